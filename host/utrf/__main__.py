@@ -1,0 +1,3 @@
+from utrf.cli import main
+
+raise SystemExit(main())

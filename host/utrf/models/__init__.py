@@ -1,0 +1,1 @@
+"""Finger models: geometry, coupled kinematics, statics with tendon elasticity, planning."""
