@@ -159,7 +159,8 @@ class FingerGeometry:
                 )
         if not all(0.0 <= c <= 1.0 for c in self.link_com_fraction):
             raise GeometryError(
-                f"{where}: link_com_fraction must be within [0, 1], got {list(self.link_com_fraction)}"
+                f"{where}: link_com_fraction must be within [0, 1], "
+                f"got {list(self.link_com_fraction)}"
             )
         if min(self.link_masses_kg) < 0:
             raise GeometryError(f"{where}: link_masses_kg must be >= 0")
@@ -246,7 +247,9 @@ class HandGeometry:
                 raise GeometryError(f"{where}: name must be a non-empty string")
             actuation = entry.get("actuation", "antagonistic")
             if actuation not in ACTUATIONS:
-                raise GeometryError(f"{where}: actuation must be one of {ACTUATIONS}, got {actuation!r}")
+                raise GeometryError(
+                    f"{where}: actuation must be one of {ACTUATIONS}, got {actuation!r}"
+                )
             geo = entry.get("geometry")
             if isinstance(geo, str):
                 geometry = FingerGeometry.from_toml(path.parent / geo)

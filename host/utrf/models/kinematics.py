@@ -33,7 +33,7 @@ def joint_positions(geom: FingerGeometry, q: ArrayLike) -> np.ndarray:
     phi = q[..., None] * _cumulative_ratios(geom)
     seg = geom.L * np.stack([np.cos(phi), np.sin(phi)], axis=-1).swapaxes(-1, -2)
     pts = np.cumsum(seg, axis=-1).swapaxes(-1, -2)
-    origin = np.zeros(q.shape + (1, 2))
+    origin = np.zeros((*q.shape, 1, 2))
     return np.concatenate([origin, pts], axis=-2)
 
 
