@@ -265,7 +265,8 @@ def _load_enum(entry: dict[str, Any], is_flags: bool) -> EnumDef:
         if not isinstance(vname, str) or not _UPPER_RE.match(vname):
             raise SpecError(f"{kind} {name}: member name {vname!r} must be UPPER_CASE")
         if not isinstance(value, int) or isinstance(value, bool):
-            raise SpecError(f"{kind} {name}.{vname}: needs an integer {'bit' if is_flags else 'value'}")
+            key = "bit" if is_flags else "value"
+            raise SpecError(f"{kind} {name}.{vname}: needs an integer {key}")
         limit = wire.size * 8 - 1 if is_flags else wire.hi
         if not 0 <= value <= limit:
             raise SpecError(f"{kind} {name}.{vname}: {value} does not fit in {wire.name}")
@@ -312,7 +313,9 @@ def _load_field(
             if scale is not None or "min" in entry or "max" in entry:
                 raise SpecError(f"{where}: an enum or flags field takes no scale, min or max")
             if ref.type is not wire:
-                raise SpecError(f"{where}: type {wire.name} differs from {ref.name}'s {ref.type.name}")
+                raise SpecError(
+                    f"{where}: type {wire.name} differs from {ref.name}'s {ref.type.name}"
+                )
     lo, hi = entry.get("min"), entry.get("max")
     for key, bound in (("min", lo), ("max", hi)):
         if bound is not None and (not isinstance(bound, int | float) or isinstance(bound, bool)):
@@ -406,7 +409,9 @@ def load_spec(path: Path = SPEC_PATH) -> Spec:
             if "fields" in entry:
                 raise SpecError(f"message {name}: has both fields and same_fields_as")
             if same not in by_name or "same_fields_as" in by_name[same]:
-                raise SpecError(f"message {name}: same_fields_as {same!r} is not a message with fields")
+                raise SpecError(
+                    f"message {name}: same_fields_as {same!r} is not a message with fields"
+                )
             source = by_name[same]
         fields: list[FieldDef] = []
         offset = 0
@@ -428,11 +433,14 @@ def load_spec(path: Path = SPEC_PATH) -> Spec:
             fields=fields,
         )
         if m.size > proto["max_payload"]:
-            raise SpecError(f"message {name}: {m.size} bytes, above max_payload {proto['max_payload']}")
+            limit = proto["max_payload"]
+            raise SpecError(f"message {name}: {m.size} bytes, above max_payload {limit}")
         if not m.is_request and (
             "idempotent" in entry or m.reply is not None or m.reply_timeout_s is not None
         ):
-            raise SpecError(f"message {name}: only requests take idempotent, reply, reply_timeout_s")
+            raise SpecError(
+                f"message {name}: only requests take idempotent, reply, reply_timeout_s"
+            )
         messages.append(m)
 
     if len({m.name for m in messages}) != len(messages):
@@ -456,7 +464,9 @@ def load_spec(path: Path = SPEC_PATH) -> Spec:
     for fixed_msg in ("identity", "boot"):
         head = [(f.name, f.type.name, f.count) for f in names[fixed_msg].fields[:2]]
         if head != [("protocol_version", "u16", None), ("schema_hash", "u32", None)]:
-            raise SpecError(f"message {fixed_msg}: must start with u16 protocol_version, u32 schema_hash")
+            raise SpecError(
+                f"message {fixed_msg}: must start with u16 protocol_version, u32 schema_hash"
+            )
     if "ErrorCode" not in enums:
         raise SpecError("the protocol needs an ErrorCode enum")
     return Spec(raw, proto, list(enums.values()), messages, schema_hash(raw))
@@ -530,8 +540,10 @@ def c_comment(f: FieldDef) -> str:
         parts.append(f.unit)
     lo, hi = si_range(f)
     if f.raw_min is not None or f.raw_max is not None:
-        parts.append(f"[{fmt_number(lo) if f.scale or f.type.is_float else lo}, "
-                     f"{fmt_number(hi) if f.scale or f.type.is_float else hi}]")
+        parts.append(
+            f"[{fmt_number(lo) if f.scale or f.type.is_float else lo}, "
+            f"{fmt_number(hi) if f.scale or f.type.is_float else hi}]"
+        )
     if f.doc:
         parts.append(one_line(f.doc))
     return "; ".join(parts)
@@ -592,7 +604,7 @@ def render_header(spec: Spec) -> str:
     w("namespace proto {")
     w("")
     w(f"static const uint16_t kProtocolVersion = {p['version']};")
-    w(f"// CRC-32 of the canonical spec (doc texts excluded); compared at the handshake.")
+    w("// CRC-32 of the canonical spec (doc texts excluded); compared at the handshake.")
     w(f"static const uint32_t kSchemaHash = 0x{spec.schema_hash:08X}UL;")
     w(f"static const uint8_t kMaxPayload = {p['max_payload']};  // body bytes")
     w(f"static const uint8_t kFingerCount = {p['finger_count']};")
@@ -677,10 +689,12 @@ def render_header(spec: Spec) -> str:
     w("")
 
     for m in spec.messages:
-        w(f"// {m.name} (0x{m.id:02X}, {m.direction.replace('_', ' ')}"
-          + (f", reply {spec.reply_of(m).name}" if m.is_request else "")  # type: ignore[union-attr]
-          + (", idempotent" if m.is_request and m.idempotent else "")
-          + ")")
+        w(
+            f"// {m.name} (0x{m.id:02X}, {m.direction.replace('_', ' ')}"
+            + (f", reply {spec.reply_of(m).name}" if m.is_request else "")  # type: ignore[union-attr]
+            + (", idempotent" if m.is_request and m.idempotent else "")
+            + ")"
+        )
         for line in wrap(m.doc, 98, "// "):
             w(line)
         w(f"struct {m.class_name} {{")
@@ -733,9 +747,11 @@ def render_header(spec: Spec) -> str:
                     w("  }")
             else:
                 w(f"  for (uint8_t i = 0; i < {f.count}; ++i) {{")
-                w(f"    out.{f.name}[i] = detail::rd_{t}(body + {f.offset} + {f.type.size} * i);"
-                  if f.type.size > 1 else
-                  f"    out.{f.name}[i] = detail::rd_{t}(body + {f.offset} + i);")
+                w(
+                    f"    out.{f.name}[i] = detail::rd_{t}(body + {f.offset} + {f.type.size} * i);"
+                    if f.type.size > 1
+                    else f"    out.{f.name}[i] = detail::rd_{t}(body + {f.offset} + i);"
+                )
                 conds = _c_checks(f, f"out.{f.name}[i]")
                 if conds:
                     w(f"    if ({' || '.join(conds)}) {{")
@@ -752,8 +768,10 @@ def render_header(spec: Spec) -> str:
                 w(f"  detail::wr_{t}(body + {f.offset}, msg.{f.name});")
             else:
                 step = f" + {f.type.size} * i" if f.type.size > 1 else " + i"
-                w(f"  for (uint8_t i = 0; i < {f.count}; ++i) "
-                  f"detail::wr_{t}(body + {f.offset}{step}, msg.{f.name}[i]);")
+                w(
+                    f"  for (uint8_t i = 0; i < {f.count}; ++i) "
+                    f"detail::wr_{t}(body + {f.offset}{step}, msg.{f.name}[i]);"
+                )
         w(f"  return {cn}::kSize;")
         w("}")
     w("")
@@ -815,27 +833,330 @@ def render_header(spec: Spec) -> str:
 
 
 # --------------------------------------------------------------------------------------------
+# Python messages
+# --------------------------------------------------------------------------------------------
+
+PY_WIDTH = 100
+
+
+def py_str(text: str) -> str:
+    return json.dumps(text, ensure_ascii=False)
+
+
+def py_call(name: str, args: list[str], indent: str, tail: str = "") -> list[str]:
+    """A call on one line if it fits, else one argument a line with a magic trailing comma
+    (the layout ruff format keeps)."""
+    line = f"{indent}{name}({', '.join(args)}){tail}"
+    if len(line) <= PY_WIDTH:
+        return [line]
+    return [f"{indent}{name}("] + [f"{indent}    {a}," for a in args] + [f"{indent}){tail}"]
+
+
+def py_docstring(text: str, indent: str) -> list[str]:
+    text = one_line(text).replace("\\", "\\\\")
+    if not text:
+        return []
+    if len(indent) + len(text) + 6 <= PY_WIDTH:
+        return [f'{indent}"""{text}"""']
+    lines = textwrap.wrap(text, PY_WIDTH - len(indent) - 3)
+    if len(lines) == 1:  # ruff format would join a one-line body with its closing quotes
+        lines = textwrap.wrap(text, len(text) * 2 // 3)
+    return [f'{indent}"""{lines[0]}'] + [f"{indent}{ln}" for ln in lines[1:]] + [f'{indent}"""']
+
+
+def py_annotation(f: FieldDef) -> str:
+    if f.enum is not None:
+        base = f.enum.name
+    elif f.flags is not None:
+        base = f.flags.name
+    elif f.type.is_float or f.scale is not None:
+        base = "float"
+    else:
+        base = "int"
+    return base if f.count is None else f"tuple[{base}, ...]"
+
+
+def py_field(f: FieldDef) -> list[str]:
+    args = [py_str(f.name), py_str(f.type.name), str(f.index)]
+    if f.count is not None:
+        args.append(f"count={f.count}")
+    if f.scale is not None:
+        args.append(f"scale={fmt_number(f.scale)}")
+    if f.type.is_float:
+        if f.raw_min is not None:
+            args.append(f"min={fmt_number(f.raw_min)}")
+        if f.raw_max is not None:
+            args.append(f"max={fmt_number(f.raw_max)}")
+    else:
+        if f.raw_min is not None:
+            args.append(f"raw_min={int(f.raw_min)}")
+        if f.raw_max is not None:
+            args.append(f"raw_max={int(f.raw_max)}")
+    if f.enum is not None:
+        args.append(f"enum={f.enum.name}")
+    if f.flags is not None:
+        args.append(f"flags={f.flags.name}")
+    if f.unit:
+        args.append(f"unit={py_str(f.unit)}")
+    return py_call("Field", args, " " * 8, ",")
+
+
+def field_note(f: FieldDef) -> str:
+    parts = []
+    if f.doc:
+        parts.append(one_line(f.doc))
+    if f.unit and f.unit != "1":
+        parts.append(f"[{f.unit}]")
+    return " ".join(parts)
+
+
+def render_messages(spec: Spec) -> str:
+    p = spec.protocol
+    out: list[str] = []
+    w = out.append
+    w('"""Generated by protocol/generate.py from protocol/spec.toml: do not edit.')
+    w("")
+    w("The host-board protocol's messages: one frozen dataclass per message, fields in SI units")
+    w("(scaled fields as float, enums as IntEnum, flags as IntFlag, arrays as tuples).")
+    w("``encode()`` gives the body, ``decode(body)`` the message; see :mod:`utrf.protocol.codec`.")
+    w("Requests are ``Request[ReplyType]``; their reply class is ``REPLY``.")
+    w('"""')
+    w("")
+    w("from __future__ import annotations")
+    w("")
+    w("from dataclasses import dataclass")
+    w("from enum import IntEnum, IntFlag")
+    w("from typing import ClassVar")
+    w("")
+    w("from utrf.protocol.codec import Direction, Field, Message, Request")
+    w("")
+    w(f"PROTOCOL_VERSION = {p['version']}")
+    w("#: CRC-32 of the canonical spec (doc texts excluded), compared at the handshake.")
+    w(f"SCHEMA_HASH = 0x{spec.schema_hash:08X}")
+    w(f"MAX_PAYLOAD = {p['max_payload']}")
+    w(f"FINGER_COUNT = {p['finger_count']}")
+    w(f"DEFAULT_BAUD = {p['default_baud']}")
+    w(f"REPLY_TIMEOUT_S = {fmt_number(p['reply_timeout_s'])}")
+    w(f"RETRIES = {p['retries']}")
+    w(f"HEARTBEAT_PERIOD_S = {fmt_number(p['heartbeat_period_s'])}")
+    w(f"MAX_TELEMETRY_HZ = {p['max_telemetry_hz']}")
+    w("#: Set in the seq of board-initiated frames (state stream, fault, boot), clear in requests.")
+    w(f"BOARD_SEQ_FLAG = 0x{p['board_seq_flag']:02X}")
+    for e in spec.enums:
+        w("")
+        w("")
+        w(f"class {e.name}({'IntFlag' if e.is_flags else 'IntEnum'}):")
+        doc = py_docstring(e.doc, "    ")
+        out.extend(doc)
+        if doc:
+            w("")
+        for v in e.values:
+            out.extend(wrap(v.doc, PY_WIDTH, "    #: "))
+            w(f"    {v.name} = {'1 << ' if e.is_flags else ''}{v.value}")
+    for m in spec.messages:
+        reply = spec.reply_of(m)
+        base = f'Request["{reply.class_name}"]' if reply is not None else "Message"
+        w("")
+        w("")
+        w("@dataclass(frozen=True, slots=True)")
+        w(f"class {m.class_name}({base}):")
+        doc = py_docstring(m.doc, "    ")
+        out.extend(doc)
+        if doc:
+            w("")
+        w(f"    NAME: ClassVar[str] = {py_str(m.name)}")
+        w(f"    ID: ClassVar[int] = 0x{m.id:02X}")
+        w(f"    SIZE: ClassVar[int] = {m.size}")
+        direction = "HOST_TO_BOARD" if m.is_request else "BOARD_TO_HOST"
+        w(f"    DIRECTION: ClassVar[Direction] = Direction.{direction}")
+        if m.is_request:
+            w(f"    IDEMPOTENT: ClassVar[bool] = {m.idempotent}")
+            w(f"    REPLY_TIMEOUT_S: ClassVar[float] = {fmt_number(spec.timeout_of(m))}")
+        if m.fields:
+            head = "    FIELDS: ClassVar[tuple[Field, ...]] = ("
+            single = py_field(m.fields[0])
+            if (
+                len(m.fields) == 1
+                and len(single) == 1
+                and len(head) + len(single[0]) - 8 + 1 <= PY_WIDTH
+            ):
+                w(head + single[0].strip() + ")")
+            else:
+                w(head)
+                for f in m.fields:
+                    out.extend(py_field(f))
+                w("    )")
+            w("")
+            for f in m.fields:
+                out.extend(wrap(field_note(f), PY_WIDTH, "    #: "))
+                w(f"    {f.name}: {py_annotation(f)}")
+    w("")
+    w("")
+    for m in spec.messages:
+        reply = spec.reply_of(m)
+        if reply is not None:
+            w(f"{m.class_name}.REPLY = {reply.class_name}")
+    w("")
+    w("#: Every message, in spec order.")
+    out.extend(
+        py_call("MESSAGES: tuple[type[Message], ...] = ", [m.class_name for m in spec.messages], "")
+    )
+    w("BY_ID: dict[int, type[Message]] = {m.ID: m for m in MESSAGES}")
+    w("BY_NAME: dict[str, type[Message]] = {m.NAME: m for m in MESSAGES}")
+    return "\n".join(out) + "\n"
+
+
+# --------------------------------------------------------------------------------------------
+# README tables
+# --------------------------------------------------------------------------------------------
+
+
+def md(text: str) -> str:
+    return one_line(text).replace("|", "\\|")
+
+
+def md_range(f: FieldDef) -> str:
+    if f.enum is not None:
+        return f"`{f.enum.name}`"
+    if f.flags is not None:
+        return f"`{f.flags.name}` bits"
+    if f.raw_min is None and f.raw_max is None:
+        return "finite" if f.type.is_float else ""
+    lo, hi = si_range(f)
+    if f.type.is_float or f.scale is not None:
+        return f"{lo:g} … {hi:g}"
+    return f"{lo} … {hi}"
+
+
+def render_readme_tables(spec: Spec) -> str:
+    p = spec.protocol
+    out: list[str] = []
+    w = out.append
+    w(README_BEGIN)
+    w("")
+    w("### Constants")
+    w("")
+    w("| name | value | meaning |")
+    w("|---|---|---|")
+    w(f"| protocol version | {p['version']} | bumped on every incompatible change |")
+    w(f"| schema hash | `0x{spec.schema_hash:08X}` | CRC-32 of the canonical spec |")
+    w(f"| max payload | {p['max_payload']} bytes | body bytes in one frame |")
+    w(f"| finger count | {p['finger_count']} | per-finger arrays have this length |")
+    w(f"| default baud | {p['default_baud']} | 8N1 |")
+    timeout = p["reply_timeout_s"]
+    w(f"| reply timeout | {timeout:g} s | per attempt, unless a message says otherwise |")
+    w(f"| retries | {p['retries']} | resends of an idempotent request after the first try |")
+    period = p["heartbeat_period_s"]
+    w(f"| heartbeat period | {period:g} s | host: longest silence before a heartbeat |")
+    w(f"| max telemetry rate | {p['max_telemetry_hz']} Hz | fastest state stream |")
+    flag = p["board_seq_flag"]
+    w(f"| board seq flag | `0x{flag:02X}` | set in the seq of board-initiated frames |")
+    w("")
+    w("### Messages")
+    w("")
+    w("| id | message | direction | body bytes | reply | idempotent | reply timeout |")
+    w("|---|---|---|---|---|---|---|")
+    for m in spec.messages:
+        reply = spec.reply_of(m)
+        arrow = "host → board" if m.is_request else "board → host"
+        w(
+            f"| `0x{m.id:02X}` | [`{m.name}`](#{m.name.replace('_', '-')}) | {arrow} | {m.size} | "
+            + (
+                f"`{reply.name}` | {'yes' if m.idempotent else 'no'} | {spec.timeout_of(m):g} s |"
+                if reply is not None
+                else "| | |"
+            )
+        )
+    for m in spec.messages:
+        reply = spec.reply_of(m)
+        w("")
+        w(f"#### {m.name}")
+        w("")
+        facts = [
+            f"id `0x{m.id:02X}`",
+            "host → board" if m.is_request else "board → host",
+            f"{m.size} body bytes",
+        ]
+        if reply is not None:
+            facts.append(f"reply `{reply.name}`")
+            facts.append("idempotent" if m.idempotent else "**not idempotent**: never resent")
+            facts.append(f"reply timeout {spec.timeout_of(m):g} s")
+        if m.same_fields_as:
+            facts.append(f"same fields as `{m.same_fields_as}`")
+        w(" · ".join(facts))
+        if m.doc:
+            w("")
+            w(one_line(m.doc))
+        if not m.fields:
+            w("")
+            w("Empty body.")
+            continue
+        w("")
+        w("| # | offset | field | type | scale | unit | range | meaning |")
+        w("|---|---|---|---|---|---|---|---|")
+        for f in m.fields:
+            name = f"`{f.name}`" + (f"[{f.count}]" if f.count else "")
+            scale = fmt_number(f.scale) if f.scale is not None else ""
+            w(
+                f"| {f.index} | {f.offset} | {name} | {f.type.name} | {scale} | {md(f.unit)} | "
+                f"{md_range(f)} | {md(f.doc)} |"
+            )
+    w("")
+    w("### Enums and flags")
+    for e in spec.enums:
+        w("")
+        w(f"#### {e.name}" + (f" ({e.type.name} bit set)" if e.is_flags else f" ({e.type.name})"))
+        w("")
+        if e.doc:
+            w(md(e.doc))
+            w("")
+        w("| bit | value | name | meaning |" if e.is_flags else "| value | name | meaning |")
+        w("|---|---|---|---|" if e.is_flags else "|---|---|---|")
+        for v in e.values:
+            if e.is_flags:
+                w(f"| {v.value} | `0x{1 << v.value:02X}` | `{v.name}` | {md(v.doc)} |")
+            else:
+                w(f"| {v.value} | `{v.name}` | {md(v.doc)} |")
+    w("")
+    w(README_END)
+    return "\n".join(out) + "\n"
+
+
+def splice_readme(current: str | None, tables: str) -> str:
+    if current is None or README_BEGIN not in current or README_END not in current:
+        raise SpecError(f"{README_PATH.relative_to(REPO_ROOT)} lacks the GENERATED markers")
+    head, rest = current.split(README_BEGIN, 1)
+    _, tail = rest.split(README_END, 1)
+    return head + tables.rstrip("\n") + tail
+
+
+# --------------------------------------------------------------------------------------------
 # Driver
 # --------------------------------------------------------------------------------------------
 
 
 def outputs(spec: Spec) -> dict[Path, str]:
-    result = {HEADER_PATH: render_header(spec)}
-    return result
+    readme = README_PATH.read_text(encoding="utf-8") if README_PATH.exists() else None
+    return {
+        HEADER_PATH: render_header(spec),
+        MESSAGES_PATH: render_messages(spec),
+        README_PATH: splice_readme(readme, render_readme_tables(spec)),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--check", action="store_true", help="exit 1 if an output is stale")
-    parser.add_argument("--spec", type=Path, default=SPEC_PATH, help="the spec (default: %(default)s)")
+    parser.add_argument("--spec", type=Path, default=SPEC_PATH, help="default: %(default)s")
     args = parser.parse_args(argv)
     try:
         spec = load_spec(args.spec)
+        rendered = outputs(spec)
     except SpecError as exc:
         print(f"generate: error: {exc}", file=sys.stderr)
         return 2
     stale = []
-    for path, text in outputs(spec).items():
+    for path, text in rendered.items():
         current = path.read_text(encoding="utf-8") if path.exists() else None
         if current == text:
             continue
@@ -847,8 +1168,10 @@ def main(argv: list[str] | None = None) -> int:
             path.write_text(text, encoding="utf-8")
             print(f"generate: wrote {rel}")
     if stale:
-        print("generate: stale (run `python protocol/generate.py`): " + ", ".join(stale),
-              file=sys.stderr)
+        print(
+            "generate: stale (run `python protocol/generate.py`): " + ", ".join(stale),
+            file=sys.stderr,
+        )
         return 1
     return 0
 
