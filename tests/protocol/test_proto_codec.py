@@ -10,6 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from proto_helpers import CppCodec
+
 from utrf.protocol import messages as M
 from utrf.protocol.codec import WIRE_TYPES, Field, Message, to_f32
 from utrf.protocol.errors import DecodeError

@@ -10,6 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from proto_helpers import CppCodec
+
 from utrf.protocol.framing import (
     MAX_BODY_BYTES,
     MAX_ENCODED_BYTES,

@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 from proto_helpers import REPO_ROOT, CppCodec
+
 from utrf.protocol import messages as M
 
 SPEC = REPO_ROOT / "protocol" / "spec.toml"

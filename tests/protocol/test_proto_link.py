@@ -9,6 +9,7 @@ from collections.abc import Iterator
 
 import pytest
 from fake_board import FakeBoard, Handler, Reply, identity, state_sample
+
 from utrf.protocol import messages as M
 from utrf.protocol.errors import (
     BoardResetError,

@@ -9,6 +9,7 @@ from typing import Any
 import pytest
 from cobs import cobs
 from proto_helpers import CppCodec, events_json, load_vectors
+
 from utrf.protocol import messages as M
 from utrf.protocol.codec import Message
 from utrf.protocol.errors import DecodeError
