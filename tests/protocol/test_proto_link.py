@@ -3,9 +3,11 @@ timeouts, nacks, the handshake, resets, disconnects and telemetry."""
 
 from __future__ import annotations
 
+import re
 import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 from fake_board import FakeBoard, Handler, Reply, identity, state_sample
@@ -318,3 +320,20 @@ def test_transport_over_loop_url_and_a_bad_url() -> None:
     assert closed.wait(1.0)
     with pytest.raises(DisconnectedError, match=r"cannot open 'socket://127\.0\.0\.1:1'"):
         SerialTransport("socket://127.0.0.1:1")
+
+
+def test_the_readme_example_runs(board: FakeBoard) -> None:
+    readme = (Path(__file__).resolve().parents[2] / "protocol" / "README.md").read_text()
+    code = re.search(r"```python\n(.*?)```", readme, re.S)
+    assert code is not None
+
+    def start_stream(frame: Frame) -> Reply:
+        threading.Timer(0.01, lambda: board.emit(state_sample(3.0))).start()
+        return [(frame.seq, M.Ack(frame.msg_id))]
+
+    board.on(M.SetTelemetry.ID, start_stream)
+    namespace: dict[str, object] = {}
+    exec(code.group(1).replace("socket://127.0.0.1:5555", board.url), namespace)
+    assert namespace["sample"] == state_sample(3.0)
+    sent = [f.msg_id for f in board.received if f.msg_id != M.Heartbeat.ID]
+    assert sent == [M.Identify.ID, M.SetTelemetry.ID, M.SetTargets.ID]
