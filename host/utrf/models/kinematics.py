@@ -101,9 +101,10 @@ def chain_positions(geom: FingerGeometry, theta: ArrayLike) -> np.ndarray:
     if th.shape[-1:] != (3,):
         raise ValueError(f"theta must have 3 angles on its last axis, got shape {th.shape}")
     phi = np.cumsum(th, axis=-1)
-    seg = geom.L[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)
-    pts = np.cumsum(seg, axis=-2)
-    return np.concatenate([np.zeros((*th.shape[:-1], 1, 2)), pts], axis=-2)
+    pts = np.zeros((*th.shape[:-1], 4, 2))
+    pts[..., 1:, 0] = np.cumsum(geom.L * np.cos(phi), axis=-1)
+    pts[..., 1:, 1] = np.cumsum(geom.L * np.sin(phi), axis=-1)
+    return pts
 
 
 @dataclass(frozen=True)

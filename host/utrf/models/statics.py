@@ -114,6 +114,9 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
+_UPPER = np.triu(np.ones((3, 3)))  # [k, j]: link j is distal to (or is) link k
+
+
 def generalised_forces(
     geom: FingerGeometry,
     theta: ArrayLike,
@@ -129,30 +132,47 @@ def generalised_forces(
     (0, −m g)); ``grasp_force_n`` acts along Link 3's normal, against flexion.
     """
     th = np.asarray(theta, dtype=float)
-    pts = kinematics.chain_positions(geom, th)  # (..., 4, 2): J1, J2, J3, tip
+    return _torques(
+        geom,
+        th,
+        kinematics.chain_positions(geom, th),
+        np.asarray(tip_force_n, dtype=float),
+        np.asarray(tip_moment_nm, dtype=float),
+        np.asarray(grasp_force_n, dtype=float),
+        gravity,
+    )
+
+
+def _torques(
+    geom: FingerGeometry,
+    th: np.ndarray,
+    pts: np.ndarray,
+    tip_force: np.ndarray,
+    tip_moment: np.ndarray,
+    grasp: np.ndarray,
+    gravity: bool,
+) -> np.ndarray:
+    """``generalised_forces`` with the chain's points (..., 4, 2) already computed."""
     phi3 = th.sum(-1)
     normal3 = np.stack([-np.sin(phi3), np.cos(phi3)], axis=-1)  # flexion side of Link 3
-    force = np.asarray(tip_force_n, dtype=float) - np.asarray(grasp_force_n)[..., None] * normal3
-    tip = pts[..., 3, :]
+    force = tip_force - grasp[..., None] * normal3
     joints = pts[..., :3, :]
-    tau = _cross(tip[..., None, :] - joints, force[..., None, :])
-    tau = tau + np.asarray(tip_moment_nm, dtype=float)[..., None]
+    tau = _cross(pts[..., 3:4, :] - joints, force[..., None, :])
+    tau = tau + tip_moment[..., None]
     if gravity:
         m = np.asarray(geom.link_masses_kg)
         c = np.asarray(geom.link_com_fraction)
-        coms = joints + c[:, None] * (pts[..., 1:, :] - joints)  # (..., 3, 2)
-        weights_y = -GRAVITY_MPS2 * m  # force (0, −m g) on link j
-        # Moment about Joint k of link j's weight (j >= k): (com_j − J_k)_x · (−m_j g).
-        dx = coms[..., None, :, 0] - joints[..., :, None, 0]  # (..., k, j)
-        upper = np.triu(np.ones((3, 3)))  # j >= k
-        tau = tau + (dx * weights_y * upper).sum(-1)
+        # Moment about Joint k of link j's weight (0, −m_j g), j >= k: (com_j − J_k)_x (−m_j g).
+        com_x = joints[..., 0] + c * (pts[..., 1:, 0] - joints[..., 0])  # (..., 3)
+        dx = com_x[..., None, :] - joints[..., :, None, 0]  # (..., k, j)
+        tau = tau + (dx * (-GRAVITY_MPS2 * m) * _UPPER).sum(-1)
     return tau
 
 
 def net_tensions(geom: FingerGeometry, tau: ArrayLike) -> np.ndarray:
     """N_k (N), shape (..., 3): flexion group positive, extension group negative (Steps 1-3)."""
     per_joint = -np.asarray(tau, dtype=float) / geom.R
-    return np.flip(np.cumsum(np.flip(per_joint, -1), -1), -1)
+    return per_joint[..., ::-1].cumsum(-1)[..., ::-1]
 
 
 def elongations(geom: FingerGeometry, net: ArrayLike) -> np.ndarray:
@@ -250,37 +270,42 @@ def solve_batch(
     qa = np.broadcast_to(qa, n).copy()
     force = np.broadcast_to(fxy, (*n, 2)).copy()
     force[:, 1] -= np.broadcast_to(payload, n) * GRAVITY_MPS2
-    moment = np.broadcast_to(moment, n)
-    grasp = np.broadcast_to(grasp, n)
+    moment = np.broadcast_to(moment, n).astype(float)
+    grasp = np.broadcast_to(grasp, n).astype(float)
 
     compliance = 1.0 / tendons.stiffnesses(geom)
     theta = kinematics.joint_angles(geom, qa)
-    tip_unloaded = kinematics.tip_position(geom, qa)
+    pts = kinematics.chain_positions(geom, theta)
+    tip_unloaded = pts[:, 3, :].copy()
     tip = tip_unloaded.copy()
     net = np.zeros((*n, 3))
     stretch = np.zeros((*n, 3))
     iterations = np.zeros(n, dtype=int)
     converged = np.zeros(n, dtype=bool)
+    everyone = True  # while no case has converged, skip the fancy indexing
     active = np.arange(n[0])
     for k in range(1, max_iterations + 1):
-        tau = generalised_forces(
-            geom,
-            theta[active],
-            tip_force_n=force[active],
-            tip_moment_nm=moment[active],
-            grasp_force_n=grasp[active],
-            gravity=gravity,
+        sel = slice(None) if everyone else active
+        net_a = net_tensions(
+            geom, _torques(geom, theta[sel], pts[sel], force[sel], moment[sel], grasp[sel], gravity)
         )
-        net_a = net_tensions(geom, tau)
         stretch_a = net_a * compliance
-        theta_a = configuration(geom, qa[active], stretch_a, model)
-        tip_a = kinematics.chain_positions(geom, theta_a)[:, 3, :]
-        change = np.hypot(*(tip_a - tip[active]).T)
-        net[active], stretch[active], theta[active], tip[active] = net_a, stretch_a, theta_a, tip_a
-        iterations[active] = k
+        theta_a = configuration(geom, qa[sel], stretch_a, model)
+        pts_a = kinematics.chain_positions(geom, theta_a)
+        tip_a = pts_a[:, 3, :]
+        change = np.hypot(*(tip_a - tip[sel]).T)
+        net[sel], stretch[sel], theta[sel], pts[sel], tip[sel] = (
+            net_a,
+            stretch_a,
+            theta_a,
+            pts_a,
+            tip_a,
+        )
+        iterations[sel] = k
         done = change <= threshold_m
         converged[active[done]] = True
         active = active[~done]
+        everyone = everyone and not done.any()
         if active.size == 0:
             break
     # Each case's tensions are those of the configuration its last pass started from: the
