@@ -14,7 +14,16 @@ from pathlib import Path
 
 import numpy as np
 
-from utrf.models import calibration, kinematics, statics, stiffness, tendons, workspace
+from utrf.models import (
+    calibration,
+    energy,
+    kinematics,
+    planning,
+    statics,
+    stiffness,
+    tendons,
+    workspace,
+)
 from utrf.models.geometry import FingerGeometry
 
 GAP_PAYLOAD_KG = 0.2
@@ -30,6 +39,42 @@ def model_gap(geom: FingerGeometry, payload_kg: float = GAP_PAYLOAD_KG, n: int =
         zero = statics.solve_batch(geom, q, model=m)
         out[m] = np.hypot(*(b.tip - zero.tip).T)
     return out
+
+
+def energy_agreement(geom: FingerGeometry, n: int = 300, seed: int = 5) -> tuple[float, float]:
+    """Largest tip (m) and tension (N) difference, Algorithm 1 (serial) against the energy
+    minimum, over n random cases: q over the range, 0-3 kg, ±10 N, ±0.2 N m, gravity on."""
+    rng = np.random.default_rng(seed)
+    tip_diff = tension_diff = 0.0
+    for _ in range(n):
+        load = statics.Load(
+            payload_kg=float(rng.uniform(0, 3)),
+            tip_force_n=(float(rng.uniform(-10, 10)), float(rng.uniform(-10, 10))),
+            tip_moment_nm=float(rng.uniform(-0.2, 0.2)),
+        )
+        q = float(rng.uniform(*geom.q_range_m))
+        a = statics.solve(geom, q, load, threshold_m=1e-12)
+        b = energy.solve_energy(geom, q, load)
+        tip_diff = max(tip_diff, float(np.hypot(*(a.tip_m - b.tip))))
+        tension_diff = max(tension_diff, float(np.abs(a.net_tensions_n - b.net_tensions_n).max()))
+    return tip_diff, tension_diff
+
+
+def largest_safe_payload(geom: FingerGeometry, flexion: float) -> float:
+    """Largest payload (kg) that ``planning.plan`` accepts at a flexion (bisection, 1 g)."""
+
+    def safe(kg: float) -> bool:
+        return planning.plan(
+            geom, planning.Target.flexion(flexion), statics.Load(payload_kg=kg)
+        ).safe
+
+    lo, hi = 0.0, 5.0
+    if not safe(lo):
+        return 0.0
+    while hi - lo > 1e-3:
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if safe(mid) else (lo, mid)
+    return lo
 
 
 def _plot_gap(gap: dict, out: Path, payload_kg: float) -> Path:
@@ -108,6 +153,17 @@ def make(outdir: str | Path, geom: FingerGeometry | None = None) -> list[str]:
         f"[{gap['flexion'][0]:.2f}, {gap['flexion'][-1]:.2f}]: serial/printed deflection "
         f"ratio {ratio.min():.2f}..{ratio.max():.2f}, largest difference "
         f"{np.abs(gap['serial'] - gap['printed']).max() * 1e3:.2f} mm"
+    )
+    tip_diff, tension_diff = energy_agreement(geom)
+    lines.append(
+        f"energy check over 300 random cases (threshold 1e-12 m): tip within {tip_diff:.2g} m, "
+        f"tensions within {tension_diff:.2g} N"
+    )
+    lines.append(
+        "largest payload a plan accepts (default limits): "
+        + ", ".join(
+            f"flexion {f:g}: {largest_safe_payload(geom, f):.3f} kg" for f in (0.0, 0.3, 0.6)
+        )
     )
     return lines
 
