@@ -23,7 +23,8 @@ def test_figures_command_writes_the_three_pngs(
 def test_bench_updates_only_its_section(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     md = tmp_path / "benchmarks.md"
     md.write_text(
-        "# Benchmarks\n\n## Firmware\n\nkeep me\n\n## Models\n\nstale-marker\n\n## Protocol\n\nme too\n"
+        "# Benchmarks\n\n## Firmware\n\nkeep me\n\n"
+        "## Models\n\nstale-marker\n\n## Protocol\n\nme too\n"
     )
     assert (
         bench.main(
