@@ -48,12 +48,14 @@ def moderate_force(geom: FingerGeometry, rotation_rad: float = 0.15) -> float:
 
 
 @st.composite
-def cases(draw: st.DrawFn) -> tuple[FingerGeometry, float, dict[str, object]]:
+def cases(
+    draw: st.DrawFn, rotation_rad: float = 0.15
+) -> tuple[FingerGeometry, float, dict[str, object]]:
     """A geometry, a q within its range and a conservative load of moderate size."""
     g = draw(geometries())
     lo, hi = g.q_range_m
     q = draw(st.floats(lo, hi))
-    f = moderate_force(g)
+    f = moderate_force(g, rotation_rad)
     angle = draw(st.floats(-math.pi, math.pi))
     mag = draw(st.floats(0.0, f))
     moment = draw(st.floats(-1.0, 1.0)) * f * g.total_length_m / 3

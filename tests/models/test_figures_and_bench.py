@@ -35,6 +35,8 @@ def test_bench_updates_only_its_section(tmp_path: Path, capsys: pytest.CaptureFi
                 "200",
                 "--repeats",
                 "3",
+                "--stress-cases",
+                "5",
                 "--json",
                 str(tmp_path / "b.json"),
             ]

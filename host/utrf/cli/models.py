@@ -488,6 +488,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _limits(p)
     p.add_argument("--threshold-m", type=float, default=statics.DEFAULT_THRESHOLD_M)
     p.add_argument("--max-iterations", type=int, default=statics.DEFAULT_MAX_ITERATIONS)
+    p.add_argument(
+        "--relaxation",
+        choices=statics.RELAXATIONS,
+        default=statics.DEFAULT_RELAXATION,
+        help="none: the paper's plain iteration; auto: relax cases that contract slowly",
+    )
     p.add_argument("--compare", action="store_true", help="also solve the other model")
     p.add_argument(
         "--verify", action="store_true", help="check against the energy minimum (serial model)"

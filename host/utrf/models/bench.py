@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import scipy
 
-from utrf.models import statics
+from utrf.models import statics, tendons
 from utrf.models.geometry import FingerGeometry
 from utrf.models.statics import Load
 
@@ -64,7 +64,57 @@ def random_cases(geom: FingerGeometry, n: int, seed: int = 0) -> dict[str, np.nd
     }
 
 
-def run(batch_size: int = 10_000, repeats_one: int = 300, repeats_batch: int = 7) -> dict[str, Any]:
+def random_fingers(n: int, seed: int = 1) -> list[FingerGeometry]:
+    """Valid fingers over the tests' ranges: lengths 20-90 mm, radii 2-15 mm, E 50-250 GPa,
+    tendons 0.5-1.5 mm, actuating tendon 30-300 mm, links up to 50 g."""
+    rng = np.random.default_rng(seed)
+    out: list[FingerGeometry] = []
+    while len(out) < n:
+        L, R = rng.uniform(0.02, 0.09, 3), rng.uniform(0.002, 0.015, 3)
+        if not (R[0] + R[1] < 0.9 * L[0] and R[1] + R[2] < 0.9 * L[1]):
+            continue
+        out.append(
+            FingerGeometry(
+                link_lengths_m=tuple(L),  # type: ignore[arg-type]
+                guide_radii_m=tuple(R),  # type: ignore[arg-type]
+                tendon_diameter_m=float(rng.uniform(5e-4, 1.5e-3)),
+                tendon_youngs_modulus_pa=float(rng.uniform(50e9, 250e9)),
+                actuating_tendon_length_m=float(rng.uniform(0.03, 0.3)),
+                link_masses_kg=tuple(rng.uniform(0, 0.05, 3)),  # type: ignore[arg-type]
+                link_com_fraction=tuple(rng.uniform(0, 1, 3)),  # type: ignore[arg-type]
+            )
+        )
+    return out
+
+
+def stress(n: int = 400, load_scale: float = 4.0, seed: int = 1) -> dict[str, Any]:
+    """Convergence within the default 100 passes, per relaxation, on random fingers under
+    loads whose stretch turns the joints by about 0.15 rad x ``load_scale`` (threshold 1e-12)."""
+    rng = np.random.default_rng(seed)
+    counts = {rx: {"converged": 0, "passes": 0} for rx in statics.RELAXATIONS}
+    for g in random_fingers(n, seed):
+        ea = g.tendon_youngs_modulus_pa * g.tendon_area_m2
+        f = 0.15 * load_scale * ea * min(g.guide_radii_m) ** 2
+        f /= 3 * g.total_length_m * tendons.rest_lengths(g).max()
+        a = rng.uniform(-np.pi, np.pi)
+        load = Load(
+            tip_force_n=(f * np.cos(a), f * np.sin(a)),
+            tip_moment_nm=float(rng.uniform(-1, 1) * f * g.total_length_m / 3),
+        )
+        q = float(rng.uniform(*g.q_range_m))
+        for rx in statics.RELAXATIONS:
+            r = statics.solve(g, q, load, threshold_m=1e-12, relaxation=rx)
+            counts[rx]["converged"] += int(r.converged)
+            counts[rx]["passes"] += r.iterations
+    return {"cases": n, "load_scale": load_scale, "results": counts}
+
+
+def run(
+    batch_size: int = 10_000,
+    repeats_one: int = 300,
+    repeats_batch: int = 7,
+    stress_cases: int = 400,
+) -> dict[str, Any]:
     geom = FingerGeometry.default()
     load = Load(payload_kg=3.0)
     out: dict[str, Any] = {
@@ -129,6 +179,28 @@ def run(batch_size: int = 10_000, repeats_one: int = 300, repeats_batch: int = 7
             ),
             "batch_iterations_vs_threshold": batch_iters,
         }
+    # Relaxation: the same 10,000 cases, serial model, at 1e-9 m.
+    out["relaxation"] = {}
+    for rx in statics.RELAXATIONS:
+
+        def relaxed(r: str = rx) -> statics.StaticsBatch:
+            return statics.solve_batch(
+                geom,
+                cases["q"],
+                payload_kg=cases["payload_kg"],
+                tip_force_n=cases["tip_force_n"],
+                tip_moment_nm=cases["tip_moment_nm"],
+                relaxation=r,
+            )
+
+        b = relaxed()
+        out["relaxation"][rx] = {
+            "batch_s": _median_time(relaxed, repeats_batch),
+            "iterations_mean": float(b.iterations.mean()),
+            "iterations_max": int(b.iterations.max()),
+            "converged": int(b.converged.sum()),
+        }
+    out["stress"] = stress(stress_cases)
     return out
 
 
@@ -179,6 +251,30 @@ def markdown(result: dict[str, Any]) -> str:
         )
         + ".",
         "",
+        "Relaxation (`relaxation=`), serial model, the same cases at 1e-9 m: `none` is the "
+        "paper's plain iteration, `auto` (default) switches a case to Aitken relaxation when its "
+        "tip movement shrinks by less than half per pass, `aitken` relaxes every case.",
+        "",
+        "| relaxation | batch time | iterations mean, max | converged |",
+        "|---|---|---|---|",
+    ]
+    for rx, r in result["relaxation"].items():
+        lines.append(
+            f"| {rx} | {r['batch_s'] * 1e3:.1f} ms | {r['iterations_mean']:.2f}, "
+            f"{r['iterations_max']} | {r['converged']:,} |"
+        )
+    st = result["stress"]
+    lines += [
+        "",
+        f"Stress: {st['cases']} random fingers (the tests' ranges) under loads "
+        f"{st['load_scale']:g} times the tests' moderate size, threshold 1e-12 m, "
+        "default 100-pass limit: converged "
+        + ", ".join(
+            f"`{rx}` {r['converged']}/{st['cases']} (mean {r['passes'] / st['cases']:.1f} passes)"
+            for rx, r in st["results"].items()
+        )
+        + ".",
+        "",
     ]
     return "\n".join(lines)
 
@@ -204,10 +300,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, help="write the raw results here")
     parser.add_argument("--batch-size", type=int, default=10_000)
     parser.add_argument("--repeats", type=int, default=300, help="repeats of the single solve")
+    parser.add_argument("--stress-cases", type=int, default=400)
     args = parser.parse_args(argv)
-    if args.batch_size < 1 or args.repeats < 1:
-        parser.error("--batch-size and --repeats must be >= 1")
-    result = run(args.batch_size, args.repeats)
+    if min(args.batch_size, args.repeats, args.stress_cases) < 1:
+        parser.error("--batch-size, --repeats and --stress-cases must be >= 1")
+    result = run(args.batch_size, args.repeats, stress_cases=args.stress_cases)
     section = markdown(result)
     print(section)
     if args.json:

@@ -47,6 +47,10 @@ MODELS = ("serial", "printed")
 DEFAULT_MODEL = "serial"
 DEFAULT_THRESHOLD_M = 1e-9
 DEFAULT_MAX_ITERATIONS = 100
+RELAXATIONS = ("auto", "none", "aitken")
+DEFAULT_RELAXATION = "auto"
+_SLOW_CONTRACTION = 0.5  # "auto" relaxes a case whose tip movement shrinks less than this
+_OMEGA_BOUNDS = (0.02, 5.0)  # keep the Aitken factor sane on nonlinear steps
 
 
 class StaticsError(ValueError):
@@ -230,13 +234,23 @@ def solve_batch(
     model: str = DEFAULT_MODEL,
     threshold_m: float = DEFAULT_THRESHOLD_M,
     max_iterations: int = DEFAULT_MAX_ITERATIONS,
+    relaxation: str = DEFAULT_RELAXATION,
 ) -> StaticsBatch:
     """Algorithm 1 for every case at once; arguments broadcast to a common number of cases.
 
-    Cases that have not met the threshold after ``max_iterations`` come back with
-    ``converged`` False (and their last iterate); ``solve`` turns that into a warning.
+    A case has converged when one plain pass of Algorithm 1 moves its tip by at most
+    ``threshold_m``; it is returned at that pass's configuration. ``relaxation``: ``"none"``
+    is the paper's plain iteration; ``"auto"`` (default) keeps it while it contracts and
+    switches a case whose tip movement shrinks by less than half per pass (a compliant finger
+    under a large load, where the plain iteration oscillates or diverges) to Aitken dynamic
+    relaxation; ``"aitken"`` relaxes every case. All three stop on the same test, so they
+    return the same equilibrium to within the threshold. Cases that have not converged after
+    ``max_iterations`` come back with ``converged`` False (and their last iterate); ``solve``
+    turns that into a warning.
     """
     _check_model(model)
+    if relaxation not in RELAXATIONS:
+        raise StaticsError(f"relaxation must be one of {RELAXATIONS}, got {relaxation!r}")
     if not (math.isfinite(threshold_m) and threshold_m > 0):
         raise StaticsError(f"threshold_m must be > 0, got {threshold_m!r}")
     if not (isinstance(max_iterations, int) and max_iterations >= 1):
@@ -277,37 +291,55 @@ def solve_batch(
     theta = kinematics.joint_angles(geom, qa)
     pts = kinematics.chain_positions(geom, theta)
     tip_unloaded = pts[:, 3, :].copy()
-    tip = tip_unloaded.copy()
     net = np.zeros((*n, 3))
     stretch = np.zeros((*n, 3))
     iterations = np.zeros(n, dtype=int)
     converged = np.zeros(n, dtype=bool)
+    # Relaxation state per case: the last plain step, its factor, the last tip movement.
+    step_prev = np.zeros((*n, 3))
+    omega = np.ones(n)
+    change_prev = np.full(n, np.inf)
+    relaxed = np.full(n, relaxation == "aitken")
     everyone = True  # while no case has converged, skip the fancy indexing
     active = np.arange(n[0])
     for k in range(1, max_iterations + 1):
         sel = slice(None) if everyone else active
+        th = theta[sel]
         net_a = net_tensions(
-            geom, _torques(geom, theta[sel], pts[sel], force[sel], moment[sel], grasp[sel], gravity)
+            geom, _torques(geom, th, pts[sel], force[sel], moment[sel], grasp[sel], gravity)
         )
         stretch_a = net_a * compliance
-        theta_a = configuration(geom, qa[sel], stretch_a, model)
-        pts_a = kinematics.chain_positions(geom, theta_a)
-        tip_a = pts_a[:, 3, :]
-        change = np.hypot(*(tip_a - tip[sel]).T)
-        net[sel], stretch[sel], theta[sel], pts[sel], tip[sel] = (
-            net_a,
-            stretch_a,
-            theta_a,
-            pts_a,
-            tip_a,
-        )
-        iterations[sel] = k
+        plain = configuration(geom, qa[sel], stretch_a, model)  # one pass of Algorithm 1
+        pts_plain = kinematics.chain_positions(geom, plain)
+        change = np.hypot(*(pts_plain[:, 3, :] - pts[sel][:, 3, :]).T)
         done = change <= threshold_m
+        step = plain - th
+        rel = relaxed[sel]
+        if relaxation == "auto" and k >= 2:
+            rel = rel | (change > _SLOW_CONTRACTION * change_prev[sel])
+        om = omega[sel]
+        if k >= 2 and rel.any():
+            # Aitken (Irons-Tuck) factor from the last two plain steps.
+            diff = step - step_prev[sel]
+            denom = (diff * diff).sum(-1)
+            safe = np.where(denom > 0, denom, 1.0)
+            aitken = -om * (step_prev[sel] * diff).sum(-1) / safe
+            om = np.where(rel & (denom > 0), np.clip(aitken, *_OMEGA_BOUNDS), om)
+        move = rel & ~done
+        nxt = np.where(move[:, None], th + om[:, None] * step, plain)
+        pts_nxt = pts_plain
+        if move.any():
+            pts_nxt = pts_plain.copy()
+            pts_nxt[move] = kinematics.chain_positions(geom, nxt[move])
+        net[sel], stretch[sel], theta[sel], pts[sel] = net_a, stretch_a, nxt, pts_nxt
+        step_prev[sel], omega[sel], change_prev[sel], relaxed[sel] = step, om, change, rel
+        iterations[sel] = k
         converged[active[done]] = True
         active = active[~done]
         everyone = everyone and not done.any()
         if active.size == 0:
             break
+    tip = pts[:, 3, :]
     # Each case's tensions are those of the configuration its last pass started from: the
     # same, within the threshold, as those of the returned one once converged.
     return StaticsBatch(
@@ -376,7 +408,7 @@ class StaticsResult:
     @property
     def safety_factor(self) -> np.ndarray:
         """Breaking stress over stress, per level (inf for a slack level)."""
-        with np.errstate(divide="ignore"):
+        with np.errstate(divide="ignore", over="ignore"):
             return self.limits.tendon_breaking_stress_pa / self.stress_pa
 
     @property
@@ -473,6 +505,7 @@ def solve(
     threshold_m: float = DEFAULT_THRESHOLD_M,
     max_iterations: int = DEFAULT_MAX_ITERATIONS,
     limits: Limits | None = None,
+    relaxation: str = DEFAULT_RELAXATION,
 ) -> StaticsResult:
     """The loaded finger's equilibrium at tendon displacement q (m), with warnings."""
     load = load if load is not None else Load()
@@ -490,6 +523,7 @@ def solve(
         model=model,
         threshold_m=threshold_m,
         max_iterations=max_iterations,
+        relaxation=relaxation,
     )
     result = StaticsResult(
         geometry=geom,
