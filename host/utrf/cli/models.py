@@ -381,7 +381,8 @@ def _calibrate(args: argparse.Namespace) -> int:
             v, unit, f = p["actuating_tendon_length_m"], "mm", 1e3
         else:
             dx, dy = (v * 1e3 for v in p["tip_offset_m"])
-            print(f"  tip_offset = ({dx:.3f}, {dy:.3f}) mm")
+            err = f" ± ({sd[0] * 1e3:.3g}, {sd[1] * 1e3:.3g})" if isinstance(sd, list) else ""
+            print(f"  tip_offset = ({dx:.3f}, {dy:.3f}){err} mm")
             continue
         err = f" ± {sd * f:.3g}" if isinstance(sd, float) else ""
         print(f"  {n} = {v * f:.5g}{err} {unit}")

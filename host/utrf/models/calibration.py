@@ -149,19 +149,6 @@ class Parameters:
     q_offset_m: float = 0.0
     tip_offset_m: tuple[float, float] = (0.0, 0.0)
 
-    def value(self, name: str) -> float | tuple[float, float]:
-        if name == "modulus":
-            return self.geometry.tendon_youngs_modulus_pa
-        if name == "q_offset":
-            return self.q_offset_m
-        if name == "radius_scale":
-            return 1.0  # relative to this object's geometry
-        if name == "actuating_length":
-            return self.geometry.actuating_tendon_length_m
-        if name == "tip_offset":
-            return self.tip_offset_m
-        raise CalibrationError(f"unknown parameter {name!r}; choose from {PARAMETERS}")
-
 
 def predict(params: Parameters, data: CalibrationData, model: str) -> np.ndarray:
     """Model tip positions (n, 2) or deflections (n,) for the data's loads and q."""
