@@ -147,7 +147,23 @@ def test_plan_safe_refused_and_named(capsys: pytest.CaptureFixture[str]) -> None
     assert out["safe"] and out["q_command_m"] == pytest.approx(ref.q_command_m, abs=1e-12)
     code, text, _ = run(capsys, "plan", "--flexion", "0", "--load-kg", "2")
     assert code == 3 and "REFUSED" in text and "motor A would pull" in text
-    code, _, err = run(capsys, "plan", "fist", "--load-kg", "0.1")
-    assert code == 2 and "no pose library is registered" in err
+    code, _, err = run(capsys, "plan", "fsit", "--load-kg", "0.1")
+    assert code == 2 and "no pose named 'fsit'" in err
+
+
+def test_plan_a_named_pose_plans_every_finger_with_its_geometry(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from utrf.poses import PoseLibrary
+
+    hand = HandGeometry.default()
+    q = PoseLibrary.load(hand=hand, include_user=False)["rock-and-roll"].q(hand)
+    out = run_json(capsys, "plan", "rock-and-roll", "--load-kg", "0.05")
+    assert out["pose"] == "rock-and-roll"
+    assert list(out["fingers"]) == [f.name for f in hand.fingers]
+    for i, f in enumerate(hand.fingers):
+        assert out["fingers"][f.name]["q_target_m"] == pytest.approx(q[i], abs=1e-12)
+    one = run_json(capsys, "plan", "rock-and-roll", "--finger-name", "thumb", "--load-kg", "0.05")
+    assert list(one["fingers"]) == ["thumb"]
     code, _, err = run(capsys, "plan", "--load-kg", "0.1")
     assert code == 2 and "give a pose" in err
