@@ -1,0 +1,71 @@
+// Framing of the host-board protocol: COBS, CRC-16/CCITT-FALSE and the sequence number.
+//
+// A frame on the wire is COBS(seq | msg_id | body | crc16) followed by one 0x00 byte. The CRC
+// (poly 0x1021, init 0xFFFF, not reflected, little-endian on the wire) covers seq, msg_id and
+// the body. COBS removes every 0x00 from the frame, so 0x00 only ever ends a frame and a
+// receiver resynchronises at the next one, whatever came before: no length is trusted.
+// Plain C++11 (no Arduino or AVR headers, no heap) so that it is tested on the host.
+// protocol/README.md is the wire format for people.
+#ifndef UTRF_CORE_FRAMING_H
+#define UTRF_CORE_FRAMING_H
+
+#include <stdint.h>
+
+namespace utrf {
+namespace framing {
+
+static const uint8_t kHeaderBytes = 2;  // seq, msg_id
+static const uint8_t kCrcBytes = 2;
+static const uint8_t kMaxBodyBytes = 64;  // proto::kMaxPayload
+static const uint8_t kMaxRawBytes = kHeaderBytes + kMaxBodyBytes + kCrcBytes;  // 68
+static const uint8_t kMinRawBytes = kHeaderBytes + kCrcBytes;
+// COBS adds one code byte per started run of 254 bytes, and a frame ends with 0x00.
+static const uint8_t kMaxEncodedBytes = kMaxRawBytes + (kMaxRawBytes + 253) / 254;  // 69
+static const uint8_t kMaxFrameBytes = kMaxEncodedBytes + 1;                          // 70
+
+// CRC-16/CCITT-FALSE; pass a previous result as `crc` to continue over more bytes.
+uint16_t crc16_ccitt(const uint8_t* data, uint16_t len, uint16_t crc = 0xFFFF);
+
+// Writes the complete frame (COBS bytes and the closing 0x00) to `out`, which must hold
+// kMaxFrameBytes, and returns its length; returns 0 (writing nothing) when len > kMaxBodyBytes.
+uint8_t encode_frame(uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len, uint8_t* out);
+
+enum class RxEvent : uint8_t {
+  NONE = 0,       // byte taken; nothing to report yet
+  FRAME,          // a valid frame: seq(), msg_id(), body(), body_len()
+  CRC_ERROR,      // a well-formed frame whose CRC failed; seq()/msg_id() as received (a hint)
+  FRAMING_ERROR,  // bad COBS, or fewer than kMinRawBytes after decoding
+  OVERSIZE,       // more than kMaxEncodedBytes before a 0x00: the rest is dropped up to the 0x00
+};
+
+// Streaming receiver with a fixed buffer: feed it every byte from the line.
+// Empty frames (0x00 right after 0x00) are ignored, so a sender may send a lone 0x00 to end
+// whatever partial frame the receiver holds. OVERSIZE is reported once, at the first byte that
+// does not fit; the bytes up to and including the next 0x00 are then dropped silently.
+class FrameDecoder {
+ public:
+  FrameDecoder();
+  RxEvent feed(uint8_t byte);
+  // Forget any partial frame (e.g. after the UART reported an overrun).
+  void reset();
+
+  // After FRAME; after CRC_ERROR seq() and msg_id() are the damaged frame's bytes.
+  // body() stays valid until the next call to feed().
+  uint8_t seq() const { return buf_[0]; }
+  uint8_t msg_id() const { return buf_[1]; }
+  const uint8_t* body() const { return buf_ + kHeaderBytes; }
+  uint8_t body_len() const { return body_len_; }
+
+ private:
+  RxEvent finish();
+
+  uint8_t buf_[kMaxEncodedBytes];
+  uint8_t len_;
+  uint8_t body_len_;
+  bool discarding_;
+};
+
+}  // namespace framing
+}  // namespace utrf
+
+#endif  // UTRF_CORE_FRAMING_H
