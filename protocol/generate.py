@@ -1060,7 +1060,7 @@ def render_readme_tables(spec: Spec) -> str:
         reply = spec.reply_of(m)
         arrow = "host → board" if m.is_request else "board → host"
         w(
-            f"| `0x{m.id:02X}` | [`{m.name}`](#{m.name.replace('_', '-')}) | {arrow} | {m.size} | "
+            f"| `0x{m.id:02X}` | [`{m.name}`](#{m.name}) | {arrow} | {m.size} | "
             + (
                 f"`{reply.name}` | {'yes' if m.idempotent else 'no'} | {spec.timeout_of(m):g} s |"
                 if reply is not None

@@ -87,9 +87,9 @@ enum class ConfigSource : uint8_t {
 
 // Why a request was refused (nack). A refused request changes nothing.
 enum class ErrorCode : uint8_t {
-  BAD_CRC = 1,  // the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only
-  UNKNOWN_ID = 2,  // no request has this message id
-  BAD_LENGTH = 3,  // the body length does not match the message
+  BAD_CRC = 1,  // the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only; detail = 0
+  UNKNOWN_ID = 2,  // no request has this message id; detail = 0
+  BAD_LENGTH = 3,  // the body length does not match the message; detail = the length it should have
   OUT_OF_RANGE = 4,  // a field is outside its range; detail = field index, or 0x80 | finger for a per-finger limit
   FAULTED = 5,  // a finger the request needs has a latched fault; detail = finger
   BUSY = 6,  // the board cannot do it now (EEPROM write under way, or the finger must be idle); detail = finger or 0xFF

@@ -116,11 +116,12 @@ class ConfigSource(IntEnum):
 class ErrorCode(IntEnum):
     """Why a request was refused (nack). A refused request changes nothing."""
 
-    #: the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only
+    #: the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only; detail =
+    #: 0
     BAD_CRC = 1
-    #: no request has this message id
+    #: no request has this message id; detail = 0
     UNKNOWN_ID = 2
-    #: the body length does not match the message
+    #: the body length does not match the message; detail = the length it should have
     BAD_LENGTH = 3
     #: a field is outside its range; detail = field index, or 0x80 | finger for a per-finger limit
     OUT_OF_RANGE = 4
