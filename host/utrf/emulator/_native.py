@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 1
+ABI = 2
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -46,6 +46,8 @@ STAT_FIELDS = (
     "clients",
     "eeprom_writes",
     "frame_cycles",
+    "adc_conversions",
+    "late_interrupts",
 )
 PROFILE_FIELDS = (
     "count",
@@ -124,7 +126,7 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_cycle": (ctypes.c_uint64, [p]),
         "utrf_sim_status": (ctypes.c_int, [p]),
         "utrf_sim_pc": (ctypes.c_uint32, [p]),
-        "utrf_sim_adc_mv": (ctypes.POINTER(ctypes.c_uint16), [p]),
+        "utrf_sim_adc_volts": (ctypes.POINTER(ctypes.c_double), [p]),
         "utrf_sim_pins": (ctypes.POINTER(ctypes.c_double), [p]),
         "utrf_sim_refresh_pins": (None, [p]),
         "utrf_sim_read_data": (ctypes.c_int, [p, ctypes.c_uint32, u8p, ctypes.c_size_t]),
@@ -161,7 +163,7 @@ def load_library() -> ctypes.CDLL:
 
 
 class NativeBoard:
-    """One simavr board. ``pins`` and ``adc_mv`` are numpy views of the harness's memory."""
+    """One simavr board. ``pins`` and ``adc_volts`` are numpy views of the harness's memory."""
 
     def __init__(self, elf: Path, seed: int) -> None:
         self._lib = load_library()
@@ -172,8 +174,8 @@ class NativeBoard:
         self._h: int | None = handle
         pins = self._lib.utrf_sim_pins(handle)
         self.pins = np.ctypeslib.as_array(pins, shape=(FINGERS, 2, PIN_FIELDS))
-        self.adc_mv = np.ctypeslib.as_array(
-            self._lib.utrf_sim_adc_mv(handle), shape=(ADC_CHANNELS,)
+        self.adc_volts = np.ctypeslib.as_array(
+            self._lib.utrf_sim_adc_volts(handle), shape=(ADC_CHANNELS,)
         )
         self._run_to = self._lib.utrf_sim_run_to
         self._u8buf = (ctypes.c_uint8 * 65536)()
@@ -187,7 +189,7 @@ class NativeBoard:
     def close(self) -> None:
         if self._h is not None:
             self.pins = np.zeros((FINGERS, 2, PIN_FIELDS))
-            self.adc_mv = np.zeros(ADC_CHANNELS, dtype=np.uint16)
+            self.adc_volts = np.zeros(ADC_CHANNELS)
             self._lib.utrf_sim_close(self._h)
             self._h = None
 

@@ -209,7 +209,7 @@ class EmulatedBoard:
             self._period_cycles = max(1, round(exchange_period * F_CPU_HZ))
             self._cycle = self._native.cycle
             self._pins_hold = np.zeros_like(self._native.pins)
-            self._native.adc_mv[:5] = self.plant.encoder_mv()
+            self._native.adc_volts[:5] = self.plant.encoder_volts()
             self._status = 0
             self.crash_pc: int | None = None
             self._capture = (not self.realtime) if capture is None else bool(capture)
@@ -281,6 +281,11 @@ class EmulatedBoard:
 
     # -- time ------------------------------------------------------------------------------------
     @property
+    def exchange_period(self) -> float:
+        """Simulated seconds between two exchanges of pins and ADC values with the plant."""
+        return self._period_cycles / F_CPU_HZ
+
+    @property
     def sim_time(self) -> float:
         """Simulated seconds since power-on (the MCU's cycle count / 16 MHz)."""
         return self._cycle / F_CPU_HZ
@@ -290,7 +295,7 @@ class EmulatedBoard:
         the plant runs with the pins as the MCU had set them at its start."""
         n = self._native
         np.copyto(self._pins_hold, n.pins)
-        n.adc_mv[:5] = self.plant.encoder_mv()
+        n.adc_volts[:5] = self.plant.encoder_volts()
         status = n.run_to(self._cycle + self._period_cycles)
         cycle = n.cycle
         self.plant.step((cycle - self._cycle) / F_CPU_HZ, self._pins_hold)
@@ -561,10 +566,10 @@ class EmulatedBoard:
             ]
 
     @property
-    def adc_mv(self) -> np.ndarray:
-        """The ADC0..4 inputs (mV) the firmware sees now."""
+    def adc_volts(self) -> np.ndarray:
+        """The voltages on ADC0..4 (the encoders' outputs) as the firmware samples them now."""
         with self._lock:
-            return self._board().adc_mv[:5].copy()
+            return self._board().adc_volts[:5].copy()
 
     @property
     def stats(self) -> dict[str, int]:
@@ -688,15 +693,12 @@ class SimSerial:
         self._buffer += self.board.read()
 
     def _run_until(self, done: Callable[[], bool]) -> None:
+        """Run one exchange period at a time (the finest step the board has) until done."""
         deadline = math.inf if self.timeout is None else self.board.sim_time + self.timeout
+        step = self.board.exchange_period
         self._pull()
         while not done() and self.board.sim_time < deadline:
-            step = (
-                min(1e-3, max(deadline - self.board.sim_time, 0.0))
-                if math.isfinite(deadline)
-                else 1e-3
-            )
-            self.board.run_for(step)
+            self.board.run_for(min(step, deadline - self.board.sim_time))
             self._pull()
 
     def read(self, size: int = 1) -> bytes:

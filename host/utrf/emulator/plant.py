@@ -22,7 +22,7 @@ Per finger (paper Sec. II, IV-B):
   (``utrf.models``), joint damping summed through the coupling (``b = Σ c_j / R_j²``) and hard
   joint limits at θ1's range (paper: ±90°).
 * **Encoder.** An AS5600 on Joint 2 in analog mode: 12-bit angle, output 10–90 % of 5 V over
-  one turn, seeded Gaussian noise; the ADC's 10-bit quantisation is simavr's.
+  one turn, seeded Gaussian noise. The board's ADC quantises it to 10 bits.
 
 Every constant the paper does not give is an assumption, kept in :class:`MotorParams`,
 :class:`EncoderParams` and :class:`PlantParams` and documented in ``README.md``.
@@ -168,7 +168,8 @@ class HandPlant:
     """State and dynamics of the five fingers. SI units: m, rad, N, A, s.
 
     ``step(dt, pins)`` advances by ``dt`` with the board's pins held (the (5, 2, 4) block of
-    duty, IN1, IN2, STBY per finger and channel); ``encoder_mv()`` gives the encoders' outputs.
+    duty, IN1, IN2, STBY per finger and channel); ``encoder_volts()`` gives the encoders'
+    outputs.
     """
 
     def __init__(
@@ -361,8 +362,8 @@ class HandPlant:
             xd[self.rotary, 1] = -xd[self.rotary, 0]
         self.q, self.qd, self.x, self.xd = q, qd, x, xd
 
-    def encoder_mv(self) -> np.ndarray:
-        """Each finger's AS5600 output in millivolts (uint16), noise included."""
+    def encoder_volts(self) -> np.ndarray:
+        """Each finger's AS5600 output (V), noise included: the ADC0..4 inputs."""
         e = self.params.encoder
         theta2 = self.q / self.R[:, 1]
         turns = (e.offset_rad + (-theta2 if e.invert else theta2)) * (0.5 / math.pi)
@@ -375,7 +376,7 @@ class HandPlant:
             volts += self._noise()
         if not self.encoder_plugged.all():
             volts = np.where(self.encoder_plugged, volts, self.unplugged_v)
-        return np.minimum(np.maximum(volts * 1000.0 + 0.5, 0.0), 65535.0).astype(np.uint16)
+        return volts
 
     def _noise(self) -> np.ndarray:
         """The encoders' next noise sample (V), drawn from the seeded generator in blocks."""

@@ -6,6 +6,7 @@
  * set) carries the duty the timer's mode makes of OCRnX. The pin map is board_pins.h,
  * shared with the firmware.
  */
+#include <math.h>
 #include <string.h>
 
 #include "avr_adc.h"
@@ -140,15 +141,41 @@ void board_io_read_pins(utrf_sim_t *s)
     }
 }
 
-void board_io_apply_adc(utrf_sim_t *s)
+/* A conversion starts: sample its channel now (the ADC's sample-and-hold) and hand simavr a
+ * value that its own arithmetic, floor(mV * 1023 / Vref), turns into the datasheet's code,
+ * floor(V * 1024 / Vref). */
+static void on_adc_trigger(struct avr_irq_t *irq, uint32_t value, void *param)
 {
-    for (int ch = 0; ch < UTRF_SIM_ADC_CHANNELS; ch++) {
-        if (s->adc_valid && s->adc_mv[ch] == s->adc_applied[ch])
-            continue;
-        avr_raise_irq(s->adc_irq + ADC_IRQ_ADC0 + ch, s->adc_mv[ch]);
-        s->adc_applied[ch] = s->adc_mv[ch];
+    (void)irq;
+    utrf_sim_t *s = param;
+    avr_t *avr = s->avr;
+    union {
+        avr_adc_mux_t mux;
+        uint32_t v;
+    } e = {.v = value};
+    s->stats.adc_conversions++;
+    if (e.mux.kind != ADC_MUX_SINGLE || e.mux.src >= UTRF_SIM_ADC_CHANNELS)
+        return;
+    uint32_t vref_mv;
+    switch ((avr->data[ADMUX] >> REFS0) & 3) {
+    case 0: vref_mv = avr->aref; break;
+    case 1: vref_mv = avr->avcc; break;
+    case 2: vref_mv = 1100; break;
+    default: vref_mv = 2560; break;
     }
-    s->adc_valid = 1;
+    double volts = s->adc_volts[e.mux.src];
+    double code = floor(volts * 1024.0 / (vref_mv * 1e-3));
+    if (!(code > 0.0)) /* also NaN */
+        code = 0.0;
+    if (code > 1023.0)
+        code = 1023.0;
+    uint32_t mv = (uint32_t)ceil(code * vref_mv / 1023.0);
+    avr_raise_irq(s->adc_irq + ADC_IRQ_ADC0 + e.mux.src, mv);
+}
+
+void board_io_init(utrf_sim_t *s)
+{
+    avr_irq_register_notify(s->adc_irq + ADC_IRQ_OUT_TRIGGER, on_adc_trigger, s);
 }
 
 uint64_t board_io_uart0_frame_cycles(const avr_t *avr, int *rx_enabled)

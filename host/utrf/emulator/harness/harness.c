@@ -128,7 +128,6 @@ int utrf_sim_run_to(utrf_sim_t *s, uint64_t target)
 {
     avr_t *avr = s->avr;
     serve_poll(s, 0);
-    board_io_apply_adc(s);
     bridge_sync_baud(s);
     if (target > avr->cycle) {
         s->target = target;
@@ -174,9 +173,9 @@ uint32_t utrf_sim_pc(const utrf_sim_t *s)
     return s->avr->pc;
 }
 
-uint16_t *utrf_sim_adc_mv(utrf_sim_t *s)
+double *utrf_sim_adc_volts(utrf_sim_t *s)
 {
-    return s->adc_mv;
+    return s->adc_volts;
 }
 
 const double *utrf_sim_pins(utrf_sim_t *s)
@@ -406,6 +405,8 @@ utrf_sim_t *utrf_sim_open(const char *elf_path, uint64_t seed, char *err, size_t
     bridge_init(s);
     serve_init(s);
     profile_init(s);
+    board_io_init(s);
+    interrupts_init(s);
     avr_register_io_write(s->avr, board_io_eecr(), eecr_write, s);
     s->stats.last_reset_flags = board_io_mcusr(s->avr); /* PORF, set by avr_init */
     board_io_read_pins(s);

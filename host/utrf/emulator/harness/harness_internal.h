@@ -45,9 +45,7 @@ struct utrf_sim {
     int in_run;
     volatile int stop;
     uint64_t target;
-    uint16_t adc_mv[UTRF_SIM_ADC_CHANNELS];
-    uint16_t adc_applied[UTRF_SIM_ADC_CHANNELS];
-    int adc_valid;
+    double adc_volts[UTRF_SIM_ADC_CHANNELS];
     double pins[UTRF_SIM_PIN_VALUES];
 
     /* UART bridge */
@@ -105,7 +103,7 @@ void serve_write(utrf_sim_t *s, const uint8_t *buf, size_t n);
 
 /* board_io.c */
 void board_io_read_pins(utrf_sim_t *s);
-void board_io_apply_adc(utrf_sim_t *s);
+void board_io_init(utrf_sim_t *s);
 uint64_t board_io_uart0_frame_cycles(const avr_t *avr, int *rx_enabled);
 void board_io_apply_reset_flag(avr_t *avr, int cause);
 uint8_t board_io_mcusr(const avr_t *avr);
@@ -114,6 +112,9 @@ uint16_t board_io_eecr(void);
 uint8_t board_io_eempe_mask(void);
 uint8_t board_io_eepe_mask(void);
 uint32_t board_io_sram_start(void);
+
+/* interrupts.c */
+void interrupts_init(utrf_sim_t *s);
 
 /* profile.c */
 void profile_init(utrf_sim_t *s);

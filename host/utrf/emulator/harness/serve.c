@@ -142,7 +142,8 @@ void serve_poll(utrf_sim_t *s, int timeout_ms)
         ilisten = n, p[n++] = (struct pollfd){s->listen_fd, POLLIN, 0};
     if (s->client_fd >= 0)
         iclient = n, p[n++] = (struct pollfd){s->client_fd, POLLIN, 0};
-    if (!n || poll(p, (nfds_t)n, timeout_ms) <= 0)
+    /* No event on the pty is news too: its slave side is open (POLLHUP otherwise). */
+    if (!n || poll(p, (nfds_t)n, timeout_ms) < 0)
         return;
 
     if (ipty >= 0) {

@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 1
+#define UTRF_SIM_ABI 2
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -58,6 +58,8 @@ typedef struct {
     uint64_t clients;           /* client connections (pty opens and TCP accepts) */
     uint64_t eeprom_writes;     /* EEPROM byte program operations */
     uint64_t frame_cycles;      /* UART0 frame time in CPU cycles at its configured baud */
+    uint64_t adc_conversions;   /* conversions started */
+    uint64_t late_interrupts;   /* interrupts raised when enabled with their flag already set */
 } utrf_sim_stats_t;
 
 /* Cycle profile of one interrupt vector or one function. */
@@ -89,8 +91,9 @@ uint64_t utrf_sim_cycle(const utrf_sim_t *s);
 int utrf_sim_status(const utrf_sim_t *s);
 uint32_t utrf_sim_pc(const utrf_sim_t *s);
 
-/* The ADC inputs in millivolts (UTRF_SIM_ADC_CHANNELS), read at the start of each run. */
-uint16_t *utrf_sim_adc_mv(utrf_sim_t *s);
+/* The voltages on ADC0..7 (UTRF_SIM_ADC_CHANNELS doubles, in volts). Each conversion samples
+ * its channel when it starts, and gives the datasheet's code, floor(1024 V / Vref). */
+double *utrf_sim_adc_volts(utrf_sim_t *s);
 /* The pin block (UTRF_SIM_PIN_VALUES doubles), refreshed after each run. */
 const double *utrf_sim_pins(utrf_sim_t *s);
 void utrf_sim_refresh_pins(utrf_sim_t *s);
