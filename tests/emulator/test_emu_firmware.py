@@ -8,9 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from emu_helpers import SimClient
 
-from utrf.emulator import EmulatedBoard, EncoderParams, PlantParams
+from utrf.emulator import EmulatedBoard, EncoderParams, PlantParams, SimClient
 from utrf.protocol import messages as m
 
 QUIET = PlantParams(gravity_m_s2=(0.0, 0.0), encoder=EncoderParams(noise_v=0.0))

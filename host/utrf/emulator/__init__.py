@@ -17,6 +17,7 @@ from utrf.emulator.board import (
     check_elf,
 )
 from utrf.emulator.plant import EncoderParams, HandPlant, MotorParams, PlantError, PlantParams
+from utrf.emulator.sim_client import SimClient
 
 __all__ = [
     "DEFAULT_ELF",
@@ -31,6 +32,7 @@ __all__ = [
     "PinState",
     "PlantError",
     "PlantParams",
+    "SimClient",
     "SimSerial",
     "check_elf",
 ]
