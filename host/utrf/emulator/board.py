@@ -402,6 +402,11 @@ class EmulatedBoard:
         return self.sim_time / wall if wall > 0 else math.nan
 
     @property
+    def busy_seconds(self) -> float:
+        """Wall-clock seconds spent running the board (sleeps while pacing left out)."""
+        return self._busy
+
+    @property
     def capacity(self) -> float:
         """Simulated seconds per wall-clock second of work: how fast the board could run."""
         return self.sim_time / self._busy if self._busy > 0 else math.nan
