@@ -111,6 +111,11 @@ class TestFaultInjection:
         assert m.FaultBits.ENCODER_RANGE in faults_seen(client, 3)
         assert faults_seen(client, 2) == m.FaultBits(0)
 
+    def test_slipped_encoder_jumps(self, board: EmulatedBoard, client: SimClient) -> None:
+        board.shift_encoder(1, 0.5)  # above the firmware's 0.2 rad a tick
+        client.run(0.02)
+        assert m.FaultBits.ENCODER_JUMP in faults_seen(client, 1)
+
     def test_blocked_finger_stalls(self, board: EmulatedBoard, client: SimClient) -> None:
         board.block_finger(0, 0.2)
         client.request(

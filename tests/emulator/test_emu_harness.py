@@ -195,6 +195,27 @@ class TestResets:
         assert board.reset_cause == cause
         assert board.stats["resets"] == 1
 
+    def test_held_in_reset(self, board: EmulatedBoard, console: Console) -> None:
+        console.command("s 2 1")
+        board.reset(hold=0.05)
+        start = board.sim_time
+        board.run_for(0.04)
+        assert not board.pins.stby.any()  # the pins float while held: the drivers are off
+        assert console.line(timeout=0.1) == "boot 2"
+        assert board.sim_time - start >= 0.05
+
+    def test_a_reset_cuts_the_transmission(self, board: EmulatedBoard, console: Console) -> None:
+        console.port.write(b"z 200\n")
+        board.run_for(0.5e-3)  # a few dozen bytes out of 200
+        board.reset()
+        board.run_for(0.01)
+        out = console.port.read(1000)
+        sent = out[: out.index(b"boot 2\n")]
+        assert 10 < len(sent) < 100
+        assert sent == bytes(range(len(sent)))  # whole bytes, then nothing but the boot line
+        assert out[len(sent) :] == b"boot 2\n"
+        assert board.stats["tx_cut"] >= 1
+
     def test_a_crash_stops_the_core_until_reset(
         self, board: EmulatedBoard, console: Console
     ) -> None:

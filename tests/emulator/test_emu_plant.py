@@ -234,6 +234,14 @@ class TestEncoder:
         assert np.abs(sa.mean(axis=0) - 2.5).max() < 3e-4
         assert np.all((sa.std(axis=0) > 1.8e-3) & (sa.std(axis=0) < 2.2e-3))
 
+    def test_slipped_magnet_shifts_the_reading(self) -> None:
+        plant = HandPlant(params=PlantParams(encoder=EncoderParams(noise_v=0.0)))
+        plant.shift_encoder(1, 0.3)
+        volts = plant.encoder_volts()
+        slope = 0.8 * 5.0 / (2 * math.pi)  # V per rad
+        assert volts[1] - volts[0] == pytest.approx(0.3 * slope, abs=2e-3)
+        assert plant.theta2[1] == 0.0  # the joint did not move
+
     def test_unplugged_reads_the_given_voltage(self) -> None:
         plant = HandPlant()
         plant.unplug_encoder(2)

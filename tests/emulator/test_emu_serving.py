@@ -46,7 +46,8 @@ def test_tcp_client_with_auto_reset_and_echo(fixture_elf: Path) -> None:
             assert got == payload
             # 1031 frames of 40 µs in, the last echoed one frame later; the board keeps to
             # the wall clock (it may run behind, and catch up by up to 100 ms)
-            assert sim >= 1032 * 40e-6
+            # (sim_time moves at the end of an exchange; the last byte left during one)
+            assert sim >= 1032 * 40e-6 - board.exchange_period
             assert wall >= sim - 0.1
             # a second client is turned away while the first is connected
             with socket.create_connection(("127.0.0.1", board.tcp_port), timeout=2.0) as other:
@@ -55,6 +56,29 @@ def test_tcp_client_with_auto_reset_and_echo(fixture_elf: Path) -> None:
         finally:
             port.close()
         assert board.stats["clients"] == 1
+
+
+def recv_line(sock: socket.socket) -> bytes:
+    line = b""
+    while not line.endswith(b"\n"):
+        chunk = sock.recv(1)
+        if not chunk:
+            break
+        line += chunk
+    return line
+
+
+def test_a_pulled_cable_hangs_up_on_the_client(fixture_elf: Path) -> None:
+    with EmulatedBoard(fixture_elf, pty=False) as board:
+        with socket.create_connection(("127.0.0.1", board.tcp_port), timeout=2.0) as client:
+            client.settimeout(2.0)
+            assert recv_line(client) == b"boot 2\n"
+            board.drop_client()
+            assert client.recv(16) == b""  # end of file
+        assert board.clients == {"pty": False, "tcp": False}
+        with socket.create_connection(("127.0.0.1", board.tcp_port), timeout=2.0) as again:
+            again.settimeout(2.0)
+            assert recv_line(again) == b"boot 2\n"  # plugged back in: reset again
 
 
 def test_pty_client(fixture_elf: Path) -> None:

@@ -126,6 +126,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="a connecting client does not reset the board (the MEGA's DTR auto-reset)",
     )
     p.add_argument(
+        "--auto-reset-hold",
+        type=float,
+        default=0.1,
+        metavar="S",
+        help="seconds a connecting client holds the board in reset (default 0.1; a stock "
+        "MEGA's bootloader waits about 1 s)",
+    )
+    p.add_argument(
         "--eeprom", type=Path, metavar="FILE", help="EEPROM image: loaded, saved at exit"
     )
     p.add_argument("--duration", type=float, metavar="S", help="stop after S simulated seconds")
@@ -211,6 +219,7 @@ def build_board(args: argparse.Namespace) -> EmulatedBoard:
         tcp_port=args.port,
         pty=not args.no_pty,
         auto_reset=not args.no_auto_reset,
+        auto_reset_hold=args.auto_reset_hold,
     )
     try:
         for finger, volts in args.unplug_encoder:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 2
+ABI = 3
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -40,6 +40,7 @@ STAT_FIELDS = (
     "tx_corrupted",
     "tx_inserted",
     "tx_unheard",
+    "tx_cut",
     "resets",
     "watchdog_resets",
     "last_reset_flags",
@@ -139,12 +140,14 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_serve_tcp": (ctypes.c_int, [p, ctypes.c_char_p, ctypes.c_int]),
         "utrf_sim_set_auto_reset": (None, [p, ctypes.c_int]),
         "utrf_sim_clients": (ctypes.c_int, [p]),
+        "utrf_sim_drop_client": (None, [p]),
         "utrf_sim_set_line_faults": (
             ctypes.c_int,
             [p, ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double],
         ),
         "utrf_sim_inject": (ctypes.c_size_t, [p, ctypes.c_int, ctypes.c_char_p, ctypes.c_size_t]),
-        "utrf_sim_reset": (None, [p, ctypes.c_int]),
+        "utrf_sim_reset": (None, [p, ctypes.c_int, ctypes.c_uint64]),
+        "utrf_sim_set_auto_reset_hold": (None, [p, ctypes.c_uint64]),
         "utrf_sim_eeprom_size": (ctypes.c_size_t, [p]),
         "utrf_sim_eeprom_get": (ctypes.c_int, [p, u8p, ctypes.c_size_t]),
         "utrf_sim_eeprom_set": (ctypes.c_int, [p, ctypes.c_char_p, ctypes.c_size_t]),
@@ -246,6 +249,9 @@ class NativeBoard:
     def clients(self) -> int:
         return self._lib.utrf_sim_clients(self.handle)
 
+    def drop_client(self) -> None:
+        self._lib.utrf_sim_drop_client(self.handle)
+
     def set_line_faults(self, direction: int, drop: float, corrupt: float, insert: float) -> None:
         if self._lib.utrf_sim_set_line_faults(self.handle, direction, drop, corrupt, insert):
             raise HarnessError("line fault probabilities must lie in [0, 1] (insert < 1)")
@@ -254,8 +260,11 @@ class NativeBoard:
         return self._lib.utrf_sim_inject(self.handle, direction, data, len(data))
 
     # -- board ------------------------------------------------------------------------------
-    def reset(self, cause: int) -> None:
-        self._lib.utrf_sim_reset(self.handle, cause)
+    def reset(self, cause: int, hold_cycles: int = 0) -> None:
+        self._lib.utrf_sim_reset(self.handle, cause, hold_cycles)
+
+    def set_auto_reset_hold(self, hold_cycles: int) -> None:
+        self._lib.utrf_sim_set_auto_reset_hold(self.handle, hold_cycles)
 
     def eeprom(self) -> bytes:
         n = self._lib.utrf_sim_eeprom_size(self.handle)

@@ -174,6 +174,7 @@ class EmulatedBoard:
         tcp_port: int = 0,
         pty: bool = True,
         auto_reset: bool = True,
+        auto_reset_hold: float = 0.1,
         capture: bool | None = None,
         exchange_period: float = EXCHANGE_PERIOD_S,
     ) -> None:
@@ -187,6 +188,8 @@ class EmulatedBoard:
             raise EmulatorError(
                 f"exchange_period must lie in [10 µs, 10 ms], got {exchange_period!r}"
             )
+        if not (isinstance(auto_reset_hold, int | float) and 0 <= auto_reset_hold <= 10):
+            raise EmulatorError(f"auto_reset_hold must lie in [0, 10] s, got {auto_reset_hold!r}")
         if not isinstance(tcp_port, int) or not 0 <= tcp_port <= 65535:
             raise EmulatorError(f"tcp_port must be 0..65535 (0: any free port), got {tcp_port!r}")
         if isinstance(hand, str | Path):
@@ -215,6 +218,7 @@ class EmulatedBoard:
             self._capture = (not self.realtime) if capture is None else bool(capture)
             self._native.set_capture(self._capture)
             self._native.set_auto_reset(auto_reset)
+            self._native.set_auto_reset_hold(round(auto_reset_hold * F_CPU_HZ))
             self.pty_path: str | None = None
             self.tcp_port: int | None = None
             if serve if serve is not None else self.realtime:
@@ -474,6 +478,17 @@ class EmulatedBoard:
         with self._lock:
             self.plant.unblock(finger)
 
+    def shift_encoder(self, finger: int, radians: float) -> None:
+        """The finger's encoder magnet slips: from now its reading is off by ``radians`` (a
+        sudden jump of the measured Joint-2 angle; 0 puts it back)."""
+        with self._lock:
+            self.plant.shift_encoder(finger, radians)
+
+    def drop_client(self) -> None:
+        """Hang up on the TCP client, as a pulled USB cable would (it reads end-of-file)."""
+        with self._lock:
+            self._board().drop_client()
+
     def set_line_faults(
         self,
         direction: str = "both",
@@ -515,14 +530,17 @@ class EmulatedBoard:
         with self._lock:
             self._board().inject(d, bytes(data))
 
-    def reset(self, cause: str = "external") -> None:
+    def reset(self, cause: str = "external", hold: float = 0.0) -> None:
         """Reset the board: ``external`` (reset pin, EXTRF; SRAM kept) or ``power_on`` (PORF;
-        SRAM cleared). The EEPROM survives both."""
+        SRAM cleared). The EEPROM survives both. ``hold``: seconds it stays in reset (pins
+        floating, firmware not running) before starting."""
         causes = {"external": _native.RESET_EXTERNAL, "power_on": _native.RESET_POWER_ON}
         if cause not in causes:
             raise EmulatorError(f"cause must be 'external' or 'power_on', got {cause!r}")
+        if not (isinstance(hold, int | float) and 0 <= hold <= 60):
+            raise EmulatorError(f"hold must lie in [0, 60] s, got {hold!r}")
         with self._lock:
-            self._board().reset(causes[cause])
+            self._board().reset(causes[cause], round(hold * F_CPU_HZ))
             self._status = 0
             self.crash_pc = None
 

@@ -237,6 +237,7 @@ class HandPlant:
         self._decay = 0.0
         self.encoder_plugged = np.ones(FINGERS, dtype=bool)
         self.unplugged_v = np.full(FINGERS, self.params.encoder.unplugged_v)
+        self.encoder_shift = np.zeros(FINGERS)  # rad, a slipped magnet
         self._block = np.array(self.q_limits)  # the joint limits, narrowed by blocks
         self._geometry_terms()
 
@@ -365,7 +366,7 @@ class HandPlant:
     def encoder_volts(self) -> np.ndarray:
         """Each finger's AS5600 output (V), noise included: the ADC0..4 inputs."""
         e = self.params.encoder
-        theta2 = self.q / self.R[:, 1]
+        theta2 = self.q / self.R[:, 1] + self.encoder_shift
         turns = (e.offset_rad + (-theta2 if e.invert else theta2)) * (0.5 / math.pi)
         turns -= np.floor(turns)  # the angle within one turn, as a fraction
         steps = 1 << e.resolution_bits
@@ -449,6 +450,13 @@ class HandPlant:
 
     def plug_encoder(self, finger: int) -> None:
         self.encoder_plugged[_finger_index(finger)] = True
+
+    def shift_encoder(self, finger: int, radians: float) -> None:
+        """The encoder's magnet slips: its reading is off by ``radians`` from now on."""
+        f = _finger_index(finger)
+        if not (isinstance(radians, int | float) and math.isfinite(radians)):
+            raise PlantError(f"encoder shift must be a finite angle in rad, got {radians!r}")
+        self.encoder_shift[f] = float(radians)
 
     def block(self, finger: int, theta2: float | None = None, direction: str = "both") -> None:
         """Block a finger at a Joint-2 angle (default: where it is). ``both``: jammed there;

@@ -129,6 +129,10 @@ int utrf_sim_run_to(utrf_sim_t *s, uint64_t target)
     avr_t *avr = s->avr;
     serve_poll(s, 0);
     bridge_sync_baud(s);
+    if (target > avr->cycle && avr->cycle < s->hold_until) {
+        /* held in reset: time passes, nothing runs */
+        avr->cycle = target < s->hold_until ? target : s->hold_until;
+    }
     if (target > avr->cycle) {
         s->target = target;
         s->stop = 0;
@@ -235,12 +239,18 @@ static void hook_reset(avr_io_t *io)
     profile_after_reset(s);
 }
 
-void utrf_sim_reset(utrf_sim_t *s, int cause)
+void utrf_sim_reset(utrf_sim_t *s, int cause, uint64_t hold_cycles)
 {
     s->pending_cause = cause == UTRF_SIM_RESET_POWER_ON ? UTRF_SIM_RESET_POWER_ON
                                                         : UTRF_SIM_RESET_EXTERNAL;
     avr_reset(s->avr);
+    s->hold_until = s->avr->cycle + hold_cycles;
     board_io_read_pins(s);
+}
+
+void utrf_sim_set_auto_reset_hold(utrf_sim_t *s, uint64_t hold_cycles)
+{
+    s->auto_reset_hold = hold_cycles;
 }
 
 /* simavr looks modules up in list order on every ioctl, and every WDR instruction is one:

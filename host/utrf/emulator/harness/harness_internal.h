@@ -68,6 +68,8 @@ struct utrf_sim {
     int listen_fd;
     int client_fd;
     int auto_reset;
+    uint64_t auto_reset_hold;
+    uint64_t hold_until; /* the MCU stays in reset until this cycle */
 
     /* resets and EEPROM */
     int pending_cause; /* -1: none (watchdog or simavr-internal) */

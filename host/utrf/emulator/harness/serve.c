@@ -36,7 +36,7 @@ static void client_connected(utrf_sim_t *s)
     /* A new session: the previous client's unsent bytes are not this one's. */
     s->rx_tail = s->rx_head;
     if (s->auto_reset)
-        utrf_sim_reset(s, UTRF_SIM_RESET_EXTERNAL);
+        utrf_sim_reset(s, UTRF_SIM_RESET_EXTERNAL, s->auto_reset_hold);
 }
 
 static void close_client(utrf_sim_t *s)
@@ -105,6 +105,11 @@ int utrf_sim_serve_tcp(utrf_sim_t *s, const char *host, int port)
 void utrf_sim_set_auto_reset(utrf_sim_t *s, int on)
 {
     s->auto_reset = on != 0;
+}
+
+void utrf_sim_drop_client(utrf_sim_t *s)
+{
+    close_client(s);
 }
 
 int utrf_sim_clients(const utrf_sim_t *s)

@@ -196,7 +196,14 @@ void bridge_deliver(utrf_sim_t *s)
 
 void bridge_after_reset(utrf_sim_t *s)
 {
-    /* A reset clears simavr's cycle timers: restart the wire if bytes are waiting. */
+    /* The reset cuts the byte on the wire and empties the transmit buffer: only bytes whose
+     * stop bit has already gone reach the host. */
+    uint64_t now = s->avr->cycle;
+    while (s->tx_head != s->tx_tail && s->tx[(s->tx_head - 1) & TX_MASK].due > now) {
+        s->tx_head--;
+        s->stats.tx_cut++;
+    }
+    /* It also cleared simavr's cycle timers: restart the wire if bytes are waiting. */
     s->rx_wire_active = 0;
     bridge_rx_kick(s);
 }

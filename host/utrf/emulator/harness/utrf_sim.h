@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 2
+#define UTRF_SIM_ABI 3
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -52,6 +52,7 @@ typedef struct {
     uint64_t tx_corrupted;      /* line faults */
     uint64_t tx_inserted;       /* line faults */
     uint64_t tx_unheard;        /* bytes sent while no client listened (or it did not read) */
+    uint64_t tx_cut;            /* bytes whose transmission a reset cut short */
     uint64_t resets;            /* resets of any cause after power-on */
     uint64_t watchdog_resets;
     uint64_t last_reset_flags;  /* MCUSR as the firmware finds it after the last reset */
@@ -119,6 +120,8 @@ int utrf_sim_serve_pty(utrf_sim_t *s, char *path, size_t len);
 int utrf_sim_serve_tcp(utrf_sim_t *s, const char *host, int port);
 void utrf_sim_set_auto_reset(utrf_sim_t *s, int on);
 int utrf_sim_clients(const utrf_sim_t *s); /* bit 0: pty open, bit 1: TCP connected */
+/* Hang up on the TCP client, as a pulled cable would (it reads end-of-file). */
+void utrf_sim_drop_client(utrf_sim_t *s);
 
 /* Line faults per direction, as probabilities per byte: drop it, flip one random bit of it,
  * insert one random byte before it. */
@@ -126,7 +129,11 @@ int utrf_sim_set_line_faults(utrf_sim_t *s, int dir, double drop, double corrupt
 /* Put raw bytes on the line now (noise bursts); to the board they queue behind host bytes. */
 size_t utrf_sim_inject(utrf_sim_t *s, int dir, const uint8_t *buf, size_t n);
 
-void utrf_sim_reset(utrf_sim_t *s, int cause);
+/* Reset the board; with hold_cycles > 0 it stays in reset that long (its pins float, nothing
+ * runs) before the firmware starts. */
+void utrf_sim_reset(utrf_sim_t *s, int cause, uint64_t hold_cycles);
+/* How long a client's connection holds the board in reset (with auto-reset), in cycles. */
+void utrf_sim_set_auto_reset_hold(utrf_sim_t *s, uint64_t hold_cycles);
 
 /* The 4 KiB EEPROM. */
 size_t utrf_sim_eeprom_size(const utrf_sim_t *s);
