@@ -46,7 +46,7 @@ def identity(version: int = M.PROTOCOL_VERSION, schema: int = M.SCHEMA_HASH) -> 
         finger_count=5,
         actuation=(M.Actuation.ANTAGONISTIC,) * 4 + (M.Actuation.ROTARY,),
         loop_rate_hz=1000,
-        reset_cause=M.ResetCause.EXTERNAL,
+        reset_cause=M.ResetCause.RESET_PIN,
         config_status=M.ConfigStatus.LOADED,
         max_telemetry_hz=M.MAX_TELEMETRY_HZ,
     )

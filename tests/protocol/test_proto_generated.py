@@ -195,3 +195,77 @@ def test_firmware_side_compiles_without_warnings(tmp_path: Path, compiler: list[
         )
         assert result.returncode == 0, f"{source.name}:\n{result.stderr}"
         assert result.stderr == ""
+
+
+ARDUINO = Path("/usr/share/arduino/hardware/arduino/avr")
+ARDUINO_FLAGS = [
+    *AVR_FLAGS,
+    "-DF_CPU=16000000L",
+    "-DARDUINO=10819",
+    "-DARDUINO_AVR_MEGA2560",
+    "-DARDUINO_ARCH_AVR",
+    f"-I{ARDUINO / 'cores' / 'arduino'}",
+    f"-I{ARDUINO / 'variants' / 'mega'}",
+]
+
+
+def test_header_lives_with_the_avr_and_arduino_macros(tmp_path: Path) -> None:
+    """<avr/io.h> and <Arduino.h> define macros such as PING and EXTERNAL: the header must
+    compile after them, and every name it defines must stay usable there (MsgId names that a
+    macro shadows are suspended inside the header, and reached as Struct::kId instead)."""
+    if (
+        shutil.which("avr-g++") is None
+        or not (ARDUINO / "cores" / "arduino" / "Arduino.h").exists()
+    ):
+        pytest.fail("avr-g++ or the Arduino core is not installed: run `make setup`")
+    probe = tmp_path / "macros.cpp"
+    probe.write_text("#include <Arduino.h>\n")
+    macros = subprocess.run(
+        ["avr-g++", *ARDUINO_FLAGS, "-E", "-dM", str(probe)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    macro_names = {
+        line.split()[1].split("(")[0] for line in macros.splitlines() if line.startswith("#define")
+    }
+    header = HEADER.read_text(encoding="utf-8")
+    suspended = set(re.findall(r'#pragma push_macro\("(\w+)"\)', header))
+    uses: list[str] = []
+    for cls in M.MESSAGES:
+        uses.append(f"proto::{cls.__name__}::kId")
+        if cls.NAME.upper() not in suspended:
+            uses.append(f"proto::MsgId::{cls.NAME.upper()}")
+    for enum in (
+        M.TargetKind,
+        M.ControlMode,
+        M.Actuation,
+        M.SafeAction,
+        M.ResetCause,
+        M.ConfigStatus,
+        M.ConfigSource,
+        M.ErrorCode,
+    ):
+        uses += [f"static_cast<uint8_t>(proto::{enum.__name__}::{m.name})" for m in enum]
+    uses += [f"proto::FaultBits::{m.name}" for m in M.FaultBits]
+    names = {u.split("::")[-1].rstrip(")") for u in uses}
+    assert names & macro_names <= suspended, "a generated name is a macro in Arduino code"
+    assert suspended <= macro_names, "a suspended name that is no macro"
+    source = tmp_path / "with_arduino.cpp"
+    source.write_text(
+        "#include <Arduino.h>\n"
+        f'#include "{REPO_ROOT}/firmware/src/core/framing.h"\n'
+        f'#include "{HEADER}"\n'
+        "using namespace utrf;\n"
+        "uint16_t sum_of_names() {\n  uint16_t s = 0;\n"
+        + "".join(f"  s = static_cast<uint16_t>(s + {u});\n" for u in uses)
+        + "  return s;\n}\n"
+        + "uint8_t port_g() { return PING; }  // the macro still works after the header\n"
+    )
+    result = subprocess.run(
+        ["avr-g++", *ARDUINO_FLAGS, "-c", str(source), "-o", str(tmp_path / "a.o")],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stderr == ""

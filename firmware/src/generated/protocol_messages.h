@@ -12,12 +12,18 @@
 #include <stdint.h>
 #include <string.h>
 
+// Macros of <avr/io.h> or <Arduino.h> with the name of a MsgId: PING.
+// They are suspended within this file so that it compiles everywhere; in a file that
+// includes those headers, write Ping::kId rather than MsgId::PING.
+#pragma push_macro("PING")
+#undef PING
+
 namespace utrf {
 namespace proto {
 
 static const uint16_t kProtocolVersion = 1;
 // CRC-32 of the canonical spec (doc texts excluded); compared at the handshake.
-static const uint32_t kSchemaHash = 0x11C32FC2UL;
+static const uint32_t kSchemaHash = 0x1556907BUL;
 static const uint8_t kMaxPayload = 64;  // body bytes
 static const uint8_t kFingerCount = 5;
 static const uint32_t kDefaultBaud = 1000000UL;
@@ -63,7 +69,7 @@ enum class SafeAction : uint8_t {
 // Why the board last started (from MCUSR; the highest-priority cause is reported).
 enum class ResetCause : uint8_t {
   POWER_ON = 0,  // power-on reset
-  EXTERNAL = 1,  // reset pin (the USB-serial auto-reset, or the button)
+  RESET_PIN = 1,  // reset pin (the USB-serial auto-reset, or the button)
   BROWN_OUT = 2,  // supply voltage dropped below the brown-out level
   WATCHDOG = 3,  // the watchdog expired: the firmware stopped running its loop
   JTAG = 4,  // JTAG reset
@@ -2083,5 +2089,7 @@ inline void unflatten(const double* in, Nack& m) {
 
 }  // namespace proto
 }  // namespace utrf
+
+#pragma pop_macro("PING")
 
 #endif  // UTRF_PROTOCOL_MESSAGES_H

@@ -207,6 +207,8 @@ class Link:
         :class:`DecodeError` for a reply that is not a valid message,
         :class:`BoardResetError` after the board reset, :class:`DisconnectedError`.
         """
+        if not isinstance(msg, Request):
+            raise TypeError(f"{type(msg).__name__} is not a request (host_to_board) message")
         body = msg.encode()
         with self._request_lock:
             self._check_usable()

@@ -16,7 +16,7 @@ from utrf.protocol.codec import Direction, Field, Message, Request
 
 PROTOCOL_VERSION = 1
 #: CRC-32 of the canonical spec (doc texts excluded), compared at the handshake.
-SCHEMA_HASH = 0x11C32FC2
+SCHEMA_HASH = 0x1556907B
 MAX_PAYLOAD = 64
 FINGER_COUNT = 5
 DEFAULT_BAUD = 1000000
@@ -78,7 +78,7 @@ class ResetCause(IntEnum):
     #: power-on reset
     POWER_ON = 0
     #: reset pin (the USB-serial auto-reset, or the button)
-    EXTERNAL = 1
+    RESET_PIN = 1
     #: supply voltage dropped below the brown-out level
     BROWN_OUT = 2
     #: the watchdog expired: the firmware stopped running its loop
