@@ -79,6 +79,7 @@ def test_fault_options(fixture_elf: Path) -> None:
         blocks = board.plant.blocks / board.plant.R[:, 1:2]  # as Joint-2 angles
         np.testing.assert_allclose(blocks[1], np.radians([30, 30]))
         assert blocks[2, 1] == pytest.approx(np.radians(45)) and blocks[2, 0] < -1.0
+        board.run_for(0.01)  # the next exchanges carry the plant's new voltages
         assert board.adc_volts[3] == 4.5 and board.adc_volts[4] == 0.0
         before = board.stats["tx_corrupted"]
         board.reset()

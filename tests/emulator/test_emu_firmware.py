@@ -59,8 +59,8 @@ def test_boot_handshake_and_reset_cause(board: EmulatedBoard, client: SimClient)
     assert identity.schema_hash == m.SCHEMA_HASH
     assert identity.reset_cause == m.ResetCause.POWER_ON
     board.reset()
-    assert client.wait_boot().reset_cause == m.ResetCause.EXTERNAL
-    assert client.request(m.Identify()).reset_cause == m.ResetCause.EXTERNAL
+    assert client.wait_boot().reset_cause == m.ResetCause.RESET_PIN
+    assert client.request(m.Identify()).reset_cause == m.ResetCause.RESET_PIN
 
 
 def test_the_firmware_reads_the_plant_encoders(board: EmulatedBoard, client: SimClient) -> None:
@@ -147,7 +147,7 @@ class TestFaultInjection:
         assert board.pins.stby[4]
         board.reset()
         boot = client.wait_boot()
-        assert boot.reset_cause == m.ResetCause.EXTERNAL
+        assert boot.reset_cause == m.ResetCause.RESET_PIN
         assert not board.pins.stby.any()  # all off after the reset
         assert client.request(m.GetState()).mode == COAST5
 

@@ -186,7 +186,7 @@ class TestResets:
         assert board.stats["watchdog_resets"] == 1
         assert console.command("b") == "b 8"
 
-    @pytest.mark.parametrize(("cause", "flags"), [("external", 2), ("power_on", 1)])
+    @pytest.mark.parametrize(("cause", "flags"), [("reset_pin", 2), ("power_on", 1)])
     def test_reset_on_request(
         self, board: EmulatedBoard, console: Console, cause: str, flags: int
     ) -> None:

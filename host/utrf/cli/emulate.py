@@ -30,7 +30,7 @@ FINGER_NAMES = ("thumb", "index", "middle", "ring", "little")
 
 COMMANDS_HELP = """\
 commands (angles in degrees, fingers 0..4 or thumb/index/middle/ring/little):
-  reset [external|power_on]   reset the board (default: external, the reset pin)
+  reset [reset_pin|power_on]  reset the board (default: reset_pin, like the auto-reset)
   unplug FINGER [VOLTS]        disconnect a Joint-2 encoder (its ADC input reads VOLTS, 0 V)
   plug FINGER                  reconnect it
   block FINGER [DEG]           jam a finger at a Joint-2 angle (default: where it is)
@@ -296,8 +296,8 @@ def _command(board: EmulatedBoard, line: str, say: _Printer) -> bool:
             st = _status(board)
             say.say(f"status: {_status_text(st)}", **st)
         elif cmd == "reset":
-            board.reset(rest[0] if rest else "external")
-            say.say(f"reset: {rest[0] if rest else 'external'}")
+            board.reset(rest[0] if rest else "reset_pin")
+            say.say(f"reset: {rest[0] if rest else 'reset_pin'}")
         elif cmd == "unplug":
             board.unplug_encoder(_finger(rest[0]), float(rest[1]) if len(rest) > 1 else None)
             say.say(f"unplugged: encoder of finger {rest[0]}")

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 3
+ABI = 4
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -24,7 +24,7 @@ REPO_ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_LIBRARY = REPO_ROOT / "build" / "emulator" / "libutrf_sim.so"
 
 STATUS_NAMES = {0: "running", 1: "crashed", 2: "done"}
-RESET_POWER_ON, RESET_EXTERNAL = 0, 1
+RESET_POWER_ON, RESET_PIN = 0, 1
 TO_BOARD, TO_HOST = 0, 1
 
 STAT_FIELDS = (
@@ -59,6 +59,7 @@ PROFILE_FIELDS = (
     "worst_incl",
     "last_entry",
     "period_sum",
+    "intervals",
 )
 
 

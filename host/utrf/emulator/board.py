@@ -29,7 +29,7 @@ EEPROM_SIZE = 4096
 # MCUSR bits, and the order in which the protocol's ResetCause reports them.
 RESET_FLAGS = {
     "power_on": 0x01,
-    "external": 0x02,
+    "reset_pin": 0x02,
     "brown_out": 0x04,
     "watchdog": 0x08,
     "jtag": 0x10,
@@ -93,7 +93,7 @@ class CycleProfile:
             best=p["best"],
             mean_incl=p["total_incl"] / n if n else math.nan,
             worst_incl=p["worst_incl"],
-            period=p["period_sum"] / (n - 1) if n > 1 else math.nan,
+            period=p["period_sum"] / p["intervals"] if p["intervals"] else math.nan,
         )
 
 
@@ -530,13 +530,14 @@ class EmulatedBoard:
         with self._lock:
             self._board().inject(d, bytes(data))
 
-    def reset(self, cause: str = "external", hold: float = 0.0) -> None:
-        """Reset the board: ``external`` (reset pin, EXTRF; SRAM kept) or ``power_on`` (PORF;
+    def reset(self, cause: str = "reset_pin", hold: float = 0.0) -> None:
+        """Reset the board: ``reset_pin`` (EXTRF, as the USB-serial auto-reset or the button;
+        SRAM kept) or ``power_on`` (PORF;
         SRAM cleared). The EEPROM survives both. ``hold``: seconds it stays in reset (pins
         floating, firmware not running) before starting."""
-        causes = {"external": _native.RESET_EXTERNAL, "power_on": _native.RESET_POWER_ON}
+        causes = {"reset_pin": _native.RESET_PIN, "power_on": _native.RESET_POWER_ON}
         if cause not in causes:
-            raise EmulatorError(f"cause must be 'external' or 'power_on', got {cause!r}")
+            raise EmulatorError(f"cause must be 'reset_pin' or 'power_on', got {cause!r}")
         if not (isinstance(hold, int | float) and 0 <= hold <= 60):
             raise EmulatorError(f"hold must lie in [0, 60] s, got {hold!r}")
         with self._lock:

@@ -196,7 +196,7 @@ void board_io_apply_reset_flag(avr_t *avr, int cause)
 {
     if (cause == UTRF_SIM_RESET_POWER_ON)
         avr->data[MCUSR] |= (uint8_t)(1 << PORF);
-    else if (cause == UTRF_SIM_RESET_EXTERNAL)
+    else if (cause == UTRF_SIM_RESET_PIN)
         avr->data[MCUSR] |= (uint8_t)(1 << EXTRF);
 }
 

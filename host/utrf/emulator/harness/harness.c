@@ -242,7 +242,7 @@ static void hook_reset(avr_io_t *io)
 void utrf_sim_reset(utrf_sim_t *s, int cause, uint64_t hold_cycles)
 {
     s->pending_cause = cause == UTRF_SIM_RESET_POWER_ON ? UTRF_SIM_RESET_POWER_ON
-                                                        : UTRF_SIM_RESET_EXTERNAL;
+                                                        : UTRF_SIM_RESET_PIN;
     avr_reset(s->avr);
     s->hold_until = s->avr->cycle + hold_cycles;
     board_io_read_pins(s);

@@ -26,8 +26,10 @@ static void record(profile_state_t *p, uint64_t now)
 
 static void enter(profile_state_t *p, uint64_t now)
 {
-    if (p->p.last_entry && p->p.count)
+    if (p->p.last_entry) {
         p->p.period_sum += now - p->p.last_entry;
+        p->p.intervals++;
+    }
     p->p.last_entry = now;
     p->active = 1;
     p->paused = 0;

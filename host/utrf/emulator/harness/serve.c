@@ -36,7 +36,7 @@ static void client_connected(utrf_sim_t *s)
     /* A new session: the previous client's unsent bytes are not this one's. */
     s->rx_tail = s->rx_head;
     if (s->auto_reset)
-        utrf_sim_reset(s, UTRF_SIM_RESET_EXTERNAL, s->auto_reset_hold);
+        utrf_sim_reset(s, UTRF_SIM_RESET_PIN, s->auto_reset_hold);
 }
 
 static void close_client(utrf_sim_t *s)

@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 3
+#define UTRF_SIM_ABI 4
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -30,7 +30,7 @@ enum utrf_sim_status {
 
 enum utrf_sim_reset_cause {
     UTRF_SIM_RESET_POWER_ON = 0, /* PORF; SRAM cleared */
-    UTRF_SIM_RESET_EXTERNAL = 1, /* EXTRF: the reset pin (the USB-serial auto-reset) */
+    UTRF_SIM_RESET_PIN = 1,      /* EXTRF: the reset pin (the USB-serial auto-reset) */
 };
 
 enum utrf_sim_dir {
@@ -73,6 +73,7 @@ typedef struct {
     uint64_t worst_incl;
     uint64_t last_entry;  /* cycle of the last entry */
     uint64_t period_sum;  /* sum of entry-to-entry intervals */
+    uint64_t intervals;   /* how many intervals period_sum holds */
 } utrf_sim_profile_t;
 
 typedef struct utrf_sim utrf_sim_t;
@@ -114,7 +115,7 @@ void utrf_sim_set_capture(utrf_sim_t *s, int on);
 
 /* Serving: a pty (path returned) and a TCP listener on host:port (port 0: any free one;
  * returns the port, or -errno). One TCP client at a time; a second one is closed at once.
- * With auto_reset, a client opening the pty or connecting resets the board (EXTERNAL), as
+ * With auto_reset, a client opening the pty or connecting resets the board (EXTRF), as
  * the MEGA's USB-serial chip does through DTR. */
 int utrf_sim_serve_pty(utrf_sim_t *s, char *path, size_t len);
 int utrf_sim_serve_tcp(utrf_sim_t *s, const char *host, int port);
