@@ -111,6 +111,18 @@ def test_twice_real_time_when_asked(fixture_elf: Path) -> None:
         assert board.sim_time - s0 >= 0.4
 
 
+def test_a_failure_in_the_board_thread_reaches_the_caller(fixture_elf: Path) -> None:
+    with EmulatedBoard(fixture_elf, pty=False) as board:
+
+        def broken(dt: float, pins: object = None) -> None:
+            raise ValueError("plant exploded")
+
+        board.plant.step = broken  # type: ignore[method-assign]
+        with pytest.raises(EmulatorError, match="plant exploded"):
+            board.run_for(0.1)
+        assert isinstance(board.failure, ValueError)
+
+
 def test_clean_shutdown(fixture_elf: Path) -> None:
     before = open_fds()
     board = EmulatedBoard(fixture_elf)

@@ -4,7 +4,8 @@ Runs the firmware ELF (default ``build/firmware/utrf.elf``, from ``make firmware
 with the plant model of the hand, paced to the wall clock, and serves its UART0 on a TCP port
 (``socket://127.0.0.1:PORT``, for pyserial) and on a pty. Prints where to connect, a status
 line now and then with the real-time factor, and takes fault-injection commands on stdin
-(``help`` lists them). Exit codes: 0 stopped (Ctrl-C, SIGTERM or ``--duration``), 2 bad input.
+(``help`` lists them). Exit codes: 0 stopped (Ctrl-C, SIGTERM or ``--duration``), 1 the board
+failed, 2 bad input.
 
 Angles on the command line are in degrees (Joint-2 angle), and say so; the API is SI.
 """
@@ -356,6 +357,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         return EXIT_BAD_INPUT
 
     stop = threading.Event()
+    failed = False
     previous = signal.getsignal(signal.SIGTERM)
     in_main = threading.current_thread() is threading.main_thread()
     if in_main:
@@ -384,6 +386,10 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         next_reset = args.reset_every
         while not stop.is_set():
             stop.wait(0.05)
+            if board.failure is not None:
+                print(f"utrf emulate: the board stopped: {board.failure!r}", file=sys.stderr)
+                failed = True
+                break
             if args.duration is not None and board.sim_time >= args.duration:
                 break
             if next_reset is not None and board.sim_time >= next_reset:
@@ -406,4 +412,4 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
             "on this machine)",
             **st,
         )
-    return 0
+    return 1 if failed else 0

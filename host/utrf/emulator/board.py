@@ -215,6 +215,7 @@ class EmulatedBoard:
             self._native.adc_volts[:5] = self.plant.encoder_volts()
             self._status = 0
             self.crash_pc: int | None = None
+            self.failure: BaseException | None = None  # what stopped the board thread
             self._capture = (not self.realtime) if capture is None else bool(capture)
             self._native.set_capture(self._capture)
             self._native.set_auto_reset(auto_reset)
@@ -366,6 +367,8 @@ class EmulatedBoard:
                     return True
             if now >= deadline:
                 return False
+            if self.failure is not None:
+                raise EmulatorError(f"the board stopped: {self.failure!r}") from self.failure
             thread = self._holder.get("thread")
             if thread is None or not thread.is_alive():
                 raise EmulatorError("the board thread has stopped")
@@ -373,6 +376,14 @@ class EmulatedBoard:
                 self._tick.wait(0.05)
 
     def _serve_forever(self) -> None:
+        try:
+            self._pace()
+        except BaseException as exc:  # kept for the caller: run_for and wait_until raise it
+            self.failure = exc
+            with self._tick:
+                self._tick.notify_all()
+
+    def _pace(self) -> None:
         batch = max(1, round(1e-3 / (self._period_cycles / F_CPU_HZ)))  # ~1 ms per lock hold
         wall0, sim0 = time.perf_counter(), self.sim_time
         while not self._stop.is_set():
