@@ -1,0 +1,138 @@
+# Firmware for the Arduino MEGA 2560 (Debian's avr-gcc + arduino-core-avr), the host build of
+# its core for the tests, flashing and the firmware benchmark. Included by the top Makefile.
+#
+#   make firmware              build/firmware/utrf.elf and .hex; prints flash and RAM use
+#   make flash PORT=/dev/ttyACM0   avrdude over the MEGA's stk500v2 bootloader, 115200 baud
+#   make firmware-host         build/firmware/host/libutrf_fw.so: core + host HAL, for pytest
+#   make bench-firmware        tick load and memory, appended to docs/benchmarks.md
+#   UTRF_BAUD=...              serial baud rate (default 1000000, exact at 16 MHz with U2X)
+
+FW_SRC       := firmware/src
+FW_BUILD     := $(BUILD)/firmware
+FW_ELF       := $(FW_BUILD)/utrf.elf
+FW_HEX       := $(FW_BUILD)/utrf.hex
+FW_HOST_LIB  := $(FW_BUILD)/host/libutrf_fw.so
+
+ARDUINO_AVR     ?= /usr/share/arduino/hardware/arduino/avr
+ARDUINO_CORE    := $(ARDUINO_AVR)/cores/arduino
+ARDUINO_VARIANT := $(ARDUINO_AVR)/variants/mega
+
+AVR_CC      ?= avr-gcc
+AVR_CXX     ?= avr-g++
+AVR_AR      ?= avr-ar
+AVR_OBJCOPY ?= avr-objcopy
+AVR_SIZE    ?= avr-size
+HOST_CXX    ?= g++
+AVRDUDE     ?= avrdude
+# "wiring" is avrdude's stk500v2 with the DTR pulse that resets the MEGA into its bootloader
+# (what the Arduino IDE uses for this board); override with AVRDUDE_PROGRAMMER=stk500v2.
+AVRDUDE_PROGRAMMER ?= wiring
+FLASH_BAUD  ?= 115200
+
+UTRF_BAUD ?= 1000000
+FW_TARGET_FLASH := 49152
+FW_TARGET_RAM   := 3072
+
+# The same flags platformio.ini gives PlatformIO (keep the two in step).
+FW_MCU    := -mmcu=atmega2560 -DF_CPU=16000000L -DARDUINO=10819 -DARDUINO_AVR_MEGA2560 \
+             -DARDUINO_ARCH_AVR
+FW_OPT    := -Os -g -ffunction-sections -fdata-sections
+FW_CXXSTD := -std=gnu++11 -fno-exceptions -fno-threadsafe-statics -fno-rtti
+FW_DEFS   := -DUTRF_BAUD=$(UTRF_BAUD)UL
+FW_WARN   := -Wall -Wextra
+FW_INC    := -I$(ARDUINO_CORE) -I$(ARDUINO_VARIANT)
+
+FW_OWN_SRCS := $(FW_SRC)/utrf_main.cpp $(wildcard $(FW_SRC)/core/*.cpp) \
+               $(wildcard $(FW_SRC)/hal/avr/*.cpp)
+FW_OWN_OBJS := $(patsubst $(FW_SRC)/%.cpp,$(FW_BUILD)/obj/%.o,$(FW_OWN_SRCS))
+
+# The Arduino core as an archive, objects named <file>.o under their own directory: its
+# main.cpp never meets ours, and only what is referenced is linked (not its Serial, whose
+# UART interrupts would clash with hal/avr's driver).
+ARDUINO_SRCS := $(wildcard $(ARDUINO_CORE)/*.c $(ARDUINO_CORE)/*.cpp $(ARDUINO_CORE)/*.S)
+ARDUINO_OBJS := $(patsubst $(ARDUINO_CORE)/%,$(FW_BUILD)/arduino-core/%.o,$(ARDUINO_SRCS))
+ARDUINO_LIB  := $(FW_BUILD)/arduino-core/libarduino_core.a
+
+# The git commit goes into identify's build_id; rewritten only when it changes.
+FW_BUILD_ID := $(FW_BUILD)/build_id.h
+FW_GIT_ID   := $(shell git rev-parse --short=8 HEAD 2>/dev/null)
+
+.PHONY: firmware flash firmware-host bench-firmware firmware-size
+
+firmware: $(FW_ELF) $(FW_HEX)
+	@$(MAKE) --no-print-directory firmware-size
+
+$(FW_BUILD_ID): FORCE_FW_ID
+	@mkdir -p $(@D)
+	@id='$(FW_GIT_ID)'; v="0x$${id:-0}UL"; \
+	 line="#define UTRF_BUILD_ID $$v"; \
+	 if [ ! -f $@ ] || [ "$$(cat $@)" != "$$line" ]; then echo "$$line" > $@; fi
+.PHONY: FORCE_FW_ID
+FORCE_FW_ID:
+
+$(FW_BUILD)/obj/core/dispatch.o: $(FW_BUILD_ID)
+$(FW_BUILD)/obj/core/dispatch.o: FW_EXTRA := -include $(FW_BUILD_ID)
+
+$(FW_BUILD)/obj/%.o: $(FW_SRC)/%.cpp
+	@mkdir -p $(@D)
+	$(AVR_CXX) -c $(FW_MCU) $(FW_OPT) $(FW_CXXSTD) $(FW_WARN) $(FW_DEFS) $(FW_INC) \
+	  $(FW_EXTRA) -MMD -MP -o $@ $<
+
+$(FW_BUILD)/arduino-core/%.c.o: $(ARDUINO_CORE)/%.c
+	@mkdir -p $(@D)
+	@$(AVR_CC) -c $(FW_MCU) $(FW_OPT) -std=gnu11 -w $(FW_INC) -o $@ $<
+$(FW_BUILD)/arduino-core/%.cpp.o: $(ARDUINO_CORE)/%.cpp
+	@mkdir -p $(@D)
+	@$(AVR_CXX) -c $(FW_MCU) $(FW_OPT) $(FW_CXXSTD) -DDECIMAL_DIG=9 -w $(FW_INC) -o $@ $<
+$(FW_BUILD)/arduino-core/%.S.o: $(ARDUINO_CORE)/%.S
+	@mkdir -p $(@D)
+	@$(AVR_CC) -c $(FW_MCU) -x assembler-with-cpp $(FW_INC) -o $@ $<
+
+$(ARDUINO_LIB): $(ARDUINO_OBJS)
+	@rm -f $@
+	@$(AVR_AR) rcs $@ $^
+	@echo "arduino core: $(words $^) objects from $(ARDUINO_CORE)"
+
+$(FW_ELF): $(FW_OWN_OBJS) $(ARDUINO_LIB)
+	$(AVR_CXX) $(FW_MCU) -Os -Wl,--gc-sections -o $@ $(FW_OWN_OBJS) $(ARDUINO_LIB) -lm
+
+$(FW_HEX): $(FW_ELF)
+	$(AVR_OBJCOPY) -O ihex -R .eeprom $< $@
+
+# Flash = .text + .data (the initial values of .data live in flash); RAM = .data + .bss +
+# .noinit, static use (the stack comes on top). Targets: 48 KB flash, 3 KB RAM.
+firmware-size: $(FW_ELF)
+	@$(AVR_SIZE) -A $(FW_ELF) | awk -v tf=$(FW_TARGET_FLASH) -v tr=$(FW_TARGET_RAM) \
+	  '$$1==".text"{t=$$2} $$1==".data"{d=$$2} $$1==".bss"{b=$$2} $$1==".noinit"{n=$$2} \
+	   END { f=t+d; r=d+b+n; \
+	     printf "firmware: flash %d bytes (%.1f%% of the %d-byte target), ", f, 100*f/tf, tf; \
+	     printf "static RAM %d bytes (data %d + bss %d + noinit %d; %.1f%% of %d)\n", \
+	       r, d, b, n, 100*r/tr, tr; \
+	     if (f > tf || r > tr) print "firmware: OVER TARGET" }'
+	@grep -h "^// Geometry\|rows, .* bytes; worst" $(FW_SRC)/generated/kinematics_table.h \
+	  | sed 's|^// |kinematics table: |'
+
+flash: $(FW_HEX)
+	@if [ -z "$(PORT)" ]; then echo "usage: make flash PORT=/dev/ttyACM0" >&2; exit 2; fi
+	$(AVRDUDE) -p atmega2560 -c $(AVRDUDE_PROGRAMMER) -P $(PORT) -b $(FLASH_BAUD) -D \
+	  -U flash:w:$(FW_HEX):i
+
+# ---- the core on the host, with the host hardware layer and a C ABI for ctypes ----------------
+FW_HOST_SRCS := $(wildcard $(FW_SRC)/core/*.cpp) $(wildcard firmware/test/*.cpp)
+FW_HOST_OBJS := $(patsubst %.cpp,$(FW_BUILD)/host/obj/%.o,$(FW_HOST_SRCS))
+FW_HOST_FLAGS := -std=gnu++11 -O2 -g -fPIC -fno-exceptions -fno-rtti $(FW_WARN) -I$(FW_SRC)
+
+firmware-host: $(FW_HOST_LIB)
+
+$(FW_BUILD)/host/obj/%.o: %.cpp
+	@mkdir -p $(@D)
+	$(HOST_CXX) -c $(FW_HOST_FLAGS) -MMD -MP -o $@ $<
+
+$(FW_HOST_LIB): $(FW_HOST_OBJS)
+	$(HOST_CXX) -shared -o $@ $^ -lm
+
+-include $(FW_OWN_OBJS:.o=.d) $(FW_HOST_OBJS:.o=.d)
+
+TEST_DEPS     += firmware firmware-host
+DEMO_DEPS     += firmware
+BENCH_TARGETS += bench-firmware

@@ -1,0 +1,76 @@
+// The firmware as a whole, in plain C++: what setup(), loop() and the tick interrupt do.
+//
+// The Arduino entry (utrf_main.cpp) and the host tests (firmware/test/) call these three
+// functions; everything else is reached through board().
+#ifndef UTRF_CORE_APP_H
+#define UTRF_CORE_APP_H
+
+#include <stdint.h>
+
+#include "config.h"
+#include "framing.h"
+#include "hand.h"
+
+namespace utrf {
+namespace app {
+
+static const uint8_t kFwMajor = 0;
+static const uint8_t kFwMinor = 1;
+static const uint8_t kFwPatch = 0;
+// Longest the tick may stand still before loop() turns the motors off and lets the watchdog
+// reset the board.
+static const uint8_t kTickDeadMs = 20;
+
+struct LinkStats {
+    uint32_t rx_frames;
+    uint32_t rx_crc_errors;
+    uint32_t rx_framing_errors;
+    uint32_t rx_overruns;
+    uint32_t nacks;
+    uint32_t tx_dropped;
+};
+
+struct Board {
+    hand::Hand hand;
+    config::Config cfg;
+    uint8_t config_status;  // proto::ConfigStatus
+    config::Writer writer;
+    int16_t save_seq;  // seq of the save_config being written, -1 when none
+    uint8_t reset_cause;
+
+    framing::FrameDecoder decoder;
+    LinkStats link;
+    uint8_t board_seq;  // running seq of board-initiated frames
+    bool boot_sent;
+
+    // One reply waits here until the transmit buffer has room; meanwhile no input is read.
+    uint8_t reply[framing::kMaxFrameBytes];
+    uint8_t reply_len;
+
+    uint16_t telemetry_hz;
+    uint16_t telemetry_acc;  // frames due, in 1/1000: += rate per tick, a frame per 1000
+    uint32_t telemetry_tick;
+
+    uint32_t watch_ticks;  // loop()'s view of the tick, for the watchdog
+    uint32_t watch_ms;
+};
+
+Board& board();
+
+void setup();  // after hal init: load the configuration, arm the tick and the watchdog
+void loop();   // one pass: link, dispatch, reports, telemetry, EEPROM, watchdog
+void tick();   // the control tick (timer interrupt context)
+
+// Apply a finger's configuration (compile in loop() context, swap under the tick lock).
+void apply_finger_config(uint8_t f);
+void apply_all_config();
+
+// Queue one frame for the host (the reply slot). False when the slot is taken.
+bool queue_reply(uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len);
+// Board time in microseconds (the tick count, refined by the tick timer).
+uint32_t board_time_us();
+
+}  // namespace app
+}  // namespace utrf
+
+#endif  // UTRF_CORE_APP_H

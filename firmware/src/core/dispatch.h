@@ -1,0 +1,26 @@
+// Protocol dispatch: one valid frame in, at most one reply out (through app::queue_reply).
+//
+// Every request is decoded and checked completely before anything changes; a refused
+// request is answered with a nack naming the field or finger, and changes nothing.
+#ifndef UTRF_CORE_DISPATCH_H
+#define UTRF_CORE_DISPATCH_H
+
+#include <stdint.h>
+
+#include "app.h"
+
+namespace utrf {
+namespace dispatch {
+
+void handle(app::Board& b, uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len);
+void nack(app::Board& b, uint8_t seq, uint8_t msg_id, uint8_t code, uint8_t detail);
+void ack(app::Board& b, uint8_t seq, uint8_t msg_id);
+
+// Encoders for board-initiated messages (used by app for the stream and reports).
+uint8_t encode_state(app::Board& b, uint8_t* body);
+uint8_t encode_boot(const app::Board& b, uint8_t* body);
+
+}  // namespace dispatch
+}  // namespace utrf
+
+#endif  // UTRF_CORE_DISPATCH_H

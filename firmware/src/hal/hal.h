@@ -1,0 +1,103 @@
+// The thin hardware layer: everything the core needs from the board, and nothing more.
+//
+// Two implementations: hal/avr/ (the MEGA 2560: timers, pins, ADC, UART0, EEPROM, watchdog)
+// and firmware/test/hal_host.cpp (memory the host tests read and write). Core modules include
+// this header only; they never see an Arduino or AVR header.
+#ifndef UTRF_HAL_HAL_H
+#define UTRF_HAL_HAL_H
+
+#include <stdint.h>
+
+namespace utrf {
+namespace hal {
+
+// ---- motors ----------------------------------------------------------------------------------
+// One TB6612FNG channel. The PWM runs at 20 kHz with kPwmPeriod counts per period.
+static const uint16_t kPwmPeriod = 800;  // TOP + 1 (board_pins.h: UTRF_PWM_TOP = 799)
+
+enum class Drive : uint8_t {
+    COAST = 0,    // IN1 = L, IN2 = L, PWM pin held low: outputs off (high impedance)
+    BRAKE = 1,    // IN1 = H, IN2 = H, PWM pin held low: short brake
+    FORWARD = 2,  // IN1 = H, IN2 = L, PWM = on_counts: pull the tendon
+    REVERSE = 3,  // IN1 = L, IN2 = H, PWM = on_counts: release it
+};
+
+struct MotorOut {
+    Drive drive;
+    uint16_t on_counts;  // FORWARD/REVERSE: 1..kPwmPeriod counts high per period
+};
+
+// Drive one finger's two channels and its STBY pin. FORWARD/REVERSE with on_counts == 0 are
+// written as COAST: the compare output is disconnected, so fast PWM's one-count spike at
+// OCR = 0 never reaches the driver.
+void motor_write(uint8_t finger, const MotorOut& a, const MotorOut& b, bool standby_high);
+
+// Every channel to COAST and every STBY low. Safe from any context, interrupts included.
+void motors_all_off();
+
+// ---- encoders ----------------------------------------------------------------------------------
+// One Joint-2 encoder reading, already checked by its driver.
+enum class EncoderStatus : uint8_t {
+    OK = 0,
+    OUT_OF_BAND = 1,  // the signal is outside the sensor's valid band (unplugged, shorted)
+    NO_DATA = 2,      // no new sample since the last tick (the sampler stopped)
+};
+
+struct EncoderReading {
+    uint16_t turn;  // angle as a fraction of one turn: 65536 = 360 degrees
+    EncoderStatus status;
+};
+
+// Fill readings for all fingers: called once per control tick, from the tick.
+void encoders_read(EncoderReading* out /* [UTRF_FINGER_COUNT] */);
+
+// ---- control tick ------------------------------------------------------------------------------
+// The tick is a hardware timer interrupt at UTRF_TICK_HZ that calls app_tick().
+void tick_start();
+// Keep the tick from running while loop() changes state it reads (masks the timer interrupt
+// only; UART and ADC interrupts keep running). Not nestable; loop() context only.
+void tick_lock();
+void tick_unlock();
+// Cycle-exact timing of the tick: stamp() at its start, cycles_since() at its end. (The AVR
+// combines the tick timer, 4 us per count, with timer 1's 16 MHz count modulo 800.)
+struct Stamp {
+    uint8_t coarse;
+    uint16_t fine;
+};
+Stamp stamp();
+uint32_t cycles_since(const Stamp& start);
+static const uint32_t kCpuHz = 16000000UL;
+// True when the tick timer reached its period again before the tick finished (an overrun).
+bool tick_period_elapsed();
+// Milliseconds since start, for loop()'s own time-outs.
+uint32_t millis();
+
+// ---- serial (UART0) ----------------------------------------------------------------------------
+// Never blocks. Reads what has arrived; writes only when serial_tx_room() says it fits.
+uint16_t serial_read(uint8_t* buf, uint16_t max);
+uint16_t serial_tx_room();
+void serial_write(const uint8_t* data, uint16_t len);
+// Bytes lost since the last call because the receive buffer or the UART itself overflowed.
+uint16_t serial_take_overruns();
+
+// ---- EEPROM ------------------------------------------------------------------------------------
+uint16_t eeprom_size();
+uint8_t eeprom_read(uint16_t addr);
+bool eeprom_ready();                           // no write under way
+void eeprom_write(uint16_t addr, uint8_t value);  // starts one byte's write; needs eeprom_ready()
+
+// ---- watchdog and reset cause ----------------------------------------------------------------
+void watchdog_start();
+void watchdog_feed();
+// Leave a mark that survives a reset: the firmware stopped itself because loop() or the tick
+// hung, and the watchdog is about to reset the board. Read back by reset_cause().
+void watchdog_mark_hang();
+void watchdog_clear_hang_mark();
+// Why the board last started, as protocol ResetCause values (POWER_ON 0, EXTERNAL 1,
+// BROWN_OUT 2, WATCHDOG 3, JTAG 4, UNKNOWN 5).
+uint8_t reset_cause();
+
+}  // namespace hal
+}  // namespace utrf
+
+#endif  // UTRF_HAL_HAL_H

@@ -1,0 +1,316 @@
+"""ctypes binding of the C harness (``harness/utrf_sim.h``); one :class:`NativeBoard` per board.
+
+The library is ``build/emulator/libutrf_sim.so`` in the repository (``make emulator`` builds
+it), or the file named by ``UTRF_SIM_LIB``. Nothing here is thread-safe: the caller
+serialises calls on one board (``EmulatedBoard`` holds a lock).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+from pathlib import Path
+
+import numpy as np
+
+ABI = 4
+F_CPU_HZ = 16_000_000
+FINGERS = 5
+PIN_FIELDS = 4  # duty, IN1, IN2, STBY
+ADC_CHANNELS = 8
+
+HARNESS_DIR = Path(__file__).resolve().parent / "harness"
+REPO_ROOT = Path(__file__).resolve().parents[3]
+DEFAULT_LIBRARY = REPO_ROOT / "build" / "emulator" / "libutrf_sim.so"
+
+STATUS_NAMES = {0: "running", 1: "crashed", 2: "done"}
+RESET_POWER_ON, RESET_PIN = 0, 1
+TO_BOARD, TO_HOST = 0, 1
+
+STAT_FIELDS = (
+    "rx_host_bytes",
+    "rx_uart_bytes",
+    "rx_lost_disabled",
+    "rx_dropped",
+    "rx_corrupted",
+    "rx_inserted",
+    "rx_held",
+    "tx_uart_bytes",
+    "tx_dropped",
+    "tx_corrupted",
+    "tx_inserted",
+    "tx_unheard",
+    "tx_cut",
+    "resets",
+    "watchdog_resets",
+    "last_reset_flags",
+    "clients",
+    "eeprom_writes",
+    "frame_cycles",
+    "adc_conversions",
+    "late_interrupts",
+)
+PROFILE_FIELDS = (
+    "count",
+    "total",
+    "worst",
+    "best",
+    "total_incl",
+    "worst_incl",
+    "last_entry",
+    "period_sum",
+    "intervals",
+)
+
+
+class HarnessError(RuntimeError):
+    """The C harness is missing, stale, or refused a request."""
+
+
+class _Stats(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_uint64) for name in STAT_FIELDS]
+
+
+class _Profile(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_uint64) for name in PROFILE_FIELDS]
+
+
+_lib: ctypes.CDLL | None = None
+
+
+def library_path() -> Path:
+    env = os.environ.get("UTRF_SIM_LIB")
+    return Path(env) if env else DEFAULT_LIBRARY
+
+
+def _check_fresh(path: Path) -> None:
+    if not path.is_file():
+        raise HarnessError(
+            f"the emulator's harness library {path} is missing: run `make emulator` "
+            "(or `make test`) in the repository"
+        )
+    if os.environ.get("UTRF_SIM_LIB"):
+        return
+    sources = [*HARNESS_DIR.glob("*.c"), *HARNESS_DIR.glob("*.h")]
+    pins = REPO_ROOT / "firmware" / "src" / "board_pins.h"
+    if pins.is_file():
+        sources.append(pins)
+    newest = max((p.stat().st_mtime for p in sources), default=0.0)
+    if newest > path.stat().st_mtime:
+        raise HarnessError(
+            f"the emulator's harness library {path} is older than its sources: run `make emulator`"
+        )
+
+
+def load_library() -> ctypes.CDLL:
+    """Load (once) and type the harness library."""
+    global _lib
+    if _lib is not None:
+        return _lib
+    path = library_path()
+    _check_fresh(path)
+    try:
+        lib = ctypes.CDLL(str(path))
+    except OSError as exc:
+        raise HarnessError(
+            f"cannot load {path}: {exc} (is libsimavr installed? `make setup`)"
+        ) from exc
+    if lib.utrf_sim_abi() != ABI:
+        raise HarnessError(
+            f"{path} speaks harness ABI {lib.utrf_sim_abi()}, this package {ABI}: "
+            "run `make emulator`"
+        )
+    p, u8p = ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint8)
+    sigs: dict[str, tuple[object, list[object]]] = {
+        "utrf_sim_open": (p, [ctypes.c_char_p, ctypes.c_uint64, ctypes.c_char_p, ctypes.c_size_t]),
+        "utrf_sim_close": (None, [p]),
+        "utrf_sim_run_to": (ctypes.c_int, [p, ctypes.c_uint64]),
+        "utrf_sim_cycle": (ctypes.c_uint64, [p]),
+        "utrf_sim_status": (ctypes.c_int, [p]),
+        "utrf_sim_pc": (ctypes.c_uint32, [p]),
+        "utrf_sim_adc_volts": (ctypes.POINTER(ctypes.c_double), [p]),
+        "utrf_sim_pins": (ctypes.POINTER(ctypes.c_double), [p]),
+        "utrf_sim_refresh_pins": (None, [p]),
+        "utrf_sim_read_data": (ctypes.c_int, [p, ctypes.c_uint32, u8p, ctypes.c_size_t]),
+        "utrf_sim_symbol": (ctypes.c_int64, [p, ctypes.c_char_p]),
+        "utrf_sim_uart_write": (ctypes.c_size_t, [p, ctypes.c_char_p, ctypes.c_size_t]),
+        "utrf_sim_uart_read": (ctypes.c_size_t, [p, u8p, ctypes.c_size_t]),
+        "utrf_sim_uart_pending": (ctypes.c_size_t, [p]),
+        "utrf_sim_set_capture": (None, [p, ctypes.c_int]),
+        "utrf_sim_serve_pty": (ctypes.c_int, [p, ctypes.c_char_p, ctypes.c_size_t]),
+        "utrf_sim_serve_tcp": (ctypes.c_int, [p, ctypes.c_char_p, ctypes.c_int]),
+        "utrf_sim_set_auto_reset": (None, [p, ctypes.c_int]),
+        "utrf_sim_clients": (ctypes.c_int, [p]),
+        "utrf_sim_drop_client": (None, [p]),
+        "utrf_sim_set_line_faults": (
+            ctypes.c_int,
+            [p, ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double],
+        ),
+        "utrf_sim_inject": (ctypes.c_size_t, [p, ctypes.c_int, ctypes.c_char_p, ctypes.c_size_t]),
+        "utrf_sim_reset": (None, [p, ctypes.c_int, ctypes.c_uint64]),
+        "utrf_sim_set_auto_reset_hold": (None, [p, ctypes.c_uint64]),
+        "utrf_sim_eeprom_size": (ctypes.c_size_t, [p]),
+        "utrf_sim_eeprom_get": (ctypes.c_int, [p, u8p, ctypes.c_size_t]),
+        "utrf_sim_eeprom_set": (ctypes.c_int, [p, ctypes.c_char_p, ctypes.c_size_t]),
+        "utrf_sim_stats": (None, [p, ctypes.POINTER(_Stats)]),
+        "utrf_sim_profile_vector": (ctypes.c_int, [p, ctypes.c_int]),
+        "utrf_sim_profile_function": (ctypes.c_int, [p, ctypes.c_int64]),
+        "utrf_sim_profile_get": (None, [p, ctypes.c_int, ctypes.POINTER(_Profile)]),
+        "utrf_sim_log": (ctypes.c_size_t, [p, ctypes.c_char_p, ctypes.c_size_t]),
+    }
+    for name, (restype, argtypes) in sigs.items():
+        fn = getattr(lib, name)
+        fn.restype = restype
+        fn.argtypes = argtypes
+    _lib = lib
+    return lib
+
+
+class NativeBoard:
+    """One simavr board. ``pins`` and ``adc_volts`` are numpy views of the harness's memory."""
+
+    def __init__(self, elf: Path, seed: int) -> None:
+        self._lib = load_library()
+        err = ctypes.create_string_buffer(1024)
+        handle = self._lib.utrf_sim_open(str(elf).encode(), seed & (2**64 - 1), err, len(err))
+        if not handle:
+            raise HarnessError(err.value.decode(errors="replace") or f"cannot load {elf}")
+        self._h: int | None = handle
+        pins = self._lib.utrf_sim_pins(handle)
+        self.pins = np.ctypeslib.as_array(pins, shape=(FINGERS, 2, PIN_FIELDS))
+        self.adc_volts = np.ctypeslib.as_array(
+            self._lib.utrf_sim_adc_volts(handle), shape=(ADC_CHANNELS,)
+        )
+        self._run_to = self._lib.utrf_sim_run_to
+        self._u8buf = (ctypes.c_uint8 * 65536)()
+
+    @property
+    def handle(self) -> int:
+        if self._h is None:
+            raise HarnessError("the board is closed")
+        return self._h
+
+    def close(self) -> None:
+        if self._h is not None:
+            self.pins = np.zeros((FINGERS, 2, PIN_FIELDS))
+            self.adc_volts = np.zeros(ADC_CHANNELS)
+            self._lib.utrf_sim_close(self._h)
+            self._h = None
+
+    # -- running ----------------------------------------------------------------------------
+    def run_to(self, cycle: int) -> int:
+        return self._run_to(self._h, cycle)
+
+    @property
+    def cycle(self) -> int:
+        return self._lib.utrf_sim_cycle(self.handle)
+
+    @property
+    def status(self) -> int:
+        return self._lib.utrf_sim_status(self.handle)
+
+    @property
+    def pc(self) -> int:
+        return self._lib.utrf_sim_pc(self.handle)
+
+    def refresh_pins(self) -> None:
+        self._lib.utrf_sim_refresh_pins(self.handle)
+
+    # -- UART -------------------------------------------------------------------------------
+    def uart_write(self, data: bytes) -> int:
+        return self._lib.utrf_sim_uart_write(self.handle, data, len(data))
+
+    def uart_read(self, limit: int = 65536) -> bytes:
+        n = self._lib.utrf_sim_uart_read(self.handle, self._u8buf, min(limit, len(self._u8buf)))
+        return bytes(self._u8buf[:n])
+
+    def uart_pending(self) -> int:
+        return self._lib.utrf_sim_uart_pending(self.handle)
+
+    def set_capture(self, on: bool) -> None:
+        self._lib.utrf_sim_set_capture(self.handle, int(on))
+
+    def serve_pty(self) -> str:
+        buf = ctypes.create_string_buffer(256)
+        rc = self._lib.utrf_sim_serve_pty(self.handle, buf, len(buf))
+        if rc < 0:
+            raise HarnessError(f"cannot open a pty: {os.strerror(-rc)}")
+        return buf.value.decode()
+
+    def serve_tcp(self, host: str, port: int) -> int:
+        rc = self._lib.utrf_sim_serve_tcp(self.handle, host.encode(), port)
+        if rc < 0:
+            raise HarnessError(f"cannot listen on {host}:{port}: {os.strerror(-rc)}")
+        return rc
+
+    def set_auto_reset(self, on: bool) -> None:
+        self._lib.utrf_sim_set_auto_reset(self.handle, int(on))
+
+    @property
+    def clients(self) -> int:
+        return self._lib.utrf_sim_clients(self.handle)
+
+    def drop_client(self) -> None:
+        self._lib.utrf_sim_drop_client(self.handle)
+
+    def set_line_faults(self, direction: int, drop: float, corrupt: float, insert: float) -> None:
+        if self._lib.utrf_sim_set_line_faults(self.handle, direction, drop, corrupt, insert):
+            raise HarnessError("line fault probabilities must lie in [0, 1] (insert < 1)")
+
+    def inject(self, direction: int, data: bytes) -> int:
+        return self._lib.utrf_sim_inject(self.handle, direction, data, len(data))
+
+    # -- board ------------------------------------------------------------------------------
+    def reset(self, cause: int, hold_cycles: int = 0) -> None:
+        self._lib.utrf_sim_reset(self.handle, cause, hold_cycles)
+
+    def set_auto_reset_hold(self, hold_cycles: int) -> None:
+        self._lib.utrf_sim_set_auto_reset_hold(self.handle, hold_cycles)
+
+    def eeprom(self) -> bytes:
+        n = self._lib.utrf_sim_eeprom_size(self.handle)
+        buf = (ctypes.c_uint8 * n)()
+        if self._lib.utrf_sim_eeprom_get(self.handle, buf, n):
+            raise HarnessError("cannot read the EEPROM")
+        return bytes(buf)
+
+    def set_eeprom(self, data: bytes) -> None:
+        if self._lib.utrf_sim_eeprom_set(self.handle, data, len(data)):
+            raise HarnessError(f"EEPROM image of {len(data)} bytes does not fit")
+
+    @property
+    def eeprom_size(self) -> int:
+        return self._lib.utrf_sim_eeprom_size(self.handle)
+
+    def stats(self) -> dict[str, int]:
+        s = _Stats()
+        self._lib.utrf_sim_stats(self.handle, ctypes.byref(s))
+        return {name: int(getattr(s, name)) for name in STAT_FIELDS}
+
+    def profile_vector(self, vector: int) -> None:
+        if self._lib.utrf_sim_profile_vector(self.handle, vector):
+            raise HarnessError(f"interrupt vector {vector} does not exist on the atmega2560")
+
+    def profile_function(self, address: int) -> None:
+        if self._lib.utrf_sim_profile_function(self.handle, address):
+            raise HarnessError(f"{address:#x} is not a code address")
+
+    def profile(self, which: int) -> dict[str, int]:
+        p = _Profile()
+        self._lib.utrf_sim_profile_get(self.handle, which, ctypes.byref(p))
+        return {name: int(getattr(p, name)) for name in PROFILE_FIELDS}
+
+    def log(self) -> str:
+        buf = ctypes.create_string_buffer(4096)
+        self._lib.utrf_sim_log(self.handle, buf, len(buf))
+        return buf.value.decode(errors="replace")
+
+    def symbol(self, name: str) -> int | None:
+        addr = self._lib.utrf_sim_symbol(self.handle, name.encode())
+        return None if addr < 0 else int(addr)
+
+    def read_data(self, address: int, size: int) -> bytes:
+        buf = (ctypes.c_uint8 * size)()
+        if self._lib.utrf_sim_read_data(self.handle, address, buf, size):
+            raise HarnessError(f"data space {address:#x}+{size} is outside the ATmega2560's")
+        return bytes(buf)

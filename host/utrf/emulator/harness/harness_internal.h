@@ -1,0 +1,129 @@
+/* Internals shared by the harness's C files. Not part of the ctypes interface. */
+#ifndef UTRF_HARNESS_INTERNAL_H
+#define UTRF_HARNESS_INTERNAL_H
+
+#include <stdint.h>
+
+#include "avr_uart.h"
+#include "avr_watchdog.h"
+#include "sim_avr.h"
+#include "sim_elf.h"
+#include "utrf_sim.h"
+
+#define RX_QUEUE_SIZE 65536u   /* host bytes waiting for the wire (power of two) */
+#define TX_QUEUE_SIZE 8192u    /* bytes on the wire toward the host (power of two) */
+#define CAPTURE_SIZE 1048576u  /* in-process output buffer (power of two) */
+#define LOG_SIZE 4096u
+
+typedef struct {
+    uint8_t byte;
+    uint64_t due; /* cycle at which its stop bit ends */
+} tx_byte_t;
+
+typedef struct {
+    double drop, corrupt, insert;
+} line_faults_t;
+
+typedef struct {
+    utrf_sim_profile_t p;
+    int active;    /* inside a call */
+    int paused;    /* a nested interrupt runs */
+    uint64_t entry, seg, excl;
+    uint16_t sp0;  /* function profile: SP at entry */
+} profile_state_t;
+
+struct utrf_sim {
+    avr_t *avr;
+    elf_firmware_t fw;
+    avr_uart_t *uart0;
+    avr_watchdog_t *watchdog;
+    avr_irq_t *uart_irq; /* UART0's IRQ block */
+    avr_irq_t *adc_irq;  /* the ADC's IRQ block */
+    avr_io_t hook;       /* our module at the end of simavr's list: sees every reset */
+
+    /* lockstep */
+    int in_run;
+    volatile int stop;
+    uint64_t target;
+    double adc_volts[UTRF_SIM_ADC_CHANNELS];
+    double pins[UTRF_SIM_PIN_VALUES];
+
+    /* UART bridge */
+    uint8_t rx[RX_QUEUE_SIZE];
+    uint32_t rx_head, rx_tail;
+    int rx_wire_active;
+    tx_byte_t tx[TX_QUEUE_SIZE];
+    uint32_t tx_head, tx_tail;
+    uint8_t *capture;
+    uint32_t cap_head, cap_tail;
+    int capture_on;
+    line_faults_t faults[2];
+    uint64_t rng;
+    uint64_t frame_cycles;
+
+    /* serving */
+    int pty_fd;
+    char pty_path[128];
+    int pty_open;
+    int listen_fd;
+    int client_fd;
+    int auto_reset;
+    uint64_t auto_reset_hold;
+    uint64_t hold_until; /* the MCU stays in reset until this cycle */
+
+    /* resets and EEPROM */
+    int pending_cause; /* -1: none (watchdog or simavr-internal) */
+    int64_t eempe_cycle;
+
+    profile_state_t prof_vec, prof_fn;
+    int prof_vector;    /* vector profiled, 0: none */
+    int64_t prof_addr;  /* function profiled (byte address), -1: none */
+    int prof_fn_vector; /* the innermost vector when the function was entered (0: none) */
+    int running_vector; /* the innermost vector running now (0: none) */
+
+    utrf_sim_stats_t stats;
+    char log[LOG_SIZE];
+    size_t log_len;
+};
+
+/* uart_bridge.c */
+void bridge_init(utrf_sim_t *s);
+void bridge_after_reset(utrf_sim_t *s);
+void bridge_sync_baud(utrf_sim_t *s);
+void bridge_rx_kick(utrf_sim_t *s);
+void bridge_deliver(utrf_sim_t *s);
+size_t bridge_rx_push(utrf_sim_t *s, const uint8_t *buf, size_t n);
+size_t bridge_rx_space(const utrf_sim_t *s);
+void bridge_to_host(utrf_sim_t *s, const uint8_t *buf, size_t n); /* after line faults */
+double bridge_random(utrf_sim_t *s);
+
+/* serve.c */
+void serve_init(utrf_sim_t *s);
+void serve_poll(utrf_sim_t *s, int timeout_ms);
+void serve_close(utrf_sim_t *s);
+void serve_write(utrf_sim_t *s, const uint8_t *buf, size_t n);
+
+/* board_io.c */
+void board_io_read_pins(utrf_sim_t *s);
+void board_io_init(utrf_sim_t *s);
+uint64_t board_io_uart0_frame_cycles(const avr_t *avr, int *rx_enabled);
+void board_io_apply_reset_flag(avr_t *avr, int cause);
+uint8_t board_io_mcusr(const avr_t *avr);
+int board_io_is_watchdog_reset(uint8_t mcusr);
+uint16_t board_io_eecr(void);
+uint8_t board_io_eempe_mask(void);
+uint8_t board_io_eepe_mask(void);
+uint32_t board_io_sram_start(void);
+
+/* interrupts.c */
+void interrupts_init(utrf_sim_t *s);
+
+/* profile.c */
+void profile_init(utrf_sim_t *s);
+void profile_after_reset(utrf_sim_t *s);
+void profile_step_function(utrf_sim_t *s);
+
+/* harness.c */
+void harness_log(utrf_sim_t *s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+
+#endif /* UTRF_HARNESS_INTERNAL_H */

@@ -1,0 +1,162 @@
+/* Cycle profiles of the firmware, with no change to it.
+ *
+ * An interrupt vector is timed from simavr's "running" signal (raised when the core jumps to
+ * the vector, lowered at its RETI). A function is timed from its first instruction to the
+ * return that lifts the stack pointer above its value at entry. Time spent in other
+ * interrupts that nest inside is counted apart: "exclusive" figures leave it out.
+ */
+#include <string.h>
+
+#include "harness_internal.h"
+
+static void record(profile_state_t *p, uint64_t now)
+{
+    uint64_t incl = now - p->entry;
+    p->p.count++;
+    p->p.total += p->excl;
+    p->p.total_incl += incl;
+    if (p->excl > p->p.worst)
+        p->p.worst = p->excl;
+    if (p->p.count == 1 || p->excl < p->p.best)
+        p->p.best = p->excl;
+    if (incl > p->p.worst_incl)
+        p->p.worst_incl = incl;
+    p->active = 0;
+}
+
+static void enter(profile_state_t *p, uint64_t now)
+{
+    if (p->p.last_entry) {
+        p->p.period_sum += now - p->p.last_entry;
+        p->p.intervals++;
+    }
+    p->p.last_entry = now;
+    p->active = 1;
+    p->paused = 0;
+    p->entry = p->seg = now;
+    p->excl = 0;
+}
+
+static void on_vector_running(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq;
+    utrf_sim_t *s = param;
+    profile_state_t *p = &s->prof_vec;
+    uint64_t now = s->avr->cycle;
+    if (value) {
+        enter(p, now);
+    } else if (p->active) {
+        if (!p->paused)
+            p->excl += now - p->seg;
+        record(p, now);
+    }
+}
+
+/* The innermost running vector changed (0: none). */
+static void on_any_running(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq;
+    utrf_sim_t *s = param;
+    uint64_t now = s->avr->cycle;
+    profile_state_t *v = &s->prof_vec;
+    if (v->active) {
+        int mine = (int)value == s->prof_vector;
+        if (!mine && !v->paused) {
+            v->excl += now - v->seg;
+            v->paused = 1;
+        } else if (mine && v->paused) {
+            v->seg = now;
+            v->paused = 0;
+        }
+    }
+    profile_state_t *f = &s->prof_fn;
+    if (f->active) {
+        /* Entered under prof_fn_vector (0: from the main loop): any other innermost vector
+         * while it runs is an interrupt nested in it. */
+        int mine = (int)value == s->prof_fn_vector;
+        if (!mine && !f->paused) {
+            f->excl += now - f->seg;
+            f->paused = 1;
+        } else if (mine && f->paused) {
+            f->seg = now;
+            f->paused = 0;
+        }
+    }
+    s->running_vector = (int)value;
+}
+
+static uint16_t stack_pointer(const avr_t *avr)
+{
+    return (uint16_t)(avr->data[R_SPL] | (avr->data[R_SPH] << 8));
+}
+
+void profile_step_function(utrf_sim_t *s)
+{
+    avr_t *avr = s->avr;
+    profile_state_t *p = &s->prof_fn;
+    if (!p->active) {
+        if (avr->pc == (uint32_t)s->prof_addr) {
+            enter(p, avr->cycle);
+            p->sp0 = stack_pointer(avr);
+            s->prof_fn_vector = s->running_vector;
+        }
+    } else if (stack_pointer(avr) > p->sp0) {
+        if (!p->paused)
+            p->excl += avr->cycle - p->seg;
+        record(p, avr->cycle);
+    }
+}
+
+void profile_init(utrf_sim_t *s)
+{
+    s->prof_vector = 0;
+    s->prof_addr = -1;
+    avr_irq_register_notify(s->avr->interrupts.irq + AVR_INT_IRQ_RUNNING, on_any_running, s);
+}
+
+void profile_after_reset(utrf_sim_t *s)
+{
+    /* A reset abandons whatever was running. */
+    s->prof_vec.active = 0;
+    s->prof_fn.active = 0;
+    s->running_vector = 0;
+}
+
+int utrf_sim_profile_vector(utrf_sim_t *s, int vector)
+{
+    if (s->prof_vector > 0) {
+        avr_irq_t *old = avr_get_interrupt_irq(s->avr, (uint8_t)s->prof_vector);
+        if (old)
+            avr_irq_unregister_notify(old + AVR_INT_IRQ_RUNNING, on_vector_running, s);
+    }
+    memset(&s->prof_vec, 0, sizeof s->prof_vec);
+    s->prof_vector = 0;
+    if (vector <= 0)
+        return 0;
+    if (vector > 255)
+        return -1;
+    avr_irq_t *irq = avr_get_interrupt_irq(s->avr, (uint8_t)vector);
+    if (!irq)
+        return -1;
+    avr_irq_register_notify(irq + AVR_INT_IRQ_RUNNING, on_vector_running, s);
+    s->prof_vector = vector;
+    return 0;
+}
+
+int utrf_sim_profile_function(utrf_sim_t *s, int64_t addr)
+{
+    memset(&s->prof_fn, 0, sizeof s->prof_fn);
+    if (addr < 0) {
+        s->prof_addr = -1;
+        return 0;
+    }
+    if ((uint64_t)addr > s->avr->flashend || (addr & 1))
+        return -1;
+    s->prof_addr = addr;
+    return 0;
+}
+
+void utrf_sim_profile_get(const utrf_sim_t *s, int which, utrf_sim_profile_t *out)
+{
+    *out = which ? s->prof_fn.p : s->prof_vec.p;
+}

@@ -1,0 +1,283 @@
+/* UART0 <-> host bytes, with the wire's timing and the line faults.
+ *
+ * To the board: host bytes wait in a queue; a cycle timer puts one on the wire per frame
+ * time at the baud the firmware configured (start + data + parity + stop bits). simavr's
+ * receiver makes a byte readable one frame after it starts, so a byte sent at cycle t is
+ * readable at t + frame, as on the chip. A byte is only handed over while simavr's 64-byte
+ * FIFO has room (it waits otherwise, as behind flow control: nothing is lost or reordered),
+ * and is lost, as on the chip, while the receiver is off (during boot or after a reset).
+ *
+ * To the host: a byte the firmware writes to UDR0 reaches the host when its stop bit ends,
+ * never sooner than one frame after the previous one.
+ *
+ * simavr 1.6 counts a parity bit in every frame whether parity is on or not (11 bits for
+ * 8N1), which makes its own receive and transmit pacing 10 % slow; the bridge sets its
+ * per-byte time to the frame the registers describe.
+ */
+#include <string.h>
+
+#include "harness_internal.h"
+
+#define RX_MASK (RX_QUEUE_SIZE - 1)
+#define TX_MASK (TX_QUEUE_SIZE - 1)
+#define CAP_MASK (CAPTURE_SIZE - 1)
+
+static uint64_t next_random(utrf_sim_t *s)
+{
+    /* xorshift64*: small, fast and reproducible for a seed */
+    uint64_t x = s->rng;
+    x ^= x >> 12;
+    x ^= x << 25;
+    x ^= x >> 27;
+    s->rng = x;
+    return x * 0x2545F4914F6CDD1DULL;
+}
+
+double bridge_random(utrf_sim_t *s)
+{
+    return (double)(next_random(s) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+static int chance(utrf_sim_t *s, double p)
+{
+    return p > 0.0 && bridge_random(s) < p;
+}
+
+static uint8_t flip_bit(utrf_sim_t *s, uint8_t b)
+{
+    return (uint8_t)(b ^ (1u << (next_random(s) >> 61)));
+}
+
+void bridge_sync_baud(utrf_sim_t *s)
+{
+    uint64_t frame = board_io_uart0_frame_cycles(s->avr, NULL);
+    s->frame_cycles = frame;
+    s->stats.frame_cycles = frame;
+    if (s->uart0 && s->uart0->cycles_per_byte != frame)
+        s->uart0->cycles_per_byte = frame;
+}
+
+static int uart_fifo_full(const avr_uart_t *u)
+{
+    return ((u->input.write + 1) & (uart_fifo_fifo_size - 1)) == u->input.read;
+}
+
+static avr_cycle_count_t rx_wire(avr_t *avr, avr_cycle_count_t when, void *param)
+{
+    utrf_sim_t *s = param;
+    if (s->rx_head == s->rx_tail) {
+        s->rx_wire_active = 0;
+        return 0;
+    }
+    int rx_enabled;
+    uint64_t frame = board_io_uart0_frame_cycles(avr, &rx_enabled);
+    bridge_sync_baud(s);
+    if (rx_enabled && uart_fifo_full(s->uart0)) {
+        s->stats.rx_held++;
+        return when + frame;
+    }
+    const line_faults_t *f = &s->faults[UTRF_SIM_TO_BOARD];
+    uint8_t b;
+    if (chance(s, f->insert)) { /* a noise byte takes this frame; the host byte waits */
+        b = (uint8_t)(next_random(s) >> 56);
+        s->stats.rx_inserted++;
+    } else {
+        b = s->rx[s->rx_tail & RX_MASK];
+        s->rx_tail++;
+        if (chance(s, f->drop)) {
+            s->stats.rx_dropped++;
+            return when + frame;
+        }
+        if (chance(s, f->corrupt)) {
+            b = flip_bit(s, b);
+            s->stats.rx_corrupted++;
+        }
+    }
+    if (!rx_enabled) {
+        s->stats.rx_lost_disabled++;
+    } else {
+        avr_raise_irq(s->uart_irq + UART_IRQ_INPUT, b);
+        s->stats.rx_uart_bytes++;
+    }
+    return when + frame;
+}
+
+void bridge_rx_kick(utrf_sim_t *s)
+{
+    if (s->rx_wire_active || s->rx_head == s->rx_tail)
+        return;
+    s->rx_wire_active = 1;
+    avr_cycle_timer_register(s->avr, 1, rx_wire, s);
+}
+
+size_t bridge_rx_space(const utrf_sim_t *s)
+{
+    return RX_QUEUE_SIZE - (s->rx_head - s->rx_tail);
+}
+
+size_t bridge_rx_push(utrf_sim_t *s, const uint8_t *buf, size_t n)
+{
+    size_t space = bridge_rx_space(s);
+    if (n > space)
+        n = space;
+    for (size_t i = 0; i < n; i++)
+        s->rx[(s->rx_head + i) & RX_MASK] = buf[i];
+    s->rx_head += (uint32_t)n;
+    bridge_rx_kick(s);
+    return n;
+}
+
+static void on_uart_output(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq;
+    utrf_sim_t *s = param;
+    /* Runs before simavr arms its transmit pump, so the pump gets the right frame time. */
+    bridge_sync_baud(s);
+    s->stats.tx_uart_bytes++;
+    if (s->tx_head - s->tx_tail >= TX_QUEUE_SIZE) {
+        s->stats.tx_unheard++;
+        return;
+    }
+    uint64_t due = s->avr->cycle + s->frame_cycles;
+    if (s->tx_head != s->tx_tail) {
+        uint64_t after = s->tx[(s->tx_head - 1) & TX_MASK].due + s->frame_cycles;
+        if (after > due)
+            due = after;
+    }
+    s->tx[s->tx_head & TX_MASK] = (tx_byte_t){(uint8_t)value, due};
+    s->tx_head++;
+}
+
+void bridge_to_host(utrf_sim_t *s, const uint8_t *buf, size_t n)
+{
+    if (s->capture_on) {
+        for (size_t i = 0; i < n; i++) {
+            if (s->cap_head - s->cap_tail >= CAPTURE_SIZE) {
+                s->stats.tx_unheard += n - i;
+                break;
+            }
+            s->capture[s->cap_head & CAP_MASK] = buf[i];
+            s->cap_head++;
+        }
+    }
+    serve_write(s, buf, n);
+}
+
+void bridge_deliver(utrf_sim_t *s)
+{
+    uint8_t out[512];
+    size_t n = 0;
+    const line_faults_t *f = &s->faults[UTRF_SIM_TO_HOST];
+    uint64_t now = s->avr->cycle;
+    while (s->tx_tail != s->tx_head && s->tx[s->tx_tail & TX_MASK].due <= now) {
+        uint8_t b = s->tx[s->tx_tail & TX_MASK].byte;
+        s->tx_tail++;
+        if (n + 2 > sizeof out) {
+            bridge_to_host(s, out, n);
+            n = 0;
+        }
+        if (chance(s, f->insert)) {
+            out[n++] = (uint8_t)(next_random(s) >> 56);
+            s->stats.tx_inserted++;
+        }
+        if (chance(s, f->drop)) {
+            s->stats.tx_dropped++;
+            continue;
+        }
+        if (chance(s, f->corrupt)) {
+            b = flip_bit(s, b);
+            s->stats.tx_corrupted++;
+        }
+        out[n++] = b;
+    }
+    if (n)
+        bridge_to_host(s, out, n);
+}
+
+void bridge_after_reset(utrf_sim_t *s)
+{
+    /* The reset cuts the byte on the wire and empties the transmit buffer: only bytes whose
+     * stop bit has already gone reach the host. */
+    uint64_t now = s->avr->cycle;
+    while (s->tx_head != s->tx_tail && s->tx[(s->tx_head - 1) & TX_MASK].due > now) {
+        s->tx_head--;
+        s->stats.tx_cut++;
+    }
+    /* It also cleared simavr's cycle timers: restart the wire if bytes are waiting. */
+    s->rx_wire_active = 0;
+    bridge_rx_kick(s);
+}
+
+void bridge_init(utrf_sim_t *s)
+{
+    uint64_t seed = s->rng + 0x9E3779B97F4A7C15ULL; /* splitmix64 of the seed: never zero */
+    seed = (seed ^ (seed >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    seed = (seed ^ (seed >> 27)) * 0x94D049BB133111EBULL;
+    seed ^= seed >> 31;
+    s->rng = seed ? seed : 1;
+
+    for (char name = '0'; name <= '3'; name++) {
+        /* No console echo of the firmware's output, no usleep() while it polls UCSRnA. */
+        uint32_t flags = 0;
+        avr_ioctl(s->avr, AVR_IOCTL_UART_SET_FLAGS(name), &flags);
+    }
+    s->uart_irq = avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), 0);
+    avr_irq_register_notify(s->uart_irq + UART_IRQ_OUTPUT, on_uart_output, s);
+    bridge_sync_baud(s);
+}
+
+size_t utrf_sim_uart_write(utrf_sim_t *s, const uint8_t *buf, size_t n)
+{
+    n = bridge_rx_push(s, buf, n);
+    s->stats.rx_host_bytes += n;
+    return n;
+}
+
+size_t utrf_sim_uart_read(utrf_sim_t *s, uint8_t *buf, size_t n)
+{
+    size_t avail = s->cap_head - s->cap_tail;
+    if (n > avail)
+        n = avail;
+    for (size_t i = 0; i < n; i++)
+        buf[i] = s->capture[(s->cap_tail + i) & CAP_MASK];
+    s->cap_tail += (uint32_t)n;
+    return n;
+}
+
+size_t utrf_sim_uart_pending(const utrf_sim_t *s)
+{
+    return s->rx_head - s->rx_tail;
+}
+
+void utrf_sim_set_capture(utrf_sim_t *s, int on)
+{
+    s->capture_on = on != 0;
+    if (!s->capture_on)
+        s->cap_head = s->cap_tail = 0;
+}
+
+int utrf_sim_set_line_faults(utrf_sim_t *s, int dir, double drop, double corrupt, double insert)
+{
+    if (dir != UTRF_SIM_TO_BOARD && dir != UTRF_SIM_TO_HOST)
+        return -1;
+    if (!(drop >= 0.0 && drop <= 1.0 && corrupt >= 0.0 && corrupt <= 1.0 && insert >= 0.0 &&
+          insert < 1.0))
+        return -1;
+    s->faults[dir] = (line_faults_t){drop, corrupt, insert};
+    return 0;
+}
+
+size_t utrf_sim_inject(utrf_sim_t *s, int dir, const uint8_t *buf, size_t n)
+{
+    if (dir == UTRF_SIM_TO_BOARD) {
+        n = bridge_rx_push(s, buf, n);
+        s->stats.rx_inserted += n;
+        return n;
+    }
+    if (dir == UTRF_SIM_TO_HOST) {
+        bridge_to_host(s, buf, n);
+        s->stats.tx_inserted += n;
+        return n;
+    }
+    return 0;
+}

@@ -1,0 +1,156 @@
+/* The UTRF emulated board: the real firmware ELF on simavr (ATmega2560 at 16 MHz).
+ *
+ * A shared library (build/emulator/libutrf_sim.so) driven from Python through ctypes
+ * (utrf/emulator/_native.py mirrors every declaration here; bump UTRF_SIM_ABI when one
+ * changes). The caller owns the clock: utrf_sim_run_to() runs the MCU up to a cycle and
+ * returns, so the plant model can exchange pins and ADC values with it in lockstep.
+ *
+ * Threading: one utrf_sim_t must not be used from two threads at once; the Python wrapper
+ * holds a lock around every call.
+ */
+#ifndef UTRF_SIM_H
+#define UTRF_SIM_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define UTRF_SIM_ABI 4
+
+#define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
+/* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
+ * PWM duty at the TB6612's PWM input (0..1), IN1 level, IN2 level, STBY level (0 or 1). */
+#define UTRF_SIM_PIN_FIELDS 4
+#define UTRF_SIM_PIN_VALUES (5 * 2 * UTRF_SIM_PIN_FIELDS)
+
+enum utrf_sim_status {
+    UTRF_SIM_RUNNING = 0, /* the MCU runs (or sleeps, waiting for an interrupt) */
+    UTRF_SIM_CRASHED = 1, /* simavr stopped the core (bad opcode or address); reset to recover */
+    UTRF_SIM_DONE = 2,    /* the program slept with interrupts off: it has ended */
+};
+
+enum utrf_sim_reset_cause {
+    UTRF_SIM_RESET_POWER_ON = 0, /* PORF; SRAM cleared */
+    UTRF_SIM_RESET_PIN = 1,      /* EXTRF: the reset pin (the USB-serial auto-reset) */
+};
+
+enum utrf_sim_dir {
+    UTRF_SIM_TO_BOARD = 0, /* host -> UART0 RX */
+    UTRF_SIM_TO_HOST = 1,  /* UART0 TX -> host */
+};
+
+/* Counters since utrf_sim_open. All uint64_t so ctypes mirrors them as one array. */
+typedef struct {
+    uint64_t rx_host_bytes;     /* bytes accepted from the host (pty, TCP, in-process) */
+    uint64_t rx_uart_bytes;     /* bytes delivered into the UART's receiver */
+    uint64_t rx_lost_disabled;  /* bytes that arrived while the receiver was off (boot, reset) */
+    uint64_t rx_dropped;        /* line faults: bytes dropped on the way to the board */
+    uint64_t rx_corrupted;      /* line faults: bytes with a flipped bit */
+    uint64_t rx_inserted;       /* line faults: noise bytes added */
+    uint64_t rx_held;           /* byte times a byte waited because simavr's FIFO was full */
+    uint64_t tx_uart_bytes;     /* bytes the firmware sent */
+    uint64_t tx_dropped;        /* line faults: bytes dropped on the way to the host */
+    uint64_t tx_corrupted;      /* line faults */
+    uint64_t tx_inserted;       /* line faults */
+    uint64_t tx_unheard;        /* bytes sent while no client listened (or it did not read) */
+    uint64_t tx_cut;            /* bytes whose transmission a reset cut short */
+    uint64_t resets;            /* resets of any cause after power-on */
+    uint64_t watchdog_resets;
+    uint64_t last_reset_flags;  /* MCUSR as the firmware finds it after the last reset */
+    uint64_t clients;           /* client connections (pty opens and TCP accepts) */
+    uint64_t eeprom_writes;     /* EEPROM byte program operations */
+    uint64_t frame_cycles;      /* UART0 frame time in CPU cycles at its configured baud */
+    uint64_t adc_conversions;   /* conversions started */
+    uint64_t late_interrupts;   /* interrupts raised when enabled with their flag already set */
+} utrf_sim_stats_t;
+
+/* Cycle profile of one interrupt vector or one function. */
+typedef struct {
+    uint64_t count;       /* completed calls */
+    uint64_t total;       /* cycles, exclusive of nested interrupts */
+    uint64_t worst;       /* longest call, exclusive */
+    uint64_t best;        /* shortest call, exclusive */
+    uint64_t total_incl;  /* cycles including nested interrupts */
+    uint64_t worst_incl;
+    uint64_t last_entry;  /* cycle of the last entry */
+    uint64_t period_sum;  /* sum of entry-to-entry intervals */
+    uint64_t intervals;   /* how many intervals period_sum holds */
+} utrf_sim_profile_t;
+
+typedef struct utrf_sim utrf_sim_t;
+
+int utrf_sim_abi(void);
+
+/* Load an AVR ELF as an atmega2560 at 16 MHz with AVcc = AREF = 5 V. seed drives the line
+ * fault generator. NULL on failure, with a message in err. */
+utrf_sim_t *utrf_sim_open(const char *elf_path, uint64_t seed, char *err, size_t errlen);
+void utrf_sim_close(utrf_sim_t *s);
+
+/* Run the MCU until avr->cycle >= target (a few cycles past, at an instruction boundary).
+ * Before running: serve the host side (accept, read input, detect clients) and apply the ADC
+ * inputs; after: refresh the pin block and deliver the output bytes that are due. */
+int utrf_sim_run_to(utrf_sim_t *s, uint64_t target);
+uint64_t utrf_sim_cycle(const utrf_sim_t *s);
+int utrf_sim_status(const utrf_sim_t *s);
+uint32_t utrf_sim_pc(const utrf_sim_t *s);
+
+/* The voltages on ADC0..7 (UTRF_SIM_ADC_CHANNELS doubles, in volts). Each conversion samples
+ * its channel when it starts, and gives the datasheet's code, floor(1024 V / Vref). */
+double *utrf_sim_adc_volts(utrf_sim_t *s);
+/* The pin block (UTRF_SIM_PIN_VALUES doubles), refreshed after each run. */
+const double *utrf_sim_pins(utrf_sim_t *s);
+void utrf_sim_refresh_pins(utrf_sim_t *s);
+
+/* Data-space access (registers and SRAM), for tests and diagnostics. */
+int utrf_sim_read_data(const utrf_sim_t *s, uint32_t addr, uint8_t *buf, size_t n);
+/* Address of an ELF symbol (data symbols carry avr-gcc's 0x800000 offset); -1 if absent. */
+int64_t utrf_sim_symbol(const utrf_sim_t *s, const char *name);
+
+/* UART0, in-process side. Bytes written start on the wire at the present cycle, one frame
+ * time apart; returns how many were accepted (the queue holds 64 KiB). Capture keeps the
+ * output for utrf_sim_uart_read (off by default: output goes to the pty/TCP clients). */
+size_t utrf_sim_uart_write(utrf_sim_t *s, const uint8_t *buf, size_t n);
+size_t utrf_sim_uart_read(utrf_sim_t *s, uint8_t *buf, size_t n);
+size_t utrf_sim_uart_pending(const utrf_sim_t *s); /* host bytes not yet on the UART */
+void utrf_sim_set_capture(utrf_sim_t *s, int on);
+
+/* Serving: a pty (path returned) and a TCP listener on host:port (port 0: any free one;
+ * returns the port, or -errno). One TCP client at a time; a second one is closed at once.
+ * With auto_reset, a client opening the pty or connecting resets the board (EXTRF), as
+ * the MEGA's USB-serial chip does through DTR. */
+int utrf_sim_serve_pty(utrf_sim_t *s, char *path, size_t len);
+int utrf_sim_serve_tcp(utrf_sim_t *s, const char *host, int port);
+void utrf_sim_set_auto_reset(utrf_sim_t *s, int on);
+int utrf_sim_clients(const utrf_sim_t *s); /* bit 0: pty open, bit 1: TCP connected */
+/* Hang up on the TCP client, as a pulled cable would (it reads end-of-file). */
+void utrf_sim_drop_client(utrf_sim_t *s);
+
+/* Line faults per direction, as probabilities per byte: drop it, flip one random bit of it,
+ * insert one random byte before it. */
+int utrf_sim_set_line_faults(utrf_sim_t *s, int dir, double drop, double corrupt, double insert);
+/* Put raw bytes on the line now (noise bursts); to the board they queue behind host bytes. */
+size_t utrf_sim_inject(utrf_sim_t *s, int dir, const uint8_t *buf, size_t n);
+
+/* Reset the board; with hold_cycles > 0 it stays in reset that long (its pins float, nothing
+ * runs) before the firmware starts. */
+void utrf_sim_reset(utrf_sim_t *s, int cause, uint64_t hold_cycles);
+/* How long a client's connection holds the board in reset (with auto-reset), in cycles. */
+void utrf_sim_set_auto_reset_hold(utrf_sim_t *s, uint64_t hold_cycles);
+
+/* The 4 KiB EEPROM. */
+size_t utrf_sim_eeprom_size(const utrf_sim_t *s);
+int utrf_sim_eeprom_get(utrf_sim_t *s, uint8_t *buf, size_t n);
+int utrf_sim_eeprom_set(utrf_sim_t *s, const uint8_t *buf, size_t n);
+
+void utrf_sim_stats(const utrf_sim_t *s, utrf_sim_stats_t *out);
+
+/* Cycle profiling: of an interrupt vector (its entry to its RETI), or of a function from its
+ * first instruction to its return (address in bytes, e.g. from utrf_sim_symbol). One of each
+ * at a time; 0 (vector) or -1 (function) turns it off. */
+int utrf_sim_profile_vector(utrf_sim_t *s, int vector);
+int utrf_sim_profile_function(utrf_sim_t *s, int64_t addr);
+void utrf_sim_profile_get(const utrf_sim_t *s, int which, utrf_sim_profile_t *out); /* 0 vector, 1 function */
+
+/* The last messages simavr logged for this board (errors and warnings), NUL-terminated. */
+size_t utrf_sim_log(const utrf_sim_t *s, char *buf, size_t n);
+
+#endif /* UTRF_SIM_H */

@@ -1,0 +1,483 @@
+"""The physical hand behind the emulated board: five tendon-driven fingers, their motors and
+encoders, vectorised over the fingers with numpy.
+
+Per finger (paper Sec. II, IV-B):
+
+* **Drive.** Each TB6612FNG channel is decoded from the board's pins (truth table in
+  ``docs/architecture.md``): IN1/IN2 = H/L drives forward at the PWM duty (and short-brakes
+  in the PWM's off time), L/H reverse, H/H short brake, L/L or STBY low coast (outputs off).
+  At 20 kHz the PWM is far faster than the motor's electrical time constant, so the motor
+  sees the average voltage ``duty * V``; "forward" pulls the motor's tendon.
+* **Motors.** DC linear actuators (lead screw), one per tendon: antagonistic fingers have
+  motor A on Tendon 1 (flexion) and motor B on Tendon 4 (extension); a rotary finger has one
+  motor winding both tendons on its bending pulley (modelled at the pulley rim, B unused).
+  ``L di/dt = u V − R i − K v``, force ``K i``, a reflected moving mass, Coulomb and viscous
+  friction, a stroke with hard ends. Coasting opens the circuit (no current).
+* **Tendons.** Steel, elastic (``k = E A / L_T``, paper: 1 mm, 200 GPa, 100 mm) with a little
+  internal damping; they pull only when taut (stretch ``x_A − q`` for Tendon 1, ``x_B + q``
+  for Tendon 4). The coupling tendons are taken as rigid, so θ_i = q / R_i exactly (their
+  stretch under the hand's own weight is below a micrometre).
+* **Finger.** One degree of freedom, the tendon displacement q: ``M(q) q̈ + ½ M'(q) q̇² = T1 −
+  T4 + Q_gravity(q) − b q̇``, with M(q) from the link masses and the coupled kinematics
+  (``utrf.models``), joint damping summed through the coupling (``b = Σ c_j / R_j²``) and hard
+  joint limits at θ1's range (paper: ±90°).
+* **Encoder.** An AS5600 on Joint 2 in analog mode: 12-bit angle, output 10–90 % of 5 V over
+  one turn, seeded Gaussian noise. The board's ADC quantises it to 10 bits.
+
+Every constant the paper does not give is an assumption, kept in :class:`MotorParams`,
+:class:`EncoderParams` and :class:`PlantParams` and documented in ``README.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from utrf.models import kinematics
+from utrf.models.geometry import HandGeometry
+
+FINGERS = 5
+_SIDE = np.array([-1.0, 1.0])  # Tendon 1 shortens as q grows, Tendon 4 lengthens
+COAST, BRAKE, FORWARD, REVERSE = 0, 1, 2, 3
+DRIVE_NAMES = ("coast", "brake", "forward", "reverse")
+
+
+class PlantError(ValueError):
+    """A plant parameter or request that does not describe the hand."""
+
+
+def _positive(name: str, value: float) -> None:
+    if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+        raise PlantError(f"{name} must be a number > 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class MotorParams:
+    """A small 12 V DC linear actuator, one per tendon. ASSUMED values (the paper names none):
+    100 N stall force and 50 mm/s no-load speed at 12 V (stall current 0.42 A, within the
+    TB6612's 1.2 A), 0.5 ms electrical time constant, 20 kg of rotor inertia reflected through
+    the lead screw (a 10 ms mechanical time constant), 1.5 N Coulomb friction (backdrivable:
+    the antagonist's tendon pulls it back), 50 mm stroke centred on the straight finger."""
+
+    supply_v: float = 12.0
+    stall_force_n: float = 100.0
+    no_load_speed_m_s: float = 0.050
+    electrical_time_constant_s: float = 0.5e-3
+    moving_mass_kg: float = 20.0
+    coulomb_friction_n: float = 1.5
+    viscous_friction_n_s_m: float = 5.0
+    stroke_m: tuple[float, float] = (-0.025, 0.025)
+
+    def __post_init__(self) -> None:
+        for name in (
+            "supply_v",
+            "stall_force_n",
+            "no_load_speed_m_s",
+            "electrical_time_constant_s",
+            "moving_mass_kg",
+        ):
+            _positive(f"MotorParams.{name}", getattr(self, name))
+        for name in ("coulomb_friction_n", "viscous_friction_n_s_m"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise PlantError(f"MotorParams.{name} must be >= 0, got {v!r}")
+        lo, hi = self.stroke_m
+        if not lo < hi:
+            raise PlantError(
+                f"MotorParams.stroke_m must be (min, max) with min < max, got {self.stroke_m}"
+            )
+
+    @property
+    def force_constant_n_a(self) -> float:
+        """K: force per ampere, equal to the back-EMF per m/s (V s/m)."""
+        return self.supply_v / self.no_load_speed_m_s
+
+    @property
+    def stall_current_a(self) -> float:
+        return self.stall_force_n / self.force_constant_n_a
+
+    @property
+    def resistance_ohm(self) -> float:
+        return self.supply_v / self.stall_current_a
+
+
+@dataclass(frozen=True)
+class EncoderParams:
+    """AS5600 in analog mode on Joint 2. ``offset_rad`` is the encoder's reading at θ2 = 0:
+    π puts the straight finger mid-turn, so θ2's whole range (±112.5° with the default
+    geometry) stays between 67.5° and 292.5° and never wraps; the firmware's
+    ``encoder_offset`` must match it."""
+
+    supply_v: float = 5.0
+    offset_rad: float = math.pi
+    invert: bool = False
+    resolution_bits: int = 12
+    band: tuple[float, float] = (0.10, 0.90)
+    noise_v: float = 0.002
+    unplugged_v: float = 0.0
+
+    def __post_init__(self) -> None:
+        _positive("EncoderParams.supply_v", self.supply_v)
+        if not (0.0 <= self.band[0] < self.band[1] <= 1.0):
+            raise PlantError(f"EncoderParams.band must be 0 <= lo < hi <= 1, got {self.band}")
+        if not (1 <= self.resolution_bits <= 16):
+            raise PlantError(
+                f"EncoderParams.resolution_bits must be 1..16, got {self.resolution_bits}"
+            )
+        if not (math.isfinite(self.noise_v) and self.noise_v >= 0):
+            raise PlantError(f"EncoderParams.noise_v must be >= 0, got {self.noise_v!r}")
+
+
+@dataclass(frozen=True)
+class PlantParams:
+    """Constants of the plant that the geometry files do not hold (ASSUMED unless noted).
+
+    ``gravity_m_s2`` is in the finger frame (x along the straight finger, y toward flexion):
+    the default is the bench's, gravity along −y (``docs/architecture.md``)."""
+
+    motor: MotorParams = field(default_factory=MotorParams)
+    encoder: EncoderParams = field(default_factory=EncoderParams)
+    joint_damping_n_m_s: float = 2e-3
+    tendon_damping_n_s_m: float = 400.0
+    gravity_m_s2: tuple[float, float] = (0.0, -9.81)
+
+    def __post_init__(self) -> None:
+        for name in ("joint_damping_n_m_s", "tendon_damping_n_s_m"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise PlantError(f"PlantParams.{name} must be >= 0, got {v!r}")
+        if len(self.gravity_m_s2) != 2 or not all(math.isfinite(g) for g in self.gravity_m_s2):
+            raise PlantError(
+                f"PlantParams.gravity_m_s2 must be (gx, gy), got {self.gravity_m_s2!r}"
+            )
+
+
+def _finger_index(finger: int) -> int:
+    if (
+        isinstance(finger, bool)
+        or not isinstance(finger, int | np.integer)
+        or not 0 <= finger < FINGERS
+    ):
+        raise PlantError(f"finger must be 0..4 (0 thumb .. 4 little), got {finger!r}")
+    return int(finger)
+
+
+class HandPlant:
+    """State and dynamics of the five fingers. SI units: m, rad, N, A, s.
+
+    ``step(dt, pins)`` advances by ``dt`` with the board's pins held (the (5, 2, 4) block of
+    duty, IN1, IN2, STBY per finger and channel); ``encoder_volts()`` gives the encoders'
+    outputs.
+    """
+
+    def __init__(
+        self, hand: HandGeometry | None = None, params: PlantParams | None = None, seed: int = 0
+    ) -> None:
+        self.hand = hand if hand is not None else HandGeometry.default()
+        if len(self.hand.fingers) != FINGERS:
+            raise PlantError(
+                f"the plant needs {FINGERS} fingers, the hand has {len(self.hand.fingers)}"
+            )
+        self.params = params if params is not None else PlantParams()
+        self._rng = np.random.default_rng(seed)
+        self._noise_block = np.zeros((0, FINGERS))
+        self._noise_next = 0
+        self.geometries = tuple(f.geometry for f in self.hand.fingers)
+        g = self.geometries
+        self.R = np.array([x.guide_radii_m for x in g])  # (5, 3)
+        self.L = np.array([x.link_lengths_m for x in g])
+        self.link_mass = np.array([x.link_masses_kg for x in g])
+        com = np.array([x.link_com_fraction for x in g])
+        self.c = np.cumsum(1.0 / self.R, axis=1)  # dφ_k/dq, φ_k the link's absolute angle
+        # Centre of mass of link k: p_k = Σ_j A[k, j] (cos φ_j, sin φ_j).
+        A = np.zeros((FINGERS, 3, 3))
+        for k in range(3):
+            A[:, k, :k] = self.L[:, :k]
+            A[:, k, k] = com[:, k] * self.L[:, k]
+        self._A = A
+        self._Ac = A * self.c[:, None, :]
+        self._Acc = A * self.c[:, None, :] ** 2
+        rod_inertia = self.link_mass * self.L**2 / 12.0  # slender links about their centres
+        self._rot_inertia = (rod_inertia * self.c**2).sum(axis=1)
+        self._joint_damping = self.params.joint_damping_n_m_s * (1.0 / self.R**2).sum(axis=1)
+        self.tendon_stiffness = np.array(
+            [x.tendon_youngs_modulus_pa * x.tendon_area_m2 / x.actuating_tendon_length_m for x in g]
+        )
+        self.rotary = np.array([f.actuation == "rotary" for f in self.hand.fingers])
+        self.q_limits = np.array([x.q_range_m for x in g])  # (5, 2)
+        self._gravity = np.asarray(self.params.gravity_m_s2, dtype=float)
+
+        m = self.params.motor
+        self._K = m.force_constant_n_a
+        self._Res = m.resistance_ohm
+        self._V = m.supply_v
+        self._ma = m.moving_mass_kg
+        self._inv_res = 1.0 / self._Res
+        self._k2 = self.tendon_stiffness[:, None]
+        self._rot = self.rotary.astype(float)
+        self._any_rotary = bool(self.rotary.any())
+        self._max_substep = self._stable_substep()
+
+        # State
+        self.time = 0.0
+        self.q = np.zeros(FINGERS)
+        self.qd = np.zeros(FINGERS)
+        self.x = np.zeros((FINGERS, 2))  # actuator positions (pulled-in tendon), A and B
+        self.xd = np.zeros((FINGERS, 2))
+        self.current = np.zeros((FINGERS, 2))
+        self.tension = np.zeros((FINGERS, 2))  # Tendon 1 (flexor), Tendon 4 (extensor)
+        self.drive_mode = np.zeros((FINGERS, 2), dtype=np.int8)
+        self.drive_duty = np.zeros((FINGERS, 2))  # signed fraction of the supply
+        self._connected = np.zeros((FINGERS, 2))
+        self._voltage = np.zeros((FINGERS, 2))
+        self._last_pins: np.ndarray | None = None
+        self._h = 0.0
+        self._decay = 0.0
+        self.encoder_plugged = np.ones(FINGERS, dtype=bool)
+        self.unplugged_v = np.full(FINGERS, self.params.encoder.unplugged_v)
+        self.encoder_shift = np.zeros(FINGERS)  # rad, a slipped magnet
+        self._block = np.array(self.q_limits)  # the joint limits, narrowed by blocks
+        self._geometry_terms()
+
+    # -- set-up ---------------------------------------------------------------------------------
+    def _inertia(self, q: np.ndarray) -> np.ndarray:
+        phi = q[:, None] * self.c
+        J = self._Ac @ np.stack((-np.sin(phi), np.cos(phi)), axis=-1)
+        return (self.link_mass[:, :, None] * J * J).sum(axis=(1, 2)) + self._rot_inertia
+
+    def _stable_substep(self) -> float:
+        """The largest integration step for the stiffest mode, a taut tendon pair between the
+        finger's smallest effective mass and the actuator's: ω h ≤ 0.7 (semi-implicit Euler is
+        stable to 2, and its frequency error is then 2 %), and the tendon damping's explicit
+        term well inside its limit."""
+        grid = np.linspace(self.q_limits[:, 0], self.q_limits[:, 1], 181)  # (181, 5)
+        m_min = min(float(self._inertia(row).min()) for row in grid)
+        k = float(self.tendon_stiffness.max())
+        inv_mass = 1.0 / m_min + 1.0 / self._ma
+        omega = math.sqrt(2.0 * k * inv_mass)
+        damping = self.params.tendon_damping_n_s_m * 2.0 * inv_mass
+        return min(0.7 / omega, 0.5 / damping if damping > 0 else math.inf)
+
+    @property
+    def max_substep(self) -> float:
+        """The integration step the plant keeps under (s)."""
+        return self._max_substep
+
+    def _geometry_terms(self) -> None:
+        """M(q), M'(q) and the gravity force at the present q (they vary slowly: refreshed
+        once per step, not per substep)."""
+        phi = self.q[:, None] * self.c
+        s, co = np.sin(phi), np.cos(phi)
+        J = self._Ac @ np.stack((-s, co), axis=-1)  # (5, 3, 2): d(COM_k)/dq
+        dJ = self._Acc @ np.stack((-co, -s), axis=-1)
+        mJ = self.link_mass[:, :, None] * J
+        self._M = (mJ * J).sum(axis=(1, 2)) + self._rot_inertia
+        self._inv_M = 1.0 / self._M
+        self._dM = 2.0 * (mJ * dJ).sum(axis=(1, 2))
+        self._Qg = (mJ @ self._gravity).sum(axis=1)
+        self._q_terms = self.q.copy()
+
+    # -- the board's side -----------------------------------------------------------------------
+    def decode_drive(self, pins: np.ndarray) -> None:
+        """TB6612FNG truth table, per channel, from the (5, 2, 4) pin block."""
+        if self._last_pins is not None and np.array_equal(pins, self._last_pins):
+            return
+        self._last_pins = np.array(pins)
+        duty = np.clip(pins[..., 0], 0.0, 1.0)
+        in1 = pins[..., 1] > 0.5
+        in2 = pins[..., 2] > 0.5
+        on = pins[..., 3] > 0.5
+        fwd = on & in1 & ~in2
+        rev = on & ~in1 & in2
+        brake = on & in1 & in2
+        mode = np.where(fwd, FORWARD, np.where(rev, REVERSE, np.where(brake, BRAKE, COAST)))
+        mode[self.rotary, 1] = COAST  # a rotary finger has no motor B
+        self.drive_mode = mode.astype(np.int8)
+        self.drive_duty = np.where(mode == FORWARD, duty, np.where(mode == REVERSE, -duty, 0.0))
+        self._connected = (mode != COAST).astype(float)
+        self._voltage = self.drive_duty * self._V
+
+    def step(self, dt: float, pins: np.ndarray | None = None) -> None:
+        """Advance by dt seconds with the pins held (None: keep the last drive)."""
+        if not dt > 0:
+            return
+        if pins is not None:
+            self.decode_drive(pins)
+        if np.abs(self.q - self._q_terms).max() > 2e-5:  # M, M', gravity vary slowly
+            self._geometry_terms()
+        n = max(1, math.ceil(dt / self._max_substep))
+        h = dt / n
+        if h != self._h:
+            self._h = h
+            self._decay = math.exp(-h / self.params.motor.electrical_time_constant_s)
+        for _ in range(n):
+            self._substep(h)
+        self.time += dt
+
+    def _substep(self, h: float) -> None:
+        """One semi-implicit Euler step: forces from the present state, velocities, then
+        positions from the new velocities, then the hard stops."""
+        m = self.params.motor
+        q, qd, x, xd = self.q, self.qd, self.x, self.xd
+        # Tendon 1 stretches as motor A pulls in past q, Tendon 4 as motor B pulls past −q.
+        stretch = x + q[:, None] * _SIDE
+        tension = np.maximum(
+            self._k2 * stretch + self.params.tendon_damping_n_s_m * (xd + qd[:, None] * _SIDE), 0.0
+        )
+        tension *= stretch > 0.0
+        self.tension = tension
+
+        # Motors: the current's exact response over h with the speed held; open when coasting.
+        i_ss = (self._voltage - self._K * xd) * self._inv_res
+        self.current = (i_ss + (self.current - i_ss) * self._decay) * self._connected
+        force = self._K * self.current - m.viscous_friction_n_s_m * xd - tension
+        if self._any_rotary:  # one pulley: Tendon 4 pulls motor A back the other way
+            force[:, 0] += self._rot * tension[:, 1]
+            force[self.rotary, 1] = 0.0
+        v_free = xd + (h / self._ma) * force
+        stick = h * m.coulomb_friction_n / self._ma
+        xd = np.where(np.abs(v_free) <= stick, 0.0, v_free - np.copysign(stick, v_free))
+
+        gen_force = (
+            tension[:, 0]
+            - tension[:, 1]
+            + self._Qg
+            - (self._joint_damping + 0.5 * self._dM * qd) * qd
+        )
+        qd = qd + h * gen_force * self._inv_M
+        q = q + h * qd
+        x = x + h * xd
+
+        lo, hi = self._block[:, 0], self._block[:, 1]
+        if np.logical_or(q < lo, q > hi).any():  # a joint limit or a block: a hard stop
+            qd = np.where(q < lo, np.maximum(qd, 0.0), np.where(q > hi, np.minimum(qd, 0.0), qd))
+            q = np.minimum(np.maximum(q, lo), hi)
+        s_lo, s_hi = m.stroke_m
+        if np.logical_or(x < s_lo, x > s_hi).any():  # an actuator at the end of its stroke
+            xd = np.where((x < s_lo) | (x > s_hi), 0.0, xd)
+            x = np.minimum(np.maximum(x, s_lo), s_hi)
+        if self._any_rotary:
+            x[self.rotary, 1] = -x[self.rotary, 0]
+            xd[self.rotary, 1] = -xd[self.rotary, 0]
+        self.q, self.qd, self.x, self.xd = q, qd, x, xd
+
+    def encoder_volts(self) -> np.ndarray:
+        """Each finger's AS5600 output (V), noise included: the ADC0..4 inputs."""
+        e = self.params.encoder
+        theta2 = self.q / self.R[:, 1] + self.encoder_shift
+        turns = (e.offset_rad + (-theta2 if e.invert else theta2)) * (0.5 / math.pi)
+        turns -= np.floor(turns)  # the angle within one turn, as a fraction
+        steps = 1 << e.resolution_bits
+        counts = np.floor(turns * steps)
+        lo, hi = e.band
+        volts = e.supply_v * lo + (e.supply_v * (hi - lo) / steps) * counts
+        if e.noise_v > 0:
+            volts += self._noise()
+        if not self.encoder_plugged.all():
+            volts = np.where(self.encoder_plugged, volts, self.unplugged_v)
+        return volts
+
+    def _noise(self) -> np.ndarray:
+        """The encoders' next noise sample (V), drawn from the seeded generator in blocks."""
+        if self._noise_next >= len(self._noise_block):
+            self._noise_block = self._rng.normal(0.0, self.params.encoder.noise_v, (1024, FINGERS))
+            self._noise_next = 0
+        self._noise_next += 1
+        return self._noise_block[self._noise_next - 1]
+
+    # -- observations ---------------------------------------------------------------------------
+    @property
+    def theta(self) -> np.ndarray:
+        """Relative joint angles θ1..θ3 per finger (rad), shape (5, 3)."""
+        return self.q[:, None] / self.R
+
+    @property
+    def theta2(self) -> np.ndarray:
+        return self.q / self.R[:, 1]
+
+    @property
+    def tip(self) -> np.ndarray:
+        """Fingertips in each finger's frame (m), shape (5, 2), from ``utrf.models``."""
+        return np.array(
+            [kinematics.tip_position(g, q) for g, q in zip(self.geometries, self.q, strict=True)]
+        )
+
+    def energy(self) -> tuple[float, float]:
+        """(kinetic, potential) energy of the whole hand in J: links, actuators, taut tendons
+        and gravity (zero at the straight finger's height). For checking the integrator."""
+        phi = self.q[:, None] * self.c
+        J = self._Ac @ np.stack((-np.sin(phi), np.cos(phi)), axis=-1)
+        M = (self.link_mass[:, :, None] * J * J).sum(axis=(1, 2)) + self._rot_inertia
+        xd = self.xd.copy()
+        xd[self.rotary, 1] = 0.0
+        kinetic = 0.5 * (M * self.qd**2).sum() + 0.5 * self._ma * (xd**2).sum()
+        com = self._A @ np.stack((np.cos(phi), np.sin(phi)), axis=-1)  # (5, 3, 2)
+        potential = -(self.link_mass[:, :, None] * com @ self._gravity).sum()
+        xb = np.where(self.rotary, -self.x[:, 0], self.x[:, 1])
+        stretch = np.maximum(np.stack((self.x[:, 0] - self.q, xb + self.q), axis=1), 0.0)
+        potential += 0.5 * (self.tendon_stiffness[:, None] * stretch**2).sum()
+        return float(kinetic), float(potential)
+
+    # -- set-up and faults ------------------------------------------------------------------------
+    def set_theta2(self, finger: int, theta2: float) -> None:
+        """Put a finger at rest at a Joint-2 angle with both tendons just taut."""
+        f = _finger_index(finger)
+        q = float(theta2) * self.R[f, 1]
+        lo, hi = self.q_limits[f]
+        if not lo <= q <= hi:
+            raise PlantError(
+                f"finger {f}: θ2 = {theta2:.3f} rad is outside its range "
+                f"[{lo / self.R[f, 1]:.3f}, {hi / self.R[f, 1]:.3f}] rad"
+            )
+        self.q[f], self.qd[f] = q, 0.0
+        self.x[f] = (q, -q)
+        self.xd[f] = 0.0
+        self.current[f] = 0.0
+        self._geometry_terms()
+
+    def unplug_encoder(self, finger: int, volts: float | None = None) -> None:
+        """The encoder's cable comes off: the ADC input reads ``volts`` (default: the
+        encoder parameters' ``unplugged_v``, 0 V)."""
+        f = _finger_index(finger)
+        if volts is None:
+            volts = self.params.encoder.unplugged_v
+        if not (math.isfinite(volts) and 0.0 <= volts <= 5.0):
+            raise PlantError(f"an unplugged encoder's input must lie in [0, 5] V, got {volts!r}")
+        self.unplugged_v[f] = volts
+        self.encoder_plugged[f] = False
+
+    def plug_encoder(self, finger: int) -> None:
+        self.encoder_plugged[_finger_index(finger)] = True
+
+    def shift_encoder(self, finger: int, radians: float) -> None:
+        """The encoder's magnet slips: its reading is off by ``radians`` from now on."""
+        f = _finger_index(finger)
+        if not (isinstance(radians, int | float) and math.isfinite(radians)):
+            raise PlantError(f"encoder shift must be a finite angle in rad, got {radians!r}")
+        self.encoder_shift[f] = float(radians)
+
+    def block(self, finger: int, theta2: float | None = None, direction: str = "both") -> None:
+        """Block a finger at a Joint-2 angle (default: where it is). ``both``: jammed there;
+        ``flexion``: an obstacle stops it flexing further (it can still open). A finger beyond
+        the angle is pushed to it."""
+        f = _finger_index(finger)
+        if direction not in ("both", "flexion"):
+            raise PlantError(f"direction must be 'both' or 'flexion', got {direction!r}")
+        q = self.q[f] if theta2 is None else float(theta2) * self.R[f, 1]
+        lo, hi = self.q_limits[f]
+        if not lo <= q <= hi:
+            raise PlantError(
+                f"finger {f}: cannot block at θ2 = {q / self.R[f, 1]:.3f} rad, outside its range"
+            )
+        self._block[f] = (q, q) if direction == "both" else (lo, q)
+
+    def unblock(self, finger: int) -> None:
+        f = _finger_index(finger)
+        self._block[f] = self.q_limits[f]
+
+    @property
+    def blocks(self) -> np.ndarray:
+        """Each finger's allowed q interval (m), shape (5, 2): its limits narrowed by blocks."""
+        return self._block.copy()

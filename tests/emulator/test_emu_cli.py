@@ -1,0 +1,115 @@
+"""``utrf emulate``: serves until interrupted, prints where to connect and its real-time factor,
+takes fault injection from its options and from stdin, refuses bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import serial
+
+from utrf.cli import build_parser, main
+from utrf.cli.emulate import build_board
+
+
+def test_serves_until_interrupted(fixture_elf: Path, tmp_path: Path) -> None:
+    url_file = tmp_path / "urls"
+    cmd = [sys.executable, "-m", "utrf", "emulate", "--elf", str(fixture_elf), "--json"]
+    cmd += ["--url-file", str(url_file), "--status-interval", "0.2"]
+    proc = subprocess.Popen(
+        cmd,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 20
+        while not url_file.exists():
+            assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+            assert time.monotonic() < deadline, "no URL file"
+            time.sleep(0.05)
+        url, pty = url_file.read_text().split()
+        assert url.startswith("socket://127.0.0.1:") and pty.startswith("/dev/pts/")
+        with serial.serial_for_url(url, timeout=5.0) as port:
+            assert port.readline() == b"boot 2\n"  # the client's connection reset it
+            assert proc.stdin is not None
+            proc.stdin.write("unplug 2 1.5\nnoise 0\n")
+            proc.stdin.flush()
+            time.sleep(0.3)
+            port.write(b"a\n")
+            reading = port.readline().split()
+            assert int(reading[3]) == math.floor(1.5 * 1024 / 5)  # ADC2: the unplugged input
+        time.sleep(0.3)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, err
+    events = [json.loads(line) for line in out.splitlines()]
+    assert events[0]["event"] == "serving" and events[0]["url"] == url
+    assert any(e["event"] == "unplugged" for e in events)
+    assert any(e["event"] == "status" for e in events)
+    last = events[-1]
+    assert last["event"] == "stopped"
+    assert 0.5 < last["realtime_factor"] <= 1.01
+    assert last["clients"] == []
+    port_number = int(url.rsplit(":", 1)[1])
+    with pytest.raises(OSError):
+        socket.create_connection(("127.0.0.1", port_number), timeout=1.0)
+
+
+def test_fault_options(fixture_elf: Path) -> None:
+    argv = ["emulate", "--elf", str(fixture_elf), "--no-pty", "--block", "1:30"]
+    argv += ["--obstacle", "middle:45", "--unplug-encoder", "3:4.5", "--unplug-encoder", "4"]
+    argv += ["--line-corrupt", "1", "--line-direction", "to_host"]
+    args = build_parser().parse_args(argv)
+    board = build_board(args)
+    try:
+        blocks = board.plant.blocks / board.plant.R[:, 1:2]  # as Joint-2 angles
+        np.testing.assert_allclose(blocks[1], np.radians([30, 30]))
+        assert blocks[2, 1] == pytest.approx(np.radians(45)) and blocks[2, 0] < -1.0
+        board.run_for(0.01)  # the next exchanges carry the plant's new voltages
+        assert board.adc_volts[3] == 4.5 and board.adc_volts[4] == 0.0
+        before = board.stats["tx_corrupted"]
+        board.reset()
+        board.run_for(0.05)
+        assert board.stats["tx_corrupted"] - before == 7  # "boot 2\n", every byte
+        assert board.stats["rx_corrupted"] == 0
+    finally:
+        board.close()
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["--elf", "/nonexistent.elf"], "not found"),
+        (["--duration", "-1"], "--duration"),
+        (["--speed", "0"], None),
+        (["--obstacle", "2"], None),
+        (["--line-drop", "2"], None),
+        (["--block", "pinky:10"], None),
+    ],
+)
+def test_bad_input_exits_2(
+    fixture_elf: Path, capsys: pytest.CaptureFixture[str], argv: list[str], needle: str | None
+) -> None:
+    if "--elf" not in argv:
+        argv = ["--elf", str(fixture_elf), *argv]
+    try:
+        code = main(["emulate", "--no-pty", *argv])
+    except SystemExit as exc:  # argparse's own refusal
+        code = exc.code
+    assert code == 2
+    if needle:
+        assert needle in capsys.readouterr().err

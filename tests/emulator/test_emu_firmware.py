@@ -1,0 +1,185 @@
+"""The real firmware (build/firmware/utrf.elf) on the emulated board, in simulated time: its
+boot and reset cause, what it reads from the encoders, what it drives on the pins, the closed
+loop through the plant, each fault injection's effect as the firmware sees it, EEPROM."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from utrf.emulator import EmulatedBoard, EncoderParams, PlantParams, SimClient
+from utrf.protocol import messages as m
+
+QUIET = PlantParams(gravity_m_s2=(0.0, 0.0), encoder=EncoderParams(noise_v=0.0))
+ALL = 0b11111
+COAST5 = (m.ControlMode.COAST,) * 5
+
+
+def set_mode(client: SimClient, finger: int, mode: m.ControlMode, duty: float = 0.0) -> None:
+    modes = list(COAST5)
+    modes[finger] = mode
+    duties = [0.0] * 5
+    duties[finger] = duty
+    reply = client.request(
+        m.SetMode(mask=1 << finger, mode=tuple(modes), duty=tuple(duties), effort=(0.0,) * 5)
+    )
+    assert isinstance(reply, m.Ack), reply
+
+
+def faults_seen(client: SimClient, finger: int) -> m.FaultBits:
+    bits = m.FaultBits(0)
+    for msg in client.stream:
+        if isinstance(msg, m.Fault) and msg.finger == finger:
+            bits |= msg.new_faults
+    return bits
+
+
+@pytest.fixture
+def board(firmware_elf: Path):
+    with EmulatedBoard(firmware_elf, realtime=False, plant_params=QUIET) as b:
+        yield b
+
+
+@pytest.fixture
+def client(board: EmulatedBoard) -> SimClient:
+    c = SimClient(board)
+    boot = c.wait_boot()
+    assert boot.reset_cause == m.ResetCause.POWER_ON
+    board.run_for(0.02)
+    assert isinstance(c.request(m.ClearFaults(mask=ALL)), m.Ack)
+    c.stream.clear()
+    return c
+
+
+def test_boot_handshake_and_reset_cause(board: EmulatedBoard, client: SimClient) -> None:
+    identity = client.request(m.Identify())
+    assert identity.protocol_version == m.PROTOCOL_VERSION
+    assert identity.schema_hash == m.SCHEMA_HASH
+    assert identity.reset_cause == m.ResetCause.POWER_ON
+    board.reset()
+    assert client.wait_boot().reset_cause == m.ResetCause.RESET_PIN
+    assert client.request(m.Identify()).reset_cause == m.ResetCause.RESET_PIN
+
+
+def test_the_firmware_reads_the_plant_encoders(board: EmulatedBoard, client: SimClient) -> None:
+    angles = [-1.0, -0.3, 0.2, 0.9, 1.6]
+    for f, a in enumerate(angles):
+        board.plant.set_theta2(f, a)
+    board.run_for(0.01)
+    state = client.request(m.GetState())
+    # 10-bit ADC over 80 % of a turn: 7.7 mrad a count
+    np.testing.assert_allclose(state.theta2, angles, atol=0.008)
+
+
+def test_pins_are_what_the_firmware_drives(board: EmulatedBoard, client: SimClient) -> None:
+    set_mode(client, 1, m.ControlMode.DUTY, 0.5)
+    client.run(0.2)
+    state = client.request(m.GetState())
+    pins = board.pins
+    assert state.mode[1] == m.ControlMode.DUTY
+    assert state.duty_a[1] > 0.4
+    assert pins.duty[1, 0] == pytest.approx(abs(state.duty_a[1]), abs=0.011)
+    assert (pins.in1[1, 0], pins.in2[1, 0]) == (True, False)  # forward: pulls Tendon 1
+    assert pins.duty[1, 1] == pytest.approx(abs(state.duty_b[1]), abs=0.011)
+    assert pins.stby.tolist() == [False, True, False, False, False]
+    assert np.all(pins.duty[[0, 2, 3, 4]] == 0.0)
+    assert board.theta2[1] > 0.2  # and the finger flexed
+
+
+def test_position_control_closes_the_loop_through_the_plant(
+    firmware_elf: Path,
+) -> None:
+    with EmulatedBoard(firmware_elf, realtime=False) as board:  # gravity and noise on
+        client = SimClient(board)
+        client.wait_boot()
+        board.run_for(0.02)
+        client.request(m.ClearFaults(mask=ALL))
+        target = (0.0, 0.0, 0.8, 0.0, 0.0)
+        client.request(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=1 << 2, value=target))
+        set_mode(client, 2, m.ControlMode.POSITION)
+        client.run(1.0)
+        assert board.theta2[2] == pytest.approx(0.8, abs=0.05)
+        assert client.request(m.GetState()).faults[2] == m.FaultBits(0)
+
+
+class TestFaultInjection:
+    def test_unplugged_encoder(self, board: EmulatedBoard, client: SimClient) -> None:
+        board.unplug_encoder(3)
+        client.run(0.02)
+        assert m.FaultBits.ENCODER_RANGE in faults_seen(client, 3)
+        assert faults_seen(client, 2) == m.FaultBits(0)
+
+    def test_slipped_encoder_jumps(self, board: EmulatedBoard, client: SimClient) -> None:
+        board.shift_encoder(1, 0.5)  # above the firmware's 0.2 rad a tick
+        client.run(0.02)
+        assert m.FaultBits.ENCODER_JUMP in faults_seen(client, 1)
+
+    def test_blocked_finger_stalls(self, board: EmulatedBoard, client: SimClient) -> None:
+        board.block_finger(0, 0.2)
+        client.request(
+            m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=1, value=(1.0,) + (0.0,) * 4)
+        )
+        set_mode(client, 0, m.ControlMode.POSITION)
+        client.run(0.8)
+        assert board.theta2[0] == pytest.approx(0.2)
+        assert m.FaultBits.STALL in faults_seen(client, 0)
+        # the stall turned the motor off: no current, no tension left pulling
+        assert board.motor_current[0, 0] == 0.0
+
+    def test_line_noise_is_counted_and_survived(
+        self, board: EmulatedBoard, client: SimClient
+    ) -> None:
+        before = client.request(m.GetStats())
+        board.inject_noise(200)  # 200 random bytes, then a clean line again
+        board.run_for(0.01)
+        after = client.request(m.GetStats(), timeout=0.2)
+        assert (
+            after.rx_crc_errors + after.rx_framing_errors
+            > before.rx_crc_errors + before.rx_framing_errors
+        )
+        assert client.request(m.Identify()).protocol_version == m.PROTOCOL_VERSION
+
+    def test_board_reset(self, board: EmulatedBoard, client: SimClient) -> None:
+        set_mode(client, 4, m.ControlMode.DUTY, 0.4)
+        client.run(0.02)
+        assert board.pins.stby[4]
+        board.reset()
+        boot = client.wait_boot()
+        assert boot.reset_cause == m.ResetCause.RESET_PIN
+        assert not board.pins.stby.any()  # all off after the reset
+        assert client.request(m.GetState()).mode == COAST5
+
+
+def test_saved_configuration_survives_in_the_eeprom_file(
+    firmware_elf: Path, tmp_path: Path
+) -> None:
+    path = tmp_path / "eeprom.bin"
+    with EmulatedBoard(firmware_elf, realtime=False, eeprom_path=path) as board:
+        client = SimClient(board)
+        assert client.wait_boot().config_status == m.ConfigStatus.DEFAULTS_BLANK
+        client.request(m.SetSafety(heartbeat_timeout=0.75, safe_action=m.SafeAction.COAST))
+        reply = client.request(m.SaveConfig(), timeout=3.0)
+        assert isinstance(reply, m.Ack)
+        assert board.stats["eeprom_writes"] > 100  # at 3.4 ms a byte
+    assert path.stat().st_size == 4096
+    with EmulatedBoard(firmware_elf, realtime=False, eeprom_path=path) as board:
+        client = SimClient(board)
+        assert client.wait_boot().config_status == m.ConfigStatus.LOADED
+        safety = client.request(m.GetSafety())
+        assert safety.heartbeat_timeout == pytest.approx(0.75)
+        assert safety.safe_action == m.SafeAction.COAST
+
+
+def test_control_tick_profile(board: EmulatedBoard, client: SimClient) -> None:
+    client.request(m.SetTelemetry(rate_hz=200))
+    board.profile_interrupt("TIMER2_COMPA")
+    client.run(0.2)
+    prof = board.profile()["interrupt"]
+    assert 195 <= prof.calls <= 201
+    assert prof.period == pytest.approx(16000, rel=2e-3)
+    assert 0 < prof.mean < prof.worst < 16000
+    assert prof.mean_incl >= prof.mean  # the tick lets the UART and the ADC interrupt it
+    stats = client.request(m.GetStats())
+    assert stats.tick_overruns == 0

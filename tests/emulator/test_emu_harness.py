@@ -1,0 +1,376 @@
+"""The harness on its own test program (tests/emulator/fixtures/fixture.c), driven in
+simulated time: UART timing and flow control, ADC, pins, watchdog, resets, EEPROM, line
+faults, determinism, the cycle profiler, a crash."""
+
+from __future__ import annotations
+
+import math
+import random
+from pathlib import Path
+
+import numpy as np
+import pytest
+from emu_helpers import Console
+
+from utrf.emulator import EmulatedBoard, EncoderParams, PlantParams
+from utrf.emulator.board import RESET_FLAGS
+
+QUIET = PlantParams(gravity_m_s2=(0.0, 0.0), encoder=EncoderParams(noise_v=0.0))
+FRAME_S = 10e-6  # 8N1 at 1 Mbaud
+
+
+@pytest.fixture
+def board(fixture_elf: Path):
+    with EmulatedBoard(fixture_elf, realtime=False, plant_params=QUIET) as b:
+        yield b
+
+
+@pytest.fixture
+def console(board: EmulatedBoard) -> Console:
+    c = Console(board)
+    assert c.line() == "boot 1"  # power-on: PORF
+    return c
+
+
+def echo_duration(board: EmulatedBoard, console: Console, payload: bytes) -> float:
+    """Send "e N" and N bytes; return the simulated time until the last echoed byte."""
+    port = console.port
+    port.write(f"e {len(payload)}\n".encode() + payload)
+    start = board.sim_time
+    got = bytearray()
+    while len(got) < len(payload) and board.sim_time - start < 1.0:
+        board.run_for(20e-6)
+        got += port.read(port.in_waiting)
+    assert bytes(got) == payload
+    return board.sim_time - start
+
+
+class TestUart:
+    def test_output_leaves_at_the_byte_rate(self, fixture_elf: Path) -> None:
+        with EmulatedBoard(fixture_elf, realtime=False, exchange_period=20e-6) as board:
+            console = Console(board)
+            assert console.line() == "boot 1"
+            console.port.write(b"z 300\n")
+            arrivals = []
+            got = bytearray()
+            while len(got) < 300 and board.sim_time < 0.1:
+                board.run_for(20e-6)
+                new = console.port.read(console.port.in_waiting)
+                arrivals += [board.sim_time] * len(new)
+                got += new
+            assert bytes(got) == bytes(i & 0xFF for i in range(300))
+            # back to back at 1 Mbaud: 10 µs a byte (simavr alone would take 11)
+            assert arrivals[-1] - arrivals[0] == pytest.approx(299 * FRAME_S, abs=40e-6)
+            assert board.stats["frame_cycles"] == 160
+
+    def test_round_trip_timing_follows_the_configured_baud(self, fixture_elf: Path) -> None:
+        with EmulatedBoard(fixture_elf, realtime=False, exchange_period=20e-6) as board:
+            console = Console(board)
+            console.line()
+            assert console.command("u 7") == "u"  # UBRR0 = 7, U2X: 250 kbaud
+            frame = 10 * 8 * 8 / 16e6
+            assert board.stats["frame_cycles"] == 10 * 8 * 8
+            payload = random.Random(1).randbytes(100)
+            elapsed = echo_duration(board, console, payload)
+            # the command line and the payload in, the last byte echoed one frame later
+            expected = (len(payload) + 6 + 1) * frame
+            assert expected <= elapsed < expected + frame
+
+    def test_a_busy_firmware_loses_no_bytes(self, board: EmulatedBoard, console: Console) -> None:
+        """The receive interrupt is off for 5 ms while 126 bytes arrive: simavr's FIFO holds
+        63, the rest wait upstream; all come through in order."""
+        payload = random.Random(2).randbytes(120)
+        console.port.write(b"x 5\n")
+        console.port.write(b"e 120\n" + payload)
+        assert console.line(timeout=0.1) == "x"
+        assert console.port.read(120) == payload
+        stats = board.stats
+        assert stats["rx_held"] > 0
+        assert stats["rx_uart_bytes"] == stats["rx_host_bytes"]
+
+    def test_bytes_sent_while_the_receiver_is_off_are_lost(self, board: EmulatedBoard) -> None:
+        board.write(b"a\n")  # the fixture has not enabled its receiver yet at t = 0
+        board.run_for(0.01)
+        assert board.stats["rx_lost_disabled"] == 2
+        assert board.read() == b"boot 1\n"
+
+
+def test_adc_values_reach_the_firmware(board: EmulatedBoard, console: Console) -> None:
+    angles = [-1.2, -0.4, 0.0, 0.7, 1.5]
+    for finger, theta2 in enumerate(angles):
+        board.plant.set_theta2(finger, theta2)
+    board.unplug_encoder(4, volts=1.0)
+    board.run_for(1e-3)
+    volts = board.adc_volts
+    assert volts[4] == 1.0
+    reading = [int(v) for v in console.command("a").split()[1:]]
+    # the datasheet's conversion, floor(1024 V / Vref), with AVcc = 5 V as the reference
+    assert reading[:5] == [math.floor(v * 1024 / 5.0) for v in volts]
+    assert reading[5:] == [0, 0, 0]
+    assert reading[0] < reading[1] < reading[2] < reading[3]
+    assert board.stats["adc_conversions"] == 8
+
+
+def test_a_conversion_samples_at_its_start(board: EmulatedBoard, console: Console) -> None:
+    """The ADC holds the value its conversion started with (104 µs at clk/128)."""
+    board.plant.set_theta2(0, 1.0)
+    console.port.write(b"a\n")
+    # run until the first conversion has started, then move the finger
+    while board.stats["adc_conversions"] == 0:
+        board.run_for(board.exchange_period)
+    started_with = math.floor(board.adc_volts[0] * 1024 / 5.0)
+    board.plant.set_theta2(0, -1.0)
+    assert int(console.line().split()[1]) == started_with
+
+
+CHANNELS = [(f, c) for f in range(5) for c in range(2)]
+
+
+@pytest.mark.parametrize(("finger", "channel"), CHANNELS)
+def test_pwm_direction_and_standby_readback(
+    board: EmulatedBoard, console: Console, finger: int, channel: int
+) -> None:
+    assert console.command(f"o {finger} {channel} 199 2") == "o"  # non-inverting
+    assert console.command(f"i {finger} {channel} 1 0") == "i"
+    assert console.command(f"s {finger} 1") == "s"
+    pins = board.pins
+    expected = np.zeros((5, 2))
+    expected[finger, channel] = 200 / 800  # fast PWM: OCR + 1 of TOP + 1 counts
+    np.testing.assert_allclose(pins.duty, expected)
+    assert pins.in1.sum() == 1 and pins.in1[finger, channel]
+    assert not pins.in2.any()
+    assert pins.stby.tolist() == [f == finger for f in range(5)]
+    board.run_for(1e-3)
+    assert board.drive[finger][channel] == ("forward", 0.25)
+
+    console.command(f"o {finger} {channel} 199 3")  # inverting
+    assert board.pins.duty[finger, channel] == pytest.approx(0.75)
+    console.command(f"i {finger} {channel} 0 1")
+    board.run_for(1e-3)
+    assert board.drive[finger][channel] == ("reverse", -0.75)
+    console.command(f"o {finger} {channel} 199 0")  # disconnected: the pin is its PORT bit, low
+    assert board.pins.duty[finger, channel] == 0.0
+    console.command(f"s {finger} 0")
+    board.run_for(1e-3)
+    assert board.drive[finger][channel] == ("coast", 0.0)
+
+
+def test_an_interrupt_enabled_with_its_flag_set_runs(
+    board: EmulatedBoard, console: Console
+) -> None:
+    """A compare match while the tick is masked runs the handler as soon as it is unmasked."""
+    assert console.command("m") == "m 1"
+    assert board.stats["late_interrupts"] == 1
+
+
+def test_driven_pins_move_the_plant(board: EmulatedBoard, console: Console) -> None:
+    console.command("o 2 0 599 2")
+    console.command("i 2 0 1 0")
+    console.command("s 2 1")
+    board.run_for(0.1)
+    assert board.theta2[2] > 0.3
+    assert board.motor_current[2, 0] > 0.0
+    assert np.abs(board.theta2[[0, 1, 3, 4]]).max() == 0.0
+
+
+class TestResets:
+    def test_watchdog_resets_a_firmware_that_stops_feeding_it(
+        self, board: EmulatedBoard, console: Console
+    ) -> None:
+        assert console.command("d") == "d"
+        start = board.sim_time
+        assert console.line(timeout=0.5) == f"boot {RESET_FLAGS['watchdog']}"
+        # WDTO_250MS: 32768 cycles of the 128 kHz watchdog oscillator
+        assert 0.25 < board.sim_time - start < 0.27
+        assert board.reset_cause == "watchdog"
+        assert board.stats["watchdog_resets"] == 1
+        assert console.command("b") == "b 8"
+
+    @pytest.mark.parametrize(("cause", "flags"), [("reset_pin", 2), ("power_on", 1)])
+    def test_reset_on_request(
+        self, board: EmulatedBoard, console: Console, cause: str, flags: int
+    ) -> None:
+        board.reset(cause)
+        assert console.line() == f"boot {flags}"
+        assert board.reset_cause == cause
+        assert board.stats["resets"] == 1
+
+    def test_held_in_reset(self, board: EmulatedBoard, console: Console) -> None:
+        console.command("s 2 1")
+        board.reset(hold=0.05)
+        start = board.sim_time
+        board.run_for(0.04)
+        assert not board.pins.stby.any()  # the pins float while held: the drivers are off
+        assert console.line(timeout=0.1) == "boot 2"
+        assert board.sim_time - start >= 0.05
+
+    def test_a_reset_cuts_the_transmission(self, board: EmulatedBoard, console: Console) -> None:
+        console.port.write(b"z 200\n")
+        board.run_for(0.5e-3)  # a few dozen bytes out of 200
+        board.reset()
+        board.run_for(0.01)
+        out = console.port.read(1000)
+        sent = out[: out.index(b"boot 2\n")]
+        assert 10 < len(sent) < 100
+        assert sent == bytes(range(len(sent)))  # whole bytes, then nothing but the boot line
+        assert out[len(sent) :] == b"boot 2\n"
+        assert board.stats["tx_cut"] >= 1
+
+    def test_a_crash_stops_the_core_until_reset(
+        self, board: EmulatedBoard, console: Console
+    ) -> None:
+        console.port.write(b"c\n")
+        board.run_for(0.01)
+        assert board.status == "crashed"
+        assert board.crash_pc is not None
+        assert "out of ram" in board.log
+        t = board.sim_time
+        board.run_for(0.01)
+        assert board.sim_time == pytest.approx(t + 0.01)  # time goes on around it
+        board.reset()
+        assert board.status == "running"
+        assert console.line() == "boot 2"
+
+
+class TestEeprom:
+    def test_persisted_across_runs(self, fixture_elf: Path, tmp_path: Path) -> None:
+        path = tmp_path / "eeprom.bin"
+        with EmulatedBoard(fixture_elf, realtime=False, eeprom_path=path) as board:
+            console = Console(board)
+            console.line()
+            for addr, value in ((0, 17), (1000, 42), (4095, 99)):
+                assert console.command(f"w {addr} {value}") == "w"
+            board.run_for(0.01)
+            assert board.stats["eeprom_writes"] == 3
+        image = path.read_bytes()
+        assert len(image) == 4096
+        assert (image[0], image[1000], image[4095]) == (17, 42, 99)
+        assert image.count(0xFF) == 4093
+        with EmulatedBoard(fixture_elf, realtime=False, eeprom_path=path) as board:
+            console = Console(board)
+            console.line()
+            assert console.command("r 1000") == "r 1000 42"
+            assert console.command("r 1001") == "r 1001 255"
+
+    def test_a_byte_takes_3_4_ms_to_program(self, fixture_elf: Path) -> None:
+        board = EmulatedBoard(fixture_elf, realtime=False, exchange_period=20e-6)
+        console = Console(board)
+        console.line()
+        port = console.port
+        port.write(b"w 5 1\nw 6 2\n")
+        assert console.line() == "w"
+        first = board.sim_time
+        assert console.line() == "w"  # waited for the first byte's programming time
+        assert 3.4e-3 <= board.sim_time - first < 3.6e-3
+        assert console.command("r 6") == "r 6 2"
+        board.close()
+
+    def test_bad_image_is_refused(self, fixture_elf: Path, tmp_path: Path) -> None:
+        path = tmp_path / "big.bin"
+        path.write_bytes(b"\0" * 5000)
+        with pytest.raises(Exception, match="5000 bytes"):
+            EmulatedBoard(fixture_elf, realtime=False, eeprom_path=path)
+
+
+class TestLineFaults:
+    def test_drop_everything_to_the_board(self, board: EmulatedBoard, console: Console) -> None:
+        board.set_line_faults("to_board", drop=1.0)
+        console.port.write(b"b\n")
+        board.run_for(0.01)
+        assert console.port.in_waiting == 0
+        assert board.stats["rx_dropped"] == 2
+        board.set_line_faults("to_board")  # clean again
+        assert console.command("b") == "b 1"
+
+    def test_corruption_flips_one_bit_per_byte(
+        self, board: EmulatedBoard, console: Console
+    ) -> None:
+        payload = bytes(range(64))
+        console.port.write(b"e 64\n")
+        board.run_for(1e-3)
+        board.set_line_faults("to_host", corrupt=1.0)
+        console.port.write(payload)
+        got = console.port.read(64)
+        assert [bin(a ^ b).count("1") for a, b in zip(got, payload, strict=True)] == [1] * 64
+        assert board.stats["tx_corrupted"] == 64
+
+    def test_insertion_and_injected_noise(self, board: EmulatedBoard, console: Console) -> None:
+        console.port.write(b"e 8\n")
+        board.run_for(1e-3)
+        board.inject_noise(b"12345678", direction="to_board")  # noise the fixture echoes
+        assert console.port.read(8) == b"12345678"
+        board.set_line_faults("to_host", insert=0.5)
+        console.port.write(b"e 100\n" + bytes(100))
+        board.run_for(5e-3)
+        out = console.port.read(1000)
+        inserted = board.stats["tx_inserted"]
+        assert 20 < inserted < 80
+        assert len(out) == 100 + inserted
+
+    def test_bad_probabilities_are_refused(self, board: EmulatedBoard) -> None:
+        with pytest.raises(Exception, match="drop must be a probability"):
+            board.set_line_faults(drop=1.5)
+        with pytest.raises(Exception, match="direction"):
+            board.set_line_faults("sideways", drop=0.1)
+
+
+def scripted_run(fixture_elf: Path, seed: int) -> tuple[bytes, np.ndarray, np.ndarray]:
+    plant = PlantParams()  # gravity and encoder noise on
+    with EmulatedBoard(fixture_elf, seed=seed, realtime=False, plant_params=plant) as board:
+        board.set_line_faults("to_host", corrupt=0.05)
+        board.run_for(0.005)
+        for cmd in (b"o 1 0 499 2\n", b"i 1 0 1 0\n", b"s 1 1\n", b"a\n", b"e 50\n"):
+            board.write(cmd)
+            board.run_for(0.002)
+        board.write(bytes(range(50)))
+        board.run_for(0.05)
+        board.write(b"a\n")
+        board.run_for(0.01)
+        return board.read(), board.theta.copy(), board.adc_volts
+
+
+def test_a_run_is_determined_by_its_seed(fixture_elf: Path) -> None:
+    out1, theta1, adc1 = scripted_run(fixture_elf, seed=3)
+    out2, theta2, adc2 = scripted_run(fixture_elf, seed=3)
+    out3, _, _ = scripted_run(fixture_elf, seed=4)
+    assert out1 == out2 and np.array_equal(theta1, theta2) and np.array_equal(adc1, adc2)
+    assert out1 != out3  # other line faults and encoder noise
+    assert theta1[1, 1] > 0.05  # the run did drive finger 1
+
+
+class TestProfiler:
+    def test_interrupt_cycles(self, board: EmulatedBoard, console: Console) -> None:
+        console.command("k 1000")  # the tick ISR busy-waits 1000 x 4 cycles
+        board.profile_interrupt("TIMER2_COMPA")
+        board.run_for(0.1)
+        prof = board.profile()["interrupt"]
+        assert 98 <= prof.calls <= 100
+        assert 4000 < prof.mean < 4150
+        assert prof.worst - prof.best < 40
+        assert prof.period == pytest.approx(16000, rel=1e-3)  # 1 kHz
+        assert 0.25 < prof.load < 0.26  # a quarter of the CPU
+        console.command("k 0")
+        board.profile_interrupt(13)
+        board.run_for(0.05)
+        assert board.profile()["interrupt"].mean < 150
+
+    def test_function_cycles(self, board: EmulatedBoard, console: Console) -> None:
+        console.command("k 500")
+        board.profile_function("__vector_13")
+        board.run_for(0.05)
+        prof = board.profile()["function"]
+        assert prof.calls >= 49
+        assert 2000 < prof.mean < 2150
+
+    def test_unknown_names_are_refused(self, board: EmulatedBoard) -> None:
+        with pytest.raises(Exception, match="unknown vector"):
+            board.profile_interrupt("TIMER9")
+        with pytest.raises(Exception, match="no symbol"):
+            board.profile_function("no_such_function")
+
+
+def test_ram_and_symbols(board: EmulatedBoard, console: Console) -> None:
+    addr = board.symbol("mcusr_saved")
+    assert addr is not None and 0x200 <= addr < 0x2200
+    assert board.read_ram("mcusr_saved", 1) == b"\x01"
+    assert math.isnan(board.profile()["interrupt"].mean)
