@@ -9,13 +9,15 @@ static_assert(kMaxBodyBytes == proto::kMaxPayload, "framing and the spec disagre
 static_assert(kMaxEncodedBytes < 254, "one COBS block must hold a whole frame");
 
 uint16_t crc16_ccitt(const uint8_t* data, uint16_t len, uint16_t crc) {
-  // Bitwise: 8 shifts a byte is a few µs on the AVR and needs no 512-byte table.
+  // Byte-wise form of the bitwise MSB-first division by 0x1021 (same results): the top
+  // byte's contribution folded in with shifts, no table. About 30 cycles a byte on the AVR
+  // against ~100 for eight single-bit steps; a 70-byte state frame at 500 Hz makes it count.
   for (uint16_t i = 0; i < len; ++i) {
-    crc ^= static_cast<uint16_t>(data[i]) << 8;
-    for (uint8_t b = 0; b < 8; ++b) {
-      crc = (crc & 0x8000u) ? static_cast<uint16_t>((crc << 1) ^ 0x1021u)
-                            : static_cast<uint16_t>(crc << 1);
-    }
+    uint8_t x = static_cast<uint8_t>((crc >> 8) ^ data[i]);
+    x ^= static_cast<uint8_t>(x >> 4);
+    // x * 32 rather than x << 5: avr-gcc makes the shift a 5-step loop, the product swaps.
+    crc = static_cast<uint16_t>((crc << 8) ^ (static_cast<uint16_t>(x) << 12) ^
+                                (static_cast<uint16_t>(x) * 32u) ^ x);
   }
   return crc;
 }
