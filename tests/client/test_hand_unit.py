@@ -1,0 +1,312 @@
+"""Hand against a scripted fake board over TCP: what the emulated firmware cannot be made to
+do (lost replies, arbitrary nacks, a bootloader's silence, a board of another spec) and the
+client's own logic (targets and their errors, trajectories, settling, logs, closing)."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hand_fake import HAND, HandBoard
+
+from utrf.datalog import read_log
+from utrf.hand import (
+    FingerFaultError,
+    Hand,
+    NotControlledError,
+    NotSettledError,
+    TargetError,
+    log_columns,
+)
+from utrf.hand.state import BOARD_CLOCK_WRAP_S, BoardClock
+from utrf.protocol import messages as M
+from utrf.protocol.errors import (
+    BoardResetError,
+    NackError,
+    ReplyTimeout,
+    SchemaMismatchError,
+)
+from utrf.trajectory import min_jerk
+
+
+@pytest.fixture
+def board() -> Iterator[HandBoard]:
+    b = HandBoard()
+    yield b
+    b.close()
+
+
+@pytest.fixture
+def hand(board: HandBoard) -> Iterator[Hand]:
+    with Hand.connect(board.url, boot_wait_s=0, telemetry_hz=100) as h:
+        yield h
+
+
+# --- connecting -------------------------------------------------------------------------
+
+
+def test_connect_waits_out_the_boot_then_handshakes_and_starts_telemetry() -> None:
+    board = HandBoard(boot_on_connect=True)
+    try:
+        t0 = time.monotonic()
+        with Hand.connect(board.url, boot_wait_s=2.0, telemetry_hz=50) as hand:
+            took = time.monotonic() - t0
+            # It waited for the boot instead of asking into the bootloader's silence.
+            assert board.unheard == 0 and 0.25 < took < 1.5
+            assert hand.identity.reset_cause == M.ResetCause.RESET_PIN
+            assert board.requests(M.SetTelemetry)[0] == M.SetTelemetry(rate_hz=50)
+            assert len(board.requests(M.GetLimits)) == 5
+            hand.state()  # usable: the boot seen before the handshake raised nothing
+    finally:
+        board.close()
+
+
+def test_schema_mismatch_names_both_versions_and_hashes(board: HandBoard) -> None:
+    board.identity = M.Identity(
+        **{**_fields(board.identity), "protocol_version": 7, "schema_hash": 0x0BADF00D}
+    )
+    with pytest.raises(SchemaMismatchError) as info:
+        Hand.connect(board.url, boot_wait_s=0)
+    text = str(info.value)
+    assert "version 7 (schema 0x0BADF00D)" in text
+    assert f"version {M.PROTOCOL_VERSION} (schema 0x{M.SCHEMA_HASH:08X})" in text
+
+
+def _fields(msg: M.Message) -> dict:
+    return {f.name: getattr(msg, f.name) for f in type(msg).FIELDS}
+
+
+def test_a_board_that_never_answers_times_out() -> None:
+    board = HandBoard()
+    board.on(M.Identify.ID, lambda f: None)
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(ReplyTimeout, match="identify"):
+            Hand.connect(board.url, boot_wait_s=0, handshake_timeout_s=0.5)
+        assert 0.45 < time.monotonic() - t0 < 1.5
+        assert len(board.requests(M.Identify)) >= 3  # asked again and again meanwhile
+    finally:
+        board.close()
+
+
+# --- requests that fail -----------------------------------------------------------------
+
+
+def test_lost_replies_are_retried_then_reported(board: HandBoard, hand: Hand) -> None:
+    drops = {"left": 2}
+
+    def flaky(frame):  # the first two set_targets get no answer
+        if drops["left"]:
+            drops["left"] -= 1
+            return None
+        return [(frame.seq, M.Ack(frame.msg_id))]
+
+    board.on(M.SetTargets.ID, flaky)
+    hand.set_targets({"index": 0.5}, enable=False)
+    sent = board.requests(M.SetTargets)
+    assert len(sent) == 3 and sent[0] == sent[2]  # resent with the same bytes
+    assert hand.link_stats().retries == 2
+    board.on(M.SetTargets.ID, lambda f: None)
+    with pytest.raises(ReplyTimeout, match="set_targets after 4 attempt"):
+        hand.set_targets({"index": 0.6}, enable=False)
+
+
+def test_out_of_range_target_is_a_target_error_naming_the_finger(
+    board: HandBoard, hand: Hand
+) -> None:
+    with pytest.raises(TargetError, match=r"'ring'.*theta2 = 2\.5 rad.*limits"):
+        hand.set_targets({"ring": 2.5})
+    with pytest.raises(TargetError, match=r"'thumb'.*flexion = -0.2.*0\.\.1"):
+        hand.set_targets({"thumb": -0.2}, kind="flexion")
+    # move checks before it sends anything
+    before = len(board.received)
+    with pytest.raises(TargetError, match=r"move: finger 'little' target 3\.000 rad"):
+        hand.move({"little": 3.0})
+    assert len(board.received) == before
+
+
+def test_a_faulted_finger_is_named_with_its_faults(board: HandBoard, hand: Hand) -> None:
+    board.latch(2, M.FaultBits.STALL)
+    with pytest.raises(FingerFaultError, match="middle: STALL"):
+        hand.set_mode("position", "middle")
+    with pytest.raises(FingerFaultError, match=r"move: .*middle: STALL"):
+        hand.move({"middle": 0.3}, 0.1)
+    hand.clear_faults("middle")
+    hand.move({"middle": 0.3}, 0.1)
+
+
+def test_other_nacks_surface_as_nack_errors(board: HandBoard, hand: Hand) -> None:
+    board.on(M.SaveConfig.ID, lambda f: [(f.seq, M.Nack(f.msg_id, M.ErrorCode.BUSY, 0xFF))])
+    with pytest.raises(NackError, match="save_config refused: BUSY"):
+        hand.save_config()
+
+
+def test_bad_input_is_refused_with_what_was_wrong(hand: Hand) -> None:
+    with pytest.raises(TargetError, match="no finger named 'pinky'; fingers are"):
+        hand.set_targets({"pinky": 0.1})
+    with pytest.raises(TargetError, match=r"finger index 5 is outside 0\.\.4"):
+        hand.set_targets({5: 0.1})
+    with pytest.raises(TargetError, match="3 targets for 5 fingers"):
+        hand.set_targets([0.1, 0.2, 0.3])
+    with pytest.raises(TargetError, match="target of index is nan"):
+        hand.set_targets({"index": math.nan})
+    with pytest.raises(TargetError, match="kind must be one of"):
+        hand.set_targets({"index": 0.1}, kind="degrees")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="unknown control mode 'hover'"):
+        hand.set_mode("hover")
+    with pytest.raises(ValueError, match="effort of index must lie in"):
+        hand.set_mode("grasp", "index", effort=1.5)
+    with pytest.raises(ValueError, match="duration must be"):
+        hand.move({"index": 0.1}, duration=-1)
+    with pytest.raises(KeyError, match="no pose named 'vulcan'"):
+        hand.pose("vulcan")
+    with pytest.raises(TypeError, match=r"unknown field.*'kq'"):
+        hand.set_gains("index", kq=1.0)
+
+
+# --- targets, trajectories, settling -----------------------------------------------------
+
+
+def test_targets_by_name_index_and_kind(board: HandBoard, hand: Hand) -> None:
+    g = HAND.fingers[1].geometry
+    hand.set_targets({"index": 0.004}, kind="q")
+    hand.set_targets({3: 0.5}, kind="flexion")
+    sent = board.requests(M.SetTargets)
+    assert sent[0].kind == M.TargetKind.TENDON_Q and sent[0].mask == 0b00010
+    assert sent[0].value[1] == pytest.approx(0.004, abs=1e-6)
+    assert sent[1].kind == M.TargetKind.FLEXION and sent[1].mask == 0b01000
+    # enable: both fingers went to POSITION, and the board holds the converted targets
+    st = hand.state()
+    assert st["index"].mode == M.ControlMode.POSITION
+    assert st["index"].target == pytest.approx(0.004 / g.guide_radii_m[1], abs=1e-3)
+    assert st[3].target == pytest.approx(hand.to_theta2("ring", 0.5, "flexion"), abs=1e-3)
+
+
+def test_move_streams_a_minimum_jerk_path(board: HandBoard, hand: Hand) -> None:
+    hand.move({"thumb": 0.2, "middle": -0.3}, 0.1)  # a known start, settled
+    n0 = len(board.requests(M.SetTargets))
+    t0 = time.monotonic()
+    hand.move({"thumb": 1.0, "middle": 0.5}, 0.5, wait=False, rate_hz=40)
+    took = time.monotonic() - t0
+    frames = board.requests(M.SetTargets)[n0:]
+    assert 0.5 <= took < 0.8
+    assert all(f.mask == 0b00101 and f.kind == M.TargetKind.JOINT2_ANGLE for f in frames)
+    thumb = np.array([f.value[0] for f in frames])
+    # the first frame holds the start, the last the end; about rate x duration in between
+    assert thumb[0] == pytest.approx(0.2, abs=1e-5) and thumb[-1] == pytest.approx(1.0, abs=1e-5)
+    assert 17 <= len(frames) <= 22
+    assert np.all(np.diff(thumb) >= -1e-9)  # monotonic: no overshoot in the targets
+    # each streamed value is the minimum-jerk path at some time in [0, T]
+    t = np.linspace(0, 0.5, 2001)
+    path = min_jerk(0.2, 1.0, 0.5, t)
+    assert max(np.min(np.abs(path - v)) for v in thumb) < 1e-3
+    middle = np.array([f.value[2] for f in frames])
+    assert middle[0] == pytest.approx(-0.3, abs=1e-5) and middle[-1] == pytest.approx(0.5)
+
+
+def test_wait_settled_names_the_finger_and_how_far(board: HandBoard, hand: Hand) -> None:
+    board.stuck[4] = 0.25  # the little finger stops at 0.25 rad
+    with pytest.raises(NotSettledError) as info:
+        hand.move({"little": 0.85, "index": 0.4}, 0.1, timeout=0.4)
+    err = info.value
+    assert set(err.errors) == {"little"}
+    assert err.errors["little"] == pytest.approx(0.6, abs=2e-3)
+    assert "little is 0.600 rad (34.4 deg) short of its target" in str(err)
+
+
+def test_wait_settled_raises_when_a_finger_faults_or_lets_go(board: HandBoard, hand: Hand) -> None:
+    board.stuck[0] = 0.0
+    hand.move({"thumb": 0.8}, 0.05, wait=False)
+    board.latch(0, M.FaultBits.ENCODER_RANGE)
+    with pytest.raises(FingerFaultError, match="thumb: ENCODER_RANGE"):
+        hand.wait_settled(timeout=1.0)
+    hand.clear_faults()
+    hand.move({"index": 0.3}, 0.05)
+    with board.lock:
+        board.mode[1] = M.ControlMode.COAST
+    with pytest.raises(NotControlledError, match="index is in COAST"):
+        hand.wait_settled(timeout=1.0, fingers="index")
+
+
+def test_pose_uses_the_library_and_grasp_mode(board: HandBoard, hand: Hand) -> None:
+    pose = hand.pose("shaka", duration=0.1)
+    st = hand.state()
+    np.testing.assert_allclose(st.target, pose.theta2(HAND), atol=1e-4)
+    assert set(st[i].mode for i in range(5)) == {M.ControlMode.POSITION}
+    grasp = hand.pose("grasp-egg", duration=0.1)
+    modes = board.requests(M.SetMode)[-1]
+    assert modes.mode == (M.ControlMode.GRASP,) * 5
+    assert modes.effort == (pytest.approx(grasp.grasp.effort),) * 5
+
+
+# --- telemetry, log, closing -------------------------------------------------------------
+
+
+def test_telemetry_reaches_callbacks_and_the_log(tmp_path: Path, board: HandBoard) -> None:
+    path = tmp_path / "run.csv"
+    seen = []
+    with Hand.connect(board.url, boot_wait_s=0, telemetry_hz=200, log_path=path) as hand:
+        unsubscribe = hand.on_state(seen.append)
+        hand.move({"index": 0.7}, 0.05)
+        time.sleep(0.2)
+        unsubscribe()
+        n = len(seen)
+        time.sleep(0.05)
+        assert len(seen) == n  # unsubscribed
+    data = read_log(path, log_columns(hand.fingers))
+    assert len(data.rows) >= n >= 30 and data.skipped == 0
+    last = data.rows[-1]
+    assert last["index_theta2_rad"] == pytest.approx(0.7, abs=1e-3)
+    assert last["index_mode"] == "POSITION"
+    seqs = [r["seq"] for r in data.rows]
+    assert all(s >= 128 for s in seqs)  # stream frames
+    times = np.array(data.column("board_time_s"), dtype=float)
+    assert np.all(np.diff(times) >= 0)
+
+
+def test_close_leaves_the_hand_braked_and_silent(board: HandBoard) -> None:
+    with Hand.connect(board.url, boot_wait_s=0) as hand:
+        hand.move({"index": 0.5}, 0.05)
+    last_mode = board.requests(M.SetMode)[-1]
+    assert last_mode.mask == 0b11111 and last_mode.mode == (M.ControlMode.BRAKE,) * 5
+    assert board.requests(M.SetTelemetry)[-1].rate_hz == 0
+    with pytest.raises(Exception, match="closed"):
+        hand.state()
+
+
+@pytest.mark.parametrize(("on_close", "mode"), [("coast", M.ControlMode.COAST), ("hold", None)])
+def test_close_modes(board: HandBoard, on_close: str, mode: M.ControlMode | None) -> None:
+    with Hand.connect(board.url, boot_wait_s=0, on_close=on_close) as hand:  # type: ignore[arg-type]
+        hand.move({"index": 0.5}, 0.05)
+    modes = board.requests(M.SetMode)
+    if mode is None:
+        assert modes[-1].mode[1] == M.ControlMode.POSITION  # left holding
+    else:
+        assert modes[-1].mode == (mode,) * 5
+
+
+def test_a_reset_makes_the_next_call_raise_until_reconnect(board: HandBoard, hand: Hand) -> None:
+    hand.move({"index": 0.5}, 0.05)
+    board.boot(M.ResetCause.WATCHDOG)
+    time.sleep(0.1)
+    with pytest.raises(BoardResetError, match="WATCHDOG"):
+        hand.wait_settled(timeout=0.5)  # noticed from telemetry, without a request
+    with pytest.raises(BoardResetError):
+        hand.state()
+    n = len(board.requests(M.SetTelemetry))
+    hand.reconnect()
+    assert len(board.requests(M.SetTelemetry)) == n + 1  # telemetry restarted
+    hand.state()
+
+
+def test_board_clock_unwraps_and_restarts() -> None:
+    clock = BoardClock()
+    assert clock.unwrap(4294.0) == 4294.0
+    assert clock.unwrap(0.5) == pytest.approx(0.5 + BOARD_CLOCK_WRAP_S)
+    assert clock.unwrap(1.0) == pytest.approx(1.0 + BOARD_CLOCK_WRAP_S)
+    clock.restart()
+    assert clock.unwrap(0.01) == 0.01
