@@ -237,10 +237,15 @@ def test_pose_uses_the_library_and_grasp_mode(board: HandBoard, hand: Hand) -> N
     st = hand.state()
     np.testing.assert_allclose(st.target, pose.theta2(HAND), atol=1e-4)
     assert set(st[i].mode for i in range(5)) == {M.ControlMode.POSITION}
-    grasp = hand.pose("grasp-egg", duration=0.1)
-    modes = board.requests(M.SetMode)[-1]
-    assert modes.mode == (M.ControlMode.GRASP,) * 5
-    assert modes.effort == (pytest.approx(grasp.grasp.effort),) * 5
+    hand.pose("open", duration=0.1)
+    n = len(board.requests(M.SetMode))
+    grasp = hand.pose("grasp-egg", duration=0.1)  # closes thumb, index, middle
+    (modes,) = board.requests(M.SetMode)[n:]  # ring and little already hold position
+    assert modes.mask == 0b00111
+    assert modes.mode[:3] == (M.ControlMode.GRASP,) * 3
+    assert modes.effort[:3] == (pytest.approx(grasp.grasp.effort),) * 3
+    st = hand.state()
+    assert [f.mode for f in st][3:] == [M.ControlMode.POSITION] * 2
 
 
 # --- telemetry, log, closing -------------------------------------------------------------

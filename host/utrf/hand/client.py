@@ -204,6 +204,7 @@ class Hand:
         self._fault_callbacks: list[Callable[[FaultEvent], None]] = []
         self._faults_seen: list[FaultEvent] = []
         self._reset: BoardResetError | None = None
+        self._last_boot: m.Boot | None = None
         self._handshaken = False
         self._closed = False
         self._log: TelemetryLog | None = None
@@ -428,6 +429,13 @@ class Hand:
         return self._identity
 
     @property
+    def last_boot(self) -> m.Boot | None:
+        """The board's last ``boot`` message (reset cause, where its configuration came
+        from), None if none was seen since the link opened."""
+        with self._lock:
+            return self._last_boot
+
+    @property
     def telemetry_hz(self) -> int:
         return self._telemetry_hz
 
@@ -574,6 +582,7 @@ class Hand:
                 cb(event)
         elif isinstance(msg, m.Boot):
             with self._lock:
+                self._last_boot = msg
                 self._board_clock.restart()
                 self._reset = BoardResetError(msg)
                 self._latest = None
@@ -797,8 +806,9 @@ class Hand:
 
         Each finger starts from the target the board holds (closed loop) or where it is
         (otherwise), so nothing jumps. ``mode``: POSITION, or GRASP with ``effort`` (the
-        largest closing duty). Fingers not named keep what they do. A fault latched during
-        the move stops it with FingerFaultError.
+        largest closing duty) for the fingers that close by more than ``tolerance`` (those that
+        open or stay move in POSITION). Fingers not named keep what they do. A fault latched
+        during the move stops it with FingerFaultError.
         """
         if not (math.isfinite(duration) and duration >= 0):
             raise ValueError(f"duration must be a finite number of seconds >= 0, got {duration}")
@@ -823,9 +833,18 @@ class Hand:
         wire = [start.get(i, 0.0) for i in range(len(self.fingers))]
         self._request(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=mask, value=tuple(wire)))
         seen = len(self.faults_seen)
-        todo = [i for i in idx if st.fingers[i].mode != mode_ or mode_ == m.ControlMode.GRASP]
+        if mode_ == m.ControlMode.GRASP:
+            # GRASP bounds the controller's output both ways: a finger that opens or stays
+            # goes in POSITION, so a gentle effort does not leave it lagging on the way out.
+            closing = [i for i in idx if end[i] > start[i] + tolerance]
+            opening = [i for i in idx if i not in closing]
+            if closing:
+                self.set_mode(m.ControlMode.GRASP, closing, effort=effort)
+        else:
+            opening = idx
+        todo = [i for i in opening if st.fingers[i].mode != m.ControlMode.POSITION]
         if todo:
-            self.set_mode(mode_, todo, effort=effort)
+            self.set_mode(m.ControlMode.POSITION, todo)
         a = np.array([start[i] for i in idx])
         b = np.array([end[i] for i in idx])
         self._goal[idx] = b
@@ -883,8 +902,8 @@ class Hand:
         timeout: float | None = None,
     ) -> Pose:
         """Move to a pose of the library (by name) or a :class:`~utrf.poses.Pose`. A grasp
-        pose closes in GRASP mode with its effort; its fingers count as settled when they
-        reach their targets or stop against the object."""
+        pose closes its fingers in GRASP mode with its effort (see :meth:`move`); they count as
+        settled when they reach their targets or stop against the object."""
         p = self.poses[pose] if isinstance(pose, str) else pose
         theta2 = p.theta2(self.geometry)
         if p.grasp is not None:

@@ -1,0 +1,148 @@
+"""The link under load and under damage, over the emulated UART's real byte timing: the
+telemetry rate the firmware sustains and the accounting of every frame lost; line noise that
+the protocol rides out without ever applying a wrong setpoint (checked in the firmware's own
+reported targets and in the plant, not only in the replies); a reset noticed and recovered
+from explicitly; and a host of another protocol refused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from utrf.emulator import EmulatedBoard
+from utrf.hand import DEFAULT_TOLERANCE, Hand, HandState
+from utrf.protocol import messages as M
+from utrf.protocol.errors import BoardResetError, SchemaMismatchError
+
+FIST = [1.15, 1.40, 1.40, 1.40, 1.40]
+
+
+def test_the_firmware_sustains_500_hz_of_telemetry_while_moving(
+    board: EmulatedBoard, hand: Hand
+) -> None:
+    hand.set_telemetry(M.MAX_TELEMETRY_HZ)
+    trace: list[HandState] = []
+    hand.on_state(trace.append)
+    hand.reset_stats()
+    s0 = hand.link_stats()
+    t0 = board.sim_time
+    hand.move(FIST, 1.0, wait=False)  # set_targets at 50 Hz share the line meanwhile
+    hand.clock.sleep(0.5)
+    elapsed = board.sim_time - t0
+    s1 = hand.link_stats()
+    frames = s1.stream_frames - s0.stream_frames
+    assert frames == pytest.approx(M.MAX_TELEMETRY_HZ * elapsed, abs=2)
+    assert s1.stream_lost == s0.stream_lost  # no gap in the stream's seqs
+    assert hand.stats().tx_dropped == 0  # and none skipped by the firmware
+    times = np.array([s.board_time for s in trace])
+    np.testing.assert_allclose(np.diff(times), 1.0 / M.MAX_TELEMETRY_HZ, atol=1.5e-6)
+    # 70 bytes a frame at 10 bits a byte: the line carried them at its own pace
+    assert board.stats["tx_uart_bytes"] >= frames * 70
+
+
+def test_frames_lost_on_the_line_are_all_counted(board: EmulatedBoard, hand: Hand) -> None:
+    hand.set_telemetry(250)
+    hand.clock.sleep(0.05)
+    board.set_line_faults("to_host", drop=0.002)  # about one state frame in seven
+    s0 = hand.link_stats()
+    t0 = board.sim_time
+    hand.clock.sleep(1.0)
+    board.set_line_faults("both")
+    hand.clock.sleep(0.02)
+    sent = round(250 * (board.sim_time - t0))
+    s1 = hand.link_stats()
+    got = s1.stream_frames - s0.stream_frames
+    lost = s1.stream_lost - s0.stream_lost
+    assert lost > 10  # the damage was real
+    assert got + lost == pytest.approx(sent, abs=3)  # every frame received or counted lost
+    assert hand.stats().tx_dropped == 0  # the firmware sent them all
+
+
+def test_line_noise_never_applies_a_wrong_setpoint(board: EmulatedBoard, hand: Hand) -> None:
+    hand.set_telemetry(200)
+    hand.pose("open", duration=0.3)
+    # Every target the host sends, and the plant after every stretch of simulated time.
+    sent: list[np.ndarray] = [hand.state().target]
+    request = hand.link.request
+
+    def recording(msg, **kw):
+        if isinstance(msg, M.SetTargets):
+            assert msg.kind == M.TargetKind.JOINT2_ANGLE and msg.mask == 0b11111
+            sent.append(np.array(msg.value))
+        return request(msg, **kw)
+
+    plant: list[np.ndarray] = []
+    run_for, run_until = board.run_for, board.run_until
+
+    def run_for_rec(seconds):
+        run_for(seconds)
+        plant.append(board.theta2)
+
+    def run_until_rec(predicate, timeout):
+        out = run_until(predicate, timeout)
+        plant.append(board.theta2)
+        return out
+
+    hand.link.request = recording  # type: ignore[method-assign]
+    board.run_for = run_for_rec  # type: ignore[method-assign]
+    board.run_until = run_until_rec  # type: ignore[method-assign]
+    trace: list[HandState] = []
+    hand.on_state(trace.append)
+    board.set_line_faults("both", corrupt=0.001, drop=0.0005, insert=0.0005)
+    board.inject_noise(120, "to_board")
+    board.inject_noise(120, "to_host")
+    hand.move(FIST, 1.0, wait=False)
+    board.inject_noise(120, "to_board")
+    hand.move([0.2] * 5, 0.8, wait=False)
+    board.set_line_faults("both")
+    hand.move([0.6] * 5, 0.5)  # a clean line again: settles as ever
+    # the noise was real, and ridden out by resends
+    link, fw = hand.link_stats(), hand.stats()
+    assert link.crc_errors + link.framing_errors > 5 and link.retries > 0
+    assert fw.rx_crc_errors + fw.rx_framing_errors > 5
+    # every target the firmware reports using is one the host sent (to its quantisation)
+    legit = np.array(sent)
+    for st in trace:
+        gap = np.min(np.abs(legit - st.target), axis=0)
+        assert np.all(gap < 3e-4), (st.board_time, st.target)
+    # the plant never left the span of the legitimate setpoints
+    lo, hi = legit.min(axis=0), legit.max(axis=0)
+    for theta in plant:
+        assert np.all(theta > lo - 0.06) and np.all(theta < hi + 0.06)
+    np.testing.assert_allclose(board.theta2, 0.6, atol=DEFAULT_TOLERANCE + 0.01)
+
+
+def test_a_reset_mid_move_raises_and_reconnect_recovers(board: EmulatedBoard, hand: Hand) -> None:
+    hand.pose("fist", duration=0.5)
+    t_reset = board.sim_time + 0.3
+
+    def reset_once(st: HandState) -> None:
+        if board.sim_time >= t_reset and board.stats["resets"] == 0:
+            board.reset()
+
+    hand.on_state(reset_once)
+    with pytest.raises(BoardResetError, match="RESET_PIN"):
+        hand.pose("open", duration=1.0)
+    assert board.sim_time - t_reset < 0.05  # noticed at once, not at the end of the move
+    with pytest.raises(BoardResetError):  # every call, until reconnect
+        hand.set_targets([0.0] * 5)
+    identity = hand.reconnect()
+    assert identity.reset_cause == M.ResetCause.RESET_PIN
+    st = hand.state()
+    assert [f.mode for f in st] == [M.ControlMode.COAST] * 5  # nothing moves on its own
+    seq0 = hand.link_stats().stream_frames
+    hand.clock.sleep(0.1)
+    assert hand.link_stats().stream_frames - seq0 == pytest.approx(10, abs=1)  # telemetry back
+    hand.pose("shaka", duration=0.5)
+
+
+def test_a_host_of_another_protocol_is_refused(
+    board: EmulatedBoard, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(M, "SCHEMA_HASH", 0x0BADF00D)  # this host "built from another spec"
+    with pytest.raises(SchemaMismatchError) as info:
+        Hand.emulated(board)
+    board_hash = info.value.board_hash
+    assert board_hash != 0x0BADF00D
+    assert f"board speaks version 1 (schema 0x{board_hash:08X})" in str(info.value)
+    assert "host speaks version 1 (schema 0x0BADF00D)" in str(info.value)
