@@ -1,0 +1,105 @@
+"""What the hand commands (``pose``, ``monitor``, ``demo``) share: options, the pose library,
+connecting, and turning errors into one line on stderr and an exit code.
+
+Exit codes: 0 done; 1 the hand did not do it (not settled, a latched fault); 2 bad input
+(an unknown pose, a bad file or value); 3 the board could not be reached or spoke another
+protocol (no reply, a reset, a lost line, a schema mismatch).
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from utrf.hand import Hand, HandError, TargetError
+from utrf.hand.errors import FingerFaultError, NotControlledError, NotSettledError
+from utrf.models.geometry import GeometryError
+from utrf.poses import PoseError, PoseLibrary, user_pose_file
+from utrf.protocol import messages as m
+from utrf.protocol.errors import ProtocolError
+
+EXIT_OK = 0
+EXIT_NOT_DONE = 1
+EXIT_BAD_INPUT = 2
+EXIT_LINK = 3
+
+
+def add_port(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--port",
+        required=True,
+        metavar="URL",
+        help="the board: a serial port (/dev/ttyACM0, COM3) or a pyserial URL "
+        "(socket://127.0.0.1:PORT, which `utrf emulate` prints)",
+    )
+    p.add_argument(
+        "--baud", type=int, default=m.DEFAULT_BAUD, help=f"default {m.DEFAULT_BAUD} (8N1)"
+    )
+    p.add_argument(
+        "--boot-wait",
+        type=float,
+        default=2.5,
+        metavar="S",
+        help="seconds to wait for the board's boot frame after opening the port (a MEGA "
+        "resets when its USB port opens; its bootloader keeps it silent 1-2 s); 0 skips",
+    )
+
+
+def add_poses(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--poses",
+        action="append",
+        type=Path,
+        default=[],
+        metavar="FILE",
+        help=f"more poses (TOML, like utrf/data/poses.toml); {user_pose_file()} is read "
+        "too when it exists ($UTRF_POSES overrides); later files win by name",
+    )
+
+
+def load_poses(args: argparse.Namespace) -> PoseLibrary:
+    return PoseLibrary.load(extra=args.poses)
+
+
+def connect(args: argparse.Namespace, **kwargs: object) -> Hand:
+    return Hand.connect(args.port, baudrate=args.baud, boot_wait_s=args.boot_wait, **kwargs)  # type: ignore[arg-type]
+
+
+def error(command: str, text: object) -> None:
+    print(f"utrf {command}: error: {text}", file=sys.stderr)
+
+
+def guarded(command: str) -> Callable[[Callable[[argparse.Namespace], int]], Callable[..., int]]:
+    """Errors to one line on stderr and the module's exit codes."""
+
+    def wrap(fn: Callable[[argparse.Namespace], int]) -> Callable[..., int]:
+        @functools.wraps(fn)
+        def run(args: argparse.Namespace) -> int:
+            try:
+                return fn(args)
+            except BrokenPipeError:  # `utrf monitor | head`: the reader has gone, quietly
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+                return EXIT_OK
+            except (NotSettledError, FingerFaultError, NotControlledError) as exc:
+                error(command, exc)
+                return EXIT_NOT_DONE
+            except ProtocolError as exc:
+                error(command, f"{type(exc).__name__}: {exc}")
+                return EXIT_LINK
+            except (PoseError, GeometryError, TargetError, KeyError, ValueError) as exc:
+                error(command, exc.args[0] if isinstance(exc, KeyError) else exc)
+                return EXIT_BAD_INPUT
+            except OSError as exc:
+                error(command, f"{type(exc).__name__}: {exc}")
+                return EXIT_LINK
+            except HandError as exc:
+                error(command, exc)
+                return EXIT_NOT_DONE
+
+        return run
+
+    return wrap

@@ -1,0 +1,172 @@
+"""``utrf demo``: the hand through open → rock-and-roll → shaka → fist → open, on the real
+firmware (``build/firmware/utrf.elf``, ``make firmware``) running on the emulated board.
+
+Starts the emulated board (simavr, paced to the wall clock so you can watch), connects a Hand
+to it over its socket as to a real MEGA, moves through the poses (minimum-jerk, 1 s each, then
+settling) with a live table on a terminal (a line per pose elsewhere), and writes to
+``--out`` (default ``out/demo``): a picture of each pose (the fingers drawn from the
+kinematics model at the measured angles, with the targets), ``trajectories.png`` (the joint
+angles against their targets) and ``telemetry.csv`` (every sample, SI). Then prints where they
+are. ``make demo`` runs this. Exit codes: 0 every pose settled; 1 one did not; 2 bad input
+(unknown pose, no firmware ELF).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import threading
+import time
+from pathlib import Path
+
+from rich.console import Console
+from rich.live import Live
+
+from utrf.cli._hand_common import EXIT_BAD_INPUT, EXIT_NOT_DONE, EXIT_OK, guarded
+from utrf.hand import Hand
+from utrf.hand.demo import DEFAULT_SEQUENCE, Step, run_demo
+from utrf.hand.view import state_table
+from utrf.poses import PoseLibrary
+
+DEFAULT_OUT = Path("out/demo")
+
+
+def _speed(text: str) -> float | None:
+    if text == "max":
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"speed must be a factor > 0 or 'max', got {text!r}"
+        ) from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"speed must be a factor > 0 or 'max', got {text!r}")
+    return v
+
+
+def _step_line(step: Step, total: int) -> str:
+    if math.isnan(step.end):
+        return f"[{step.index}/{total}] {step.name} ..."
+    took = step.settled_at - step.start
+    if step.settled:
+        return (
+            f"[{step.index}/{total}] {step.name}: settled in {took:.2f} s (board time), "
+            f"largest error {math.degrees(step.worst_error):.1f} deg"
+        )
+    return f"[{step.index}/{total}] {step.name}: NOT settled: {step.reason}"
+
+
+@guarded("demo")
+def run(args: argparse.Namespace) -> int:
+    from utrf.emulator import EmulatorError
+
+    sequence = [s.strip() for s in args.sequence.split(",") if s.strip()]
+    library = PoseLibrary.load(extra=args.poses)
+    console = Console()
+    live_view = console.is_terminal and not args.no_live
+    state: dict[str, object] = {"hand": None, "step": None, "board": None}
+    lock = threading.Lock()
+    live: Live | None = None
+
+    def render():  # type: ignore[no-untyped-def]
+        with lock:
+            hand: Hand | None = state["hand"]  # type: ignore[assignment]
+            step: Step | None = state["step"]  # type: ignore[assignment]
+            board = state["board"]
+        if hand is None:
+            return "starting the emulated board..."
+        title = "UTRF-RoboHand demo"
+        if step is not None:
+            title += f": pose {step.index}/{len(sequence)}, {step.name}"
+        factor = getattr(board, "realtime_factor", math.nan)
+        footer = (
+            f"real firmware on the emulated board at {hand.url} | real-time factor {factor:.2f}"
+        )
+        return state_table(hand.latest, title=title, footer=footer)
+
+    def on_connect(hand: Hand, board: object) -> None:
+        with lock:
+            state["hand"], state["board"] = hand, board
+        print(f"emulated board up, the Hand connected to it at {hand.url}", flush=True)
+
+    def on_step(step: Step) -> None:
+        with lock:
+            state["step"] = step
+        line = _step_line(step, len(sequence))
+        if live is not None:
+            if not math.isnan(step.end):
+                live.console.print(line)
+        else:
+            print(line, flush=True)
+
+    print(
+        f"utrf demo: {' -> '.join(sequence)} on the real firmware "
+        f"({args.elf or 'build/firmware/utrf.elf'}) on the emulated board",
+        flush=True,
+    )
+    t0 = time.monotonic()
+    try:
+        if live_view:
+            live = Live(get_renderable=render, console=console, refresh_per_second=10)
+            live.start()
+        try:
+            result = run_demo(
+                args.out,
+                sequence,
+                elf=args.elf,
+                speed=args.speed,
+                move_s=args.duration,
+                hold_s=args.hold,
+                seed=args.seed,
+                poses=library,
+                on_connect=on_connect,
+                on_step=on_step,
+            )
+        finally:
+            if live is not None:
+                live.stop()
+    except EmulatorError as exc:
+        print(f"utrf demo: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    took = time.monotonic() - t0
+    print(
+        f"done in {took:.1f} s (real-time factor {result.realtime_factor:.2f}); "
+        f"{'every pose settled' if result.ok else 'NOT every pose settled'}. Files:"
+    )
+    for path in result.files:
+        print(f"  {path}")
+    return EXIT_OK if result.ok else EXIT_NOT_DONE
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "demo",
+        help="the pose demo on the emulated board (pictures and plots in out/demo)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output folder (out/demo)")
+    p.add_argument(
+        "--sequence",
+        default=",".join(DEFAULT_SEQUENCE),
+        metavar="P1,P2,...",
+        help=f"poses in order (default {','.join(DEFAULT_SEQUENCE)})",
+    )
+    p.add_argument(
+        "--poses", action="append", type=Path, default=[], metavar="FILE", help="more poses (TOML)"
+    )
+    p.add_argument("--duration", type=float, default=1.0, metavar="S", help="move time per pose")
+    p.add_argument("--hold", type=float, default=0.5, metavar="S", help="pause at each pose")
+    p.add_argument(
+        "--speed",
+        type=_speed,
+        default=1.0,
+        metavar="X|max",
+        help="the board's pace: X times real time (1), or 'max' (as fast as it goes)",
+    )
+    p.add_argument("--elf", type=Path, help="firmware ELF (default build/firmware/utrf.elf)")
+    p.add_argument("--seed", type=int, default=0, help="the plant's noise seed")
+    p.add_argument("--no-live", action="store_true", help="no live table, a line per pose")
+    p.set_defaults(handler=run)
