@@ -163,7 +163,7 @@ void apply_finger_config(uint8_t f) {
     b.hand.configure_finger(f, p);
     // A target outside new limits is never kept: clamp it in.
     finger::Finger& fg = b.hand.finger(f);
-    const int32_t t = fg.target();
+    const int16_t t = fg.target();
     if (t < p.theta_min || t > p.theta_max) {
         fg.set_target(t < p.theta_min ? p.theta_min : p.theta_max);
     }
@@ -223,6 +223,7 @@ void tick() {
     hal::EncoderReading enc[hand::kFingers];
     hal::encoders_read(enc);
     g_board.hand.tick(enc);
+    hal::encoders_sample();
     g_board.hand.record_timing(hal::cycles_since(start), hal::tick_period_elapsed());
 }
 

@@ -30,7 +30,18 @@ namespace {
 
 const uint8_t kNoDetail = 0xFF;
 
-int32_t q16_from_milli(int32_t milli) { return (milli * fx::kOne16) / 1000; }
+// Protocol thousandths to Q15 (1000 -> 32767).
+int16_t q15_from_milli(int32_t milli) {
+    return fx::sat16((milli * fx::kOne15 + (milli < 0 ? -500 : 500)) / 1000);
+}
+
+// Q15 to the state message's hundredths, rounded half away from zero (x 200 / 65536: the
+// shift is a byte move on the AVR).
+int8_t hundredths(int16_t q15) {
+    const int32_t v = (int32_t)(q15 < 0 ? -q15 : q15) * 200 + 32768;
+    const int8_t h = (int8_t)(v >> 16);
+    return q15 < 0 ? (int8_t)-h : h;
+}
 
 struct Lock {  // the tick does not run while one of these lives
     Lock() { hal::tick_lock(); }
@@ -107,7 +118,7 @@ bool target_angle(uint8_t kind, uint8_t f, int32_t raw, float& theta2) {
 void set_targets(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     SetTargets m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
-    int32_t au[kFingerCount];
+    int16_t bu[kFingerCount];
     for (uint8_t f = 0; f < kFingerCount; ++f) {
         if (!(m.mask & (1u << f))) continue;
         float th;
@@ -116,18 +127,18 @@ void set_targets(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
             nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
             return;
         }
-        au[f] = fx::round_sat(th * fx::kAuPerRad);
+        const int32_t a = fx::round_sat(th * fx::kBuPerRad);
         // The exact limit is allowed: the float round trip may land a count beyond it.
-        if (au[f] < p.theta_min - 1 || au[f] > p.theta_max + 1) {
+        if (a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1) {
             nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
             return;
         }
-        au[f] = fx::clamp(au[f], p.theta_min, p.theta_max);
+        bu[f] = (int16_t)fx::clamp32(a, p.theta_min, p.theta_max);
     }
     {
         Lock lock;
         for (uint8_t f = 0; f < kFingerCount; ++f) {
-            if (m.mask & (1u << f)) b.hand.finger(f).set_target(au[f]);
+            if (m.mask & (1u << f)) b.hand.finger(f).set_target(bu[f]);
         }
     }
     ack(b, seq, m.kId);
@@ -136,9 +147,16 @@ void set_targets(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
 void set_mode(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     SetMode m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
+    int16_t duty[kFingerCount];
+    int16_t effort[kFingerCount];
+    for (uint8_t f = 0; f < kFingerCount; ++f) {  // divisions outside the lock
+        duty[f] = q15_from_milli(m.duty[f]);
+        effort[f] = q15_from_milli(m.effort[f]);
+    }
     uint8_t refused = kNoDetail;
     {
         // Check and apply under one lock: a fault the tick latches in between cannot slip by.
+        // The tick waits meanwhile, so nothing in here may take long.
         Lock lock;
         for (uint8_t f = 0; f < kFingerCount && refused == kNoDetail; ++f) {
             if (!(m.mask & (1u << f))) continue;
@@ -151,8 +169,7 @@ void set_mode(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
         if (refused == kNoDetail) {
             for (uint8_t f = 0; f < kFingerCount; ++f) {
                 if (!(m.mask & (1u << f))) continue;
-                b.hand.finger(f).set_mode(m.mode[f], q16_from_milli(m.duty[f]),
-                                          q16_from_milli(m.effort[f]));
+                b.hand.finger(f).set_mode(m.mode[f], duty[f], effort[f]);
             }
         }
     }
@@ -449,27 +466,31 @@ void ack(app::Board& b, uint8_t seq, uint8_t msg_id) {
 }
 
 uint8_t encode_state(app::Board& b, uint8_t* body) {
+    // Copy under the lock (the tick waits meanwhile), convert after it.
     State s;
-    int32_t theta[kFingerCount];
+    int16_t duty_a[kFingerCount];
+    int16_t duty_b[kFingerCount];
     uint32_t t;
     {
         Lock lock;
         t = b.hand.ticks();
         for (uint8_t f = 0; f < kFingerCount; ++f) {
             const finger::Finger& fg = b.hand.finger(f);
-            theta[f] = fg.theta();
-            s.theta2[f] = (int16_t)fx::clamp(fg.theta(), -32768, 32767);
-            s.target[f] = (int16_t)fx::clamp(fg.target(), -32768, 32767);
-            // Q16 to hundredths, rounded: |duty| <= 1, so this stays within +-100.
-            s.duty_a[f] = (int8_t)((fg.duty_a() * 100 + (fg.duty_a() < 0 ? -32768 : 32768)) >> 16);
-            s.duty_b[f] = (int8_t)((fg.duty_b() * 100 + (fg.duty_b() < 0 ? -32768 : 32768)) >> 16);
+            s.theta2[f] = fg.theta();
+            s.target[f] = fg.target();
+            duty_a[f] = fg.duty_a();
+            duty_b[f] = fg.duty_b();
             s.mode[f] = fg.mode();
             s.faults[f] = fg.faults();
         }
     }
     s.board_time = t * 1000UL;
     for (uint8_t f = 0; f < kFingerCount; ++f) {
-        kin::tip_raw(kin::finger_geometry(f), theta[f], s.tip_x[f], s.tip_y[f]);
+        s.theta2[f] = fx::au_from_bu(s.theta2[f]);  // BU to the protocol's 1e-4 rad
+        s.target[f] = fx::au_from_bu(s.target[f]);
+        s.duty_a[f] = hundredths(duty_a[f]);
+        s.duty_b[f] = hundredths(duty_b[f]);
+        kin::tip_raw(kin::finger_geometry(f), s.theta2[f], s.tip_x[f], s.tip_y[f]);
     }
     return encode(s, body);
 }

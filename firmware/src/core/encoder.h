@@ -18,29 +18,48 @@ namespace encoder {
 // Valid band: 10-90 % with 1 % (10 counts) of tolerance each side for divider and ADC errors.
 static const uint16_t kAdcBandLow = 92;
 static const uint16_t kAdcBandHigh = 932;
-// A channel whose sample counter has not moved for this many ticks has stopped (NO_DATA).
+// A sampler whose round counter has not moved for this many ticks has stopped (NO_DATA).
 static const uint8_t kStaleTicks = 3;
 
-// One AS5600 analog channel. The ADC interrupt keeps the two latest samples and a counter;
-// the tick hands them here once per tick.
-class As5600Analog {
+// One AS5600 analog sample judged: its angle as a turn fraction and whether it lies in the
+// sensor's valid band. (Cheap enough for the ADC interrupt, which calls it for each sample.)
+__attribute__((always_inline)) inline hal::EncoderReading as5600_reading(uint16_t sample) {
+    hal::EncoderReading r;
+    // 102.4..921.6 counts mapped to 0..65536, i.e. sample * 80 - 8192, modulo 2^16 (16-bit
+    // arithmetic wraps exactly so).
+    r.turn = (uint16_t)((uint16_t)(sample * 80u) - 8192u);
+    r.status = (sample < kAdcBandLow || sample > kAdcBandHigh) ? hal::EncoderStatus::OUT_OF_BAND
+                                                               : hal::EncoderStatus::OK;
+    return r;
+}
+
+// Watches the sampler's round counter: a counter that stands still for kStaleTicks ticks
+// means the sampling stopped, and every reading is NO_DATA.
+class Staleness {
    public:
-    As5600Analog() : last_seq_(0), stale_(0) {}
-    hal::EncoderReading update(uint16_t newest, uint16_t previous, uint8_t seq);
+    Staleness() : last_seq_(0), stale_(0) {}
+    // Once per tick, with the counter; true while the readings are stale.
+    bool stale(uint8_t seq) {
+        if (seq != last_seq_) {
+            last_seq_ = seq;
+            stale_ = 0;
+        } else if (stale_ < kStaleTicks) {
+            ++stale_;
+        }
+        return stale_ >= kStaleTicks;
+    }
 
    private:
     uint8_t last_seq_;
     uint8_t stale_;
 };
 
-// Joint-2 angle in AU (1e-4 rad) from a one-turn reading: the reading minus the reading at
-// angle 0, wrapped to +-half a turn, with the sign flipped for an encoder mounted to count
-// against flexion.
-inline int32_t angle_au(uint16_t turn, uint16_t zero_turn, bool invert) {
-    int32_t d = (int16_t)(uint16_t)(turn - zero_turn);
-    if (invert) d = -d;
-    // 2 pi 1e4 / 65536 = 0.958738 AU per turn count; 62832 / 65536 = 0.958740.
-    return (d * 62832L + 32768L) >> 16;
+// Joint-2 angle in BU (2 pi / 32768 rad, within +-pi) from a one-turn reading: the reading
+// minus the reading at angle 0, wrapped to +-half a turn, counted against flexion for an
+// encoder mounted the other way round. Two instructions' worth of 16-bit arithmetic.
+inline int16_t angle_bu(uint16_t turn, uint16_t zero_turn, bool invert) {
+    const uint16_t d = invert ? (uint16_t)(zero_turn - turn) : (uint16_t)(turn - zero_turn);
+    return (int16_t)((int16_t)d >> 1);  // -16384..16383
 }
 
 // Angle (rad) <-> one-turn count, for configuration (loop() context).

@@ -7,8 +7,9 @@ namespace utrf {
 namespace finger {
 
 namespace {
-int32_t au(float rad) { return fx::round_sat(rad * fx::kAuPerRad); }
-int32_t q16_milli(uint16_t milli) { return ((int32_t)milli * fx::kOne16 + 500) / 1000; }
+int16_t q15_milli(uint16_t milli) {
+    return (int16_t)fx::clamp32(((int32_t)milli * fx::kOne15 + 500) / 1000, 0, fx::kMax15);
+}
 }  // namespace
 
 Params compile(const config::Finger& cfg, float dt_s) {
@@ -21,16 +22,19 @@ Params compile(const config::Finger& cfg, float dt_s) {
     g.deadband = cfg.gains.deadband_milli * 1e-3f;
     g.slew_per_s = cfg.gains.slew_per_s;
     p.pid = pid::compile(g, dt_s);
-    p.max16 = q16_milli(cfg.gains.max_duty_milli);
-    p.pretension16 = q16_milli(cfg.gains.pretension_milli);
-    p.theta_min = au(cfg.limits.theta2_min);
-    p.theta_max = au(cfg.limits.theta2_max);
-    p.margin = au(cfg.limits.limit_margin);
-    p.stall_error = au(cfg.limits.stall_error);
-    p.stall_motion = au(cfg.limits.stall_motion);
-    uint32_t ticks = (uint32_t)((float)cfg.limits.stall_time_ms * 1e-3f / dt_s + 0.5f);
-    p.stall_ticks = (uint16_t)(ticks < 1 ? 1 : (ticks > 65535u ? 65535u : ticks));
-    p.jump = au(cfg.limits.encoder_jump);
+    p.max_duty = q15_milli(cfg.gains.max_duty_milli);
+    p.pretension = q15_milli(cfg.gains.pretension_milli);
+    p.theta_min = fx::bu(cfg.limits.theta2_min);
+    p.theta_max = fx::bu(cfg.limits.theta2_max);
+    const int16_t margin = fx::bu(cfg.limits.limit_margin);
+    p.fault_low = fx::sat16((int32_t)p.theta_min - margin);
+    p.fault_high = fx::sat16((int32_t)p.theta_max + margin);
+    p.stall_error = fx::bu(cfg.limits.stall_error);
+    p.stall_motion = fx::bu(cfg.limits.stall_motion);
+    const uint32_t checks =
+        (uint32_t)((float)cfg.limits.stall_time_ms * 1e-3f / (dt_s * kStallEvery) + 0.5f);
+    p.stall_checks = (uint16_t)(checks < 1 ? 1 : (checks > 65535u ? 65535u : checks));
+    p.jump = fx::bu(cfg.limits.encoder_jump);
     p.zero_turn = encoder::turn_from_rad(cfg.hw.encoder_offset);
     p.encoder_invert = cfg.hw.encoder_invert != 0;
     p.motor_invert = cfg.hw.motor_invert != 0;
@@ -39,78 +43,86 @@ Params compile(const config::Finger& cfg, float dt_s) {
 }
 
 Finger::Finger()
-    : mode_(COAST),
+    : theta_(0),
+      target_(0),
+      limit_(0),
+      duty_a_(0),
+      duty_b_(0),
+      stall_ref_(0),
+      stall_count_(0),
+      last_turn_(0),
+      mode_(COAST),
       faults_(0),
       new_faults_(0),
       have_theta_(false),
-      target_valid_(false),
-      contact_(false),
       encoder_ok_(false),
-      last_turn_(0),
-      theta_(0),
-      target_(0),
-      duty_cmd16_(0),
-      effort16_(0),
-      duty_a16_(0),
-      duty_b16_(0),
-      stall_ref_(0),
-      stall_count_(0) {
+      contact_(false),
+      target_valid_(false),
+      duty_cmd_(0),
+      effort_(0) {
     params_ = Params();
 }
 
-int32_t Finger::limit_for(uint8_t mode) const {
-    int32_t lim = params_.limit16();
+int16_t Finger::limit_for(uint8_t mode) const {
+    int16_t lim = params_.limit();
     if (mode == GRASP) {
         // The effort bounds the closing motor's duty: the flexor's, pretension included.
-        const int32_t e = params_.rotary ? effort16_ : effort16_ - params_.pretension16;
+        const int16_t e = params_.rotary ? effort_ : (int16_t)(effort_ - params_.pretension);
         if (e < lim) lim = e;
     }
-    return lim < 0 ? 0 : lim;
+    return lim < 0 ? (int16_t)0 : lim;
 }
 
 void Finger::configure(const Params& p) {
     const pid::Coeffs old = params_.pid;
-    const bool encoder_changed = p.zero_turn != params_.zero_turn ||
-                                 p.encoder_invert != params_.encoder_invert;
+    const bool encoder_changed =
+        p.zero_turn != params_.zero_turn || p.encoder_invert != params_.encoder_invert;
     params_ = p;
     if (encoder_changed) have_theta_ = false;  // the next reading is not a jump
-    pid_.rebase(old, params_.pid, limit_for(mode_));
+    limit_ = limit_for(mode_);
+    pid_.rebase(old, params_.pid, limit_);
 }
 
 void Finger::enter_closed_loop(uint8_t mode) {
     if (!target_valid_) {
-        target_ = fx::clamp(theta_, params_.theta_min, params_.theta_max);
+        target_ = fx::clamp16(theta_, params_.theta_min, params_.theta_max);
         target_valid_ = true;
     }
     // Bumpless: the PID starts from the output the motors have now.
-    const int32_t present = (mode_ == COAST || mode_ == BRAKE) ? 0 : pid_.output();
-    pid_.reset(params_.pid, limit_for(mode), present, theta_);
+    const int16_t present = idle() ? (int16_t)0 : pid_.output();
+    limit_ = limit_for(mode);
+    pid_.reset(params_.pid, limit_, present, theta_);
     stall_count_ = 0;
     stall_ref_ = theta_;
     contact_ = false;
 }
 
-void Finger::set_mode(uint8_t mode, int32_t duty16, int32_t effort16) {
-    duty_cmd16_ = duty16;
-    effort16_ = effort16;
-    if (mode == mode_) return;  // a resent frame changes nothing; new duty/effort apply
+void Finger::set_mode(uint8_t mode, int16_t duty, int16_t effort) {
+    duty_cmd_ = duty;
+    effort_ = effort;
+    if (mode == mode_) {  // a resent frame changes nothing; a new duty or effort applies
+        limit_ = limit_for(mode_);
+        return;
+    }
     if (mode == POSITION || mode == GRASP) {
         enter_closed_loop(mode);
     } else if (mode == DUTY) {
-        const int32_t present = (mode_ == COAST || mode_ == BRAKE) ? 0 : pid_.output();
-        pid_.reset(params_.pid, limit_for(DUTY), present, theta_);
+        const int16_t present = idle() ? (int16_t)0 : pid_.output();
+        limit_ = limit_for(DUTY);
+        pid_.reset(params_.pid, limit_, present, theta_);
         stall_count_ = 0;
         stall_ref_ = theta_;
     } else {
         target_valid_ = false;
-        pid_.reset(params_.pid, limit_for(mode), 0, theta_);
+        limit_ = limit_for(mode);
+        pid_.reset(params_.pid, limit_, 0, theta_);
     }
     contact_ = false;
     mode_ = mode;
 }
 
-void Finger::set_target(int32_t theta_au) {
-    target_ = theta_au;
+void Finger::set_target(int16_t theta_bu) {
+    target_ = theta_bu;
     target_valid_ = true;
 }
 
@@ -122,135 +134,34 @@ void Finger::clear_faults() {
 }
 
 void Finger::latch(uint8_t bits) {
-    const uint8_t fresh = bits & (uint8_t)~faults_;
+    new_faults_ |= bits & (uint8_t)~faults_;
     faults_ |= bits;
-    new_faults_ |= fresh;
-    if (bits & kStopFaults) {
-        if (mode_ != COAST) {
-            mode_ = COAST;
-            target_valid_ = false;
-            contact_ = false;
-            pid_.reset(params_.pid, limit_for(COAST), 0, theta_);
-        }
+    if ((bits & kStopFaults) && mode_ != COAST) {
+        mode_ = COAST;
+        target_valid_ = false;
+        contact_ = false;
+        limit_ = limit_for(COAST);
+        pid_.reset(params_.pid, limit_, 0, theta_);
     }
 }
 
 void Finger::hold_here() {
     const uint8_t mode = mode_ == GRASP ? GRASP : POSITION;
-    target_ = fx::clamp(theta_, params_.theta_min, params_.theta_max);
+    target_ = fx::clamp16(theta_, params_.theta_min, params_.theta_max);
     target_valid_ = true;
-    const int32_t present = pid_.output();
-    pid_.reset(params_.pid, limit_for(mode), present, theta_);
+    const int16_t present = pid_.output();
+    limit_ = limit_for(mode);
+    pid_.reset(params_.pid, limit_, present, theta_);
     stall_count_ = 0;
     stall_ref_ = theta_;
     mode_ = mode;
 }
 
-hal::MotorOut Finger::drive(int32_t duty16) const {
-    hal::MotorOut m;
-    bool forward = duty16 > 0;
-    uint32_t mag = (uint32_t)(duty16 < 0 ? -duty16 : duty16);
-    if (mag > (uint32_t)fx::kOne16) mag = fx::kOne16;
-    // Q16 duty to PWM counts, rounded: at most 65536 * 800, within uint32.
-    m.on_counts = (uint16_t)((mag * hal::kPwmPeriod + 32768u) >> 16);
-    if (m.on_counts == 0) {
-        m.drive = hal::Drive::COAST;  // zero duty: really off
-    } else {
-        if (params_.motor_invert) forward = !forward;
-        m.drive = forward ? hal::Drive::FORWARD : hal::Drive::REVERSE;
-    }
-    return m;
-}
-
-void Finger::tick(const hal::EncoderReading& enc, hal::MotorOut& a, hal::MotorOut& b,
-                  bool& stby) {
-    // ---- encoder: band and plausibility ----
-    encoder_ok_ = enc.status == hal::EncoderStatus::OK;
-    if (!encoder_ok_) {
-        latch(ENCODER_RANGE);
-    } else {
-        last_turn_ = enc.turn;
-        const int32_t th = encoder::angle_au(enc.turn, params_.zero_turn, params_.encoder_invert);
-        if (have_theta_ && fx::abs32(th - theta_) > params_.jump) latch(ENCODER_JUMP);
-        theta_ = th;
-        have_theta_ = true;
-        // ---- joint limits ----
-        if (th < params_.theta_min - params_.margin || th > params_.theta_max + params_.margin) {
-            latch(JOINT_LIMIT);
-        }
-    }
-
-    // ---- the mode ----
-    int32_t u = 0;
-    switch (mode_) {
-        case POSITION:
-        case GRASP:
-            u = pid_.step(params_.pid, limit_for(mode_), target_, theta_);
-            break;
-        case DUTY: {
-            int32_t d = duty_cmd16_;
-            // Never drive further past a joint limit.
-            if ((theta_ >= params_.theta_max && d > 0) || (theta_ <= params_.theta_min && d < 0)) {
-                d = 0;
-            }
-            u = pid_.step_open(params_.pid, limit_for(DUTY), d, theta_);
-            break;
-        }
-        default:
-            break;
-    }
-
-    // ---- stall: large error (or a commanded duty), output at its limit, no motion ----
-    bool pushing = false;
-    if (mode_ == POSITION || mode_ == GRASP) {
-        const int32_t lim = limit_for(mode_);
-        pushing = fx::abs32(target_ - theta_) > params_.stall_error && fx::abs32(u) >= lim &&
-                  lim > 0;
-    } else if (mode_ == DUTY) {
-        pushing = u != 0 && fx::abs32(u) >= params_.pid.deadband;
-    }
-    if (pushing) {
-        if (fx::abs32(theta_ - stall_ref_) > params_.stall_motion) {
-            stall_ref_ = theta_;
-            stall_count_ = 0;
-        } else if (stall_count_ < params_.stall_ticks) {
-            ++stall_count_;
-        }
-        if (stall_count_ >= params_.stall_ticks) {
-            if (mode_ == GRASP) {
-                contact_ = true;  // closed on an object: hold it with the effort limit
-            } else {
-                latch(STALL);
-                u = 0;
-            }
-        }
-    } else {
-        stall_ref_ = theta_;
-        stall_count_ = 0;
-        if (mode_ == GRASP && fx::abs32(target_ - theta_) <= params_.stall_error) contact_ = false;
-    }
-
-    // ---- driver channels ----
-    if (mode_ == POSITION || mode_ == GRASP || mode_ == DUTY) {
-        if (params_.rotary) {
-            duty_a16_ = u;
-            duty_b16_ = 0;
-        } else {
-            duty_a16_ = params_.pretension16 + (u > 0 ? u : 0);
-            duty_b16_ = params_.pretension16 + (u < 0 ? -u : 0);
-        }
-        a = drive(duty_a16_);
-        b = drive(duty_b16_);
-        if (params_.rotary) b.drive = hal::Drive::COAST;
-    } else {
-        duty_a16_ = 0;
-        duty_b16_ = 0;
-        a.on_counts = 0;
-        b.on_counts = 0;
-        a.drive = mode_ == BRAKE ? hal::Drive::BRAKE : hal::Drive::COAST;
-        b.drive = (mode_ == BRAKE && !params_.rotary) ? hal::Drive::BRAKE : hal::Drive::COAST;
-    }
-    stby = mode_ != COAST && (faults_ & kStopFaults) == 0;
+void Finger::stop_now(hal::MotorCommand& out) {
+    duty_a_ = duty_b_ = 0;
+    out.a.on_counts = out.b.on_counts = 0;
+    out.a.drive = out.b.drive = hal::Drive::COAST;
+    out.stby = false;
 }
 
 }  // namespace finger

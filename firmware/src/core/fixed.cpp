@@ -1,5 +1,7 @@
 #include "fixed.h"
 
+#include <math.h>
+
 namespace utrf {
 namespace fx {
 
@@ -10,14 +12,35 @@ int32_t round_sat(float v) {
     return (int32_t)(v < 0 ? v - 0.5f : v + 0.5f);
 }
 
-SatGain make_sat_gain(float coef, int32_t ymax) {
-    SatGain g;
-    g.coef = round_sat(coef);
-    if (g.coef < 0) g.coef = 0;  // gains are never negative (validated at the protocol)
-    g.ymax = ymax;
-    g.xlim = g.coef == 0 ? 2147483647L : ymax / g.coef;
+int16_t bu(float rad) {
+    return (int16_t)clamp32(round_sat(rad * kBuPerRad), -kBuHalfTurn, kBuHalfTurn - 1);
+}
+
+float rad_from_bu(int16_t b) { return (float)b / kBuPerRad; }
+
+Gain make_gain(float value, int32_t ymax) {
+    Gain g;
+    g.m = 0;
+    g.shift = 0;
+    g.xlim = 32767;
+    if (!(value > 0.0f)) return g;
+    // The smallest exponent whose mantissa still fits 16 bits keeps the most precision.
+    for (int8_t s = -16; s <= 16; s = (int8_t)(s + 8)) {
+        const float m = ldexpf(value, -s);
+        if (m < 65535.5f || s == 16) {
+            g.shift = s;
+            g.m = m >= 65535.0f ? (uint16_t)65535u : (uint16_t)(m + 0.5f);
+            break;
+        }
+    }
+    if (g.m == 0) return g;
+    // The largest |x| whose product stays within ymax.
+    const float lim = (float)ymax / gain_value(g);
+    g.xlim = lim >= 32767.0f ? (int16_t)32767 : (int16_t)lim;
     return g;
 }
+
+float gain_value(const Gain& g) { return ldexpf((float)g.m, g.shift); }
 
 }  // namespace fx
 }  // namespace utrf

@@ -15,6 +15,7 @@ Hand::Hand()
       loop_idle_ticks_(0),
       halted_(0),
       overrun_pending_(false),
+      stall_turn_(0),
       window_sum_(0),
       window_n_(0) {
     timing_.ticks = 0;
@@ -92,12 +93,11 @@ void Hand::tick(const hal::EncoderReading* enc) {
         return;
     }
 
-    for (uint8_t f = 0; f < kFingers; ++f) {
-        hal::MotorOut a, b;
-        bool stby;
-        fingers_[f].tick(enc[f], a, b, stby);
-        hal::motor_write(f, a, b, stby);
-    }
+    hal::MotorCommand out[kFingers];
+    const uint8_t turn = stall_turn_;
+    stall_turn_ = (uint8_t)(turn + 1 == finger::kStallEvery ? 0 : turn + 1);
+    for (uint8_t f = 0; f < kFingers; ++f) fingers_[f].tick(enc[f], out[f], f == turn);
+    hal::motors_write(out);
 }
 
 void Hand::record_timing(uint32_t cycles, bool overran) {

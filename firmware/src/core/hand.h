@@ -66,6 +66,7 @@ class Hand {
     uint16_t loop_idle_ticks_;
     volatile uint8_t halted_;
     bool overrun_pending_;
+    uint8_t stall_turn_;  // the finger whose stall rule runs this tick
     TickTiming timing_;
     uint32_t window_sum_;
     uint16_t window_n_;

@@ -1,15 +1,21 @@
 // PID position controller on the Joint-2 angle, in fixed point (core/fixed.h).
 //
-//   u = Kp e + I - D,    e = target - measured
-//   I += Ki e dt         only while the output is not saturated in the direction e pushes
-//                        (conditional integration), and |I| <= the output limit
-//   D = filtered Kd d(measured)/dt: derivative on the measurement, so a target step gives no
-//       derivative kick; first-order low-pass with cut-off d_cutoff_hz
+//   e = target - measured
+//   u = Kp e + I - Kd v
+//   I += Ki e dt    only while the output is not held back (by its limit or the slew
+//                   limiter) in the direction e pushes it: conditional integration; and
+//                   |I| <= the output limit
+//   v = d(measured)/dt through a first-order low-pass (cut-off d_cutoff_hz): the derivative
+//       acts on the measurement, so a target step gives no derivative kick
 //   u += deadband * clamp(u / ramp, -1, 1)   static-friction compensation, continuous at 0
 //   u = clamp(u, -limit, limit), then slew-limited to slew_per_s * dt per tick
 //
 // Bumpless starts: reset() makes the integrator carry the present output, and the slew limiter
 // starts from it, so the output is continuous when a mode or the gains change.
+//
+// Fixed point: angles BU (int16), e and d(measured) int16 with no overflow (angles stay within
+// +-pi); v in Q8 BU per tick (int16; d(measured) is clamped to +-63 BU per tick, 12 rad/s,
+// beyond any finger's speed); P and D in Q23 duty, I in Q31 (|I| < 1 duty fits), u in Q15.
 #ifndef UTRF_CORE_PID_H
 #define UTRF_CORE_PID_H
 
@@ -32,50 +38,130 @@ struct Gains {
 
 // The same, ready for the tick. Built by compile() in loop() context (floats live here only).
 struct Coeffs {
-    fx::SatGain kp;     // e [AU]  -> Q24 duty
-    fx::SatGain ki;     // e [AU]  -> Q32 duty per tick (>> 8 -> Q24)
-    fx::SatGain kd;     // dm [AU per tick] -> Q24 duty
-    uint16_t alpha;     // derivative low-pass, Q16 (y += alpha (x - y))
-    int32_t slew;       // Q16 duty per tick
-    int32_t deadband;   // Q16 duty
+    fx::Gain kp;          // e [BU] -> Q23 duty
+    fx::Gain ki;          // e [BU] -> Q31 duty per tick
+    fx::Gain kd;          // v [Q8 BU per tick] -> Q23 duty
+    uint16_t alpha;       // velocity low-pass, Q16: v += alpha (x - v)
+    int16_t slew;         // Q15 duty per tick
+    int16_t deadband;     // Q15 duty
+    uint16_t db_inverse;  // Q16: ramp / (ramp + deadband), to undo the compensation
 };
 
-static const int32_t kDeadbandRamp16 = 1024;  // 1/64 duty: the compensation ramps in over this
+// Saturation levels of the terms, chosen so no sum can overflow int32.
+static const int32_t kPMax23 = 8L * fx::kOne23;  // proportional term: +-8 duty
+static const int32_t kDMax23 = 4L * fx::kOne23;  // derivative term: +-4 duty
+static const int32_t kIStepMax31 = 1L << 29;    // integrator step: +-0.25 duty per tick
+static const int16_t kMaxDm = 63;                // d(measured) clamp, BU per tick
+static const int16_t kDeadbandRamp15 = 256;      // 1/128 duty: the compensation ramps in
 
 Coeffs compile(const Gains& g, float dt_s);
 
 class Pid {
    public:
     Pid();
-    // Start from the present output u16 (Q16) at measurement m: no bump.
-    void reset(const Coeffs& c, int32_t limit16, int32_t u16, int32_t measured);
-    // One tick: returns the output, Q16, within +-limit16.
-    int32_t step(const Coeffs& c, int32_t limit16, int32_t target, int32_t measured);
+    // Start from the present output u (Q15) at measurement m: no bump.
+    void reset(const Coeffs& c, int16_t limit, int16_t u, int16_t measured);
+    // One tick: returns the output, Q15, within +-limit.
+    inline int16_t step(const Coeffs& c, int16_t limit, int16_t target, int16_t measured);
     // Open loop (DUTY mode): the commanded duty through the same limit and slew limiter, so a
     // later switch to closed loop is bumpless.
-    int32_t step_open(const Coeffs& c, int32_t limit16, int32_t duty16, int32_t measured);
+    inline int16_t step_open(const Coeffs& c, int16_t limit, int16_t duty, int16_t measured);
     // New gains or limit: keep the output where it is (the integrator absorbs the change of
-    // the proportional term; the derivative filter restarts).
-    void rebase(const Coeffs& old_c, const Coeffs& new_c, int32_t new_limit16);
+    // the proportional and derivative terms).
+    void rebase(const Coeffs& old_c, const Coeffs& new_c, int16_t new_limit);
 
-    int32_t output() const { return u16_; }
-    int32_t integrator24() const { return i24_; }
-    int32_t derivative24() const { return d24_; }
+    int16_t output() const { return u_; }
+    int32_t integrator31() const { return i31_; }
+    int16_t velocity8() const { return v8_; }
     // The last step wanted more than the limit or slew limiter gave, toward its error.
     bool saturated() const { return saturated_; }
 
    private:
-    int32_t i24_;     // integrator, Q24 duty
-    int32_t d24_;     // filtered derivative term, Q24 duty
-    int32_t m_prev_;  // last measurement, AU
-    int32_t e_last_;  // last error, AU
-    int32_t u16_;     // last output, Q16 duty
+    int32_t i31_;     // integrator, Q31 duty
+    int16_t v8_;      // filtered d(measured), Q8 BU per tick
+    int16_t m_prev_;  // last measurement, BU
+    int16_t e_last_;  // last error, BU
+    int16_t u_;       // last output, Q15 duty
     bool saturated_;
 };
 
-// The deadband compensation alone, and its inverse (for bumpless starts).
-int32_t add_deadband(int32_t v16, int32_t deadband16);
-int32_t remove_deadband(int32_t u16, int32_t deadband16);
+// The deadband compensation alone, and its inverse (for bumpless starts). Q15.
+int16_t remove_deadband(int16_t u, int16_t deadband, uint16_t db_inverse);
+
+// The per-tick functions are defined here, inline: the tick runs them five times a
+// millisecond, and a call with its register saves costs as much as the arithmetic.
+#define UTRF_HOT __attribute__((always_inline)) inline
+
+UTRF_HOT int16_t add_deadband(int16_t v, int16_t db) {
+    if (v >= kDeadbandRamp15) return fx::sat16((int32_t)v + db);
+    if (v <= -kDeadbandRamp15) return fx::sat16((int32_t)v - db);
+    // |v| < 2^8 and db <= 2^14: the product fits; the ramp is 2^8, so the shift is a byte move.
+    return (int16_t)(v + (int16_t)(((int32_t)v * db) >> 8));
+}
+
+UTRF_HOT int16_t slew_limit(int16_t want, int16_t last, int16_t slew) {
+    // 16-bit only: the unsigned difference of two int16 fits, and last +- slew cannot pass
+    // `want`, so it cannot overflow either.
+    if (want > last) {
+        if ((uint16_t)(want - last) > (uint16_t)slew) return (int16_t)(last + slew);
+    } else if ((uint16_t)(last - want) > (uint16_t)slew) {
+        return (int16_t)(last - slew);
+    }
+    return want;
+}
+
+UTRF_HOT int16_t Pid::step(const Coeffs& c, int16_t limit, int16_t target, int16_t measured) {
+    // Angles are within +-pi (BU), so these differences fit int16.
+    const int16_t e = (int16_t)(target - measured);
+    int16_t dm = (int16_t)(measured - m_prev_);
+    m_prev_ = measured;
+    e_last_ = e;
+    dm = fx::clamp16(dm, (int16_t)-kMaxDm, kMaxDm);
+    // v += alpha (256 dm - v): |256 dm - v| < 2^15, one 16 x 16 multiply, rounded.
+    const int16_t dv = (int16_t)(((int16_t)(dm << 8)) - v8_);
+    v8_ = (int16_t)(v8_ + (int16_t)((fx::mul_su(dv, c.alpha) + 32768L) >> 16));
+
+    // Q23 sum (|p| <= 8, |i| < 1, |d| <= 4 duty) to Q15, rounded; kept in 32 bits until the
+    // limit, so no separate saturation is needed.
+    const int32_t sum = fx::apply(c.kp, e, kPMax23) + (i31_ >> 8) - fx::apply(c.kd, v8_, kDMax23);
+    int32_t v = (sum + 128) >> 8;
+    if (c.deadband) {
+        if (v >= kDeadbandRamp15) {
+            v += c.deadband;
+        } else if (v <= -kDeadbandRamp15) {
+            v -= c.deadband;
+        } else {  // |v| < 2^8, deadband <= 2^14: the product fits 32 bits, >> 8 is a byte move
+            v += fx::mul_su((int16_t)v, (uint16_t)c.deadband) >> 8;
+        }
+    }
+    int16_t u = v > limit ? limit : (v < -limit ? (int16_t)-limit : (int16_t)v);
+    u = slew_limit(u, u_, c.slew);
+    u_ = u;
+
+    // Conditional integration: hold the integrator while the output is held back in the
+    // direction the error pushes it; integrate when it is free or when the error unwinds it.
+    saturated_ = (v > u && e > 0) || (v < u && e < 0);
+    if (!saturated_ && e != 0) {
+        // i31 + step could overflow int32 near the limit: saturate before adding.
+        const int32_t lim31 = (int32_t)((uint32_t)(uint16_t)limit << 16);
+        const int32_t step = fx::apply(c.ki, e, kIStepMax31);
+        if (step >= 0) {
+            i31_ = i31_ > lim31 - step ? lim31 : i31_ + step;
+        } else {
+            i31_ = i31_ < -lim31 - step ? -lim31 : i31_ + step;
+        }
+    }
+    return u;
+}
+
+UTRF_HOT int16_t Pid::step_open(const Coeffs& c, int16_t limit, int16_t duty, int16_t measured) {
+    int16_t u = fx::clamp16(duty, (int16_t)-limit, limit);
+    u = slew_limit(u, u_, c.slew);
+    saturated_ = u != duty;
+    u_ = u;
+    m_prev_ = measured;  // a switch to closed loop calls reset() with this output
+    return u;
+}
 
 }  // namespace pid
 }  // namespace utrf

@@ -27,10 +27,17 @@ struct MotorOut {
     uint16_t on_counts;  // FORWARD/REVERSE: 1..kPwmPeriod counts high per period
 };
 
-// Drive one finger's two channels and its STBY pin. FORWARD/REVERSE with on_counts == 0 are
-// written as COAST: the compare output is disconnected, so fast PWM's one-count spike at
-// OCR = 0 never reaches the driver.
-void motor_write(uint8_t finger, const MotorOut& a, const MotorOut& b, bool standby_high);
+// One finger's driver: its two channels and its STBY pin.
+struct MotorCommand {
+    MotorOut a;  // motor A: flexor (Tendon 1), or the rotary motor
+    MotorOut b;  // motor B: extensor (Tendon 4)
+    bool stby;   // STBY high: the driver's outputs enabled
+};
+
+// Drive every finger's channels and STBY pin (called once per tick with all five). The core
+// sends FORWARD/REVERSE only with on_counts >= 1; COAST and BRAKE disconnect the compare
+// output, so fast PWM's one-count spike at OCR = 0 never reaches the driver.
+void motors_write(const MotorCommand* cmd /* [UTRF_FINGER_COUNT] */);
 
 // Every channel to COAST and every STBY low. Safe from any context, interrupts included.
 void motors_all_off();
@@ -50,6 +57,9 @@ struct EncoderReading {
 
 // Fill readings for all fingers: called once per control tick, from the tick.
 void encoders_read(EncoderReading* out /* [UTRF_FINGER_COUNT] */);
+// Start sampling every encoder once (the AVR's ADC round, ~0.5 ms), to be read by the next
+// tick. Called at the end of each tick, so the sampling interrupts fall between ticks.
+void encoders_sample();
 
 // ---- control tick ------------------------------------------------------------------------------
 // The tick is a hardware timer interrupt at UTRF_TICK_HZ that calls app_tick().

@@ -127,54 +127,65 @@ MotorHw motor_hw(const utrf_motor_pins_t& p) {
     return m;
 }
 
-void motor_apply(MotorHw& m, const MotorOut& out) {
-    const uint8_t d = (uint8_t)out.drive;
-    const bool drives = out.drive == Drive::FORWARD || out.drive == Drive::REVERSE;
-    if (drives && out.on_counts > 0) {
-        const uint16_t c = out.on_counts > kPwmPeriod ? kPwmPeriod : out.on_counts;
-        *m.ocr = (uint16_t)(c - 1);  // double-buffered: takes effect at the next period
-        if (d != m.last) {
-            const bool fwd = out.drive == Drive::FORWARD;
-            pin_set(m.in1, fwd);
-            pin_set(m.in2, !fwd);
-            ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { *m.tccra |= m.com; }
-            m.last = d;
-        }
-        return;
+// A change of drive (direction, coast, brake): rare, so not inlined.
+void __attribute__((noinline)) motor_change(MotorHw& m, const MotorOut& out) {
+    if (out.drive == Drive::FORWARD || out.drive == Drive::REVERSE) {
+        const bool fwd = out.drive == Drive::FORWARD;
+        pin_set(m.in1, fwd);
+        pin_set(m.in2, !fwd);
+        ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { *m.tccra |= m.com; }
+    } else {
+        // COAST or BRAKE: the compare output is disconnected, so the pin is its PORT bit, low.
+        // Fast PWM at OCR = 0 would still give a one-count spike every period.
+        ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { *m.tccra &= (uint8_t)~m.com; }
+        const bool brake = out.drive == Drive::BRAKE;
+        pin_set(m.in1, brake);
+        pin_set(m.in2, brake);
     }
-    // COAST or BRAKE (and zero duty): the compare output is disconnected, so the pin is the
-    // PORT bit, low. Fast PWM at OCR = 0 would still give a one-count spike every period.
-    const uint8_t want = out.drive == Drive::BRAKE ? (uint8_t)Drive::BRAKE : (uint8_t)Drive::COAST;
-    if (want == m.last) return;
-    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { *m.tccra &= (uint8_t)~m.com; }
-    const bool brake = want == (uint8_t)Drive::BRAKE;
-    pin_set(m.in1, brake);
-    pin_set(m.in2, brake);
-    m.last = want;
+    m.last = (uint8_t)out.drive;
 }
 
-// ---- ADC round robin -----------------------------------------------------------------------
+inline void motor_apply(MotorHw& m, const MotorOut& out) {
+    if (out.drive == Drive::FORWARD || out.drive == Drive::REVERSE) {
+        uint16_t c = out.on_counts;
+        if (c > kPwmPeriod) c = kPwmPeriod;
+        if (c == 0) c = 1;  // the core sends COAST for zero duty; never a spike from here
+        // OCRnx is double-buffered in fast PWM: the new duty starts with the next period.
+        *m.ocr = (uint16_t)(c - 1);
+    }
+    if ((uint8_t)out.drive != m.last) motor_change(m, out);
+}
+
+// ---- ADC: one round over the five encoder channels between two ticks ------------------------
 uint8_t g_adc_mux[UTRF_FINGER_COUNT];
-volatile uint16_t g_adc_last[UTRF_FINGER_COUNT];
-volatile uint16_t g_adc_prev[UTRF_FINGER_COUNT];
-volatile uint8_t g_adc_seq[UTRF_FINGER_COUNT];
-volatile uint8_t g_adc_at;
-encoder::As5600Analog g_enc[UTRF_FINGER_COUNT];
+volatile EncoderReading g_reading[UTRF_FINGER_COUNT];  // judged in the ADC interrupt
+volatile uint8_t g_adc_round;    // completed rounds (wraps)
+volatile uint8_t g_adc_at = 0xFF;  // channel being converted, 0xFF: idle
+encoder::Staleness g_staleness;
 
 void adc_select(uint8_t finger) {
     const uint8_t ch = g_adc_mux[finger];  // 0..7 (A0..A7): MUX5 stays 0
     ADMUX = (uint8_t)(_BV(REFS0) | (ch & 0x07));  // AVCC reference: ratiometric with the sensor
 }
 
-// ---- UART0 -----------------------------------------------------------------------------------
-const uint8_t kRxSize = 128;  // powers of two: the index arithmetic wraps with a mask
-const uint16_t kTxSize = 256;
-uint8_t g_rx[kRxSize];
-uint8_t g_tx[kTxSize];
-volatile uint8_t g_rx_head, g_rx_tail;
-volatile uint8_t g_tx_head, g_tx_tail;
-volatile uint16_t g_rx_lost;
+}  // namespace
 
+// ---- UART0 ---------------------------------------------------------------------------------
+// Ring buffers shared with the interrupt routines below, which are written in assembly (C
+// names for that reason): at 1 Mbaud and a 500 Hz state stream they run 35,000 times a
+// second, and the compiler's prologues doubled their cost.
+extern "C" {
+uint8_t utrf_rx_buf[128];  // powers of two: the index arithmetic wraps with a mask
+uint8_t utrf_tx_buf[256];
+volatile uint8_t utrf_rx_head, utrf_rx_tail;
+volatile uint8_t utrf_tx_head, utrf_tx_tail;
+volatile uint16_t utrf_rx_lost;
+}
+
+namespace {
+const uint8_t kRxSize = sizeof utrf_rx_buf;
+static_assert(sizeof utrf_tx_buf == 256, "the transmit index wraps by itself at 256");
+static_assert(sizeof utrf_rx_buf == 128, "the receive ISR masks its index with 0x7F");
 }  // namespace
 
 // ---- interrupts --------------------------------------------------------------------------------
@@ -187,50 +198,140 @@ extern "C" void utrf_read_reset_flags(void) {
     wdt_disable();
 }
 
+// The tick lock is a flag, not the interrupt mask: a compare that arrives while loop() holds
+// the lock, or while a tick still runs, is remembered and its tick runs as soon as the lock is
+// released or the running tick ends (late, never lost). Masking OCIE2A would do the same on
+// the chip, but simavr drops an interrupt raised while its enable bit is clear.
+static volatile uint8_t g_tick_locked;
+static volatile uint8_t g_tick_running;
+static volatile uint8_t g_tick_deferred;
+
+namespace {
+// Runs ticks while any is due. Called with interrupts disabled; returns with them disabled.
+// The UART transmitter's interrupt waits during the tick (the byte in the shift register and
+// the one in UDR0 still go out): the control tick comes first, and its measured time is its
+// own. Receiving stays on, or bytes would be lost.
+void run_due_ticks() {
+    do {
+        g_tick_deferred = 0;
+        g_tick_running = 1;
+        UCSR0B &= (uint8_t)~_BV(UDRIE0);
+        sei();
+        app::tick();
+        cli();
+        if (utrf_tx_head != utrf_tx_tail) UCSR0B |= _BV(UDRIE0);
+        g_tick_running = 0;
+    } while (g_tick_deferred && !g_tick_locked);
+}
+}  // namespace
+
 ISR(TIMER2_COMPA_vect) {
-    // The tick runs with interrupts enabled, so the UART and the ADC are served during it.
-    // Its own interrupt is masked meanwhile: a tick never nests in itself.
-    TIMSK2 &= (uint8_t)~_BV(OCIE2A);
-    sei();
-    app::tick();
-    cli();
-    TIMSK2 |= _BV(OCIE2A);
+    if (g_tick_running || g_tick_locked) {
+        g_tick_deferred = 1;
+        return;
+    }
+    run_due_ticks();
 }
 
 ISR(ADC_vect) {
-    const uint16_t v = ADC;
     uint8_t i = g_adc_at;
-    g_adc_prev[i] = g_adc_last[i];
-    g_adc_last[i] = v;
-    g_adc_seq[i] = (uint8_t)(g_adc_seq[i] + 1);
-    if (++i == UTRF_FINGER_COUNT) i = 0;
-    g_adc_at = i;
-    adc_select(i);
-    ADCSRA |= _BV(ADSC);
+    // Judged here, between ticks (the round runs after each tick), not in the tick.
+    const EncoderReading r = encoder::as5600_reading(ADC);
+    g_reading[i].turn = r.turn;
+    g_reading[i].status = r.status;
+    if (++i < UTRF_FINGER_COUNT) {
+        g_adc_at = i;
+        adc_select(i);
+        ADCSRA |= _BV(ADSC);
+    } else {
+        g_adc_at = 0xFF;
+        g_adc_round = (uint8_t)(g_adc_round + 1);
+    }
 }
 
-ISR(USART0_RX_vect) {
-    const uint8_t status = UCSR0A;
-    const uint8_t c = UDR0;
-    if (status & _BV(DOR0)) ++g_rx_lost;  // the UART itself lost at least one byte
-    const uint8_t head = g_rx_head;
-    const uint8_t next = (uint8_t)((head + 1) & (kRxSize - 1));
-    if (next == g_rx_tail) {
-        ++g_rx_lost;
-        return;
-    }
-    g_rx[head] = c;
-    g_rx_head = next;
+// A received byte into the ring; a byte that finds the ring full, or that the UART itself
+// lost (DOR0), is counted in utrf_rx_lost.
+ISR(USART0_RX_vect, ISR_NAKED) {
+    __asm__ __volatile__(
+        "push r24\n\t"
+        "in r24, __SREG__\n\t"
+        "push r24\n\t"
+        "push r25\n\t"
+        "push r30\n\t"
+        "push r31\n\t"
+        "lds r25, %[ucsra]\n\t"
+        "lds r24, %[udr]\n\t"
+        "sbrs r25, %[dor]\n\t"
+        "rjmp 1f\n\t"
+        "lds r30, utrf_rx_lost\n\t"
+        "lds r31, utrf_rx_lost+1\n\t"
+        "adiw r30, 1\n\t"
+        "sts utrf_rx_lost+1, r31\n\t"
+        "sts utrf_rx_lost, r30\n\t"
+        "1:\n\t"
+        "lds r30, utrf_rx_head\n\t"
+        "mov r25, r30\n\t"
+        "inc r25\n\t"
+        "andi r25, 0x7F\n\t"
+        "lds r31, utrf_rx_tail\n\t"
+        "cp r25, r31\n\t"
+        "breq 2f\n\t"
+        "ldi r31, 0\n\t"
+        "subi r30, lo8(-(utrf_rx_buf))\n\t"
+        "sbci r31, hi8(-(utrf_rx_buf))\n\t"
+        "st Z, r24\n\t"
+        "sts utrf_rx_head, r25\n\t"
+        "rjmp 3f\n\t"
+        "2:\n\t"
+        "lds r30, utrf_rx_lost\n\t"
+        "lds r31, utrf_rx_lost+1\n\t"
+        "adiw r30, 1\n\t"
+        "sts utrf_rx_lost+1, r31\n\t"
+        "sts utrf_rx_lost, r30\n\t"
+        "3:\n\t"
+        "pop r31\n\t"
+        "pop r30\n\t"
+        "pop r25\n\t"
+        "pop r24\n\t"
+        "out __SREG__, r24\n\t"
+        "pop r24\n\t"
+        "reti\n\t" ::[ucsra] "n"(_SFR_MEM_ADDR(UCSR0A)),
+        [udr] "n"(_SFR_MEM_ADDR(UDR0)), [dor] "n"(DOR0));
 }
 
-ISR(USART0_UDRE_vect) {
-    const uint8_t tail = g_tx_tail;
-    if (tail == g_tx_head) {
-        UCSR0B &= (uint8_t)~_BV(UDRIE0);
-        return;
-    }
-    UDR0 = g_tx[tail];
-    g_tx_tail = (uint8_t)(tail + 1);  // kTxSize is 256: wraps by itself
+// The next byte of the ring into UDR0; when the ring is empty, this interrupt goes off.
+ISR(USART0_UDRE_vect, ISR_NAKED) {
+    __asm__ __volatile__(
+        "push r24\n\t"
+        "in r24, __SREG__\n\t"
+        "push r24\n\t"
+        "push r30\n\t"
+        "push r31\n\t"
+        "lds r24, utrf_tx_tail\n\t"
+        "lds r30, utrf_tx_head\n\t"
+        "cp r24, r30\n\t"
+        "breq 1f\n\t"
+        "mov r30, r24\n\t"
+        "ldi r31, 0\n\t"
+        "subi r30, lo8(-(utrf_tx_buf))\n\t"
+        "sbci r31, hi8(-(utrf_tx_buf))\n\t"
+        "ld r30, Z\n\t"
+        "sts %[udr], r30\n\t"
+        "inc r24\n\t"
+        "sts utrf_tx_tail, r24\n\t"
+        "rjmp 2f\n\t"
+        "1:\n\t"
+        "lds r24, %[ucsrb]\n\t"
+        "andi r24, %[off]\n\t"
+        "sts %[ucsrb], r24\n\t"
+        "2:\n\t"
+        "pop r31\n\t"
+        "pop r30\n\t"
+        "pop r24\n\t"
+        "out __SREG__, r24\n\t"
+        "pop r24\n\t"
+        "reti\n\t" ::[udr] "n"(_SFR_MEM_ADDR(UDR0)),
+        [ucsrb] "n"(_SFR_MEM_ADDR(UCSR0B)), [off] "n"(0xFF & ~(1 << UDRIE0)));
 }
 
 // ---- hal.h -------------------------------------------------------------------------------------
@@ -274,12 +375,11 @@ void avr_init() {
     OCR2A = (uint8_t)(F_CPU / 64 / UTRF_TICK_HZ - 1);
     TCNT2 = 0;
 
-    // ADC: clk/128 (125 kHz, 104 us a conversion), interrupt-driven round robin.
+    // ADC: clk/128 (125 kHz, 104 us a conversion); a round of five takes ~0.52 ms.
     ADCSRB = 0;
-    g_adc_at = 0;
-    adc_select(0);
     ADCSRA = _BV(ADEN) | _BV(ADIE) | _BV(ADPS2) | _BV(ADPS1) | _BV(ADPS0);
-    ADCSRA |= _BV(ADSC);
+    g_adc_at = 0xFF;
+    encoders_sample();
 
     // UART0, 8N1, double speed: UBRR = F_CPU / (8 baud) - 1 (1 at 1 Mbaud, exact).
     static_assert(F_CPU / 8 / UTRF_BAUD >= 1, "UTRF_BAUD is too fast for U2X at this clock");
@@ -287,23 +387,26 @@ void avr_init() {
     UCSR0A = _BV(U2X0);
     UBRR0 = (uint16_t)((F_CPU + 4UL * UTRF_BAUD) / (8UL * UTRF_BAUD) - 1);
     UCSR0C = _BV(UCSZ01) | _BV(UCSZ00);
-    g_rx_head = g_rx_tail = 0;
-    g_tx_head = g_tx_tail = 0;
-    g_rx_lost = 0;
+    utrf_rx_head = utrf_rx_tail = 0;
+    utrf_tx_head = utrf_tx_tail = 0;
+    utrf_rx_lost = 0;
     UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
 }
 
-void motor_write(uint8_t finger, const MotorOut& a, const MotorOut& b, bool standby_high) {
-    FingerHw& h = g_hw[finger];
-    if (!standby_high && h.stby_last) {
-        pin_set(h.stby, false);  // off first
-        h.stby_last = 0;
-    }
-    motor_apply(h.m[0], a);
-    motor_apply(h.m[1], b);
-    if (standby_high && !h.stby_last) {
-        pin_set(h.stby, true);
-        h.stby_last = 1;
+void motors_write(const MotorCommand* cmd) {
+    for (uint8_t f = 0; f < UTRF_FINGER_COUNT; ++f) {
+        FingerHw& h = g_hw[f];
+        const MotorCommand& c = cmd[f];
+        if (!c.stby && h.stby_last) {
+            pin_set(h.stby, false);  // off first
+            h.stby_last = 0;
+        }
+        motor_apply(h.m[0], c.a);
+        motor_apply(h.m[1], c.b);
+        if (c.stby && !h.stby_last) {
+            pin_set(h.stby, true);
+            h.stby_last = 1;
+        }
     }
 }
 
@@ -325,26 +428,52 @@ void motors_all_off() {
 }
 
 void encoders_read(EncoderReading* out) {
-    for (uint8_t f = 0; f < UTRF_FINGER_COUNT; ++f) {
-        uint16_t last, prev;
-        uint8_t seq;
-        ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
-            last = g_adc_last[f];
-            prev = g_adc_prev[f];
-            seq = g_adc_seq[f];
+    uint8_t round;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+        for (uint8_t f = 0; f < UTRF_FINGER_COUNT; ++f) {
+            out[f].turn = g_reading[f].turn;
+            out[f].status = g_reading[f].status;
         }
-        out[f] = g_enc[f].update(last, prev, seq);
+        round = g_adc_round;
+    }
+    if (g_staleness.stale(round)) {
+        for (uint8_t f = 0; f < UTRF_FINGER_COUNT; ++f) out[f].status = EncoderStatus::NO_DATA;
+    }
+}
+
+void encoders_sample() {
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+        if (g_adc_at == 0xFF) {  // a round still running (ADC slower than it should be) goes on
+            g_adc_at = 0;
+            adc_select(0);
+            ADCSRA |= _BV(ADSC);
+        }
     }
 }
 
 void tick_start() {
+    // Let the ADC finish a round first, so the first tick judges real readings (an encoder
+    // that is really unplugged is still caught then). At most ~5 ms.
+    const uint32_t t0 = ::millis();
+    encoders_sample();
+    while (g_adc_round == 0 && ::millis() - t0 < 5) {
+    }
+    g_tick_locked = 0;
+    g_tick_running = 0;
+    g_tick_deferred = 0;
     TCNT2 = 0;
     TIFR2 = _BV(OCF2A);
     TIMSK2 = _BV(OCIE2A);
 }
 
-void tick_lock() { TIMSK2 &= (uint8_t)~_BV(OCIE2A); }
-void tick_unlock() { TIMSK2 |= _BV(OCIE2A); }
+void tick_lock() { g_tick_locked = 1; }
+
+void tick_unlock() {
+    cli();
+    g_tick_locked = 0;
+    if (g_tick_deferred && !g_tick_running) run_due_ticks();  // the tick that came meanwhile
+    sei();
+}
 
 Stamp stamp() {
     Stamp s;
@@ -357,47 +486,48 @@ uint32_t cycles_since(const Stamp& start) {
     const uint8_t c2 = TCNT2;
     const uint16_t c1 = TCNT1;
     int16_t d2 = (int16_t)c2 - (int16_t)start.coarse;
-    if ((TIFR2 & _BV(OCF2A)) || d2 < 0) d2 = (int16_t)(d2 + (F_CPU / 64 / UTRF_TICK_HZ));
+    if (g_tick_deferred || d2 < 0) d2 = (int16_t)(d2 + (F_CPU / 64 / UTRF_TICK_HZ));
     // The tick timer gives the time to within 64 cycles; timer 1 (modulo 800) gives it exactly
     // modulo 800: take the value of the second that lies within 400 cycles of the first.
     const uint16_t coarse = (uint16_t)d2 * 64u;
-    uint16_t cycles = c1 >= start.fine ? (uint16_t)(c1 - start.fine)
-                                       : (uint16_t)(c1 + (UTRF_PWM_TOP + 1) - start.fine);
-    while ((uint16_t)(cycles + (UTRF_PWM_TOP + 1) / 2) < coarse) cycles += UTRF_PWM_TOP + 1;
-    return cycles;
+    const uint16_t fine = c1 >= start.fine ? (uint16_t)(c1 - start.fine)
+                                           : (uint16_t)(c1 + (UTRF_PWM_TOP + 1) - start.fine);
+    // Whole periods of 800: (coarse - fine + 400) / 800, as a multiply by 82 / 65536.
+    const int16_t k = (int16_t)(((int32_t)((int16_t)(coarse - fine) + 400) * 82) >> 16);
+    return (uint32_t)fine + (uint32_t)(k < 0 ? 0 : k) * (UTRF_PWM_TOP + 1);
 }
 
-bool tick_period_elapsed() { return (TIFR2 & _BV(OCF2A)) != 0; }
+bool tick_period_elapsed() { return g_tick_deferred != 0; }
 
 uint32_t millis() { return ::millis(); }
 
 uint16_t serial_read(uint8_t* buf, uint16_t max) {
     uint16_t n = 0;
-    uint8_t tail = g_rx_tail;
-    while (n < max && tail != g_rx_head) {
-        buf[n++] = g_rx[tail];
+    uint8_t tail = utrf_rx_tail;
+    while (n < max && tail != utrf_rx_head) {
+        buf[n++] = utrf_rx_buf[tail];
         tail = (uint8_t)((tail + 1) & (kRxSize - 1));
     }
-    g_rx_tail = tail;
+    utrf_rx_tail = tail;
     return n;
 }
 
 uint16_t serial_tx_room() {
-    return (uint16_t)((uint8_t)(g_tx_tail - g_tx_head - 1));  // 256-byte ring
+    return (uint16_t)((uint8_t)(utrf_tx_tail - utrf_tx_head - 1));  // 256-byte ring
 }
 
 void serial_write(const uint8_t* data, uint16_t len) {
-    uint8_t head = g_tx_head;
-    for (uint16_t i = 0; i < len; ++i) g_tx[head++] = data[i];
-    g_tx_head = head;
+    uint8_t head = utrf_tx_head;
+    for (uint16_t i = 0; i < len; ++i) utrf_tx_buf[head++] = data[i];
+    utrf_tx_head = head;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { UCSR0B |= _BV(UDRIE0); }
 }
 
 uint16_t serial_take_overruns() {
     uint16_t n;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
-        n = g_rx_lost;
-        g_rx_lost = 0;
+        n = utrf_rx_lost;
+        utrf_rx_lost = 0;
     }
     return n;
 }

@@ -1,0 +1,274 @@
+// Firmware benchmark: runs build/firmware/utrf.elf on simavr's ATmega2560 and measures the
+// control tick under protocol traffic, as the firmware itself reports it (get_stats:
+// tick_worst, tick_mean, overruns), plus the telemetry it streams.
+//
+//   tick_bench <elf> <scenario> <seconds>     prints one JSON object
+//
+// Scenarios (all five fingers in POSITION, encoders moving, 500 Hz telemetry):
+//   idle      no requests beyond heartbeats
+//   typical   set_targets at 200 Hz
+//   stress    set_targets back to back: the receive line saturated at 1 Mbaud
+//
+// Frames are built and parsed with the firmware's own framing and generated messages, so the
+// bench speaks exactly the protocol the firmware does.
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <deque>
+#include <string>
+
+#include <simavr/avr_adc.h>
+#include <simavr/avr_uart.h>
+#include <simavr/sim_avr.h>
+#include <simavr/sim_elf.h>
+
+#include "core/framing.h"
+#include "generated/protocol_messages.h"
+
+using namespace utrf;
+
+namespace {
+
+const double kCpuHz = 16e6;
+const uint32_t kByteCycles = 160;  // 10 bits at 1 Mbaud
+
+struct Bench {
+    avr_t* avr = nullptr;
+    std::deque<uint8_t> to_board;
+    bool xon = true;
+    uint64_t next_byte_cycle = 0;
+    framing::FrameDecoder decoder;
+    uint8_t seq = 0;
+    uint32_t state_frames = 0;
+    uint32_t state_gaps = 0;
+    int last_state_seq = -1;
+    uint32_t nacks = 0;
+    uint32_t faults = 0;
+    bool have_stats = false;
+    proto::Stats stats;
+    // Independent measure from the simulator: cycles from app::tick()'s entry to the return
+    // into the timer interrupt (addresses from the ELF, given on the command line).
+    uint32_t tick_entry = 0;
+    uint32_t tick_return = 0;
+    uint64_t tick_start = 0;
+    bool in_tick = false;
+    uint64_t sim_ticks = 0;
+    uint64_t sim_sum = 0;
+    uint64_t sim_worst = 0;
+};
+
+Bench g;
+
+double angle(int finger, double t) {
+    // Each finger sweeps +-0.4 rad at 1.3 Hz, phase-shifted: the PIDs always have work.
+    return 0.4 * sin(2 * M_PI * 1.3 * t + finger);
+}
+
+void adc_trigger(avr_irq_t*, uint32_t value, void*) {
+    union {
+        avr_adc_mux_t mux;
+        uint32_t v;
+    } e;
+    e.v = value;
+    const int ch = e.mux.src;
+    if (ch < 0 || ch > 4) return;
+    const double t = g.avr->cycle / kCpuHz;
+    // AS5600 analog: 10 % of 5 V at 0, 90 % at one turn; straight finger mounted mid-band.
+    double turn = fmod((angle(ch, t) + M_PI) / (2 * M_PI), 1.0);
+    if (turn < 0) turn += 1.0;
+    const uint32_t mv = (uint32_t)lround(5000.0 * (0.1 + 0.8 * turn));
+    avr_raise_irq(avr_io_getirq(g.avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + ch), mv);
+}
+
+void uart_out(avr_irq_t*, uint32_t value, void*) {
+    const framing::RxEvent ev = g.decoder.feed((uint8_t)value);
+    if (ev != framing::RxEvent::FRAME) return;
+    const uint8_t id = g.decoder.msg_id();
+    if (id == proto::MsgId::STATE && (g.decoder.seq() & proto::kBoardSeqFlag)) {
+        ++g.state_frames;
+        if (g.last_state_seq >= 0 && g.decoder.seq() != proto::next_board_seq((uint8_t)g.last_state_seq)) {
+            ++g.state_gaps;
+        }
+        g.last_state_seq = g.decoder.seq();
+    } else if (id == proto::MsgId::NACK) {
+        ++g.nacks;
+    } else if (id == proto::MsgId::FAULT) {
+        ++g.faults;
+    } else if (id == proto::MsgId::STATS) {
+        uint8_t bad;
+        g.have_stats = proto::decode(g.decoder.body(), g.decoder.body_len(), g.stats, bad) ==
+                       proto::DecodeStatus::OK;
+    }
+}
+
+void uart_xon(avr_irq_t*, uint32_t, void*) { g.xon = true; }
+void uart_xoff(avr_irq_t*, uint32_t, void*) { g.xon = false; }
+
+template <typename Msg>
+void send(const Msg& msg) {
+    uint8_t body[proto::kMaxPayload] = {0};
+    uint8_t frame[framing::kMaxFrameBytes];
+    const uint8_t n = proto::encode(msg, body);
+    g.seq = (uint8_t)((g.seq + 1) & 0x7F);
+    const uint8_t len = framing::encode_frame(g.seq, Msg::kId, body, n, frame);
+    for (uint8_t i = 0; i < len; ++i) g.to_board.push_back(frame[i]);
+}
+
+void run_until(double t_end) {
+    const uint64_t end = (uint64_t)(t_end * kCpuHz);
+    avr_irq_t* in = avr_io_getirq(g.avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+    while (g.avr->cycle < end) {
+        const int st = avr_run(g.avr);
+        if (st == cpu_Done || st == cpu_Crashed) {
+            fprintf(stderr, "tick_bench: the simulated CPU stopped (state %d)\n", st);
+            exit(1);
+        }
+        if (g.tick_entry) {
+            if (g.avr->pc == g.tick_entry && !g.in_tick) {
+                g.in_tick = true;
+                g.tick_start = g.avr->cycle;
+            } else if (g.avr->pc == g.tick_return && g.in_tick) {
+                g.in_tick = false;
+                const uint64_t c = g.avr->cycle - g.tick_start;
+                ++g.sim_ticks;
+                g.sim_sum += c;
+                if (c > g.sim_worst) g.sim_worst = c;
+            }
+        }
+        if (!g.to_board.empty() && g.xon && g.avr->cycle >= g.next_byte_cycle) {
+            avr_raise_irq(in, g.to_board.front());
+            g.to_board.pop_front();
+            g.next_byte_cycle = g.avr->cycle + kByteCycles;
+        }
+    }
+}
+
+proto::SetTargets targets(double t) {
+    proto::SetTargets m;
+    m.kind = (uint8_t)proto::TargetKind::JOINT2_ANGLE;
+    m.mask = 0x1F;
+    for (int f = 0; f < 5; ++f) m.value[f] = (int32_t)lround(angle(f, t + 0.05) * 1e6);
+    return m;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    if (argc != 4 && argc != 6) {
+        fprintf(stderr,
+                "usage: tick_bench <elf> idle|typical|stress <seconds> [<tick entry> <tick "
+                "return>] (byte addresses, hex)\n");
+        return 2;
+    }
+    if (argc == 6) {
+        g.tick_entry = (uint32_t)strtoul(argv[4], nullptr, 16);
+        g.tick_return = (uint32_t)strtoul(argv[5], nullptr, 16);
+    }
+    const std::string scenario = argv[2];
+    const double seconds = atof(argv[3]);
+    if (scenario != "idle" && scenario != "typical" && scenario != "stress") {
+        fprintf(stderr, "tick_bench: unknown scenario %s\n", scenario.c_str());
+        return 2;
+    }
+    elf_firmware_t fw;
+    memset(&fw, 0, sizeof fw);
+    if (elf_read_firmware(argv[1], &fw) != 0) {
+        fprintf(stderr, "tick_bench: cannot read %s\n", argv[1]);
+        return 1;
+    }
+    g.avr = avr_make_mcu_by_name("atmega2560");
+    if (!g.avr) return 1;
+    avr_init(g.avr);
+    avr_load_firmware(g.avr, &fw);
+    g.avr->frequency = (uint32_t)kCpuHz;
+    g.avr->vcc = g.avr->avcc = g.avr->aref = 5000;
+    g.avr->log = 0;
+
+    uint32_t flags = 0;
+    avr_ioctl(g.avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
+    flags &= ~AVR_UART_FLAG_STDIO;
+    avr_ioctl(g.avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+    avr_irq_register_notify(avr_io_getirq(g.avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_OUT_TRIGGER),
+                            adc_trigger, nullptr);
+    avr_irq_register_notify(avr_io_getirq(g.avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
+                            uart_out, nullptr);
+    avr_irq_register_notify(avr_io_getirq(g.avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON),
+                            uart_xon, nullptr);
+    avr_irq_register_notify(avr_io_getirq(g.avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF),
+                            uart_xoff, nullptr);
+
+    // Boot, then every finger into closed loop and the stream on.
+    run_until(0.1);
+    send(proto::Heartbeat());
+    send(targets(0.1));
+    proto::SetMode mode;
+    mode.mask = 0x1F;
+    for (int f = 0; f < 5; ++f) {
+        mode.mode[f] = (uint8_t)proto::ControlMode::POSITION;
+        mode.duty[f] = 0;
+        mode.effort[f] = 0;
+    }
+    send(mode);
+    proto::SetTelemetry tel;
+    tel.rate_hz = 500;
+    send(tel);
+    run_until(0.3);
+    send(proto::ResetStats());
+    run_until(0.31);
+    g.sim_ticks = g.sim_sum = g.sim_worst = 0;
+    const uint32_t frames_before = g.state_frames;
+    const uint32_t gaps_before = g.state_gaps;
+    const double t0 = g.avr->cycle / kCpuHz;
+    const double t_end = t0 + seconds;
+    double next_send = t0;
+    while (g.avr->cycle / kCpuHz < t_end) {
+        const double t = g.avr->cycle / kCpuHz;
+        if (scenario == "stress") {
+            if (g.to_board.size() < 64) send(targets(t));
+            run_until(t + 0.0005);
+        } else {
+            if (t >= next_send) {
+                if (scenario == "typical") {
+                    send(targets(t));
+                    next_send += 0.005;
+                } else {
+                    send(proto::Heartbeat());
+                    next_send += 0.05;
+                }
+            }
+            run_until(t + 0.0005);
+        }
+    }
+    const uint32_t frames = g.state_frames - frames_before;
+    const uint32_t gaps = g.state_gaps - gaps_before;
+    const uint64_t sim_ticks = g.sim_ticks;
+    const uint64_t sim_worst = g.sim_worst;
+    const double sim_mean = sim_ticks ? (double)g.sim_sum / (double)sim_ticks : 0.0;
+    // Let the board work off what it has received, then ask for its counters. A lone 0x00
+    // first ends whatever partial frame the board holds (the queue was cut mid-frame).
+    g.to_board.clear();
+    run_until(g.avr->cycle / kCpuHz + 0.05);
+    g.to_board.push_back(0x00);
+    send(proto::GetStats());
+    run_until(g.avr->cycle / kCpuHz + 0.02);
+    if (!g.have_stats) {
+        fprintf(stderr, "tick_bench: no stats reply\n");
+        return 1;
+    }
+    const proto::Stats& s = g.stats;
+    printf("{\"scenario\": \"%s\", \"seconds\": %.3f, \"ticks\": %u, \"tick_overruns\": %u, "
+           "\"tick_worst_us\": %u, \"tick_mean_us\": %u, \"rx_frames\": %u, "
+           "\"rx_crc_errors\": %u, \"rx_framing_errors\": %u, \"rx_overruns\": %u, "
+           "\"nacks\": %u, \"tx_dropped\": %u, \"state_frames\": %u, \"state_seq_gaps\": %u, "
+           "\"fault_frames\": %u, \"sim_ticks\": %llu, \"sim_tick_worst_cycles\": %llu, "
+           "\"sim_tick_mean_cycles\": %.1f}\n",
+           scenario.c_str(), seconds, (unsigned)s.ticks, (unsigned)s.tick_overruns,
+           (unsigned)s.tick_worst, (unsigned)s.tick_mean, (unsigned)s.rx_frames,
+           (unsigned)s.rx_crc_errors, (unsigned)s.rx_framing_errors, (unsigned)s.rx_overruns,
+           (unsigned)s.nacks, (unsigned)s.tx_dropped, (unsigned)frames, (unsigned)gaps,
+           (unsigned)g.faults, (unsigned long long)sim_ticks, (unsigned long long)sim_worst,
+           sim_mean);
+    return 0;
+}

@@ -1,0 +1,267 @@
+// C ABI over the firmware core and the host hardware layer, for the pytest suite (ctypes).
+//
+// A simulated board: power it on, set encoder voltages, run ticks and loop() passes, feed the
+// UART, read what it sent and what its motor pins do. Units at this boundary are the
+// firmware's own: angles in 1e-4 rad (AU), duties in Q16 (65536 = 1), ADC counts.
+#include <new>
+
+#include "core/app.h"
+#include "core/config.h"
+#include "core/encoder.h"
+#include "core/kinematics.h"
+#include "core/pid.h"
+#include "hal_host.h"
+
+using namespace utrf;
+using hal::host::state;
+
+extern "C" {
+
+// ---- the board -------------------------------------------------------------------------------
+
+void fw_power_on(uint8_t reset_cause) {
+    hal::host::power_on();
+    state().reset_cause = reset_cause;
+    app::Board* b = &app::board();
+    b->~Board();
+    new (b) app::Board();
+    app::setup();
+}
+
+void fw_tick(uint32_t n) {
+    for (uint32_t i = 0; i < n; ++i) {
+        ++state().ms;
+        if (state().tick_locked) ++state().lock_errors;  // the tick cannot run while locked
+        app::tick();
+    }
+}
+
+void fw_loop(uint32_t n) {
+    for (uint32_t i = 0; i < n; ++i) app::loop();
+}
+
+// `ms` milliseconds of normal running: a tick, then a loop() pass, each millisecond.
+void fw_run(uint32_t ms) {
+    for (uint32_t i = 0; i < ms; ++i) {
+        fw_tick(1);
+        app::loop();
+    }
+}
+
+void fw_advance_ms(uint32_t ms) { state().ms += ms; }
+
+void fw_set_adc(uint8_t f, uint16_t sample) { state().adc[f] = sample; }
+// The sampler stops (no new ADC rounds): every encoder goes stale.
+void fw_freeze_adc(int frozen) { state().adc_frozen = frozen != 0; }
+void fw_set_tick_cycles(uint32_t c) { state().tick_cycles = c; }
+void fw_set_period_elapsed(int on) { state().period_elapsed = on != 0; }
+
+uint16_t fw_rx(const uint8_t* data, uint16_t n) {
+    hal::host::State& s = state();
+    uint16_t k = 0;
+    for (; k < n; ++k) {
+        const uint16_t next = (uint16_t)((s.rx_head + 1) % hal::host::kRxBytes);
+        if (next == s.rx_tail) break;
+        s.rx[s.rx_head] = data[k];
+        s.rx_head = next;
+    }
+    return k;
+}
+
+void fw_add_rx_lost(uint16_t n) { state().rx_lost = (uint16_t)(state().rx_lost + n); }
+
+uint16_t fw_tx(uint8_t* out, uint16_t max) {
+    hal::host::State& s = state();
+    const uint16_t n = s.tx_len < max ? s.tx_len : max;
+    for (uint16_t i = 0; i < n; ++i) out[i] = s.tx[i];
+    for (uint16_t i = n; i < s.tx_len; ++i) s.tx[i - n] = s.tx[i];
+    s.tx_len = (uint16_t)(s.tx_len - n);
+    return n;
+}
+
+void fw_set_tx_room(uint16_t n) { state().tx_room_limit = n; }
+
+uint8_t* fw_eeprom(void) { return state().eeprom; }
+uint16_t fw_eeprom_size(void) { return hal::host::kEepromBytes; }
+void fw_set_eeprom_busy_polls(uint8_t n) { state().eeprom_busy_polls = n; }
+void fw_set_eeprom_stuck(int32_t addr) { state().eeprom_stuck_addr = addr; }
+uint32_t fw_eeprom_writes(void) { return state().eeprom_writes; }
+
+struct FwMotor {
+    uint8_t drive_a;
+    uint8_t drive_b;
+    uint16_t counts_a;
+    uint16_t counts_b;
+    uint8_t stby;
+};
+
+void fw_motor(uint8_t f, FwMotor* out) {
+    out->drive_a = (uint8_t)state().motor[f][0].drive;
+    out->drive_b = (uint8_t)state().motor[f][1].drive;
+    out->counts_a = state().motor[f][0].on_counts;
+    out->counts_b = state().motor[f][1].on_counts;
+    out->stby = state().stby[f] ? 1 : 0;
+}
+
+struct FwFinger {
+    uint8_t mode;
+    uint8_t faults;
+    uint8_t contact;
+    uint8_t has_theta;
+    uint8_t saturated;
+    int16_t theta;
+    int16_t target;
+    int16_t duty_a;
+    int16_t duty_b;
+    int16_t output;
+    int16_t limit;
+    int32_t integrator31;
+};
+
+void fw_finger(uint8_t f, FwFinger* out) {
+    const finger::Finger& fg = app::board().hand.finger(f);
+    out->mode = fg.mode();
+    out->faults = fg.faults();
+    out->contact = fg.contact() ? 1 : 0;
+    out->has_theta = fg.has_theta() ? 1 : 0;
+    out->saturated = fg.pid().saturated() ? 1 : 0;
+    out->theta = fg.theta();
+    out->target = fg.target();
+    out->duty_a = fg.duty_a();
+    out->duty_b = fg.duty_b();
+    out->output = fg.output();
+    out->limit = fg.limit();
+    out->integrator31 = fg.pid().integrator31();
+}
+
+struct FwStatus {
+    uint32_t lock_errors;
+    uint32_t wdt_feeds;
+    uint32_t all_off_calls;
+    uint8_t wdt_started;
+    uint8_t hang_mark;
+    uint8_t tick_started;
+    uint8_t halted;
+    uint8_t config_status;
+    uint8_t reset_cause;
+    uint8_t saving;
+};
+
+void fw_status(FwStatus* out) {
+    const hal::host::State& s = state();
+    out->lock_errors = s.lock_errors;
+    out->wdt_feeds = s.wdt_feeds;
+    out->all_off_calls = s.all_off_calls;
+    out->wdt_started = s.wdt_started;
+    out->hang_mark = s.hang_mark;
+    out->tick_started = s.tick_started;
+    out->halted = app::board().hand.halted() ? 1 : 0;
+    out->config_status = app::board().config_status;
+    out->reset_cause = app::board().reset_cause;
+    out->saving = app::board().writer.busy() ? 1 : 0;
+}
+
+// ---- the PID alone ---------------------------------------------------------------------------
+
+namespace {
+pid::Coeffs g_pc;
+pid::Pid g_pid;
+int16_t g_plimit;
+
+pid::Gains gains(double kp, double ki, double kd, double fc, double db, double slew) {
+    pid::Gains g;
+    g.kp = (float)kp;
+    g.ki = (float)ki;
+    g.kd = (float)kd;
+    g.d_cutoff_hz = (float)fc;
+    g.deadband = (float)db;
+    g.slew_per_s = (float)slew;
+    return g;
+}
+}  // namespace
+
+void fw_pid_config(double kp, double ki, double kd, double fc, double db, double slew,
+                   int16_t limit) {
+    g_pc = pid::compile(gains(kp, ki, kd, fc, db, slew), 1e-3f);
+    g_plimit = limit;
+}
+
+// New gains while running: rebased, so the output does not jump.
+void fw_pid_regain(double kp, double ki, double kd, double fc, double db, double slew,
+                   int16_t limit) {
+    const pid::Coeffs old = g_pc;
+    g_pc = pid::compile(gains(kp, ki, kd, fc, db, slew), 1e-3f);
+    g_plimit = limit;
+    g_pid.rebase(old, g_pc, g_plimit);
+}
+
+void fw_pid_reset(int16_t u, int16_t measured) { g_pid.reset(g_pc, g_plimit, u, measured); }
+int16_t fw_pid_step(int16_t target, int16_t measured) {
+    return g_pid.step(g_pc, g_plimit, target, measured);
+}
+int16_t fw_pid_step_open(int16_t duty, int16_t measured) {
+    return g_pid.step_open(g_pc, g_plimit, duty, measured);
+}
+void fw_pid_state(int32_t* i31, int32_t* v8, int32_t* saturated) {
+    *i31 = g_pid.integrator31();
+    *v8 = g_pid.velocity8();
+    *saturated = g_pid.saturated() ? 1 : 0;
+}
+int16_t fw_pid_add_deadband(int16_t v, int16_t db) { return db ? pid::add_deadband(v, db) : v; }
+int16_t fw_pid_remove_deadband(int16_t u, int16_t db) {
+    pid::Gains g = gains(0, 0, 0, 10, db / 32768.0, 1);
+    const pid::Coeffs c = pid::compile(g, 1e-3f);
+    return pid::remove_deadband(u, c.deadband, c.db_inverse);
+}
+// The gain representation: value -> (mantissa, shift) -> the value it stands for.
+double fw_gain_roundtrip(double value) {
+    return fx::gain_value(fx::make_gain((float)value, 2147483647L));
+}
+int32_t fw_gain_apply(double value, int16_t x, int32_t ymax) {
+    return fx::apply(fx::make_gain((float)value, ymax), x, ymax);
+}
+int32_t fw_mul_q16(int32_t x, uint16_t c) { return fx::mul_q16(x, c); }
+
+// ---- kinematics, encoder, config -------------------------------------------------------------
+
+void fw_kin_init(void) { kin::init(); }
+uint8_t fw_kin_geometry(uint8_t finger) { return kin::finger_geometry(finger); }
+uint8_t fw_kin_geometry_count(void) { return kin::geometry_count(); }
+uint16_t fw_kin_table_bytes(void) { return kin::table_bytes(); }
+void fw_kin_range(uint8_t g, double* lo, double* hi) {
+    *lo = kin::theta2_min(g);
+    *hi = kin::theta2_max(g);
+}
+int fw_kin_lookup(uint8_t g, double theta2, double* out6) {
+    kin::Point p;
+    const bool inside = kin::lookup(g, (float)theta2, p);
+    out6[0] = p.q;
+    out6[1] = p.theta1;
+    out6[2] = p.theta2;
+    out6[3] = p.theta3;
+    out6[4] = p.tip_x;
+    out6[5] = p.tip_y;
+    return inside ? 1 : 0;
+}
+int fw_kin_theta2_from_q(uint8_t g, double q, double* theta2) {
+    float t = 0;
+    const bool ok = kin::theta2_from_q(g, (float)q, t);
+    *theta2 = t;
+    return ok ? 1 : 0;
+}
+double fw_kin_q_full(uint8_t g) { return kin::q_full_flexion(g); }
+void fw_kin_tip_raw(uint8_t g, int32_t theta_au, int16_t* x, int16_t* y) {
+    kin::tip_raw(g, theta_au, *x, *y);
+}
+
+int16_t fw_encoder_angle(uint16_t turn, uint16_t zero, int invert) {
+    return encoder::angle_bu(turn, zero, invert != 0);
+}
+int16_t fw_au_from_bu(int16_t b) { return fx::au_from_bu(b); }
+int16_t fw_bu(double rad) { return fx::bu((float)rad); }
+uint16_t fw_encoder_turn_from_rad(double rad) { return encoder::turn_from_rad((float)rad); }
+
+uint16_t fw_config_image_bytes(void) { return config::kImageBytes; }
+uint16_t fw_config_body_bytes(void) { return sizeof(config::Config); }
+
+}  // extern "C"
