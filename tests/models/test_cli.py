@@ -33,16 +33,26 @@ def test_kinematics_json(capsys: pytest.CaptureFixture[str]) -> None:
     np.testing.assert_allclose(out["theta_rad"], fk.theta)
     np.testing.assert_allclose(out["tip_m"], fk.tip)
     np.testing.assert_allclose(out["jacobian"], fk.jacobian)
-    by_deg = run_json(capsys, "kinematics", "--theta2-deg", str(math.degrees(0.003 / 0.008)))
+    theta2 = 0.003 / g.guide_radii_m[1]
+    by_deg = run_json(capsys, "kinematics", "--theta2-deg", str(math.degrees(theta2)))
     np.testing.assert_allclose(by_deg["tip_m"], fk.tip, atol=1e-12)
     by_tip = run_json(capsys, "kinematics", "--tip-mm", *(str(v * 1e3) for v in fk.tip))
     assert by_tip["tip_distance_m"] < 1e-8
 
 
-def test_kinematics_table_says_its_units(capsys: pytest.CaptureFixture[str]) -> None:
+def test_kinematics_table_says_its_units(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
     code, out, _ = run(capsys, "kinematics", "--flexion", "0.9")
     assert code == 0 and "(deg, relative)" in out and "tip (mm)" in out
-    assert "would leave its guide" in out  # flexion 0.9 is past the default's wrap limit
+    assert "would leave its guide" not in out  # the default stays coupled over its range
+    steep = FingerGeometry.from_dict(
+        {**FingerGeometry.default().to_dict(), "guide_radii_m": [0.010, 0.008, 0.006]}
+    )
+    f = tmp_path / "steep.toml"
+    f.write_text("[finger]\n" + "".join(f"{k} = {v!r}\n" for k, v in steep.to_dict().items()))
+    code, out, _ = run(capsys, "kinematics", "--flexion", "0.9", "--finger", str(f))
+    assert code == 0 and "would leave its guide" in out  # 10/8/6 mm unwraps at flexion 0.70
 
 
 def test_statics_json_has_the_issue_keys(capsys: pytest.CaptureFixture[str]) -> None:
@@ -137,7 +147,23 @@ def test_plan_safe_refused_and_named(capsys: pytest.CaptureFixture[str]) -> None
     assert out["safe"] and out["q_command_m"] == pytest.approx(ref.q_command_m, abs=1e-12)
     code, text, _ = run(capsys, "plan", "--flexion", "0", "--load-kg", "2")
     assert code == 3 and "REFUSED" in text and "motor A would pull" in text
-    code, _, err = run(capsys, "plan", "fist", "--load-kg", "0.1")
-    assert code == 2 and "no pose library is registered" in err
+    code, _, err = run(capsys, "plan", "fsit", "--load-kg", "0.1")
+    assert code == 2 and "no pose named 'fsit'" in err
+
+
+def test_plan_a_named_pose_plans_every_finger_with_its_geometry(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from utrf.poses import PoseLibrary
+
+    hand = HandGeometry.default()
+    q = PoseLibrary.load(hand=hand, include_user=False)["rock-and-roll"].q(hand)
+    out = run_json(capsys, "plan", "rock-and-roll", "--load-kg", "0.05")
+    assert out["pose"] == "rock-and-roll"
+    assert list(out["fingers"]) == [f.name for f in hand.fingers]
+    for i, f in enumerate(hand.fingers):
+        assert out["fingers"][f.name]["q_target_m"] == pytest.approx(q[i], abs=1e-12)
+    one = run_json(capsys, "plan", "rock-and-roll", "--finger-name", "thumb", "--load-kg", "0.05")
+    assert list(one["fingers"]) == ["thumb"]
     code, _, err = run(capsys, "plan", "--load-kg", "0.1")
     assert code == 2 and "give a pose" in err

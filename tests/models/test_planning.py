@@ -116,15 +116,15 @@ def test_bad_targets_are_named(geom: FingerGeometry, target, match: str) -> None
         planning.plan(geom, target(), Load())
 
 
-def test_named_poses_come_from_the_registered_library(geom: FingerGeometry) -> None:
-    with pytest.raises(PlanError, match="no pose library is registered"):
-        planning.named_pose_target("fist")
-    try:
-        planning.register_pose_resolver(
-            lambda name, finger: Target.flexion({"fist": 0.9, "open": 0.0}[name])
-        )
-        assert planning.named_pose_target("fist", "index") == Target.flexion(0.9)
-        p = planning.plan(geom, planning.named_pose_target("open"), Load(payload_kg=0.1))
-        assert p.q_target_m == 0.0
-    finally:
-        planning.register_pose_resolver(None)
+def test_named_poses_come_from_the_pose_library(geom: FingerGeometry) -> None:
+    from utrf.poses import PoseLibrary
+
+    lib = PoseLibrary.load(include_user=False)
+    fist = planning.named_pose_target("fist", "index", lib)
+    assert fist == Target(lib["fist"].targets["index"].kind, lib["fist"].targets["index"].value)
+    p = planning.plan(geom, planning.named_pose_target("open", "index", lib), Load(payload_kg=0.1))
+    assert p.q_target_m == 0.0
+    with pytest.raises(PlanError, match="no pose named 'fits'"):
+        planning.named_pose_target("fits", "index", lib)
+    with pytest.raises(PlanError, match="no finger 'pinky'"):
+        planning.named_pose_target("fist", "pinky", lib)

@@ -402,16 +402,89 @@ def _calibrate(args: argparse.Namespace) -> int:
 
 
 # -- plan -------------------------------------------------------------------------------------
+def _plan_one(args: argparse.Namespace, geom: FingerGeometry, target: planning.Target):
+    return planning.plan(
+        geom,
+        target,
+        _load(args),
+        model=args.model,
+        limits=_limits_from(args),
+        match=args.match,
+        tolerance_m=args.tolerance_mm * 1e-3,
+    )
+
+
+def _print_plan(p: planning.Plan, target: planning.Target, title: str) -> None:
+    s = p.statics
+    print(f"{title}; target {target.kind} = {target.value}; model {s.model}")
+    print(
+        f"target pose: q {p.q_target_m * 1e3:.4f} mm, tip ({p.target_tip_m[0] * 1e3:.3f}, "
+        f"{p.target_tip_m[1] * 1e3:.3f}) mm"
+    )
+    print(
+        f"command: q {p.q_command_m * 1e3:.4f} mm (correction "
+        f"{(p.q_command_m - p.q_target_m) * 1e3:+.4f} mm); Joint-2 setpoint "
+        f"{math.degrees(p.theta2_setpoint_rad):.3f} deg"
+    )
+    ft = p.firmware_targets
+    print(
+        f"firmware targets: JOINT2_ANGLE {math.degrees(ft['JOINT2_ANGLE']):.3f} deg, "
+        f"TENDON_Q {ft['TENDON_Q'] * 1e3:.4f} mm, FLEXION {ft['FLEXION']:.5f}"
+    )
+    print(
+        f"loaded tip ({s.tip_m[0] * 1e3:.3f}, {s.tip_m[1] * 1e3:.3f}) mm, "
+        f"{p.tip_error_m * 1e3:.3f} mm from the target"
+    )
+    print(
+        "tensions (N): "
+        + ", ".join(f"T{t} {v:.1f}" for t, v in zip(s.loaded_tendons, s.tensions_n, strict=True))
+        + f"; motor pull A {s.motor_force_n[0]:.1f} N, B {s.motor_force_n[1]:.1f} N"
+    )
+    for w in p.warnings:
+        print(f"warning: {w}")
+    if p.safe:
+        print("safe: yes")
+    else:
+        print("REFUSED:")
+        for r in p.reasons:
+            print(f"  - {r}")
+
+
+def _plan_named_pose(args: argparse.Namespace) -> int:
+    """Plan each finger of the hand (or the one named) for a pose of the pose library."""
+    from utrf.poses import PoseLibrary
+
+    hand = HandGeometry.default()
+    poses = PoseLibrary.load(args.poses or (), hand=hand)
+    fingers = [f for f in hand.fingers if args.finger_name in (None, f.name)]
+    if not fingers:
+        raise planning.PlanError(
+            f"--finger-name {args.finger_name!r}: fingers are {[f.name for f in hand.fingers]}"
+        )
+    plans = {}
+    for f in fingers:
+        geom = _geometry(args) if args.finger else f.geometry
+        target = planning.named_pose_target(args.pose, f.name, poses)
+        plans[f.name] = (target, _plan_one(args, geom, target))
+    if args.json:
+        _emit({"pose": args.pose, "fingers": {n: p.to_json() for n, (_, p) in plans.items()}})
+    else:
+        for name, (target, p) in plans.items():
+            _print_plan(p, target, f"pose {args.pose}, finger {name}")
+            print()
+    return 0 if all(p.safe for _, p in plans.values()) else EXIT_REFUSED
+
+
 def _plan(args: argparse.Namespace) -> int:
-    geom = _geometry(args)
     given = [
         n for n in ("q", "q_mm", "theta2_deg", "flexion", "tip_mm") if getattr(args, n) is not None
     ]
     if args.pose and given:
         raise planning.PlanError("give either a named POSE or one of --flexion/--theta2-deg/...")
     if args.pose:
-        target = planning.named_pose_target(args.pose, args.finger_name)
-    elif args.q is not None:
+        return _plan_named_pose(args)
+    geom = _geometry(args)
+    if args.q is not None:
         target = planning.Target.q(args.q)
     elif args.q_mm is not None:
         target = planning.Target.q(args.q_mm * 1e-3)
@@ -423,53 +496,11 @@ def _plan(args: argparse.Namespace) -> int:
         target = planning.Target.tip(args.tip_mm[0] * 1e-3, args.tip_mm[1] * 1e-3)
     else:
         raise planning.PlanError("give a pose: POSE, --flexion F, --theta2-deg DEG, --q Q ...")
-    p = planning.plan(
-        geom,
-        target,
-        _load(args),
-        model=args.model,
-        limits=_limits_from(args),
-        match=args.match,
-        tolerance_m=args.tolerance_mm * 1e-3,
-    )
+    p = _plan_one(args, geom, target)
     if args.json:
         _emit(p.to_json())
     else:
-        s = p.statics
-        print(f"finger {geom.source}; target {target.kind} = {target.value}; model {s.model}")
-        print(
-            f"target pose: q {p.q_target_m * 1e3:.4f} mm, tip ({p.target_tip_m[0] * 1e3:.3f}, "
-            f"{p.target_tip_m[1] * 1e3:.3f}) mm"
-        )
-        print(
-            f"command: q {p.q_command_m * 1e3:.4f} mm (correction "
-            f"{(p.q_command_m - p.q_target_m) * 1e3:+.4f} mm); Joint-2 setpoint "
-            f"{math.degrees(p.theta2_setpoint_rad):.3f} deg"
-        )
-        ft = p.firmware_targets
-        print(
-            f"firmware targets: JOINT2_ANGLE {math.degrees(ft['JOINT2_ANGLE']):.3f} deg, "
-            f"TENDON_Q {ft['TENDON_Q'] * 1e3:.4f} mm, FLEXION {ft['FLEXION']:.5f}"
-        )
-        print(
-            f"loaded tip ({s.tip_m[0] * 1e3:.3f}, {s.tip_m[1] * 1e3:.3f}) mm, "
-            f"{p.tip_error_m * 1e3:.3f} mm from the target"
-        )
-        print(
-            "tensions (N): "
-            + ", ".join(
-                f"T{t} {v:.1f}" for t, v in zip(s.loaded_tendons, s.tensions_n, strict=True)
-            )
-            + f"; motor pull A {s.motor_force_n[0]:.1f} N, B {s.motor_force_n[1]:.1f} N"
-        )
-        for w in p.warnings:
-            print(f"warning: {w}")
-        if p.safe:
-            print("safe: yes")
-        else:
-            print("REFUSED:")
-            for r in p.reasons:
-                print(f"  - {r}")
+        _print_plan(p, target, f"finger {geom.source}")
     return 0 if p.safe else EXIT_REFUSED
 
 
@@ -549,9 +580,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "pose",
         nargs="?",
         metavar="POSE",
-        help="a named pose (needs the pose library); or give --flexion / --theta2-deg / ...",
+        help="a named pose of the pose library (utrf poses); or give --flexion / --theta2-deg",
     )
-    p.add_argument("--finger-name", help="which finger of a named pose (e.g. index)")
+    p.add_argument(
+        "--finger-name", help="plan only this finger of a named pose (default: every finger)"
+    )
+    p.add_argument(
+        "--poses", action="append", metavar="FILE", help="an extra pose file (repeatable)"
+    )
     _pose(p, required=False)
     _loads(p)
     _limits(p)

@@ -30,8 +30,10 @@ GAP_PAYLOAD_KG = 0.2
 
 
 def model_gap(geom: FingerGeometry, payload_kg: float = GAP_PAYLOAD_KG, n: int = 61) -> dict:
-    """Tip deflection of both models over the flexion range where the coupling holds."""
-    lo, hi = tendons.coupling_q_range_m(geom)
+    """Tip deflection of both models where the finger can go: θ1 within its range and the
+    coupling holding."""
+    (clo, chi), (rlo, rhi) = tendons.coupling_q_range_m(geom), geom.q_range_m
+    lo, hi = max(clo, rlo), min(chi, rhi)
     q = np.linspace(lo, hi, n)
     out: dict = {"q_m": q, "flexion": kinematics.flexion_from_q(geom, q)}
     for m in statics.MODELS:

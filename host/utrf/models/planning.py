@@ -19,14 +19,14 @@ A plan is refused (``safe`` False, with the reasons) when a tendon's safety fact
 the limit, a motor would pull more than its rating, Joint 1 would leave its range, the statics
 do not converge, or the loaded finger cannot reach the target within ``tolerance_m``.
 
-Named poses (``"fist"``, ...) come from the pose library, which registers a resolver with
-``register_pose_resolver``; until one is registered ``named_pose_target`` says so.
+Named poses (``"fist"``, ...) come from the pose library (``utrf.poses``) through
+``named_pose_target``.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -111,25 +111,20 @@ class Target:
         return {"kind": self.kind, "value": list(v) if isinstance(v, tuple | list) else v}
 
 
-# -- named poses: the pose library's hook -----------------------------------------------------
-PoseResolver = Callable[[str, str | None], Target]
-_pose_resolver: PoseResolver | None = None
+# -- named poses -------------------------------------------------------------------------------
+def named_pose_target(name: str, finger: str, library: Mapping[str, Any] | None = None) -> Target:
+    """Finger ``finger``'s target in the named pose of the pose library (utrf.poses)."""
+    from utrf.poses import PoseLibrary  # the library imports the models: import it late
 
-
-def register_pose_resolver(resolver: PoseResolver | None) -> None:
-    """The pose library registers ``resolver(pose_name, finger_name) -> Target`` here."""
-    global _pose_resolver
-    _pose_resolver = resolver
-
-
-def named_pose_target(name: str, finger: str | None = None) -> Target:
-    """The target of finger ``finger`` in the named pose, from the registered pose library."""
-    if _pose_resolver is None:
-        raise PlanError(
-            f"no pose library is registered, so the named pose {name!r} is unknown; give the "
-            "pose as a flexion or a Joint-2 angle (utrf plan --flexion F / --theta2-deg DEG)"
-        )
-    return _pose_resolver(name, finger)
+    poses = library if library is not None else PoseLibrary.load()
+    try:
+        pose = poses[name]
+    except KeyError as exc:
+        raise PlanError(exc.args[0]) from None
+    if finger not in pose.targets:
+        raise PlanError(f"pose {name!r} has no finger {finger!r}; fingers are {list(pose.targets)}")
+    t = pose.targets[finger]
+    return Target(t.kind, t.value)
 
 
 # -- plans --------------------------------------------------------------------------------------
