@@ -1,9 +1,9 @@
 """The emulated board in a child process (``utrf emulate``), driven through its stdin.
 
 In one process, a real-time board's thread shares the interpreter with its client (a
-``Link``, a ``Hand``, a test): each waits for the other now and then, and the board has less
-headroom. ``BoardProcess`` runs ``utrf emulate --json`` in a process of its own, so the
-client has the interpreter to itself and a crash of either leaves the other standing. Faults
+``Link``, a ``Hand``, a test): they take turns with it. ``BoardProcess`` runs
+``utrf emulate --json`` in a process of its own, so each has an interpreter and a crash or a
+stall of either leaves the other standing. Faults
 go in as ``utrf emulate``'s stdin commands (``utrf emulate --help`` lists them; angles there
 are in degrees); ``state()`` returns the hand's true state.
 
