@@ -68,8 +68,8 @@ void tick_start();
 // only; UART and ADC interrupts keep running). Not nestable; loop() context only.
 void tick_lock();
 void tick_unlock();
-// Cycle-exact timing of the tick: stamp() at its start, cycles_since() at its end. (The AVR
-// combines the tick timer, 4 us per count, with timer 1's 16 MHz count modulo 800.)
+// Cycle-exact timing (the AVR combines the tick timer, 4 us per count, with timer 1's 16 MHz
+// count modulo 800). The AVR layer times each tick itself and reports it to app::tick_done().
 struct Stamp {
     uint8_t coarse;
     uint16_t fine;

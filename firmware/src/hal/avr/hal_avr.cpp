@@ -216,8 +216,12 @@ void run_due_ticks() {
         g_tick_deferred = 0;
         g_tick_running = 1;
         UCSR0B &= (uint8_t)~_BV(UDRIE0);
+        const Stamp start = stamp();
         sei();
         app::tick();
+        const uint32_t cycles = cycles_since(start);
+        const bool overran = g_tick_deferred != 0;
+        app::tick_done(cycles, overran);
         cli();
         if (utrf_tx_head != utrf_tx_tail) UCSR0B |= _BV(UDRIE0);
         g_tick_running = 0;
