@@ -35,6 +35,19 @@ README_BEGIN = "<!-- BEGIN GENERATED: message tables (python protocol/generate.p
 README_END = "<!-- END GENERATED: message tables -->"
 
 
+# Object-like macros of <avr/io.h> (ATmega2560) and <Arduino.h> that an UPPER_CASE name could
+# meet; a macro would replace the name wherever both are included. (A test checks this list
+# against the real headers.)
+AVR_ARDUINO_MACROS = frozenset(
+    {f"{reg}{port}" for reg in ("PIN", "PORT", "DDR") for port in "ABCDEFGHJKL"}
+    | {"HIGH", "LOW", "INPUT", "OUTPUT", "INPUT_PULLUP", "LSBFIRST", "MSBFIRST"}
+    | {"CHANGE", "FALLING", "RISING", "DEFAULT", "EXTERNAL", "INTERNAL", "INTERNAL1V1"}
+    | {"INTERNAL2V56", "PI", "HALF_PI", "TWO_PI", "DEG_TO_RAD", "RAD_TO_DEG", "EULER"}
+    | {"SERIAL", "DISPLAY", "DEC", "HEX", "OCT", "BIN", "NOT_A_PIN", "NOT_A_PORT"}
+    | {"NOT_AN_INTERRUPT", "NOT_ON_TIMER", "TIMER0A", "TIMER1A", "SPCR", "SREG", "RAMEND"}
+)
+
+
 class SpecError(ValueError):
     """The spec is inconsistent; the message names the offending entry."""
 
@@ -264,6 +277,10 @@ def _load_enum(entry: dict[str, Any], is_flags: bool) -> EnumDef:
         value = item.get("bit" if is_flags else "value")
         if not isinstance(vname, str) or not _UPPER_RE.match(vname):
             raise SpecError(f"{kind} {name}: member name {vname!r} must be UPPER_CASE")
+        if vname in AVR_ARDUINO_MACROS:
+            raise SpecError(
+                f"{kind} {name}.{vname}: a macro of <avr/io.h> or <Arduino.h> has this name"
+            )
         if not isinstance(value, int) or isinstance(value, bool):
             key = "bit" if is_flags else "value"
             raise SpecError(f"{kind} {name}.{vname}: needs an integer {key}")
@@ -600,6 +617,16 @@ def render_header(spec: Spec) -> str:
     w("#include <stdint.h>")
     w("#include <string.h>")
     w("")
+    clashes = [m.upper for m in spec.messages if m.upper in AVR_ARDUINO_MACROS]
+    if clashes:
+        w(f"// Macros of <avr/io.h> or <Arduino.h> with the name of a MsgId: {', '.join(clashes)}.")
+        w("// They are suspended within this file so that it compiles everywhere; in a file that")
+        kids = ", ".join(camel(c.lower()) + "::kId" for c in clashes)
+        w(f"// includes those headers, write {kids} rather than MsgId::{clashes[0]}.")
+        for c in clashes:
+            w(f'#pragma push_macro("{c}")')
+            w(f"#undef {c}")
+    w("")
     w("namespace utrf {")
     w("namespace proto {")
     w("")
@@ -828,6 +855,10 @@ def render_header(spec: Spec) -> str:
     w("}  // namespace proto")
     w("}  // namespace utrf")
     w("")
+    for c in clashes:
+        w(f'#pragma pop_macro("{c}")')
+    if clashes:
+        w("")
     w("#endif  // UTRF_PROTOCOL_MESSAGES_H")
     return "\n".join(out) + "\n"
 
@@ -1060,7 +1091,7 @@ def render_readme_tables(spec: Spec) -> str:
         reply = spec.reply_of(m)
         arrow = "host → board" if m.is_request else "board → host"
         w(
-            f"| `0x{m.id:02X}` | [`{m.name}`](#{m.name.replace('_', '-')}) | {arrow} | {m.size} | "
+            f"| `0x{m.id:02X}` | [`{m.name}`](#{m.name}) | {arrow} | {m.size} | "
             + (
                 f"`{reply.name}` | {'yes' if m.idempotent else 'no'} | {spec.timeout_of(m):g} s |"
                 if reply is not None

@@ -9,50 +9,47 @@ static_assert(kMaxBodyBytes == proto::kMaxPayload, "framing and the spec disagre
 static_assert(kMaxEncodedBytes < 254, "one COBS block must hold a whole frame");
 
 uint16_t crc16_ccitt(const uint8_t* data, uint16_t len, uint16_t crc) {
-  // Byte-wise form of the bitwise MSB-first division by 0x1021 (same results): the top
-  // byte's contribution folded in with shifts, no table. About 30 cycles a byte on the AVR
-  // against ~100 for eight single-bit steps; a 70-byte state frame at 500 Hz makes it count.
+  // A byte at a time with no table (no flash or SRAM for 256 entries). For the polynomial
+  // x^16 + x^12 + x^5 + 1, the table entry of v = (crc >> 8) ^ byte is v * x^16 mod P; since
+  // x^16 = x^12 + x^5 + 1 (mod P), folding v's high nibble back in gives, with
+  // w = v ^ (v >> 4): entry = (w << 12) ^ (w << 5) ^ w (16 bits).
+  // The two CRC bytes are kept apart: an 8-bit AVR has no 16-bit shift by 5, but (w << 5)
+  // is (w >> 3) in the high byte and (w << 5) in the low one.
+  uint8_t hi = static_cast<uint8_t>(crc >> 8);
+  uint8_t lo = static_cast<uint8_t>(crc);
   for (uint16_t i = 0; i < len; ++i) {
-    uint8_t x = static_cast<uint8_t>((crc >> 8) ^ data[i]);
-    x ^= static_cast<uint8_t>(x >> 4);
-    // x * 32 rather than x << 5: avr-gcc makes the shift a 5-step loop, the product swaps.
-    crc = static_cast<uint16_t>((crc << 8) ^ (static_cast<uint16_t>(x) << 12) ^
-                                (static_cast<uint16_t>(x) * 32u) ^ x);
+    uint8_t w = static_cast<uint8_t>(hi ^ data[i]);
+    w = static_cast<uint8_t>(w ^ (w >> 4));
+    hi = static_cast<uint8_t>(lo ^ static_cast<uint8_t>(w << 4) ^ static_cast<uint8_t>(w >> 3));
+    lo = static_cast<uint8_t>(static_cast<uint8_t>(w << 5) ^ w);
   }
-  return crc;
+  return static_cast<uint16_t>((static_cast<uint16_t>(hi) << 8) | lo);
 }
 
 uint8_t encode_frame(uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len, uint8_t* out) {
   if (len > kMaxBodyBytes) return 0;
-  const uint8_t header[kHeaderBytes] = {seq, msg_id};
-  uint16_t crc = crc16_ccitt(header, kHeaderBytes);
-  crc = crc16_ccitt(body, len, crc);
-  const uint8_t raw_len = static_cast<uint8_t>(len + kHeaderBytes + kCrcBytes);
-  // COBS, streamed over header | body | crc without assembling them first. A frame is at most
-  // 68 bytes, below the 254-byte block limit, so a block ends only at a zero or at the end.
-  uint8_t code_at = 0;  // where the current block's code byte goes
-  uint8_t n = 1;
-  for (uint8_t i = 0; i < raw_len; ++i) {
-    uint8_t b;
-    if (i < kHeaderBytes) {
-      b = header[i];
-    } else if (i < kHeaderBytes + len) {
-      b = body[i - kHeaderBytes];
-    } else if (i == kHeaderBytes + len) {
-      b = static_cast<uint8_t>(crc);
-    } else {
-      b = static_cast<uint8_t>(crc >> 8);
-    }
-    if (b == 0) {
-      out[code_at] = static_cast<uint8_t>(n - code_at);
-      code_at = n++;
-    } else {
-      out[n++] = b;
+  // Lay the frame out one byte in, then COBS-encode it in place: a frame (at most 68 bytes)
+  // is shorter than one 254-byte block, so every 0x00 simply becomes the code byte of the
+  // block after it, and out[0] the code of the first block.
+  uint8_t* raw = out + 1;
+  raw[0] = seq;
+  raw[1] = msg_id;
+  for (uint8_t i = 0; i < len; ++i) raw[kHeaderBytes + i] = body[i];
+  const uint8_t payload = static_cast<uint8_t>(kHeaderBytes + len);
+  const uint16_t crc = crc16_ccitt(raw, payload);
+  raw[payload] = static_cast<uint8_t>(crc);
+  raw[payload + 1] = static_cast<uint8_t>(crc >> 8);
+  const uint8_t end = static_cast<uint8_t>(payload + kCrcBytes + 1);  // index after the data
+  uint8_t code_at = 0;
+  for (uint8_t i = 1; i < end; ++i) {
+    if (out[i] == 0) {
+      out[code_at] = static_cast<uint8_t>(i - code_at);
+      code_at = i;
     }
   }
-  out[code_at] = static_cast<uint8_t>(n - code_at);
-  out[n++] = 0x00;
-  return n;
+  out[code_at] = static_cast<uint8_t>(end - code_at);
+  out[end] = 0x00;
+  return static_cast<uint8_t>(end + 1);
 }
 
 FrameDecoder::FrameDecoder() : len_(0), body_len_(0), discarding_(false) {}
@@ -63,7 +60,7 @@ void FrameDecoder::reset() {
   discarding_ = false;
 }
 
-RxEvent FrameDecoder::feed(uint8_t byte) {
+RxEvent FrameDecoder::feed_rest(uint8_t byte) {
   if (byte == 0x00) {
     if (discarding_) {
       discarding_ = false;

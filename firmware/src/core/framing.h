@@ -45,7 +45,14 @@ enum class RxEvent : uint8_t {
 class FrameDecoder {
  public:
   FrameDecoder();
-  RxEvent feed(uint8_t byte);
+  RxEvent feed(uint8_t byte) {
+    // The common case inline: one more byte of a frame that still fits.
+    if (byte != 0 && len_ < kMaxEncodedBytes && !discarding_) {
+      buf_[len_++] = byte;
+      return RxEvent::NONE;
+    }
+    return feed_rest(byte);
+  }
   // Forget any partial frame (e.g. after the UART reported an overrun).
   void reset();
 
@@ -57,6 +64,7 @@ class FrameDecoder {
   uint8_t body_len() const { return body_len_; }
 
  private:
+  RxEvent feed_rest(uint8_t byte);
   RxEvent finish();
 
   uint8_t buf_[kMaxEncodedBytes];

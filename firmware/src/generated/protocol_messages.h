@@ -12,12 +12,18 @@
 #include <stdint.h>
 #include <string.h>
 
+// Macros of <avr/io.h> or <Arduino.h> with the name of a MsgId: PING.
+// They are suspended within this file so that it compiles everywhere; in a file that
+// includes those headers, write Ping::kId rather than MsgId::PING.
+#pragma push_macro("PING")
+#undef PING
+
 namespace utrf {
 namespace proto {
 
 static const uint16_t kProtocolVersion = 1;
 // CRC-32 of the canonical spec (doc texts excluded); compared at the handshake.
-static const uint32_t kSchemaHash = 0x11C32FC2UL;
+static const uint32_t kSchemaHash = 0x1556907BUL;
 static const uint8_t kMaxPayload = 64;  // body bytes
 static const uint8_t kFingerCount = 5;
 static const uint32_t kDefaultBaud = 1000000UL;
@@ -63,7 +69,7 @@ enum class SafeAction : uint8_t {
 // Why the board last started (from MCUSR; the highest-priority cause is reported).
 enum class ResetCause : uint8_t {
   POWER_ON = 0,  // power-on reset
-  EXTERNAL = 1,  // reset pin (the USB-serial auto-reset, or the button)
+  RESET_PIN = 1,  // reset pin (the USB-serial auto-reset, or the button)
   BROWN_OUT = 2,  // supply voltage dropped below the brown-out level
   WATCHDOG = 3,  // the watchdog expired: the firmware stopped running its loop
   JTAG = 4,  // JTAG reset
@@ -87,9 +93,9 @@ enum class ConfigSource : uint8_t {
 
 // Why a request was refused (nack). A refused request changes nothing.
 enum class ErrorCode : uint8_t {
-  BAD_CRC = 1,  // the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only
-  UNKNOWN_ID = 2,  // no request has this message id
-  BAD_LENGTH = 3,  // the body length does not match the message
+  BAD_CRC = 1,  // the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only; detail = 0
+  UNKNOWN_ID = 2,  // no request has this message id; detail = 0
+  BAD_LENGTH = 3,  // the body length does not match the message; detail = the length it should have
   OUT_OF_RANGE = 4,  // a field is outside its range; detail = field index, or 0x80 | finger for a per-finger limit
   FAULTED = 5,  // a finger the request needs has a latched fault; detail = finger
   BUSY = 6,  // the board cannot do it now (EEPROM write under way, or the finger must be idle); detail = finger or 0xFF
@@ -2083,5 +2089,7 @@ inline void unflatten(const double* in, Nack& m) {
 
 }  // namespace proto
 }  // namespace utrf
+
+#pragma pop_macro("PING")
 
 #endif  // UTRF_PROTOCOL_MESSAGES_H

@@ -6,3 +6,27 @@
 - :mod:`utrf.protocol.link`: :class:`Link`, requests and replies, retries, telemetry;
 - :mod:`utrf.protocol.errors`: the exceptions.
 """
+
+from utrf.protocol.errors import (
+    BoardResetError,
+    DecodeError,
+    DisconnectedError,
+    NackError,
+    ProtocolError,
+    ReplyTimeout,
+    SchemaMismatchError,
+)
+from utrf.protocol.link import Link, LinkStats, Telemetry
+
+__all__ = [
+    "BoardResetError",
+    "DecodeError",
+    "DisconnectedError",
+    "Link",
+    "LinkStats",
+    "NackError",
+    "ProtocolError",
+    "ReplyTimeout",
+    "SchemaMismatchError",
+    "Telemetry",
+]

@@ -16,7 +16,7 @@ from utrf.protocol.codec import Direction, Field, Message, Request
 
 PROTOCOL_VERSION = 1
 #: CRC-32 of the canonical spec (doc texts excluded), compared at the handshake.
-SCHEMA_HASH = 0x11C32FC2
+SCHEMA_HASH = 0x1556907B
 MAX_PAYLOAD = 64
 FINGER_COUNT = 5
 DEFAULT_BAUD = 1000000
@@ -78,7 +78,7 @@ class ResetCause(IntEnum):
     #: power-on reset
     POWER_ON = 0
     #: reset pin (the USB-serial auto-reset, or the button)
-    EXTERNAL = 1
+    RESET_PIN = 1
     #: supply voltage dropped below the brown-out level
     BROWN_OUT = 2
     #: the watchdog expired: the firmware stopped running its loop
@@ -116,11 +116,12 @@ class ConfigSource(IntEnum):
 class ErrorCode(IntEnum):
     """Why a request was refused (nack). A refused request changes nothing."""
 
-    #: the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only
+    #: the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only; detail =
+    #: 0
     BAD_CRC = 1
-    #: no request has this message id
+    #: no request has this message id; detail = 0
     UNKNOWN_ID = 2
-    #: the body length does not match the message
+    #: the body length does not match the message; detail = the length it should have
     BAD_LENGTH = 3
     #: a field is outside its range; detail = field index, or 0x80 | finger for a per-finger limit
     OUT_OF_RANGE = 4

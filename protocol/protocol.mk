@@ -1,0 +1,26 @@
+# Protocol: the host build of the firmware's framing and generated codec, for the pytest suite.
+# Included by the top-level Makefile.
+
+PROTO_HOST_LIB  := $(BUILD)/host/libutrf_proto.so
+PROTO_LIB_SRCS  := firmware/src/core/framing.cpp tests/protocol/cpp/shim.cpp
+PROTO_LIB_HDRS  := firmware/src/core/framing.h firmware/src/generated/protocol_messages.h
+PROTO_HOST_CXX  ?= g++
+PROTO_HOST_FLAGS := -std=gnu++11 -O2 -g -Wall -Wextra -Werror -fPIC -shared
+
+$(PROTO_HOST_LIB): $(PROTO_LIB_SRCS) $(PROTO_LIB_HDRS) protocol/protocol.mk
+	@mkdir -p $(dir $@)
+	$(PROTO_HOST_CXX) $(PROTO_HOST_FLAGS) -o $@ $(PROTO_LIB_SRCS)
+
+TEST_DEPS += $(PROTO_HOST_LIB)
+BENCH_TARGETS += protocol-bench
+
+.PHONY: generate protocol-generate protocol-bench
+generate: protocol-generate
+
+# Regenerate the bindings, the README tables and the golden vectors from protocol/spec.toml.
+protocol-generate: setup
+	$(PY) protocol/generate.py
+	$(PY) protocol/make_vectors.py
+
+protocol-bench: setup $(PROTO_HOST_LIB)
+	$(PY) tools/bench_protocol.py
