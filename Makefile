@@ -37,8 +37,8 @@ demo: setup $(DEMO_DEPS)
 bench: setup $(BENCH_TARGETS)
 
 lint: setup
-	$(PY) -m ruff check host tests hil tools protocol
-	$(PY) -m ruff format --check host tests hil tools protocol
+	$(PY) -m ruff check $(wildcard host tests hil tools protocol)
+	$(PY) -m ruff format --check $(wildcard host tests hil tools protocol)
 
 clean:
 	rm -rf $(BUILD)

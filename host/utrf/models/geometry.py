@@ -66,7 +66,7 @@ class FingerGeometry:
     """One UTRF finger. Lengths in m, angles in rad, modulus in Pa, masses in kg."""
 
     link_lengths_m: tuple[float, float, float] = (0.070, 0.055, 0.045)
-    guide_radii_m: tuple[float, float, float] = (0.010, 0.008, 0.006)
+    guide_radii_m: tuple[float, float, float] = (0.0100, 0.0095, 0.0090)
     tendon_diameter_m: float = 0.001
     tendon_youngs_modulus_pa: float = 200e9
     actuating_tendon_length_m: float = 0.100

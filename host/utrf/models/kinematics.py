@@ -5,6 +5,10 @@ The cumulative link angle is φ_k = Σ_{i≤k} θ_i = q · c_k with c_k = Σ_{i�
 x = Σ L_k cos(φ_k), y = Σ L_k sin(φ_k) (Eq. 1, 3) and the Jacobian dx/dq = −Σ L_k c_k sin φ_k,
 dy/dq = Σ L_k c_k cos φ_k. (Eq. 4 as printed writes L_i / R_i where the cumulative c_k belongs;
 see docs/models.md.) Every function takes scalar or array q (m) and broadcasts.
+
+Under load the tendons stretch and the angles leave the coupling; ``chain_positions`` gives
+the joints and tip for any relative angles. ``q_for_tip`` is the inverse for a tip point: the
+q within the tendon's range whose tip comes nearest.
 """
 
 from __future__ import annotations
@@ -82,4 +86,85 @@ def q_from_flexion(geom: FingerGeometry, flexion: ArrayLike) -> np.ndarray:
 
 
 def flexion_from_q(geom: FingerGeometry, q: ArrayLike) -> np.ndarray:
+    """Normalised flexion for a tendon displacement q (m): the inverse of ``q_from_flexion``."""
     return np.asarray(q, dtype=float) / geom.q_range_m[1]
+
+
+def theta2_from_q(geom: FingerGeometry, q: ArrayLike) -> np.ndarray:
+    """Joint-2 angle (rad) for a tendon displacement q (m): θ2 = q / R2."""
+    return np.asarray(q, dtype=float) / geom.guide_radii_m[1]
+
+
+def chain_positions(geom: FingerGeometry, theta: ArrayLike) -> np.ndarray:
+    """Joints 1-3 and the tip (m) for any relative angles θ (..., 3): shape (..., 4, 2)."""
+    th = np.asarray(theta, dtype=float)
+    if th.shape[-1:] != (3,):
+        raise ValueError(f"theta must have 3 angles on its last axis, got shape {th.shape}")
+    phi = np.cumsum(th, axis=-1)
+    pts = np.zeros((*th.shape[:-1], 4, 2))
+    pts[..., 1:, 0] = np.cumsum(geom.L * np.cos(phi), axis=-1)
+    pts[..., 1:, 1] = np.cumsum(geom.L * np.sin(phi), axis=-1)
+    return pts
+
+
+@dataclass(frozen=True)
+class NearestTip:
+    """The reachable tip point nearest a requested one (arrays over the requested points)."""
+
+    q: np.ndarray  # m
+    tip: np.ndarray  # (..., 2) m
+    distance_m: np.ndarray  # from the requested point
+
+
+_GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
+
+
+def q_for_tip(
+    geom: FingerGeometry,
+    point: ArrayLike,
+    q_range: tuple[float, float] | None = None,
+    samples: int = 4097,
+) -> NearestTip:
+    """The q (m) within ``q_range`` (default: the tendon's) whose tip is nearest ``point`` (..., 2).
+
+    The reachable tip set is one curve; a dense scan picks the best sample and a golden-section
+    search within its neighbours refines it (to about 1e-9 m of tip). Vectorised over points.
+    """
+    p = np.asarray(point, dtype=float)
+    if p.shape[-1:] != (2,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"point must be finite (x, y) in m on its last axis, got shape {p.shape}")
+    lo, hi = q_range if q_range is not None else geom.q_range_m
+    if not lo < hi:
+        raise ValueError(f"q_range must be (min, max) with min < max, got {(lo, hi)}")
+    grid = np.linspace(lo, hi, samples)
+    pts = p.reshape(-1, 2)
+    tips = tip_position(geom, grid)  # (samples, 2)
+    d2 = ((pts[:, None, :] - tips[None, :, :]) ** 2).sum(-1)
+    best = d2.argmin(axis=1)
+    step = grid[1] - grid[0]
+    a = np.maximum(grid[best] - step, lo)
+    b = np.minimum(grid[best] + step, hi)
+
+    def dist2(q: np.ndarray) -> np.ndarray:
+        return ((tip_position(geom, q) - pts) ** 2).sum(-1)
+
+    c = b - _GOLDEN * (b - a)
+    d = a + _GOLDEN * (b - a)
+    fc, fd = dist2(c), dist2(d)
+    for _ in range(80):
+        left = fc < fd  # the minimum lies in [a, d]: drop (d, b]; else drop [a, c)
+        a, b = np.where(left, a, c), np.where(left, d, b)
+        new = np.where(left, b - _GOLDEN * (b - a), a + _GOLDEN * (b - a))
+        f_new = dist2(new)
+        c, d = np.where(left, new, d), np.where(left, c, new)
+        fc, fd = np.where(left, f_new, fd), np.where(left, fc, f_new)
+    q = (a + b) / 2
+    # The scan's best sample may itself be nearer (at a range end): keep the better.
+    q = np.where(dist2(q) <= d2[np.arange(len(pts)), best], q, grid[best])
+    tip = tip_position(geom, q)
+    shape = p.shape[:-1]
+    return NearestTip(
+        q=q.reshape(shape),
+        tip=tip.reshape((*shape, 2)),
+        distance_m=np.sqrt(dist2(q)).reshape(shape),
+    )
