@@ -264,7 +264,7 @@ def test_cross_field_checks(sim: Sim) -> None:
     )
     nack = sim.nack(m.SetGains.ID, gains.encode())
     assert (nack.code, nack.detail) == (m.ErrorCode.OUT_OF_RANGE, 8)  # pretension >= max_duty
-    for lo, hi, field in ((-2.5, 1.0, 1), (-1.0, 2.5, 2), (1.0, 0.5, 2)):  # geometry: +-1.96
+    for lo, hi, field in ((-2.5, 1.0, 1), (-1.0, 2.5, 2), (1.0, 0.5, 2)):  # geometry: +-1.65
         limits = m.SetLimits(
             finger=0,
             theta2_min=lo,

@@ -115,8 +115,8 @@ def test_anti_windup_recovery_beats_a_wound_integrator(sim: Sim) -> None:
     sim.ok(
         m.SetLimits(
             finger=0,
-            theta2_min=-1.9,
-            theta2_max=1.9,
+            theta2_min=-1.5,
+            theta2_max=1.5,
             limit_margin=0.1,
             stall_error=3.0,
             stall_motion=0.02,
