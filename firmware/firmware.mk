@@ -161,3 +161,6 @@ $(FW_BENCH): firmware/bench/tick_bench.cpp $(FW_SRC)/core/framing.cpp
 TEST_DEPS     += firmware firmware-host firmware-check
 DEMO_DEPS     += firmware
 BENCH_TARGETS += bench-firmware
+
+bench-firmware: firmware firmware-host firmware-check
+	$(PY) tools/bench_firmware.py --update docs/benchmarks.md

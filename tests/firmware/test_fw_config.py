@@ -6,6 +6,7 @@ import struct
 
 import pytest
 from fwsim import Sim, m
+
 from utrf.protocol.framing import crc16_ccitt
 
 MAGIC = 0x46525455

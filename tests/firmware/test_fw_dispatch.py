@@ -12,6 +12,7 @@ import struct
 
 import pytest
 from fwsim import Sim, m, raw_body
+
 from utrf.protocol.codec import WIRE_TYPES
 from utrf.protocol.framing import encode_frame
 

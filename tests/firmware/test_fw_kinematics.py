@@ -9,6 +9,7 @@ import sys
 import numpy as np
 import pytest
 from fwsim import BU, REPO
+
 from utrf import firmware_table
 from utrf.models import kinematics
 from utrf.models.geometry import HandGeometry

@@ -103,8 +103,7 @@ void watchdog_feed();
 // hung, and the watchdog is about to reset the board. Read back by reset_cause().
 void watchdog_mark_hang();
 void watchdog_clear_hang_mark();
-// Why the board last started, as protocol ResetCause values (POWER_ON 0, EXTERNAL 1,
-// BROWN_OUT 2, WATCHDOG 3, JTAG 4, UNKNOWN 5).
+// Why the board last started, as a proto::ResetCause value.
 uint8_t reset_cause();
 
 }  // namespace hal
