@@ -136,8 +136,31 @@ $(FW_BUILD)/host/obj/%.o: %.cpp
 $(FW_HOST_LIB): $(FW_HOST_OBJS)
 	$(HOST_CXX) -shared -o $@ $^ -lm
 
--include $(FW_OWN_OBJS:.o=.d) $(FW_HOST_OBJS:.o=.d)
+# ---- checks that need the AVR: the core's arithmetic on the chip, the simavr harness ----------
+FW_CHECK_ELF := $(FW_BUILD)/check/core_check.elf
+FW_CHECK_SRCS := firmware/test/avr/core_check.cpp $(FW_SRC)/core/fixed.cpp \
+                 $(FW_SRC)/core/pid.cpp $(FW_SRC)/core/encoder.cpp
+FW_BENCH := $(FW_BUILD)/bench/tick_bench
+SIMAVR_INC ?= /usr/include/simavr
 
-TEST_DEPS     += firmware firmware-host
+firmware-check: $(FW_CHECK_ELF) $(FW_BENCH)
+
+$(FW_CHECK_ELF): $(FW_CHECK_SRCS)
+	@mkdir -p $(@D)
+	$(AVR_CXX) $(FW_MCU) $(FW_OPT) $(FW_CXXSTD) $(FW_WARN) -I$(FW_SRC) -Ifirmware/test -MMD -MP \
+	  -Wl,--gc-sections -o $@ $(FW_CHECK_SRCS) -lm
+
+$(FW_BENCH): firmware/bench/tick_bench.cpp $(FW_SRC)/core/framing.cpp
+	@mkdir -p $(@D)
+	$(HOST_CXX) -std=gnu++11 -O2 $(FW_WARN) -I$(FW_SRC) -I$(SIMAVR_INC) -MMD -MP -o $@ \
+	  firmware/bench/tick_bench.cpp $(FW_SRC)/core/framing.cpp -lsimavr -lelf -lm
+
+-include $(FW_OWN_OBJS:.o=.d) $(FW_HOST_OBJS:.o=.d) $(FW_CHECK_ELF:.elf=.d) $(FW_BENCH).d
+
+.PHONY: firmware-check
+TEST_DEPS     += firmware firmware-host firmware-check
 DEMO_DEPS     += firmware
 BENCH_TARGETS += bench-firmware
+
+bench-firmware: firmware firmware-host firmware-check
+	$(PY) tools/bench_firmware.py --update docs/benchmarks.md

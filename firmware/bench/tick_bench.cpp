@@ -2,12 +2,14 @@
 // control tick under protocol traffic, as the firmware itself reports it (get_stats:
 // tick_worst, tick_mean, overruns), plus the telemetry it streams.
 //
-//   tick_bench <elf> <scenario> <seconds>     prints one JSON object
+//   tick_bench <elf> <scenario> <seconds> [<tick entry> <tick return>]   prints one JSON object
 //
 // Scenarios (all five fingers in POSITION, encoders moving, 500 Hz telemetry):
 //   idle      no requests beyond heartbeats
 //   typical   set_targets at 200 Hz
 //   stress    set_targets back to back: the receive line saturated at 1 Mbaud
+// and `pins`: the driver pins and PWM timers through a sequence of modes, checked against
+// board_pins.h (the table the emulator's harness reads too).
 //
 // Frames are built and parsed with the firmware's own framing and generated messages, so the
 // bench speaks exactly the protocol the firmware does.
@@ -24,6 +26,7 @@
 #include <simavr/sim_avr.h>
 #include <simavr/sim_elf.h>
 
+#include "board_pins.h"
 #include "core/framing.h"
 #include "generated/protocol_messages.h"
 
@@ -61,7 +64,11 @@ struct Bench {
 
 Bench g;
 
+bool g_pins = false;         // the pins scenario holds the encoders still
+int g_broken_encoder = -1;   // ... and may unplug one (0 V)
+
 double angle(int finger, double t) {
+    if (g_pins) return 0.0;
     // Each finger sweeps +-0.4 rad at 1.3 Hz, phase-shifted: the PIDs always have work.
     return 0.4 * sin(2 * M_PI * 1.3 * t + finger);
 }
@@ -78,7 +85,8 @@ void adc_trigger(avr_irq_t*, uint32_t value, void*) {
     // AS5600 analog: 10 % of 5 V at 0, 90 % at one turn; straight finger mounted mid-band.
     double turn = fmod((angle(ch, t) + M_PI) / (2 * M_PI), 1.0);
     if (turn < 0) turn += 1.0;
-    const uint32_t mv = (uint32_t)lround(5000.0 * (0.1 + 0.8 * turn));
+    uint32_t mv = (uint32_t)lround(5000.0 * (0.1 + 0.8 * turn));
+    if (ch == g_broken_encoder) mv = 0;
     avr_raise_irq(avr_io_getirq(g.avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + ch), mv);
 }
 
@@ -153,6 +161,100 @@ proto::SetTargets targets(double t) {
     return m;
 }
 
+// ---- the pins scenario ----------------------------------------------------------------------
+// ATmega2560 data-space addresses (the datasheet's register summary).
+uint16_t port_addr(char port) {
+    switch (port) {
+        case 'A': return 0x22;
+        case 'B': return 0x25;
+        case 'C': return 0x28;
+        case 'D': return 0x2B;
+        case 'E': return 0x2E;
+        case 'F': return 0x31;
+        case 'G': return 0x34;
+        case 'H': return 0x102;
+        case 'J': return 0x105;
+        case 'K': return 0x108;
+        default: return 0x10B;
+    }
+}
+uint16_t tccra_addr(int timer) {
+    return timer == 1 ? 0x80 : timer == 3 ? 0x90 : timer == 4 ? 0xA0 : 0x120;
+}
+uint8_t rd(uint16_t a) { return g.avr->data[a]; }
+uint16_t rd16(uint16_t a) { return (uint16_t)(rd(a) | (rd((uint16_t)(a + 1)) << 8)); }
+int pin(const utrf_pin_t& p) { return (rd(port_addr(p.port)) >> p.bit) & 1; }
+int ddr(const utrf_pin_t& p) { return (rd((uint16_t)(port_addr(p.port) - 1)) >> p.bit) & 1; }
+
+void print_motor(const utrf_motor_pins_t& m) {
+    const uint16_t a = tccra_addr(m.pwm.timer);
+    const int ch = m.pwm.channel - 'A';
+    const uint8_t tccra = rd(a), tccrb = rd((uint16_t)(a + 1));
+    const int wgm = (tccra & 3) | ((tccrb >> 1) & 0x0C);
+    printf("{\"com\": %d, \"ocr\": %u, \"icr\": %u, \"wgm\": %d, \"cs\": %d, \"in1\": %d, "
+           "\"in2\": %d, \"pwm_pin\": %d, \"outputs\": %d}",
+           (tccra >> (6 - 2 * ch)) & 3, rd16((uint16_t)(a + 8 + 2 * ch)), rd16((uint16_t)(a + 6)),
+           wgm, tccrb & 7, pin(m.in1), pin(m.in2), pin(m.pwm.pin),
+           ddr(m.in1) && ddr(m.in2) && ddr(m.pwm.pin));
+}
+
+void print_pins(const char* label) {
+    printf("%s\"%s\": [", strcmp(label, "boot") == 0 ? "" : ", ", label);
+    for (int f = 0; f < UTRF_FINGER_COUNT; ++f) {
+        const utrf_finger_pins_t& p = UTRF_FINGER_PINS[f];
+        printf("%s{\"stby\": %d, \"stby_out\": %d, \"a\": ", f ? ", " : "", pin(p.stby),
+               ddr(p.stby));
+        print_motor(p.a);
+        printf(", \"b\": ");
+        print_motor(p.b);
+        printf("}");
+    }
+    printf("]");
+}
+
+proto::SetMode all_modes(uint8_t mode, int16_t duty_milli) {
+    proto::SetMode m;
+    m.mask = 0x1F;
+    for (int f = 0; f < 5; ++f) {
+        m.mode[f] = mode;
+        m.duty[f] = duty_milli;
+        m.effort[f] = 0;
+    }
+    return m;
+}
+
+int run_pins() {
+    g_pins = true;
+    run_until(0.05);
+    printf("{");
+    print_pins("boot");
+    double t = 0.05;
+    send(proto::Heartbeat());
+    // 80 ms a phase: the default slew limit (20 /s) takes the duty there within 50 ms.
+    send(all_modes((uint8_t)proto::ControlMode::DUTY, 500));
+    run_until(t += 0.08);
+    print_pins("duty_plus");
+    send(all_modes((uint8_t)proto::ControlMode::DUTY, -500));
+    run_until(t += 0.08);
+    print_pins("duty_minus");
+    send(all_modes((uint8_t)proto::ControlMode::BRAKE, 0));
+    run_until(t += 0.02);
+    print_pins("brake");
+    send(all_modes((uint8_t)proto::ControlMode::COAST, 0));
+    run_until(t += 0.02);
+    print_pins("coast");
+    send(all_modes((uint8_t)proto::ControlMode::DUTY, 500));
+    run_until(t += 0.08);
+    g_broken_encoder = 2;  // finger 2's encoder unplugged: its driver goes off
+    run_until(t += 0.003);
+    print_pins("encoder_fault");
+    const uint8_t tccr2a = rd(0xB0), tccr2b = rd(0xB1), ocr2a = rd(0xB3), timsk2 = rd(0x70);
+    printf(", \"timer2\": {\"tccr2a\": %u, \"tccr2b\": %u, \"ocr2a\": %u, \"timsk2\": %u}",
+           tccr2a, tccr2b, ocr2a, timsk2);
+    printf(", \"ubrr0\": %u, \"ucsr0a\": %u}\n", rd16(0xC4), rd(0xC0));
+    return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -168,7 +270,8 @@ int main(int argc, char** argv) {
     }
     const std::string scenario = argv[2];
     const double seconds = atof(argv[3]);
-    if (scenario != "idle" && scenario != "typical" && scenario != "stress") {
+    if (scenario != "idle" && scenario != "typical" && scenario != "stress" &&
+        scenario != "pins") {
         fprintf(stderr, "tick_bench: unknown scenario %s\n", scenario.c_str());
         return 2;
     }
@@ -198,6 +301,8 @@ int main(int argc, char** argv) {
                             uart_xon, nullptr);
     avr_irq_register_notify(avr_io_getirq(g.avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF),
                             uart_xoff, nullptr);
+
+    if (scenario == "pins") return run_pins();
 
     // Boot, then every finger into closed loop and the stream on.
     run_until(0.1);

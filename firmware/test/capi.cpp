@@ -10,6 +10,7 @@
 #include "core/encoder.h"
 #include "core/kinematics.h"
 #include "core/pid.h"
+#include "core_check_seq.h"
 #include "hal_host.h"
 
 using namespace utrf;
@@ -33,6 +34,7 @@ void fw_tick(uint32_t n) {
         ++state().ms;
         if (state().tick_locked) ++state().lock_errors;  // the tick cannot run while locked
         app::tick();
+        app::tick_done(state().tick_cycles, state().period_elapsed);
     }
 }
 
@@ -262,6 +264,7 @@ int16_t fw_bu(double rad) { return fx::bu((float)rad); }
 uint16_t fw_encoder_turn_from_rad(double rad) { return encoder::turn_from_rad((float)rad); }
 
 uint16_t fw_config_image_bytes(void) { return config::kImageBytes; }
+uint32_t fw_core_check(void) { return check::core_check_run(); }
 uint16_t fw_config_body_bytes(void) { return sizeof(config::Config); }
 
 }  // extern "C"

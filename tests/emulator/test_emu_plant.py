@@ -204,7 +204,7 @@ class TestEncoder:
     def test_transfer_slope_and_quantisation(self) -> None:
         enc = EncoderParams(noise_v=0.0)
         plant = HandPlant(params=PlantParams(encoder=enc))
-        for theta2 in (-1.5, -0.3, 0.4, 1.9):
+        for theta2 in (-1.5, -0.3, 0.4, 1.6):
             plant.set_theta2(0, theta2)
             turn = (math.pi + theta2) / (2 * math.pi)
             volts = 5.0 * (0.1 + 0.8 * math.floor(turn * 4096) / 4096)  # 12-bit steps

@@ -219,13 +219,13 @@ void loop() {
 }
 
 void tick() {
-    const hal::Stamp start = hal::stamp();
     hal::EncoderReading enc[hand::kFingers];
     hal::encoders_read(enc);
     g_board.hand.tick(enc);
     hal::encoders_sample();
-    g_board.hand.record_timing(hal::cycles_since(start), hal::tick_period_elapsed());
 }
+
+void tick_done(uint32_t cycles, bool overran) { g_board.hand.record_timing(cycles, overran); }
 
 }  // namespace app
 }  // namespace utrf

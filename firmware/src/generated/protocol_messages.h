@@ -98,17 +98,18 @@ enum class ErrorCode : uint8_t {
   BAD_LENGTH = 3,  // the body length does not match the message; detail = the length it should have
   OUT_OF_RANGE = 4,  // a field is outside its range; detail = field index, or 0x80 | finger for a per-finger limit
   FAULTED = 5,  // a finger the request needs has a latched fault; detail = finger
-  BUSY = 6,  // the board cannot do it now (EEPROM write under way, or the finger must be idle); detail = finger or 0xFF
+  BUSY = 6,  // the board cannot do it now (EEPROM write under way or failed, or the finger must be idle); detail = finger, or 0xFF for the EEPROM
 };
 
-// Latched faults of one finger. A latched fault stays until clear_faults; its finger's motors are
-// off.
+// Latched faults of one finger. A latched fault stays until clear_faults and the finger refuses
+// POSITION, DUTY and GRASP. Every fault but HOST_TIMEOUT turns the finger's motors off (COAST,
+// STBY low); HOST_TIMEOUT applies the board's safe action instead.
 namespace FaultBits {
 static const uint8_t ENCODER_RANGE = 1u << 0;  // encoder signal outside its valid band (AS5600 analog: 10-90 % of supply), e.g. unplugged
 static const uint8_t ENCODER_JUMP = 1u << 1;  // encoder reading jumped more than the limit in one tick
 static const uint8_t STALL = 1u << 2;  // large error with saturated output and no motion for the stall time
 static const uint8_t JOINT_LIMIT = 1u << 3;  // measured Joint-2 angle beyond its limits by more than the margin
-static const uint8_t HOST_TIMEOUT = 1u << 4;  // no valid frame within the heartbeat timeout; the safe action was applied
+static const uint8_t HOST_TIMEOUT = 1u << 4;  // no valid frame within the heartbeat timeout while the finger drove; the safe action was applied (HOLD: closed loop at the measured angle; COAST: motors off)
 static const uint8_t OVERRUN = 1u << 5;  // the control tick overran its period
 static const uint8_t kAll = 0x3F;
 }  // namespace FaultBits
@@ -218,7 +219,8 @@ struct Heartbeat {
 // set_targets (0x10, host to board, reply ack, idempotent)
 // Set the targets of the fingers in `mask`, absolute (a resent frame is harmless). Out-of-range
 // targets (beyond the finger's Joint-2 limits) are refused with OUT_OF_RANGE, detail 0x80 |
-// finger, and no target changes.
+// finger, and no target changes. A faulted finger's target is stored but drives nothing until the
+// fault is cleared and a mode set.
 struct SetTargets {
   static const uint8_t kId = 0x10;
   static const uint8_t kSize = 22;
@@ -363,8 +365,9 @@ struct CalibrateZero {
 };
 
 // clear_faults (0x33, host to board, reply ack, idempotent)
-// Clear the latched faults of the fingers in `mask`. Their mode stays COAST: the host must set a
-// mode again. A fault whose cause persists latches again at the next tick.
+// Clear the latched faults of the fingers in `mask`. A finger whose fault stopped its motors
+// stays in COAST, so the host must set a mode again; a finger held by the HOLD safe action stays
+// in POSITION, holding. A fault whose cause persists latches again at the next tick.
 struct ClearFaults {
   static const uint8_t kId = 0x33;
   static const uint8_t kSize = 1;

@@ -68,8 +68,8 @@ void tick_start();
 // only; UART and ADC interrupts keep running). Not nestable; loop() context only.
 void tick_lock();
 void tick_unlock();
-// Cycle-exact timing of the tick: stamp() at its start, cycles_since() at its end. (The AVR
-// combines the tick timer, 4 us per count, with timer 1's 16 MHz count modulo 800.)
+// Cycle-exact timing (the AVR combines the tick timer, 4 us per count, with timer 1's 16 MHz
+// count modulo 800). The AVR layer times each tick itself and reports it to app::tick_done().
 struct Stamp {
     uint8_t coarse;
     uint16_t fine;
@@ -103,8 +103,7 @@ void watchdog_feed();
 // hung, and the watchdog is about to reset the board. Read back by reset_cause().
 void watchdog_mark_hang();
 void watchdog_clear_hang_mark();
-// Why the board last started, as protocol ResetCause values (POWER_ON 0, EXTERNAL 1,
-// BROWN_OUT 2, WATCHDOG 3, JTAG 4, UNKNOWN 5).
+// Why the board last started, as a proto::ResetCause value.
 uint8_t reset_cause();
 
 }  // namespace hal

@@ -41,6 +41,7 @@ commands (angles in degrees, fingers 0..4 or thumb/index/middle/ring/little):
   line drop|corrupt|insert P [to_board|to_host|both]   per-byte fault probability
   clean                        a clean line again
   status                       print the status line now
+  state                        print the hand's true state (joint angles, tensions, drives)
   help, quit"""
 
 
@@ -282,6 +283,26 @@ def _status_text(st: dict[str, Any]) -> str:
     )
 
 
+def _plant_state(board: EmulatedBoard) -> dict[str, Any]:
+    """The true state of the hand, SI (rad, N, A), for people and for BoardProcess."""
+    return {
+        "sim_time_s": board.sim_time,
+        "theta_rad": board.theta.tolist(),
+        "theta2_rad": board.theta2.tolist(),
+        "tension_n": board.tendon_tension.tolist(),
+        "current_a": board.motor_current.tolist(),
+        "drive": [[list(ch) for ch in finger] for finger in board.drive],
+        "adc_volts": board.adc_volts.tolist(),
+        "status": board.status,
+    }
+
+
+def _plant_state_text(st: dict[str, Any]) -> str:
+    deg = " ".join(f"{math.degrees(a):6.1f}" for a in st["theta2_rad"])
+    tension = " ".join(f"{t1:5.1f}/{t4:<5.1f}" for t1, t4 in st["tension_n"])
+    return f"t = {st['sim_time_s']:.3f} s | theta2 (deg) {deg} | tendon 1/4 (N) {tension}"
+
+
 def _command(board: EmulatedBoard, line: str, say: _Printer) -> bool:
     """Run one stdin command; False to quit."""
     words = line.split()
@@ -296,6 +317,9 @@ def _command(board: EmulatedBoard, line: str, say: _Printer) -> bool:
         elif cmd == "status":
             st = _status(board)
             say.say(f"status: {_status_text(st)}", **st)
+        elif cmd == "state":
+            st = _plant_state(board)
+            say.say(f"state: {_plant_state_text(st)}", **st)
         elif cmd == "reset":
             board.reset(rest[0] if rest else "reset_pin")
             say.say(f"reset: {rest[0] if rest else 'reset_pin'}")

@@ -17,11 +17,13 @@ from utrf.emulator.board import (
     check_elf,
 )
 from utrf.emulator.plant import EncoderParams, HandPlant, MotorParams, PlantError, PlantParams
+from utrf.emulator.process import BoardProcess
 from utrf.emulator.sim_client import SimClient
 
 __all__ = [
     "DEFAULT_ELF",
     "VECTORS",
+    "BoardProcess",
     "CycleProfile",
     "EmulatedBoard",
     "EmulatorError",

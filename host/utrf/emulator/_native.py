@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 4
+ABI = 5
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -60,6 +60,8 @@ PROFILE_FIELDS = (
     "last_entry",
     "period_sum",
     "intervals",
+    "latency_sum",
+    "latency_worst",
 )
 
 

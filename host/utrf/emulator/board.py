@@ -65,7 +65,9 @@ class CycleProfile:
 
     ``mean``/``worst``/``best`` leave out interrupts that nest inside; ``*_incl`` count them.
     ``period`` is the mean interval between entries; ``load`` and ``worst_load`` divide by it
-    (the fraction of the CPU the code takes)."""
+    (the fraction of the CPU the code takes). For an interrupt, ``latency`` and
+    ``worst_latency`` count the cycles from its flag being raised to its handler's entry (long
+    when the firmware masks it)."""
 
     calls: int
     mean: float
@@ -74,6 +76,8 @@ class CycleProfile:
     mean_incl: float
     worst_incl: int
     period: float
+    latency: float = math.nan  # interrupt: mean cycles from its flag to its entry
+    worst_latency: int = 0
 
     @property
     def load(self) -> float:
@@ -94,6 +98,8 @@ class CycleProfile:
             mean_incl=p["total_incl"] / n if n else math.nan,
             worst_incl=p["worst_incl"],
             period=p["period_sum"] / p["intervals"] if p["intervals"] else math.nan,
+            latency=p["latency_sum"] / n if n else math.nan,
+            worst_latency=p["latency_worst"],
         )
 
 

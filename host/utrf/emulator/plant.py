@@ -106,9 +106,8 @@ class MotorParams:
 @dataclass(frozen=True)
 class EncoderParams:
     """AS5600 in analog mode on Joint 2. ``offset_rad`` is the encoder's reading at θ2 = 0:
-    π puts the straight finger mid-turn, so θ2's whole range (±112.5° with the default
-    geometry) stays between 67.5° and 292.5° and never wraps; the firmware's
-    ``encoder_offset`` must match it."""
+    π puts the straight finger mid-turn, so θ2's whole range (within ±180°: ±95° with the
+    default geometry) never wraps; the firmware's ``encoder_offset`` must match it."""
 
     supply_v: float = 5.0
     offset_rad: float = math.pi

@@ -127,14 +127,15 @@ class ErrorCode(IntEnum):
     OUT_OF_RANGE = 4
     #: a finger the request needs has a latched fault; detail = finger
     FAULTED = 5
-    #: the board cannot do it now (EEPROM write under way, or the finger must be idle); detail =
-    #: finger or 0xFF
+    #: the board cannot do it now (EEPROM write under way or failed, or the finger must be idle);
+    #: detail = finger, or 0xFF for the EEPROM
     BUSY = 6
 
 
 class FaultBits(IntFlag):
-    """Latched faults of one finger. A latched fault stays until clear_faults; its finger's motors
-    are off.
+    """Latched faults of one finger. A latched fault stays until clear_faults and the finger refuses
+    POSITION, DUTY and GRASP. Every fault but HOST_TIMEOUT turns the finger's motors off (COAST,
+    STBY low); HOST_TIMEOUT applies the board's safe action instead.
     """
 
     #: encoder signal outside its valid band (AS5600 analog: 10-90 % of supply), e.g. unplugged
@@ -145,7 +146,8 @@ class FaultBits(IntFlag):
     STALL = 1 << 2
     #: measured Joint-2 angle beyond its limits by more than the margin
     JOINT_LIMIT = 1 << 3
-    #: no valid frame within the heartbeat timeout; the safe action was applied
+    #: no valid frame within the heartbeat timeout while the finger drove; the safe action was
+    #: applied (HOLD: closed loop at the measured angle; COAST: motors off)
     HOST_TIMEOUT = 1 << 4
     #: the control tick overran its period
     OVERRUN = 1 << 5
@@ -197,7 +199,8 @@ class Heartbeat(Request["Ack"]):
 class SetTargets(Request["Ack"]):
     """Set the targets of the fingers in `mask`, absolute (a resent frame is harmless). Out-of-range
     targets (beyond the finger's Joint-2 limits) are refused with OUT_OF_RANGE, detail 0x80 |
-    finger, and no target changes.
+    finger, and no target changes. A faulted finger's target is stored but drives nothing until
+    the fault is cleared and a mode set.
     """
 
     NAME: ClassVar[str] = "set_targets"
@@ -507,8 +510,9 @@ class CalibrateZero(Request["Ack"]):
 
 @dataclass(frozen=True, slots=True)
 class ClearFaults(Request["Ack"]):
-    """Clear the latched faults of the fingers in `mask`. Their mode stays COAST: the host must set
-    a mode again. A fault whose cause persists latches again at the next tick.
+    """Clear the latched faults of the fingers in `mask`. A finger whose fault stopped its motors
+    stays in COAST, so the host must set a mode again; a finger held by the HOLD safe action
+    stays in POSITION, holding. A fault whose cause persists latches again at the next tick.
     """
 
     NAME: ClassVar[str] = "clear_faults"

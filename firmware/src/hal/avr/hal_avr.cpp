@@ -17,6 +17,7 @@
 #include "../../board_pins.h"
 #include "../../core/app.h"
 #include "../../core/encoder.h"
+#include "../../generated/protocol_messages.h"
 #include "../hal.h"
 
 extern "C" unsigned long millis(void);  // Arduino core (timer 0)
@@ -216,8 +217,12 @@ void run_due_ticks() {
         g_tick_deferred = 0;
         g_tick_running = 1;
         UCSR0B &= (uint8_t)~_BV(UDRIE0);
+        const Stamp start = stamp();
         sei();
         app::tick();
+        const uint32_t cycles = cycles_since(start);
+        const bool overran = g_tick_deferred != 0;
+        app::tick_done(cycles, overran);
         cli();
         if (utrf_tx_head != utrf_tx_tail) UCSR0B |= _BV(UDRIE0);
         g_tick_running = 0;
@@ -543,17 +548,17 @@ void watchdog_mark_hang() { g_hang_mark = kHangMagic; }
 void watchdog_clear_hang_mark() { g_hang_mark = 0; }
 
 uint8_t reset_cause() {
-    // Protocol ResetCause: POWER_ON 0, EXTERNAL 1, BROWN_OUT 2, WATCHDOG 3, JTAG 4, UNKNOWN 5.
     // The MEGA's stk500v2 bootloader reads MCUSR and clears it before it starts us, so with
     // the bootloader the flags are gone (UNKNOWN); a watchdog reset this firmware provoked
     // (a hung loop or tick) is still known from the mark it left in .noinit RAM.
+    typedef proto::ResetCause C;
     const uint8_t f = g_mcusr;
-    if (f & _BV(PORF)) return 0;
-    if (f & _BV(BORF)) return 2;
-    if ((f & _BV(WDRF)) || g_hang_mark == kHangMagic) return 3;
-    if (f & _BV(EXTRF)) return 1;
-    if (f & _BV(JTRF)) return 4;
-    return 5;
+    if (f & _BV(PORF)) return (uint8_t)C::POWER_ON;
+    if (f & _BV(BORF)) return (uint8_t)C::BROWN_OUT;
+    if ((f & _BV(WDRF)) || g_hang_mark == kHangMagic) return (uint8_t)C::WATCHDOG;
+    if (f & _BV(EXTRF)) return (uint8_t)C::RESET_PIN;
+    if (f & _BV(JTRF)) return (uint8_t)C::JTAG;
+    return (uint8_t)C::UNKNOWN;
 }
 
 }  // namespace hal

@@ -388,6 +388,22 @@ utrf_sim_t *utrf_sim_open(const char *elf_path, uint64_t seed, char *err, size_t
     }
     register_board(s, 1);
     avr_init(s->avr);
+    /* simavr 1.6 flags an access past SRAM as a crash, then makes it anyway, past the end of
+     * its data buffer (a firmware bug would corrupt our heap): give it all 64 KiB that a
+     * 16-bit address can reach. avr_terminate frees it like its own. */
+    uint8_t *data = calloc(1, 0x10000);
+    if (!data) {
+        snprintf(err, errlen, "out of memory");
+        register_board(s, 0);
+        free(s->avr);
+        free_firmware(&s->fw);
+        free(s->capture);
+        free(s);
+        return NULL;
+    }
+    memcpy(data, s->avr->data, s->avr->ramend + 1);
+    free(s->avr->data);
+    s->avr->data = data;
     s->fw.frequency = F_CPU_HZ;
     s->fw.vcc = s->fw.avcc = s->fw.aref = SUPPLY_MV;
     avr_load_firmware(s->avr, &s->fw);

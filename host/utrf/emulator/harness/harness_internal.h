@@ -30,6 +30,8 @@ typedef struct {
     int paused;    /* a nested interrupt runs */
     uint64_t entry, seg, excl;
     uint16_t sp0;  /* function profile: SP at entry */
+    int waiting;   /* vector profile: its flag is raised, its handler not yet entered */
+    uint64_t raised_at;
 } profile_state_t;
 
 struct utrf_sim {

@@ -1,7 +1,8 @@
 /* Cycle profiles of the firmware, with no change to it.
  *
  * An interrupt vector is timed from simavr's "running" signal (raised when the core jumps to
- * the vector, lowered at its RETI). A function is timed from its first instruction to the
+ * the vector, lowered at its RETI); its latency from its "pending" signal (its flag raised,
+ * enabled or not) to the jump. A function is timed from its first instruction to the
  * return that lifts the stack pointer above its value at entry. Time spent in other
  * interrupts that nest inside is counted apart: "exclusive" figures leave it out.
  */
@@ -37,6 +38,18 @@ static void enter(profile_state_t *p, uint64_t now)
     p->excl = 0;
 }
 
+/* The vector's flag is raised (whether enabled or not): its latency starts at the first raise. */
+static void on_vector_pending(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq;
+    utrf_sim_t *s = param;
+    profile_state_t *p = &s->prof_vec;
+    if (value && !p->waiting) {
+        p->waiting = 1;
+        p->raised_at = s->avr->cycle;
+    }
+}
+
 static void on_vector_running(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     (void)irq;
@@ -44,6 +57,13 @@ static void on_vector_running(struct avr_irq_t *irq, uint32_t value, void *param
     profile_state_t *p = &s->prof_vec;
     uint64_t now = s->avr->cycle;
     if (value) {
+        if (p->waiting) {
+            uint64_t latency = now - p->raised_at;
+            p->p.latency_sum += latency;
+            if (latency > p->p.latency_worst)
+                p->p.latency_worst = latency;
+            p->waiting = 0;
+        }
         enter(p, now);
     } else if (p->active) {
         if (!p->paused)
@@ -116,8 +136,9 @@ void profile_init(utrf_sim_t *s)
 
 void profile_after_reset(utrf_sim_t *s)
 {
-    /* A reset abandons whatever was running. */
+    /* A reset abandons whatever was running or waiting. */
     s->prof_vec.active = 0;
+    s->prof_vec.waiting = 0;
     s->prof_fn.active = 0;
     s->running_vector = 0;
 }
@@ -126,8 +147,10 @@ int utrf_sim_profile_vector(utrf_sim_t *s, int vector)
 {
     if (s->prof_vector > 0) {
         avr_irq_t *old = avr_get_interrupt_irq(s->avr, (uint8_t)s->prof_vector);
-        if (old)
+        if (old) {
             avr_irq_unregister_notify(old + AVR_INT_IRQ_RUNNING, on_vector_running, s);
+            avr_irq_unregister_notify(old + AVR_INT_IRQ_PENDING, on_vector_pending, s);
+        }
     }
     memset(&s->prof_vec, 0, sizeof s->prof_vec);
     s->prof_vector = 0;
@@ -139,6 +162,7 @@ int utrf_sim_profile_vector(utrf_sim_t *s, int vector)
     if (!irq)
         return -1;
     avr_irq_register_notify(irq + AVR_INT_IRQ_RUNNING, on_vector_running, s);
+    avr_irq_register_notify(irq + AVR_INT_IRQ_PENDING, on_vector_pending, s);
     s->prof_vector = vector;
     return 0;
 }

@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 4
+#define UTRF_SIM_ABI 5
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -74,6 +74,8 @@ typedef struct {
     uint64_t last_entry;  /* cycle of the last entry */
     uint64_t period_sum;  /* sum of entry-to-entry intervals */
     uint64_t intervals;   /* how many intervals period_sum holds */
+    uint64_t latency_sum; /* vector: cycles from its flag being raised to its entry */
+    uint64_t latency_worst;
 } utrf_sim_profile_t;
 
 typedef struct utrf_sim utrf_sim_t;

@@ -1,0 +1,415 @@
+"""Protocol dispatch: every request, its reply, and every way to get it wrong.
+
+A refused request is answered with a nack naming the field or finger, and changes nothing:
+`snapshot()` is compared before and after.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import struct
+
+import pytest
+from fwsim import Sim, m, raw_body
+
+from utrf.protocol.codec import WIRE_TYPES
+from utrf.protocol.framing import encode_frame
+
+REQUESTS = [c for c in m.MESSAGES if c.DIRECTION == "host_to_board"]
+
+VALID: dict[type[m.Message], m.Message] = {
+    m.Identify: m.Identify(),
+    m.Ping: m.Ping(token=0xDEADBEEF),
+    m.Heartbeat: m.Heartbeat(),
+    m.SetTargets: m.SetTargets(
+        kind=m.TargetKind.JOINT2_ANGLE, mask=0b11, value=(0.2, -0.1, 0, 0, 0)
+    ),
+    m.SetMode: m.SetMode(mask=0b1, mode=(1, 0, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5),
+    m.SetTelemetry: m.SetTelemetry(rate_hz=0),
+    m.GetGains: m.GetGains(finger=1),
+    m.SetGains: m.SetGains(
+        finger=1,
+        kp=4.0,
+        ki=1.0,
+        kd=0.02,
+        d_cutoff_hz=40.0,
+        deadband_duty=0.02,
+        slew_per_s=30.0,
+        max_duty=0.9,
+        pretension_duty=0.05,
+    ),
+    m.GetLimits: m.GetLimits(finger=1),
+    m.SetLimits: m.SetLimits(
+        finger=1,
+        theta2_min=-1.0,
+        theta2_max=1.5,
+        limit_margin=0.1,
+        stall_error=0.2,
+        stall_motion=0.02,
+        stall_time=0.5,
+        encoder_jump=0.2,
+    ),
+    m.GetSafety: m.GetSafety(),
+    m.SetSafety: m.SetSafety(heartbeat_timeout=1.0, safe_action=m.SafeAction.COAST),
+    m.GetFingerConfig: m.GetFingerConfig(finger=1),
+    m.SetFingerConfig: m.SetFingerConfig(
+        finger=1,
+        actuation=m.Actuation.ANTAGONISTIC,
+        encoder_offset=3.0,
+        encoder_invert=0,
+        motor_invert=0,
+    ),
+    m.SaveConfig: m.SaveConfig(),
+    m.LoadConfig: m.LoadConfig(source=m.ConfigSource.DEFAULTS),
+    m.CalibrateZero: m.CalibrateZero(mask=0b100),
+    m.ClearFaults: m.ClearFaults(mask=0b11111),
+    m.GetState: m.GetState(),
+    m.GetStats: m.GetStats(),
+    m.ResetStats: m.ResetStats(),
+}
+
+
+def snapshot(sim: Sim) -> tuple:
+    """Everything a request could change: settings, finger states, targets, the EEPROM."""
+    cfg = [sim.ok(m.GetSafety())]
+    for f in range(5):
+        cfg += [
+            sim.ok(m.GetGains(finger=f)),
+            sim.ok(m.GetLimits(finger=f)),
+            sim.ok(m.GetFingerConfig(finger=f)),
+        ]
+    fingers = [(x.mode, x.faults, x.target) for x in (sim.finger(f) for f in range(5))]
+    eeprom = bytes(sim.eeprom()[: sim.lib.fw_config_image_bytes()])
+    return tuple(cfg), tuple(fingers), eeprom, sim.status().config_status
+
+
+def bad_raw_values(field: m.Field) -> list[int | float]:
+    """Raw wire values of `field` that its range (or enum) excludes."""
+    _, tlo, thi = WIRE_TYPES[field.type]
+    if field.type == "f32":
+        out = [math.nan, math.inf]
+        if field.max is not None:
+            out.append(field.max * 2 + 1)
+        if field.min is not None:
+            out.append(field.min - 1 if field.min <= 0 else field.min / 2)
+        return out
+    if field.enum is not None:
+        top = max(field.enum._value2member_map_) + 1
+        return [top] if top <= thi else []
+    out = []
+    if field.raw_max is not None and field.raw_max < thi:
+        out.append(field.raw_max + 1)
+    if field.raw_min is not None and field.raw_min > tlo:
+        out.append(field.raw_min - 1)
+    return out
+
+
+def out_of_range_cases():
+    for cls in REQUESTS:
+        valid = list(VALID[cls].to_raw().values())
+        for field in cls.FIELDS:
+            for bad in bad_raw_values(field):
+                raw = [list(v) if isinstance(v, tuple) else v for v in valid]
+                if field.count is None:
+                    raw[field.index] = bad
+                else:
+                    raw[field.index][field.count - 1] = bad
+                flat = []
+                for v in raw:
+                    flat.extend(v if isinstance(v, list) else [v])
+                yield pytest.param(
+                    cls, field.index, cls._STRUCT.pack(*flat), id=f"{cls.NAME}.{field.name}={bad}"
+                )
+
+
+def test_every_request_has_an_example() -> None:
+    assert set(VALID) == set(REQUESTS)
+
+
+def test_boot_is_the_first_frame(fwlib) -> None:
+    sim = Sim(fwlib)
+    sim.power_on(settle_ms=0)
+    sim.run(1)
+    first = sim.frames[0]
+    assert first.seq == m.BOARD_SEQ_FLAG and isinstance(first.msg, m.Boot)
+    assert (first.msg.protocol_version, first.msg.schema_hash) == (
+        m.PROTOCOL_VERSION,
+        m.SCHEMA_HASH,
+    )
+
+
+@pytest.mark.parametrize("cls", REQUESTS, ids=lambda c: c.NAME)
+def test_every_request_gets_its_reply(sim: Sim, cls: type[m.Message]) -> None:
+    if cls is m.CalibrateZero:
+        sim.run(2)  # needs a reading first
+    reply = sim.request(VALID[cls], ms=2 if cls is not m.SaveConfig else 2000)
+    expected = cls.REPLY
+    assert isinstance(reply.msg, expected), reply.msg
+    if expected is m.Ack:
+        assert reply.msg.msg_id == cls.ID
+    assert reply.seq == sim._seq  # the request's seq comes back
+
+
+@pytest.mark.parametrize("cls", REQUESTS, ids=lambda c: c.NAME)
+def test_wrong_length_is_refused_and_changes_nothing(sim: Sim, cls) -> None:
+    before = snapshot(sim)
+    body = VALID[cls].encode()
+    for bad in (body + b"\x00", body[:-1] if body else None):
+        if bad is None:
+            continue
+        nack = sim.nack(cls.ID, bad)
+        assert (nack.msg_id, nack.code) == (cls.ID, m.ErrorCode.BAD_LENGTH)
+        assert nack.detail == cls.SIZE
+    assert snapshot(sim) == before
+
+
+@pytest.mark.parametrize("cls,index,body", list(out_of_range_cases()))
+def test_out_of_range_field_is_refused_and_changes_nothing(sim: Sim, cls, index, body) -> None:
+    before = snapshot(sim)
+    nack = sim.nack(cls.ID, body)
+    assert (nack.msg_id, nack.code, nack.detail) == (cls.ID, m.ErrorCode.OUT_OF_RANGE, index)
+    assert snapshot(sim) == before
+
+
+@pytest.mark.parametrize("msg_id", [0x00, 0x04, 0x13, 0x37, 0x81, 0x90, 0xF0, 0xFF])
+def test_unknown_ids_are_refused(sim: Sim, msg_id: int) -> None:
+    before = snapshot(sim)
+    nack = sim.nack(msg_id, b"\x01\x02")
+    assert (nack.msg_id, nack.code) == (msg_id, m.ErrorCode.UNKNOWN_ID)
+    assert snapshot(sim) == before
+
+
+def test_bad_crc_is_refused_with_the_frames_seq(sim: Sim) -> None:
+    before = snapshot(sim)
+    frame = bytearray(encode_frame(0x42, m.SetMode.ID, VALID[m.SetMode].encode()))
+    # A damaged CRC byte (a data byte of the COBS frame, not a code byte, and not 0x00).
+    assert frame[-2] not in (0x00, 0x40)
+    frame[-2] ^= 0x40
+    sim.send_raw(bytes(frame))
+    sim.run(2)
+    nack = next(r for r in sim.frames if r.seq == 0x42).msg
+    assert (nack.msg_id, nack.code) == (m.SetMode.ID, m.ErrorCode.BAD_CRC)
+    assert snapshot(sim) == before
+    assert sim.ok(m.GetStats()).rx_crc_errors == 1
+
+
+def test_framing_errors_are_counted_not_answered(sim: Sim) -> None:
+    before = snapshot(sim)
+    sim.take()
+    sim.send_raw(b"\x09\x01\x00")  # COBS says 8 more bytes, the frame ends after 1
+    sim.send_raw(b"\x02\x00")  # too short for seq, id and a CRC
+    sim.send_raw(b"\x01" * 200 + b"\x00")  # longer than any frame
+    sim.run(3)
+    assert sim.frames == []
+    stats = sim.ok(m.GetStats())
+    assert stats.rx_framing_errors == 3
+    assert snapshot(sim) == before
+    # The receiver is in step again: the next frame is answered.
+    assert isinstance(sim.ok(m.Ping(token=7)), m.Pong)
+
+
+def test_ping_echoes_its_token_with_the_board_time(sim: Sim) -> None:
+    first = sim.ok(m.Ping(token=123456789))
+    sim.run(250)
+    second = sim.ok(m.Ping(token=42))
+    assert (first.token, second.token) == (123456789, 42)
+    assert second.board_time - first.board_time == pytest.approx(0.252, abs=0.002)
+
+
+def test_identity(sim: Sim) -> None:
+    ident = sim.ok(m.Identify())
+    assert (ident.protocol_version, ident.schema_hash) == (m.PROTOCOL_VERSION, m.SCHEMA_HASH)
+    assert ident.finger_count == 5
+    assert ident.loop_rate_hz == 1000
+    assert ident.max_telemetry_hz == 500
+
+
+def test_set_targets_in_every_unit(sim: Sim) -> None:
+    from utrf.models import kinematics
+    from utrf.models.geometry import HandGeometry
+
+    geom = HandGeometry.default().fingers[1].geometry
+    sim.ok(m.SetTargets(kind=m.TargetKind.TENDON_Q, mask=0b10, value=(0, 0.004, 0, 0, 0)))
+    assert sim.finger(1).target_rad == pytest.approx(0.004 / geom.guide_radii_m[1], abs=5e-4)
+    sim.ok(m.SetTargets(kind=m.TargetKind.FLEXION, mask=0b10, value=(0, 0.5, 0, 0, 0)))
+    q = float(kinematics.q_from_flexion(geom, 0.5))
+    assert sim.finger(1).target_rad == pytest.approx(q / geom.guide_radii_m[1], abs=5e-4)
+    sim.ok(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=0b10, value=(0, -0.7, 0, 0, 0)))
+    assert sim.finger(1).target_rad == pytest.approx(-0.7, abs=2e-4)
+    before = snapshot(sim)
+    for kind, value in (
+        (m.TargetKind.FLEXION, 1.2),
+        (m.TargetKind.FLEXION, -0.1),
+        (m.TargetKind.TENDON_Q, 0.03),
+        (m.TargetKind.JOINT2_ANGLE, 2.5),
+    ):
+        body = raw_body(m.SetTargets, int(kind), 0b10, 0, round(value * 1e6), 0, 0, 0)
+        nack = sim.nack(m.SetTargets.ID, body)
+        assert (nack.code, nack.detail) == (m.ErrorCode.OUT_OF_RANGE, 0x80 | 1)
+    assert snapshot(sim) == before
+
+
+def test_cross_field_checks(sim: Sim) -> None:
+    before = snapshot(sim)
+    gains = m.SetGains(
+        finger=0,
+        kp=3.0,
+        ki=2.0,
+        kd=0.05,
+        d_cutoff_hz=30.0,
+        deadband_duty=0.0,
+        slew_per_s=20.0,
+        max_duty=0.3,
+        pretension_duty=0.3,
+    )
+    nack = sim.nack(m.SetGains.ID, gains.encode())
+    assert (nack.code, nack.detail) == (m.ErrorCode.OUT_OF_RANGE, 8)  # pretension >= max_duty
+    for lo, hi, field in ((-2.5, 1.0, 1), (-1.0, 2.5, 2), (1.0, 0.5, 2)):  # geometry: +-1.65
+        limits = m.SetLimits(
+            finger=0,
+            theta2_min=lo,
+            theta2_max=hi,
+            limit_margin=0.1,
+            stall_error=0.2,
+            stall_motion=0.02,
+            stall_time=0.5,
+            encoder_jump=0.2,
+        )
+        nack = sim.nack(m.SetLimits.ID, limits.encode())
+        assert (nack.code, nack.detail) == (m.ErrorCode.OUT_OF_RANGE, field)
+    assert snapshot(sim) == before
+
+
+def test_hardware_changes_need_an_idle_finger(sim: Sim) -> None:
+    sim.ok(m.SetMode(mask=0b10, mode=(0, 2, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
+    before = snapshot(sim)
+    cfg = m.SetFingerConfig(
+        finger=1, actuation=m.Actuation.ROTARY, encoder_offset=0.0, encoder_invert=0, motor_invert=0
+    )
+    nack = sim.nack(m.SetFingerConfig.ID, cfg.encode())
+    assert (nack.code, nack.detail) == (m.ErrorCode.BUSY, 1)
+    nack = sim.nack(m.CalibrateZero.ID, m.CalibrateZero(mask=0b10).encode())
+    assert (nack.code, nack.detail) == (m.ErrorCode.BUSY, 1)
+    assert snapshot(sim) == before
+
+
+def test_calibrate_zero_takes_the_present_reading(sim: Sim) -> None:
+    sim.set_adc(2, 300)  # far from the default zero (mid-band)
+    sim.run(2)
+    sim.ok(m.ClearFaults(mask=0b100))  # that step was a jump
+    sim.run(2)
+    assert abs(sim.finger(2).theta_rad) > 1.0
+    sim.ok(m.CalibrateZero(mask=0b100))
+    sim.run(2)
+    assert abs(sim.finger(2).theta_rad) < 1e-3
+    offset = sim.ok(m.GetFingerConfig(finger=2)).encoder_offset
+    assert offset == pytest.approx(((300 / 1024 - 0.1) / 0.8) * 2 * math.pi, abs=1e-3)
+    # A finger whose encoder is out of its band cannot be zeroed.
+    sim.set_adc(3, 20)
+    sim.run(2)
+    nack = sim.nack(m.CalibrateZero.ID, m.CalibrateZero(mask=0b1000).encode())
+    assert (nack.code, nack.detail) == (m.ErrorCode.FAULTED, 3)
+
+
+@pytest.mark.parametrize("rate", [500, 200, 50])
+def test_telemetry_stream_rate_and_seq(sim: Sim, rate: int) -> None:
+    sim.ok(m.SetTelemetry(rate_hz=rate))
+    sim.take()
+    sim.run(1000)
+    states = sim.take(m.State)
+    assert abs(len(states) - rate) <= 1
+    seqs = [s.seq for s in states]
+    assert all(s & m.BOARD_SEQ_FLAG for s in seqs)
+    assert all(b == (m.BOARD_SEQ_FLAG | ((a + 1) & 0x7F)) for a, b in itertools.pairwise(seqs))
+    times = [s.msg.board_time for s in states]
+    assert times[-1] - times[0] == pytest.approx((len(states) - 1) / rate, abs=0.0015)
+    sim.ok(m.SetTelemetry(rate_hz=0))
+    sim.take()
+    sim.run(100)
+    assert sim.take(m.State) == []
+
+
+def test_a_full_transmit_buffer_drops_stream_frames_and_counts_them(sim: Sim) -> None:
+    sim.ok(m.SetTelemetry(rate_hz=500))
+    sim.run(20)
+    last_before = sim.take(m.State)[-1].seq
+    sim.lib.fw_set_tx_room(40)  # less than a state frame: nothing fits for 100 ms
+    sim.run(100)
+    sim.lib.fw_set_tx_room(0xFFFF)
+    sim.run(10)
+    first_after = sim.take(m.State)[0].seq
+    dropped = sim.ok(m.GetStats()).tx_dropped
+    assert 49 <= dropped <= 51
+    # The seq counted the dropped frames too: the host sees a gap of exactly that size.
+    gap = ((first_after & 0x7F) - (last_before & 0x7F)) % 128 - 1
+    assert gap == dropped
+
+
+def test_state_reports_angles_targets_and_the_tip(sim: Sim) -> None:
+    from utrf.models import kinematics
+    from utrf.models.geometry import HandGeometry
+
+    geom = HandGeometry.default().fingers[4].geometry
+    for k in range(1, 7):
+        sim.set_angle(4, 0.1 * k)
+        sim.run(1)
+    sim.ok(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=0b10000, value=(0, 0, 0, 0, 0.9)))
+    st = sim.ok(m.GetState())
+    assert st.theta2[4] == pytest.approx(0.6, abs=0.01)  # the ADC's resolution
+    assert st.target[4] == pytest.approx(0.9, abs=2e-4)
+    tip = kinematics.tip_position(geom, kinematics.q_from_theta2(geom, st.theta2[4]))
+    assert st.tip_x[4] == pytest.approx(tip[0], abs=1e-4)
+    assert st.tip_y[4] == pytest.approx(tip[1], abs=1e-4)
+
+
+def test_a_new_fault_is_reported_once(sim: Sim) -> None:
+    sim.set_adc(0, 5)
+    sim.run(20)
+    faults = sim.take(m.Fault)
+    assert len(faults) == 1
+    assert faults[0].seq & m.BOARD_SEQ_FLAG
+    msg = faults[0].msg
+    assert (msg.finger, msg.new_faults) == (0, m.FaultBits.ENCODER_RANGE)
+    assert msg.faults[0] == m.FaultBits.ENCODER_RANGE
+
+
+def test_stats_count_and_reset(sim: Sim) -> None:
+    sim.lib.fw_set_tick_cycles(4800)  # what the host layer says each tick took
+    sim.ok(m.ResetStats())
+    for _ in range(3):
+        sim.ok(m.Heartbeat())
+    sim.nack(0x77, b"")
+    sim.lib.fw_add_rx_lost(5)
+    sim.run(1100)
+    stats = sim.ok(m.GetStats())
+    assert stats.rx_frames == 5  # 3 heartbeats, the bad id, this request
+    assert stats.nacks == 1
+    assert stats.rx_overruns == 5
+    assert stats.ticks >= 1100
+    assert stats.tick_worst == pytest.approx(300e-6)
+    assert stats.tick_mean == pytest.approx(300e-6)
+    sim.ok(m.ResetStats())
+    stats = sim.ok(m.GetStats())
+    assert (stats.rx_frames, stats.nacks, stats.rx_overruns) == (1, 0, 0)
+
+
+def test_repeated_set_mode_is_harmless(sim: Sim) -> None:
+    """set_mode is idempotent: a resent frame does not restart the PID."""
+    sim.ok(m.SetSafety(heartbeat_timeout=10.0, safe_action=m.SafeAction.HOLD))
+    sim.ok(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=1, value=(0.02, 0, 0, 0, 0)))
+    mode = m.SetMode(mask=1, mode=(2, 0, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5)
+    sim.ok(mode)
+    sim.run(300)  # a small error, far from saturation: the integrator grows
+    i_before = sim.finger(0).integrator31
+    assert i_before > 0
+    seq = sim.send(mode)
+    sim.loop()  # the resent frame, and no tick: a restart would show at once
+    assert [r for r in sim.frames if r.seq == seq]
+    assert sim.finger(0).integrator31 == i_before
+
+
+def test_request_with_the_board_seq_flag_is_still_answered(sim: Sim) -> None:
+    sim.send_raw(encode_frame(0x85, m.Ping.ID, struct.pack("<I", 9)))
+    sim.run(2)
+    assert next(r for r in sim.frames if isinstance(r.msg, m.Pong)).seq == 0x85

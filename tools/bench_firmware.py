@@ -1,0 +1,217 @@
+"""Firmware benchmark: memory, the control tick's CPU load, and the PID's step figures.
+
+    python tools/bench_firmware.py [--update docs/benchmarks.md] [--seconds 2]
+
+Run by `make bench-firmware`, which builds the ELF, the host library and the simavr harness
+first. Every figure is measured here:
+
+- flash and static RAM from `avr-size` on build/firmware/utrf.elf; the kinematics table's
+  bytes and worst error from its generator;
+- the control tick on simavr (build/firmware/bench/tick_bench): the firmware's own
+  measurement (get_stats: tick_mean over 1024 ticks, tick_worst) and the simulator's cycle
+  count of app::tick(), with five fingers in closed loop and the 500 Hz state stream, under
+  three loads of host traffic;
+- the step response of the default gains on the reference finger plant (tests/firmware/
+  fwsim.py), through the host build of the firmware core.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import platform
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+ELF = REPO / "build" / "firmware" / "utrf.elf"
+BENCH = REPO / "build" / "firmware" / "bench" / "tick_bench"
+TABLE = REPO / "firmware" / "src" / "generated" / "kinematics_table.h"
+BEGIN = "<!-- BEGIN firmware (make bench-firmware) -->"
+END = "<!-- END firmware -->"
+CPU_HZ = 16_000_000
+TICK_CYCLES = CPU_HZ // 1000
+
+sys.path.insert(0, str(REPO / "tests" / "firmware"))
+
+
+def run(cmd: list[str]) -> str:
+    return subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, check=True).stdout
+
+
+def memory() -> dict[str, int]:
+    sizes: dict[str, int] = {}
+    for line in run(["avr-size", "-A", str(ELF)]).splitlines():
+        parts = line.split()
+        if len(parts) >= 2 and parts[0].startswith(".") and parts[1].isdigit():
+            sizes[parts[0]] = int(parts[1])
+    data, bss, noinit = sizes.get(".data", 0), sizes.get(".bss", 0), sizes.get(".noinit", 0)
+    return {
+        "flash": sizes[".text"] + data,
+        "ram": data + bss + noinit,
+        "data": data,
+        "bss": bss,
+        "noinit": noinit,
+    }
+
+
+def table() -> list[str]:
+    out = run([sys.executable, "-m", "utrf.firmware_table", "--check"])
+    return [ln for ln in out.splitlines() if ln.startswith(("geometry", "total"))]
+
+
+def tick_addresses() -> tuple[str, str]:
+    nm = run(["avr-nm", "-C", str(ELF)])
+    entry = next(ln.split()[0] for ln in nm.splitlines() if ln.endswith(" utrf::app::tick()"))
+    dis = run(["avr-objdump", "-d", "-C", str(ELF)]).splitlines()
+    call = next(i for i, ln in enumerate(dis) if "call" in ln and "<utrf::app::tick()>" in ln)
+    return entry, dis[call + 1].split(":")[0].strip()
+
+
+def tick_load(scenario: str, seconds: float) -> dict:
+    entry, ret = tick_addresses()
+    out = run([str(BENCH), str(ELF), scenario, str(seconds), entry, ret])
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def step_figures() -> list[tuple[float, dict[str, float]]]:
+    import ctypes
+
+    from fwsim import ClosedLoop, FingerPlant, Sim, build_library, load_library, m
+
+    lib = load_library(build_library())
+    eeprom = (ctypes.c_uint8 * lib.fw_eeprom_size()).from_address(
+        ctypes.addressof(lib.fw_eeprom().contents)
+    )
+    rows = []
+    for step in (0.2, 0.5, 1.0):
+        ctypes.memset(eeprom, 0xFF, len(eeprom))
+        sim = Sim(lib)
+        sim.power_on()
+        sim.ok(m.SetSafety(heartbeat_timeout=10.0, safe_action=m.SafeAction.HOLD))
+        loop = ClosedLoop(sim, {0: FingerPlant()})
+        sim.ok(m.SetMode(mask=1, mode=(2, 0, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
+        sim.ok(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=1, value=(step, 0, 0, 0, 0)))
+        trace = loop.run(1500, record=0)
+        t10 = next(t for t, x, _ in trace if x >= 0.1 * step)
+        t90 = next(t for t, x, _ in trace if x >= 0.9 * step)
+        peak = max(x for _, x, _ in trace)
+        settle = max((t for t, x, _ in trace if abs(x - step) > 0.02 * step), default=0.0)
+        final = sum(x for _, x, _ in trace[-200:]) / 200
+        rows.append(
+            (
+                step,
+                {
+                    "rise": t90 - t10,
+                    "overshoot": max(0.0, (peak - step) / step),
+                    "settle": settle,
+                    "error": final - step,
+                },
+            )
+        )
+    return rows
+
+
+def pct(cycles: float) -> str:
+    return f"{100 * cycles / TICK_CYCLES:.1f} %"
+
+
+def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: float) -> str:
+    now = datetime.date.today().isoformat()
+    lines = [
+        BEGIN,
+        "## Firmware",
+        "",
+        f"Measured with `make bench-firmware` (`python tools/bench_firmware.py`) on "
+        f"{platform.machine()}, avr-gcc 5.4 (Debian), simavr 1.6, {now}.",
+        "",
+        "### Memory (`avr-size -A build/firmware/utrf.elf`)",
+        "",
+        "| what | bytes | target |",
+        "|---|---|---|",
+        f"| flash (.text + .data) | {mem['flash']:,} | 49,152 (48 KB) |",
+        f"| static RAM (.data {mem['data']} + .bss {mem['bss']} + .noinit {mem['noinit']}) "
+        f"| {mem['ram']:,} | 3,072 (3 KB) |",
+    ]
+    lines += [f"| kinematics table: {t} | | |" for t in tbl]
+    lines += [
+        "",
+        "### Control tick (five fingers in POSITION, 1 kHz = 16,000 cycles)",
+        "",
+        f"simavr runs the ELF {seconds:g} s per row (after 0.3 s of start-up and a reset_stats),"
+        " the encoders sweeping ±0.4 rad at 1.3 Hz, the state stream at 500 Hz. *firmware*: "
+        "its own figures (get_stats; timer 2 and timer 1, around app::tick() in the timer "
+        "interrupt, nested UART/ADC interrupts included). *simavr*: cycles from app::tick()'s "
+        "entry to its return, counted by the simulator. Target: at most 30 %.",
+        "",
+        "| host traffic | ticks | overruns | firmware mean | firmware worst | "
+        "simavr mean | simavr worst | state frames / dropped | rx frames / overruns |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    what = {
+        "idle": "heartbeats only",
+        "typical": "set_targets at 200 Hz",
+        "stress": "set_targets back to back (line saturated)",
+    }
+    for d in loads:
+        fm, fw = d["tick_mean_us"] * 16, d["tick_worst_us"] * 16
+        lines.append(
+            f"| {what[d['scenario']]} | {d['ticks']} | {d['tick_overruns']} | "
+            f"{d['tick_mean_us']} µs ({pct(fm)}) | {d['tick_worst_us']} µs ({pct(fw)}) | "
+            f"{d['sim_tick_mean_cycles']:,.0f} cycles ({pct(d['sim_tick_mean_cycles'])}) | "
+            f"{d['sim_tick_worst_cycles']:,} cycles ({pct(d['sim_tick_worst_cycles'])}) | "
+            f"{d['state_frames']} / {d['tx_dropped']} | {d['rx_frames']} / {d['rx_overruns']} |"
+        )
+    lines += [
+        "",
+        "The mean stays near 31-34 %: the 30 % target is **not met** (see firmware/README.md, "
+        "Timing). Worst cases grow with the bytes that arrive during a tick (each UART "
+        "receive interrupt nests in it, ~45 cycles a byte). The saturated line is a stress "
+        "case: the tick stays on time, the board drops what it cannot parse (counted).",
+        "",
+        "### PID step response (default gains, reference plant, host build of the core)",
+        "",
+        "Plant (tests/firmware/fwsim.py `FingerPlant`): θ'' = (6 rad/s · (u − 0.03 sign) − θ')"
+        " / 30 ms, the net duty u from the motor pins; the encoder quantised by the ADC.",
+        "",
+        "| step | rise 10-90 % | overshoot | settling (2 %) | error at rest |",
+        "|---|---|---|---|---|",
+    ]
+    for step, f in steps:
+        lines.append(
+            f"| {step:g} rad | {f['rise'] * 1e3:.0f} ms | {100 * f['overshoot']:.1f} % | "
+            f"{f['settle'] * 1e3:.0f} ms | {1e3 * f['error']:+.1f} mrad |"
+        )
+    lines.append(END)
+    return "\n".join(lines) + "\n"
+
+
+def update(path: Path, section: str) -> None:
+    text = path.read_text() if path.exists() else "# Benchmarks\n"
+    pattern = re.compile(re.escape(BEGIN) + r".*?" + re.escape(END) + r"\n?", re.S)
+    text = pattern.sub(section, text) if pattern.search(text) else text.rstrip() + "\n\n" + section
+    path.write_text(text)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
+    parser.add_argument("--update", type=Path, help="write the section into this markdown file")
+    parser.add_argument("--seconds", type=float, default=2.0, help="simulated seconds per load")
+    args = parser.parse_args(argv)
+    mem = memory()
+    tbl = table()
+    loads = [tick_load(s, args.seconds) for s in ("idle", "typical", "stress")]
+    steps = step_figures()
+    section = render(mem, tbl, loads, steps, args.seconds)
+    print(section)
+    if args.update:
+        update(args.update, section)
+        print(f"updated {args.update}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
