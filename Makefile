@@ -16,6 +16,7 @@ BENCH_TARGETS :=
 -include firmware/firmware.mk
 -include host/utrf/emulator/harness/harness.mk
 -include host/utrf/models/models.mk
+-include host/utrf/hand/hand.mk
 
 .PHONY: help setup test demo bench lint clean
 

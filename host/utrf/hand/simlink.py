@@ -167,12 +167,12 @@ class SimLink:
 
     def sleep(self, seconds: float) -> None:
         """Run the board for ``seconds`` of simulated time, with heartbeats, delivering its
-        frames to the callbacks as they arrive (to within ``PUMP_INTERVAL_S``)."""
+        frames to the callbacks as they arrive (to within ``PUMP_INTERVAL_S``). The board moves
+        in whole exchange periods: the sleep ends within half of one of ``seconds``."""
         end = self.now() + seconds
-        while True:
+        period = self.board.exchange_period
+        while self.now() < end - period / 2:
             now = self.now()
-            if now >= end:
-                return
             step = min(end - now, PUMP_INTERVAL_S)
             if self._heartbeats_on():
                 assert self.heartbeat_period_s is not None
@@ -181,7 +181,9 @@ class SimLink:
                     self._send_heartbeat()
                     due = now + self.heartbeat_period_s
                 step = min(step, due - now)
-            self.board.run_for(max(step, 0.0))
+            # whole exchanges, at least one (a step shorter than a clock cycle would not move
+            # the board), the nearest to the step: the sleep ends within half an exchange
+            self.board.run_for(max(round(step / period), 1) * period)
             self._pump()
 
     # --- internals -----------------------------------------------------------------------
