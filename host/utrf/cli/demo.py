@@ -74,16 +74,12 @@ def run(args: argparse.Namespace) -> int:
         with lock:
             hand: Hand | None = state["hand"]  # type: ignore[assignment]
             step: Step | None = state["step"]  # type: ignore[assignment]
-            board = state["board"]
         if hand is None:
             return "starting the emulated board..."
         title = "UTRF-RoboHand demo"
         if step is not None:
             title += f": pose {step.index}/{len(sequence)}, {step.name}"
-        factor = getattr(board, "realtime_factor", math.nan)
-        footer = (
-            f"real firmware on the emulated board at {hand.url} | real-time factor {factor:.2f}"
-        )
+        footer = f"the real firmware on the emulated board at {hand.url}"
         return state_table(hand.latest, title=title, footer=footer)
 
     def on_connect(hand: Hand, board: object) -> None:
