@@ -17,6 +17,20 @@ from utrf.protocol.errors import BoardResetError, SchemaMismatchError
 FIST = [1.15, 1.40, 1.40, 1.40, 1.40]
 
 
+def test_the_handshake_with_the_real_firmware(hand: Hand) -> None:
+    ident = hand.identity
+    assert (ident.protocol_version, ident.schema_hash) == (M.PROTOCOL_VERSION, M.SCHEMA_HASH)
+    assert (ident.finger_count, ident.loop_rate_hz) == (5, 1000)
+    assert ident.max_telemetry_hz == M.MAX_TELEMETRY_HZ
+    expected = tuple(M.Actuation[f.actuation.upper()] for f in hand.geometry.fingers)
+    assert ident.actuation == expected
+    assert ident.reset_cause == M.ResetCause.POWER_ON
+    assert ident.config_status == M.ConfigStatus.DEFAULTS_BLANK  # a fresh EEPROM
+    # the boot came first and was waited for: the handshake went to a running firmware
+    assert hand.last_boot is not None and hand.last_boot.reset_cause == M.ResetCause.POWER_ON
+    assert hand.link_stats().retries == 0
+
+
 def test_the_firmware_sustains_500_hz_of_telemetry_while_moving(
     board: EmulatedBoard, hand: Hand
 ) -> None:

@@ -5,6 +5,7 @@ the auto-reset, a pulled cable, and the demo writing its files."""
 from __future__ import annotations
 
 import json
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -98,6 +99,26 @@ def test_utrf_monitor_prints_and_logs(
     data = read_log(log, log_columns(("thumb", "index", "middle", "ring", "little")))
     assert 90 <= len(data.rows) <= 130  # 100 Hz for about a second
     assert {r["thumb_mode"] for r in data.rows} == {"COAST"}  # the monitor moved nothing
+
+
+def test_utrf_monitor_says_when_the_board_resets_and_carries_on(
+    served: EmulatedBoard, capsys: pytest.CaptureFixture[str]
+) -> None:
+    def reset_once_monitored() -> None:  # 0.5 s (simulated) into the monitor's connection
+        if served.wait_until(lambda b: b.clients["tcp"], timeout=10.0):
+            served.run_for(0.5)
+            served.reset()
+
+    resetter = threading.Thread(target=reset_once_monitored, daemon=True)
+    resetter.start()
+    argv = ["monitor", "--port", served.url, "--duration", "2.5", "--every", "0.25"]
+    assert main(argv) == 0
+    resetter.join(timeout=5.0)
+    assert served.stats["resets"] >= 2  # the auto-reset of the connection, then ours
+    out = capsys.readouterr().out
+    assert "the board reset (RESET_PIN): handshaking again" in out
+    after = out.split("handshaking again", 1)[1]
+    assert sum(line.startswith("t=") for line in after.splitlines()) >= 2  # the stream is back
 
 
 def test_utrf_demo_writes_its_pictures_and_plot(

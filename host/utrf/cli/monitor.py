@@ -127,6 +127,8 @@ def run(args: argparse.Namespace) -> int:
                     print(line)
                 if hand.last_boot is not boot:  # the board reset: say so, handshake again
                     boot = hand.last_boot
+                    with watch.lock:
+                        watch.latest = None  # its state is gone
                     cause = boot.reset_cause.name if boot is not None else "?"
                     msg = f"the board reset ({cause}): handshaking again"
                     (live.console.print if live_view else print)(msg)
