@@ -140,7 +140,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         type=float,
         default=None,
         metavar="S",
-        help="settling time allowed (duration + 2 s)",
+        help="settling time allowed after the move (the larger of 3 s and duration + 2 s)",
     )
     p.add_argument(
         "--then",
