@@ -335,9 +335,9 @@ def _record(
     period = 1.0 / config.tracker_hz
     for _ in range(n):
         bench.sleep(period)
-        _check_faults(bench, config.finger, seen, during)
-        row = write()
+        row = write()  # logged first: the samples around a fault are kept too
         rows.append(row)
+        _check_faults(bench, config.finger, seen, during)
     return rows
 
 
