@@ -4,11 +4,13 @@ nothing faults; the report's figures recomputed from the samples."""
 from __future__ import annotations
 
 import csv
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from utrf.cli import main
 from utrf.hil import grasp_hold as gh
 from utrf.hil.bench import EmulatedTruth, open_emulated
 from utrf.hil.static_loading import RunError
@@ -48,6 +50,11 @@ def test_hits_are_found_and_the_grasp_recovers(firmware_elf: Path, tmp_path: Pat
     cur = np.array([float(r["middle_current_a_a"]) for r in rows])
     assert result["fingers"]["middle"]["current_a_a"]["max"] == pytest.approx(cur.max())
     assert (out / "grasp_hold.png").exists()
+    # the results come from the logs alone: `utrf hil analyse` rebuilds them
+    before = json.loads((out / "results.json").read_text())
+    (out / "results.json").unlink()
+    assert main(["hil", "analyse", str(out)]) == 0
+    assert json.loads((out / "results.json").read_text()) == before
 
 
 def test_a_pose_that_is_not_a_grasp_is_refused(firmware_elf: Path, tmp_path: Path) -> None:

@@ -3,6 +3,7 @@
     utrf hil static-loading --emulated --out out/static [--seed N] [--force]
     utrf hil static-loading --port /dev/ttyACM0 --tracker-port /dev/ttyUSB0 --out out/static
     utrf hil grasp-hold --emulated --out out/grasp --duration-s 600
+    utrf hil analyse out/grasp          # results from the logs alone, a killed run's too
 
 Options are SI except where named (``--loads-kg``); the progress lines and tables show mm and
 degrees and say so. Exit codes: 0 done; 1 stopped on a fault or interrupted (the data stay;
@@ -80,7 +81,33 @@ def register(subparsers: Any) -> None:
     )
     g.add_argument("--sample-hz", type=float, default=50.0, help="samples/s logged (50)")
     g.set_defaults(handler=_grasp_hold)
+    a = sub.add_parser(
+        "analyse", help="(re)compute a run's results and figure from its logs (a killed run too)"
+    )
+    a.add_argument("out", type=Path, metavar="DIR", help="the run's output directory")
+    a.set_defaults(handler=_analyse)
     p.set_defaults(handler=lambda _a: (p.print_help(), EXIT_BAD_INPUT)[1])
+
+
+def _analyse(args: argparse.Namespace) -> int:
+    import json
+
+    from utrf.hil import grasp_hold as gh
+    from utrf.hil import static_loading as sl
+    from utrf.models.geometry import HandGeometry
+
+    meta_path = args.out / "meta.json"
+    if not meta_path.exists():
+        error("hil analyse", f"{args.out} holds no run (no meta.json)")
+        return EXIT_BAD_INPUT
+    config = json.loads(meta_path.read_text())["config"]
+    if "loads_kg" in config:
+        geometry = HandGeometry.default().fingers[int(config["finger"])].geometry
+        print(sl.describe(sl.analyse(args.out, geometry=geometry)))
+    else:
+        print(gh.describe(gh.analyse(args.out)))
+    print(f"results: {args.out / 'results.json'}")
+    return EXIT_OK
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -184,9 +211,10 @@ def _static_loading(args: argparse.Namespace) -> int:
             seed=args.seed,
         )
         geometry = HandGeometry.default().fingers[config.finger].geometry
-        if args.resume:
+        if args.resume:  # the stored configuration wins (finger, loads, seed...)
             config = sl.prepare_output(args.out, config, resume=True, extra_meta={})
             geometry = HandGeometry.default().fingers[config.finger].geometry
+            args.seed = config.seed
         checks, limits = sl.check_loads(geometry, config)
         unsafe = [c for c in checks if not c.safe]
         for c in checks:
