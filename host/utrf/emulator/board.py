@@ -501,6 +501,42 @@ class EmulatedBoard:
         with self._lock:
             self.plant.shift_encoder(finger, radians)
 
+    def set_tip_force(self, finger: int, force_n: tuple[float, float], ramp_s: float = 0.0) -> None:
+        """A steady force (Fx, Fy) in N at a fingertip, finger frame (y toward flexion; the
+        bench's gravity is −y), reached over ``ramp_s`` s; (0, 0) removes it. The motor and the
+        controller feel it through the coupling (``HandPlant.set_tip_force``)."""
+        with self._lock:
+            self.plant.set_tip_force(finger, force_n, ramp_s)
+
+    def hang_payload(self, finger: int, mass_kg: float, ramp_s: float = 0.0) -> None:
+        """Hang ``mass_kg`` from a fingertip (its weight along −y of the finger frame, the
+        bench's gravity), lowered in over ``ramp_s`` s; 0 removes it."""
+        if not (isinstance(mass_kg, int | float) and math.isfinite(mass_kg) and mass_kg >= 0):
+            raise EmulatorError(f"a payload must be a mass >= 0 kg, got {mass_kg!r}")
+        g = -self.plant.params.gravity_m_s2[1] if self.plant.params.gravity_m_s2[1] else 9.81
+        self.set_tip_force(finger, (0.0, -float(mass_kg) * g), ramp_s)
+
+    def hit_tip(
+        self, finger: int, impulse_ns: tuple[float, float], duration_s: float = 5e-3
+    ) -> None:
+        """A hammer hit: a force pulse at the tip carrying ``impulse_ns`` (Jx, Jy) in N s,
+        finger frame, over ``duration_s`` from now."""
+        with self._lock:
+            self.plant.hit(finger, impulse_ns, duration_s)
+
+    @property
+    def tip(self) -> np.ndarray:
+        """True fingertips (m), shape (5, 2), each in its finger's frame, with the coupling
+        tendons' stretch under tip loads: what a perfect tracker would read."""
+        with self._lock:
+            return self.plant.tip
+
+    @property
+    def tip_force(self) -> np.ndarray:
+        """The tip force applied over the last step (N), shape (5, 2), pulses included."""
+        with self._lock:
+            return self.plant.applied_force.copy()
+
     def drop_client(self) -> None:
         """Hang up on the TCP client, as a pulled USB cable would (it reads end-of-file)."""
         with self._lock:

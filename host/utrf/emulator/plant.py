@@ -23,6 +23,19 @@ Per finger (paper Sec. II, IV-B):
   joint limits at θ1's range (paper: ±90°).
 * **Encoder.** An AS5600 on Joint 2 in analog mode: 12-bit angle, output 10–90 % of 5 V over
   one turn, seeded Gaussian noise. The board's ADC quantises it to 10 bits.
+* **Tip loads.** An external force at each fingertip (a payload's weight, any direction,
+  ramped in as an operator lowers a weight) plus short force pulses (hammer hits). The motor
+  and the controller feel it through the coupling: its generalised force on q is the tip
+  Jacobian's transpose times the force. The payload acts by its weight only (its inertia,
+  a weight hanging on a cord, is not modelled).
+* **Coupling stretch under tip loads.** The coupling tendons stay rigid in the dynamics, but
+  under a tip load they stretch quasi-statically (their resonance, ~1 kHz, is far above the
+  loop's): the net tensions of the statics (``N3 = −τ3/R3``, ``N2 = N3 − τ2/R2``) stretch
+  Tendon 2 and 3 by ``e = N L_T / (E A)``, with ``PlantParams.coupling_modulus_pa`` (the
+  hidden "true" effective modulus of an emulated bench; default: the geometry's). The joints
+  then sit at ``R1 θ1 = q``, ``R2 θ2 = q − e2``, ``R3 θ3 = q − e2 − e3``, so the Joint-2
+  encoder, the joint angles and the tip all see it, and a controller holding θ2 holds the
+  stretched finger. The links' own weight is left out of it (below a micrometre).
 
 Every constant the paper does not give is an assumption, kept in :class:`MotorParams`,
 :class:`EncoderParams` and :class:`PlantParams` and documented in ``README.md``.
@@ -35,7 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from utrf.models import kinematics
+from utrf.models import tendons
 from utrf.models.geometry import HandGeometry
 
 FINGERS = 5
@@ -141,16 +154,31 @@ class PlantParams:
     joint_damping_n_m_s: float = 2e-3
     tendon_damping_n_s_m: float = 400.0
     gravity_m_s2: tuple[float, float] = (0.0, -9.81)
+    #: the coupling tendons' effective Young's modulus (Pa) for their stretch under tip
+    #: loads; None: each finger's geometry value (``tendon_youngs_modulus_pa``)
+    coupling_modulus_pa: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("joint_damping_n_m_s", "tendon_damping_n_s_m"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise PlantError(f"PlantParams.{name} must be >= 0, got {v!r}")
+        if self.coupling_modulus_pa is not None:
+            _positive("PlantParams.coupling_modulus_pa", self.coupling_modulus_pa)
         if len(self.gravity_m_s2) != 2 or not all(math.isfinite(g) for g in self.gravity_m_s2):
             raise PlantError(
                 f"PlantParams.gravity_m_s2 must be (gx, gy), got {self.gravity_m_s2!r}"
             )
+
+
+def _force_vector(value: tuple[float, float], what: str) -> np.ndarray:
+    try:
+        v = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise PlantError(f"{what} must be two numbers (x, y), got {value!r}") from None
+    if v.shape != (2,) or not np.all(np.isfinite(v)):
+        raise PlantError(f"{what} must be two finite numbers (x, y), got {value!r}")
+    return v
 
 
 def _finger_index(finger: int) -> int:
@@ -204,6 +232,17 @@ class HandPlant:
         self.tendon_stiffness = np.array(
             [x.tendon_youngs_modulus_pa * x.tendon_area_m2 / x.actuating_tendon_length_m for x in g]
         )
+        modulus = np.array(
+            [
+                x.tendon_youngs_modulus_pa
+                if self.params.coupling_modulus_pa is None
+                else self.params.coupling_modulus_pa
+                for x in g
+            ]
+        )
+        area = np.array([x.tendon_area_m2 for x in g])
+        rest = np.array([tendons.rest_lengths(x) for x in g])  # (5, 3): T1, T2, T3
+        self.coupling_compliance = rest[:, 1:] / (modulus * area)[:, None]  # m/N, T2 and T3
         self.rotary = np.array([f.actuation == "rotary" for f in self.hand.fingers])
         self.q_limits = np.array([x.q_range_m for x in g])  # (5, 2)
         self._gravity = np.asarray(self.params.gravity_m_s2, dtype=float)
@@ -238,6 +277,14 @@ class HandPlant:
         self.unplugged_v = np.full(FINGERS, self.params.encoder.unplugged_v)
         self.encoder_shift = np.zeros(FINGERS)  # rad, a slipped magnet
         self._block = np.array(self.q_limits)  # the joint limits, narrowed by blocks
+        # Tip loads: the steady force (ramping toward its goal) and short pulses (hits).
+        self.tip_force = np.zeros((FINGERS, 2))  # N, finger frame, steady part now
+        self._tip_goal = np.zeros((FINGERS, 2))
+        self._tip_rate = np.full(FINGERS, np.inf)  # N/s toward the goal
+        self._pulses: list[tuple[int, float, float, np.ndarray]] = []  # finger, t0, t1, force
+        self.applied_force = np.zeros((FINGERS, 2))  # the tip force of the last step (N)
+        self.coupling_stretch = np.zeros((FINGERS, 2))  # e2, e3 (m), Tendon 2/5 and 3/6
+        self._Q_ext = np.zeros(FINGERS)
         self._geometry_terms()
 
     # -- set-up ---------------------------------------------------------------------------------
@@ -277,6 +324,39 @@ class HandPlant:
         self._dM = 2.0 * (mJ * dJ).sum(axis=(1, 2))
         self._Qg = (mJ @ self._gravity).sum(axis=1)
         self._q_terms = self.q.copy()
+        self._tip_terms()
+
+    def _phi(self) -> np.ndarray:
+        """Absolute link angles (5, 3) with the coupling stretch."""
+        shift = np.column_stack(
+            (np.zeros(FINGERS), self.coupling_stretch[:, 0], self.coupling_stretch.sum(axis=1))
+        )
+        return np.cumsum((self.q[:, None] - shift) / self.R, axis=1)
+
+    def _tip_terms(self) -> None:
+        """The coupling stretch and the tip force's generalised force on q, for the force
+        applied now (two passes: the stretch moves the arms a little)."""
+        force = self.applied_force
+        self._q_tip = self.q.copy()
+        if not force.any():
+            self.coupling_stretch[:] = 0.0
+            self._Q_ext = np.zeros(FINGERS)
+            return
+        for _ in range(2):
+            phi = self._phi()
+            u = np.stack((np.cos(phi), np.sin(phi)), axis=-1)  # (5, 3, 2)
+            seg = self.L[:, :, None] * u
+            arm3 = seg[:, 2]  # tip − Joint 3
+            arm2 = seg[:, 1] + arm3  # tip − Joint 2
+            tau2 = arm2[:, 0] * force[:, 1] - arm2[:, 1] * force[:, 0]
+            tau3 = arm3[:, 0] * force[:, 1] - arm3[:, 1] * force[:, 0]
+            n3 = -tau3 / self.R[:, 2]
+            n2 = n3 - tau2 / self.R[:, 1]
+            self.coupling_stretch = np.column_stack((n2, n3)) * self.coupling_compliance
+        phi = self._phi()
+        # d tip / d q: the stretch is held (quasi-static), so dθ_k/dq = 1/R_k as when rigid.
+        jac = (self.L * self.c)[:, :, None] * np.stack((-np.sin(phi), np.cos(phi)), axis=-1)
+        self._Q_ext = (jac.sum(axis=1) * force).sum(axis=1)
 
     # -- the board's side -----------------------------------------------------------------------
     def decode_drive(self, pins: np.ndarray) -> None:
@@ -304,8 +384,13 @@ class HandPlant:
             return
         if pins is not None:
             self.decode_drive(pins)
+        changed = self._update_tip_force(dt)
         if np.abs(self.q - self._q_terms).max() > 2e-5:  # M, M', gravity vary slowly
             self._geometry_terms()
+        elif changed or (
+            self.applied_force.any() and np.abs(self.q - self._q_tip).max() > 2e-6
+        ):  # the tip force's arms: finer (the stretch is a small difference of them)
+            self._tip_terms()
         n = max(1, math.ceil(dt / self._max_substep))
         h = dt / n
         if h != self._h:
@@ -314,6 +399,33 @@ class HandPlant:
         for _ in range(n):
             self._substep(h)
         self.time += dt
+
+    def _update_tip_force(self, dt: float) -> bool:
+        """The tip force over the coming step: the steady part ramped toward its goal, plus
+        each pulse's force times the fraction of the step it covers. True when it changed."""
+        if not (
+            self._pulses or self.tip_force.any() or self._tip_goal.any() or self.applied_force.any()
+        ):
+            return False
+        gap = self._tip_goal - self.tip_force
+        dist = np.hypot(gap[:, 0], gap[:, 1])
+        reach = self._tip_rate * dt
+        frac = np.where(dist > reach, reach / np.where(dist > 0, dist, 1.0), 1.0)
+        self.tip_force = self.tip_force + gap * frac[:, None]
+        force = self.tip_force.copy()
+        t0, t1 = self.time, self.time + dt
+        keep = []
+        for pulse in self._pulses:
+            f, p0, p1, fv = pulse
+            overlap = min(t1, p1) - max(t0, p0)
+            if overlap > 0:
+                force[f] += fv * (overlap / dt)
+            if p1 > t1:
+                keep.append(pulse)
+        self._pulses = keep
+        changed = not np.array_equal(force, self.applied_force)
+        self.applied_force = force
+        return changed
 
     def _substep(self, h: float) -> None:
         """One semi-implicit Euler step: forces from the present state, velocities, then
@@ -343,6 +455,7 @@ class HandPlant:
             tension[:, 0]
             - tension[:, 1]
             + self._Qg
+            + self._Q_ext
             - (self._joint_damping + 0.5 * self._dM * qd) * qd
         )
         qd = qd + h * gen_force * self._inv_M
@@ -365,7 +478,7 @@ class HandPlant:
     def encoder_volts(self) -> np.ndarray:
         """Each finger's AS5600 output (V), noise included: the ADC0..4 inputs."""
         e = self.params.encoder
-        theta2 = self.q / self.R[:, 1] + self.encoder_shift
+        theta2 = self.theta2 + self.encoder_shift
         turns = (e.offset_rad + (-theta2 if e.invert else theta2)) * (0.5 / math.pi)
         turns -= np.floor(turns)  # the angle within one turn, as a fraction
         steps = 1 << e.resolution_bits
@@ -389,19 +502,55 @@ class HandPlant:
     # -- observations ---------------------------------------------------------------------------
     @property
     def theta(self) -> np.ndarray:
-        """Relative joint angles θ1..θ3 per finger (rad), shape (5, 3)."""
-        return self.q[:, None] / self.R
+        """Relative joint angles θ1..θ3 per finger (rad), shape (5, 3): θ_k = q / R_k, less
+        the coupling tendons' stretch under a tip load."""
+        e = self.coupling_stretch
+        shift = np.column_stack((np.zeros(FINGERS), e[:, 0], e[:, 0] + e[:, 1]))
+        return (self.q[:, None] - shift) / self.R
 
     @property
     def theta2(self) -> np.ndarray:
-        return self.q / self.R[:, 1]
+        return (self.q - self.coupling_stretch[:, 0]) / self.R[:, 1]
 
     @property
     def tip(self) -> np.ndarray:
-        """Fingertips in each finger's frame (m), shape (5, 2), from ``utrf.models``."""
-        return np.array(
-            [kinematics.tip_position(g, q) for g, q in zip(self.geometries, self.q, strict=True)]
+        """Fingertips in each finger's frame (m), shape (5, 2): Eq. 1 at the joint angles
+        (``utrf.models.kinematics`` for the rigid finger)."""
+        phi = np.cumsum(self.theta, axis=1)
+        return np.stack(
+            ((self.L * np.cos(phi)).sum(axis=1), (self.L * np.sin(phi)).sum(axis=1)), axis=-1
         )
+
+    @property
+    def generalised_tip_force(self) -> np.ndarray:
+        """The tip force's generalised force on q (N), per finger: J_tipᵀ F."""
+        return self._Q_ext.copy()
+
+    # -- tip loads --------------------------------------------------------------------------------
+    def set_tip_force(self, finger: int, force_n: tuple[float, float], ramp_s: float = 0.0) -> None:
+        """Apply a steady tip force (Fx, Fy) in N, finger frame (a payload of m kg is
+        (0, −m g)), reached linearly over ``ramp_s`` s (0: at once), as an operator lowers a
+        weight onto a cord. (0, 0) removes it."""
+        f = _finger_index(finger)
+        fv = _force_vector(force_n, "tip force")
+        if not (isinstance(ramp_s, int | float) and math.isfinite(ramp_s) and ramp_s >= 0):
+            raise PlantError(f"ramp_s must be a duration >= 0 s, got {ramp_s!r}")
+        self._tip_goal[f] = fv
+        dist = float(np.hypot(*(fv - self.tip_force[f])))
+        self._tip_rate[f] = dist / ramp_s if ramp_s > 0 else np.inf
+        if ramp_s == 0:
+            self.tip_force[f] = fv
+
+    def hit(self, finger: int, impulse_ns: tuple[float, float], duration_s: float = 5e-3) -> None:
+        """A hammer hit on the tip: a force pulse carrying ``impulse_ns`` (Jx, Jy) in N s,
+        finger frame, spread evenly over ``duration_s`` starting now."""
+        f = _finger_index(finger)
+        jv = _force_vector(impulse_ns, "impulse")
+        if not (
+            isinstance(duration_s, int | float) and math.isfinite(duration_s) and duration_s > 0
+        ):
+            raise PlantError(f"a hit's duration must be > 0 s, got {duration_s!r}")
+        self._pulses.append((f, self.time, self.time + float(duration_s), jv / duration_s))
 
     def energy(self) -> tuple[float, float]:
         """(kinetic, potential) energy of the whole hand in J: links, actuators, taut tendons
@@ -430,6 +579,7 @@ class HandPlant:
                 f"finger {f}: θ2 = {theta2:.3f} rad is outside its range "
                 f"[{lo / self.R[f, 1]:.3f}, {hi / self.R[f, 1]:.3f}] rad"
             )
+        q = min(max(q + self.coupling_stretch[f, 0], lo), hi)
         self.q[f], self.qd[f] = q, 0.0
         self.x[f] = (q, -q)
         self.xd[f] = 0.0

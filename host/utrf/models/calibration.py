@@ -16,6 +16,14 @@ Data (CSV, one row per measurement, ``#`` comments allowed): ``load_kg``, option
 ``deflection_m`` from the zero-payload tip (``_mm`` columns are accepted too). Deflection data
 carry no pose information, so only the parameters that change the stiffness can be fitted
 from them.
+
+The boundary condition: a ``q_m`` row was held at its tendon displacement (the paper's slide
+stage). A ``theta2_rad`` (or ``theta2_deg``) column instead says the finger was held at that
+Joint-2 angle, as the firmware's closed loop on the Joint-2 encoder holds it: the model then
+finds, per row, the q at which the loaded finger's Joint-2 angle is the row's
+(:func:`hold_q`), so the actuating tendon's stretch drops out and Tendons 2 and 3 stretch
+the finger. Such data have no q to offset; position data fit ``modulus`` and ``tip_offset``
+by default.
 """
 
 from __future__ import annotations
@@ -35,6 +43,7 @@ from utrf.models.geometry import FingerGeometry, GeometryError
 
 PARAMETERS = ("modulus", "q_offset", "radius_scale", "actuating_length", "tip_offset")
 DEFAULT_FIT_POSITION = ("modulus", "q_offset")
+DEFAULT_FIT_POSITION_THETA2 = ("modulus", "tip_offset")
 DEFAULT_FIT_DEFLECTION = ("modulus",)
 _STIFFNESS_ONLY = ("modulus", "radius_scale", "actuating_length")
 
@@ -50,10 +59,16 @@ class CalibrationData:
     tip_m: np.ndarray | None = None  # (n, 2)
     deflection_m: np.ndarray | None = None  # (n,)
     source: str = "<data>"
+    theta2_rad: np.ndarray | None = None  # (n,): held at this Joint-2 angle, not at q_m
 
     @property
     def kind(self) -> str:
         return "position" if self.tip_m is not None else "deflection"
+
+    @property
+    def hold(self) -> str:
+        """``"q"`` (tendon displacement held) or ``"theta2"`` (Joint-2 angle held)."""
+        return "q" if self.theta2_rad is None else "theta2"
 
     def __len__(self) -> int:
         return int(self.load_kg.size)
@@ -88,6 +103,14 @@ def read_csv(path: str | Path) -> CalibrationData:
         for suffix, factor in (("_m", 1.0), ("_mm", 1e-3)):
             if name + suffix in columns:
                 scale[name] = (name + suffix, factor)
+    for col, factor in (("theta2_rad", 1.0), ("theta2_deg", math.pi / 180)):
+        if col in columns:
+            scale["theta2"] = (col, factor)
+    if "theta2" in scale and "q" in scale:
+        raise CalibrationError(
+            f"{path}:{header_line}: give q (held tendon displacement) or theta2 (held Joint-2 "
+            "angle) per row, not both"
+        )
     has_tip = "tip_x" in scale and "tip_y" in scale
     if not has_tip and "deflection" not in scale:
         raise CalibrationError(
@@ -96,7 +119,9 @@ def read_csv(path: str | Path) -> CalibrationData:
         )
     if ("tip_x" in scale) != ("tip_y" in scale):
         raise CalibrationError(f"{path}:{header_line}: tip_x and tip_y must come together")
-    rows: dict[str, list[float]] = {k: [] for k in ("load", "q", "tip_x", "tip_y", "deflection")}
+    rows: dict[str, list[float]] = {
+        k: [] for k in ("load", "q", "theta2", "tip_x", "tip_y", "deflection")
+    }
     for line_no, text in numbered[1:]:
         cells = [c.strip() for c in next(csv.reader([text]))]
         if len(cells) != len(columns):
@@ -108,7 +133,7 @@ def read_csv(path: str | Path) -> CalibrationData:
         if load < 0:
             raise CalibrationError(f"{path}:{line_no} load_kg: must be >= 0, got {load}")
         rows["load"].append(load)
-        for key in ("q", "tip_x", "tip_y", "deflection"):
+        for key in ("q", "theta2", "tip_x", "tip_y", "deflection"):
             if key in scale:
                 col, factor = scale[key]
                 rows[key].append(_number(row[col], f"{path}:{line_no} {col}") * factor)
@@ -116,11 +141,18 @@ def read_csv(path: str | Path) -> CalibrationData:
     if n == 0:
         raise CalibrationError(f"{path}: no data rows")
     q = np.array(rows["q"]) if "q" in scale else np.zeros(n)
+    theta2 = np.array(rows["theta2"]) if "theta2" in scale else None
     if has_tip:
         tip = np.column_stack([rows["tip_x"], rows["tip_y"]])
-        return CalibrationData(np.array(rows["load"]), q, tip_m=tip, source=str(path))
+        return CalibrationData(
+            np.array(rows["load"]), q, tip_m=tip, source=str(path), theta2_rad=theta2
+        )
     return CalibrationData(
-        np.array(rows["load"]), q, deflection_m=np.array(rows["deflection"]), source=str(path)
+        np.array(rows["load"]),
+        q,
+        deflection_m=np.array(rows["deflection"]),
+        source=str(path),
+        theta2_rad=theta2,
     )
 
 
@@ -128,14 +160,17 @@ def write_csv(data: CalibrationData, path: str | Path, comment: str = "") -> Pat
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     out = [f"# {ln}" for ln in comment.splitlines()] if comment else []
+    pose_col, pose = (
+        ("q_m", data.q_m) if data.theta2_rad is None else ("theta2_rad", data.theta2_rad)
+    )
     if data.tip_m is not None:
-        out.append("load_kg,q_m,tip_x_m,tip_y_m")
-        for w, q, (x, y) in zip(data.load_kg, data.q_m, data.tip_m, strict=True):
+        out.append(f"load_kg,{pose_col},tip_x_m,tip_y_m")
+        for w, q, (x, y) in zip(data.load_kg, pose, data.tip_m, strict=True):
             out.append(f"{w:.6g},{q:.9g},{x:.9g},{y:.9g}")
     else:
         assert data.deflection_m is not None
-        out.append("load_kg,q_m,deflection_m")
-        for w, q, d in zip(data.load_kg, data.q_m, data.deflection_m, strict=True):
+        out.append(f"load_kg,{pose_col},deflection_m")
+        for w, q, d in zip(data.load_kg, pose, data.deflection_m, strict=True):
             out.append(f"{w:.6g},{q:.9g},{d:.9g}")
     path.write_text("\n".join(out) + "\n")
     return path
@@ -150,9 +185,53 @@ class Parameters:
     tip_offset_m: tuple[float, float] = (0.0, 0.0)
 
 
+def hold_q(
+    geom: FingerGeometry,
+    theta2_rad: np.ndarray,
+    load_kg: np.ndarray,
+    model: str = statics.DEFAULT_MODEL,
+    *,
+    tolerance_rad: float = 1e-12,
+    max_iterations: int = 50,
+) -> np.ndarray:
+    """The tendon displacement (m) at which the finger under each payload has the given
+    Joint-2 angle: the q that a closed loop on the Joint-2 encoder ends up commanding.
+
+    The loaded Joint-2 angle is (q − e1 − e2) / R2 (serial; q − e2 printed) with stretches
+    that vary slowly with q, so q ← q − R2 (θ2(q) − θ2*) contracts quickly."""
+    theta2 = np.asarray(theta2_rad, dtype=float)
+    loads = np.broadcast_to(np.asarray(load_kg, dtype=float), theta2.shape)
+    r2 = geom.guide_radii_m[1]
+    q = theta2 * r2
+    for _ in range(max_iterations):
+        got = statics.solve_batch(geom, q, payload_kg=loads, model=model).theta[:, 1]
+        miss = got - theta2
+        q = q - r2 * miss
+        if np.all(np.abs(miss) <= tolerance_rad):
+            return q
+    raise CalibrationError(
+        f"no tendon displacement holds Joint 2 at the given angles within {tolerance_rad:g} rad "
+        f"after {max_iterations} passes (largest miss {np.abs(miss).max():.3g} rad)"
+    )
+
+
+def _row_q(params: Parameters, data: CalibrationData, model: str) -> np.ndarray:
+    if data.theta2_rad is None:
+        return data.q_m + params.q_offset_m
+    return hold_q(params.geometry, data.theta2_rad, data.load_kg, model)
+
+
 def predict(params: Parameters, data: CalibrationData, model: str) -> np.ndarray:
-    """Model tip positions (n, 2) or deflections (n,) for the data's loads and q."""
-    q = data.q_m + params.q_offset_m
+    """Model tip positions (n, 2) or deflections (n,) for the data's loads and q (or held
+    Joint-2 angles)."""
+    q = _row_q(params, data, model)
+    if data.theta2_rad is not None and data.kind == "deflection":
+        # Unloaded reference at the same Joint-2 angle.
+        q0 = hold_q(params.geometry, data.theta2_rad, np.zeros(len(data)), model)
+        loaded = statics.solve_batch(params.geometry, q, payload_kg=data.load_kg, model=model)
+        free = statics.solve_batch(params.geometry, q0, payload_kg=0.0, model=model)
+        disp = loaded.tip - free.tip
+        return np.hypot(disp[:, 0], disp[:, 1])
     if data.kind == "position":
         batch = statics.solve_batch(params.geometry, q, payload_kg=data.load_kg, model=model)
         return batch.tip + np.asarray(params.tip_offset_m)
@@ -248,7 +327,12 @@ def fit(
     statics._check_model(model)
     names = tuple(fit_params) if fit_params is not None else None
     if names is None:
-        names = DEFAULT_FIT_POSITION if data.kind == "position" else DEFAULT_FIT_DEFLECTION
+        if data.kind == "deflection":
+            names = DEFAULT_FIT_DEFLECTION
+        elif data.hold == "theta2":
+            names = DEFAULT_FIT_POSITION_THETA2
+        else:
+            names = DEFAULT_FIT_POSITION
     if not names:
         raise CalibrationError("nothing to fit: give at least one parameter")
     for n in names:
@@ -256,6 +340,11 @@ def fit(
             raise CalibrationError(f"unknown parameter {n!r}; choose from {PARAMETERS}")
     if len(set(names)) != len(names):
         raise CalibrationError(f"parameters listed twice: {list(names)}")
+    if data.hold == "theta2" and "q_offset" in names:
+        raise CalibrationError(
+            "q_offset needs data held at a tendon displacement (q_m); these rows were held at "
+            "a Joint-2 angle (theta2), which has no q to offset"
+        )
     if data.kind == "deflection":
         bad = [n for n in names if n not in _STIFFNESS_ONLY]
         if bad:

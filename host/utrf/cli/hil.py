@@ -1,0 +1,297 @@
+"""``utrf hil``: the bench runs (``hil/README.md``).
+
+    utrf hil static-loading --emulated --out out/static [--seed N] [--force]
+    utrf hil static-loading --port /dev/ttyACM0 --tracker-port /dev/ttyUSB0 --out out/static
+    utrf hil grasp-hold --emulated --out out/grasp --duration-s 600
+    utrf hil analyse out/grasp          # results from the logs alone, a killed run's too
+
+Options are SI except where named (``--loads-kg``); the progress lines and tables show mm and
+degrees and say so. Exit codes: 0 done; 1 stopped on a fault or interrupted (the data stay;
+``--resume`` continues a static loading run); 2 bad input (including payloads the planner
+refuses without ``--force``); 3 the board or the tracker could not be reached.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from utrf.cli._hand_common import EXIT_BAD_INPUT, EXIT_LINK, EXIT_NOT_DONE, EXIT_OK, error
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "hil",
+        help="bench runs: static loading (paper Sec. IV-A), grasp hold (Sec. IV-C)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    sub = p.add_subparsers(dest="hil_command", metavar="RUN")
+
+    s = sub.add_parser(
+        "static-loading",
+        help="payloads at a straight finger's tip, tip tracked, model compared and calibrated",
+    )
+    _common(s)
+    s.add_argument("--finger", default="index", help="finger name or index (default index)")
+    s.add_argument("--repeats", type=int, default=3, help="repeats of the schedule (default 3)")
+    s.add_argument(
+        "--loads-kg",
+        type=float,
+        nargs="+",
+        default=None,
+        metavar="KG",
+        help="payloads in kg (default the paper's 0.5 1.0 1.5 2.0 2.5 3.0); each repeat starts "
+        "unloaded",
+    )
+    s.add_argument("--resume", action="store_true", help="continue the run in --out")
+    s.add_argument(
+        "--force",
+        action="store_true",
+        help="run payloads the planner calls unsafe (tendon or actuator over its rating), "
+        "with a warning; the paper's 3 kg is one on the default finger",
+    )
+    s.add_argument(
+        "--actuator-rating-n",
+        type=float,
+        default=None,
+        metavar="N",
+        help="the driving actuator's rated pull for the planner's check (default: the "
+        "planner's 150 N; emulated: the bench actuator's stall force)",
+    )
+    s.add_argument("--settle-s", type=float, default=1.5, help="wait after a load (s)")
+    s.add_argument("--record-s", type=float, default=1.0, help="recording per step (s)")
+    s.add_argument("--tracker-hz", type=float, default=40.0, help="tracker samples/s (40)")
+    s.set_defaults(handler=_static_loading)
+
+    g = sub.add_parser("grasp-hold", help="hold a grasp pose under hammer hits, record drift")
+    _common(g)
+    g.add_argument("--pose", default="grasp-bottle", help="a grasp pose of the library")
+    g.add_argument("--duration-s", type=float, default=600.0, help="hold time (paper: 600 s)")
+    g.add_argument(
+        "--hits", type=int, default=None, help="emulated hammer hits (default one per 30 s)"
+    )
+    g.add_argument(
+        "--hit-impulse-ns", type=float, default=0.3, help="emulated hit impulse, N s (0.3)"
+    )
+    g.add_argument(
+        "--tracked-finger", default="index", help="the finger carrying the tracker's sensor"
+    )
+    g.add_argument("--sample-hz", type=float, default=50.0, help="samples/s logged (50)")
+    g.set_defaults(handler=_grasp_hold)
+    a = sub.add_parser(
+        "analyse", help="(re)compute a run's results and figure from its logs (a killed run too)"
+    )
+    a.add_argument("out", type=Path, metavar="DIR", help="the run's output directory")
+    a.set_defaults(handler=_analyse)
+    p.set_defaults(handler=lambda _a: (p.print_help(), EXIT_BAD_INPUT)[1])
+
+
+def _analyse(args: argparse.Namespace) -> int:
+    import json
+
+    from utrf.hil import grasp_hold as gh
+    from utrf.hil import static_loading as sl
+    from utrf.models.geometry import HandGeometry
+
+    meta_path = args.out / "meta.json"
+    if not meta_path.exists():
+        error("hil analyse", f"{args.out} holds no run (no meta.json)")
+        return EXIT_BAD_INPUT
+    config = json.loads(meta_path.read_text())["config"]
+    if "loads_kg" in config:
+        geometry = HandGeometry.default().fingers[int(config["finger"])].geometry
+        print(sl.describe(sl.analyse(args.out, geometry=geometry)))
+    else:
+        print(gh.describe(gh.analyse(args.out)))
+    print(f"results: {args.out / 'results.json'}")
+    return EXIT_OK
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--port", metavar="URL", help="the real board (serial port or URL)")
+    where.add_argument(
+        "--emulated",
+        action="store_true",
+        help="a driven emulated board with the emulated truth and a simulated tracker",
+    )
+    p.add_argument("--seed", type=int, default=0, help="emulation seed (default 0)")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
+    p.add_argument(
+        "--tracker-port",
+        default=None,
+        metavar="PORT",
+        help="NDI Aurora's serial port (bench; default: probe)",
+    )
+    p.add_argument("--tracker-sensor", type=int, default=0, help="the tip sensor's tool (0)")
+    p.add_argument("--boot-wait", type=float, default=2.5, help="s to wait for the board's boot")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def _finger(name: str) -> int:
+    from utrf.models.geometry import HandGeometry
+
+    names = [f.name for f in HandGeometry.default().fingers]
+    if name in names:
+        return names.index(name)
+    if name.isdigit() and 0 <= int(name) < len(names):
+        return int(name)
+    raise ValueError(f"no finger {name!r}; fingers are {names} or 0..{len(names) - 1}")
+
+
+def _open(args: argparse.Namespace, tracked: int, truth: Any = None) -> Any:
+    from utrf.hil import bench as bench_mod
+
+    if args.emulated:
+        return bench_mod.open_emulated(seed=args.seed, tracked_finger=tracked, truth=truth)
+    from utrf.hil.tracker import NDIAuroraTracker
+
+    tracker = NDIAuroraTracker(args.tracker_port, sensor=args.tracker_sensor)
+    try:
+        return bench_mod.open_real(args.port, tracker, boot_wait_s=args.boot_wait)
+    except BaseException:
+        tracker.close()
+        raise
+
+
+def _run_guarded(command: str, body: Any) -> int:
+    from utrf.hand.errors import HandError
+    from utrf.hil.static_loading import RunError, RunStopped
+    from utrf.hil.tracker import TrackerError
+    from utrf.protocol.errors import ProtocolError
+
+    try:
+        return int(body())
+    except RunStopped as exc:
+        error(command, f"stopped: {exc}; every sample taken is in the output directory")
+        return EXIT_NOT_DONE
+    except HandError as exc:
+        error(command, f"stopped: {exc}; every sample taken is in the output directory")
+        return EXIT_NOT_DONE
+    except (RunError, ValueError) as exc:
+        error(command, exc)
+        return EXIT_BAD_INPUT
+    except TrackerError as exc:
+        error(command, exc)
+        return EXIT_LINK if "could not" in str(exc) else EXIT_BAD_INPUT
+    except (ProtocolError, OSError) as exc:
+        error(command, f"the board: {exc}")
+        return EXIT_LINK
+    except EOFError as exc:
+        error(command, exc)
+        return EXIT_NOT_DONE
+
+
+def _static_loading(args: argparse.Namespace) -> int:
+    from utrf.hil import static_loading as sl
+    from utrf.hil.bench import BENCH_ACTUATOR, EmulatedTruth
+    from utrf.models.geometry import HandGeometry
+
+    command = "hil static-loading"
+    progress = (lambda _s: None) if args.quiet else (lambda s: print(s, flush=True))
+
+    def body() -> int:
+        finger = _finger(args.finger)
+        rating = args.actuator_rating_n
+        if rating is None and args.emulated:
+            rating = BENCH_ACTUATOR.stall_force_n
+        config = sl.StaticLoadingConfig(
+            finger=finger,
+            loads_kg=tuple(args.loads_kg) if args.loads_kg else sl.PAPER_LOADS_KG,
+            repeats=args.repeats,
+            settle_s=args.settle_s,
+            record_s=args.record_s,
+            tracker_hz=args.tracker_hz,
+            force=args.force,
+            actuator_rating_n=rating,
+            emulated=bool(args.emulated),
+            seed=args.seed,
+        )
+        geometry = HandGeometry.default().fingers[config.finger].geometry
+        if args.resume:  # the stored configuration wins (finger, loads, seed...)
+            config = sl.prepare_output(args.out, config, resume=True, extra_meta={})
+            geometry = HandGeometry.default().fingers[config.finger].geometry
+            args.seed = config.seed
+        checks, limits = sl.check_loads(geometry, config)
+        unsafe = [c for c in checks if not c.safe]
+        for c in checks:
+            progress(
+                f"planner: {c.load_kg:g} kg -> actuating tendon {c.tension_n:.0f} N (safety "
+                f"factor {c.safety_factor:.2f}), motor A {c.motor_force_n:.0f} N of "
+                f"{limits.actuator_rated_force_n:g} N rated: {'ok' if c.safe else 'UNSAFE'}"
+            )
+        if unsafe and not config.force:
+            for c in unsafe:
+                error(command, f"refused {c.load_kg:g} kg: " + "; ".join(c.reasons))
+            error(command, "the planner calls these payloads unsafe; --force runs them anyway")
+            return EXIT_BAD_INPUT
+        for c in unsafe:
+            print(
+                f"WARNING: running {c.load_kg:g} kg although the planner says: "
+                + "; ".join(c.reasons)
+                + " (--force)",
+                file=sys.stderr,
+                flush=True,
+            )
+        truth = EmulatedTruth() if config.emulated else None
+        if not args.resume:
+            meta: dict[str, Any] = {"started": sl.default_time(), "port": args.port}
+            if truth is not None:
+                meta["emulated_truth"] = truth.to_json()
+            meta["planner"] = [
+                {"load_kg": c.load_kg, "safe": c.safe, "reasons": list(c.reasons)} for c in checks
+            ]
+            sl.prepare_output(args.out, config, resume=False, extra_meta=meta)
+        bench = _open(args, config.finger, truth)
+        try:
+            result = sl.run(bench, config, args.out, geometry=geometry, progress=progress)
+        finally:
+            bench.close()
+        print(sl.describe(result))
+        print(f"results: {args.out / 'results.json'}, figure: {args.out / 'static_loading.png'}")
+        return EXIT_OK if result.get("complete") else EXIT_NOT_DONE
+
+    return _run_guarded(command, body)
+
+
+def _grasp_hold(args: argparse.Namespace) -> int:
+    from utrf.hil import grasp_hold as gh
+    from utrf.hil.bench import EmulatedTruth
+    from utrf.hil.static_loading import default_time
+
+    command = "hil grasp-hold"
+    progress = (lambda _s: None) if args.quiet else (lambda s: print(s, flush=True))
+
+    def body() -> int:
+        tracked = _finger(args.tracked_finger)
+        hits = args.hits if args.hits is not None else int(args.duration_s // 30)
+        config = gh.GraspHoldConfig(
+            pose=args.pose,
+            duration_s=args.duration_s,
+            hits=hits if args.emulated else 0,
+            hit_impulse_ns=args.hit_impulse_ns,
+            tracked_finger=tracked,
+            sample_hz=args.sample_hz,
+            emulated=bool(args.emulated),
+            seed=args.seed,
+        )
+        # The grasp hold uses the hand's own motors (no bench actuator).
+        bench = _open(args, tracked, EmulatedTruth(actuator=None))
+        try:
+            result = gh.run(
+                bench,
+                config,
+                args.out,
+                progress=progress,
+                meta={"started": default_time(), "port": args.port},
+            )
+        finally:
+            bench.close()
+        print(gh.describe(result))
+        print(f"results: {args.out / 'results.json'}, figure: {args.out / 'grasp_hold.png'}")
+        return EXIT_OK if result.get("complete") and not result.get("faults") else EXIT_NOT_DONE
+
+    return _run_guarded(command, body)

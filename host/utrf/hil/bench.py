@@ -1,0 +1,221 @@
+"""The bench a run talks to: the hand, the tracker, and whoever applies the loads.
+
+On the real bench (``--port``) an operator hangs the weights and hits the fingers; the run
+prompts and waits for a confirmation, and records. On the emulated bench (``--emulated``) the
+run drives an :class:`~utrf.emulator.EmulatedBoard` in simulated time (as fast as the machine
+goes, the same for a seed) and applies the loads itself; a :class:`SimulatedTracker` reads the
+plant's fingertip.
+
+**The emulated truth is not the analysis model.** :class:`EmulatedTruth` holds what the runs
+must find out without being told: the coupling tendons' effective modulus (a stranded rope is
+softer than its wire: 160 GPa against the model's nominal 200 GPa), the tracker frame's pose
+relative to the finger (found by the registration), and the tracker's noise. The firmware's
+closed loop on the 10-bit ADC reading of the Joint-2 encoder (7.7 mrad a count, about 2.4 mm
+at the straight finger's tip) adds the hold error a real hand has.
+
+**The emulated bench's actuator.** The paper's static loading experiment drove the finger with
+a linear slide stage, not with the hand's 12 W motors: holding 3 kg straight needs about
+1 kN on the actuating tendon (``docs/models.md``), ten times the hand's assumed 100 N motors.
+The emulated bench therefore puts a slide-stage-like actuator on the tested finger's motor A
+and B channels (:data:`BENCH_ACTUATOR`: 2.5 kN at stall, 50 mm/s, a heavy carriage) and
+raises the controller's integral gain for it (:data:`BENCH_GAINS`).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from utrf.emulator.plant import MotorParams, PlantParams
+from utrf.hil.tracker import Registration, SimulatedTracker, Tracker, rotation_from_euler
+
+#: the emulated static-loading bench's actuator (a linear slide stage; ASSUMED values)
+BENCH_ACTUATOR = MotorParams(stall_force_n=2500.0, moving_mass_kg=100.0)
+#: controller gains the emulated bench sets on the tested finger (the rest stay default)
+BENCH_GAINS: dict[str, float] = {"ki": 20.0}
+
+
+@dataclass(frozen=True)
+class EmulatedTruth:
+    """What the emulated bench knows and the analysis must find: SI units."""
+
+    coupling_modulus_pa: float = 160e9
+    tracker_euler_rad: tuple[float, float, float] = (0.6, -0.25, 0.15)
+    tracker_translation_m: tuple[float, float, float] = (-0.080, 0.210, -0.045)
+    tracker_noise_m: float = 1e-4
+    actuator: MotorParams | None = field(default_factory=lambda: BENCH_ACTUATOR)
+
+    def plant_params(self) -> PlantParams:
+        if self.actuator is None:
+            return PlantParams(coupling_modulus_pa=self.coupling_modulus_pa)
+        return PlantParams(motor=self.actuator, coupling_modulus_pa=self.coupling_modulus_pa)
+
+    def tracker_frame(self) -> Registration:
+        return Registration(
+            rotation_from_euler(*self.tracker_euler_rad), np.asarray(self.tracker_translation_m)
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "coupling_modulus_pa": self.coupling_modulus_pa,
+            "tracker_euler_rad": list(self.tracker_euler_rad),
+            "tracker_translation_m": list(self.tracker_translation_m),
+            "tracker_noise_m": self.tracker_noise_m,
+            "actuator_stall_force_n": None
+            if self.actuator is None
+            else self.actuator.stall_force_n,
+        }
+
+
+class Operator(Protocol):
+    """The person at the real bench."""
+
+    def confirm(self, text: str) -> None:
+        """Show an instruction and wait until it is done."""
+
+    def say(self, text: str) -> None: ...
+
+
+class ConsoleOperator:
+    """Instructions on stdout; Enter confirms. A closed stdin (no operator) raises."""
+
+    def confirm(self, text: str) -> None:
+        print(
+            f"\n>>> {text}\n    press Enter when done (Ctrl-C stops the run) ", end="", flush=True
+        )
+        line = sys.stdin.readline()
+        if line == "":
+            raise EOFError("no operator: stdin is closed, nobody can confirm the bench step")
+
+    def say(self, text: str) -> None:
+        print(text, flush=True)
+
+
+class Bench:
+    """A hand, a tracker and the loads on one finger, real or emulated."""
+
+    def __init__(
+        self,
+        hand: Any,
+        tracker: Tracker,
+        *,
+        board: Any = None,
+        operator: Operator | None = None,
+        truth: EmulatedTruth | None = None,
+        ramp_s: float = 0.5,
+    ) -> None:
+        if board is None and operator is None:
+            raise ValueError("a real bench needs an operator to apply the loads")
+        self.hand = hand
+        self.tracker = tracker
+        self.board = board
+        self.operator = operator
+        self.truth = truth
+        self.ramp_s = ramp_s
+
+    @property
+    def emulated(self) -> bool:
+        return self.board is not None
+
+    def sleep(self, seconds: float) -> None:
+        self.hand.clock.sleep(seconds)
+
+    def now(self) -> float:
+        return float(self.hand.clock.now())
+
+    def set_payload(self, finger: int, mass_kg: float, previous_kg: float | None) -> None:
+        """The payload hanging from the fingertip becomes ``mass_kg`` (total)."""
+        if self.board is not None:
+            self.board.hang_payload(finger, mass_kg, ramp_s=self.ramp_s)
+            self.sleep(self.ramp_s)
+            return
+        assert self.operator is not None
+        name = self.hand.fingers[finger]
+        if mass_kg == 0:
+            if previous_kg:
+                self.operator.confirm(f"REMOVE the weight from the {name} fingertip, gently")
+            return
+        self.operator.confirm(
+            f"Hang {mass_kg * 1e3:.0f} g in total from the {name} fingertip (lower it gently; "
+            f"now {0 if previous_kg is None else previous_kg * 1e3:.0f} g)"
+        )
+
+    def hit(self, finger: int, impulse_ns: tuple[float, float], duration_s: float) -> None:
+        if self.board is None:
+            raise RuntimeError("only the emulated bench hits by itself; on the bench, the operator")
+        self.board.hit_tip(finger, impulse_ns, duration_s)
+
+    def currents(self) -> np.ndarray:
+        """Motor currents (5, 2) in A where they are known (emulated), NaN otherwise."""
+        if self.board is None:
+            return np.full((5, 2), np.nan)
+        return np.asarray(self.board.motor_current)
+
+    def close(self) -> None:
+        try:
+            self.tracker.close()
+        finally:
+            try:
+                self.hand.close()
+            finally:
+                if self.board is not None:
+                    self.board.close()
+
+
+def open_emulated(
+    *,
+    seed: int,
+    tracked_finger: int,
+    truth: EmulatedTruth | None = None,
+    telemetry_hz: int = 100,
+    ramp_s: float = 0.5,
+    elf: str | None = None,
+) -> Bench:
+    """A driven emulated board with the emulated truth, a Hand over it, a simulated tracker
+    on ``tracked_finger``'s tip."""
+    from utrf.emulator import EmulatedBoard
+    from utrf.hand import Hand
+
+    truth = truth if truth is not None else EmulatedTruth()
+    board = EmulatedBoard(elf, realtime=False, seed=seed, plant_params=truth.plant_params())
+    try:
+        hand = Hand.emulated(board, telemetry_hz=telemetry_hz)
+    except BaseException:
+        board.close()
+        raise
+    tracker = SimulatedTracker(
+        lambda: board.tip[tracked_finger],
+        lambda: board.sim_time,
+        frame=truth.tracker_frame(),
+        noise_m=truth.tracker_noise_m,
+        seed=seed + 7919,
+    )
+    return Bench(hand, tracker, board=board, truth=truth, ramp_s=ramp_s)
+
+
+def open_real(
+    port: str,
+    tracker: Tracker,
+    *,
+    operator: Operator | None = None,
+    telemetry_hz: int = 100,
+    boot_wait_s: float = 2.5,
+) -> Bench:
+    from utrf.hand import Hand
+
+    hand = Hand.connect(port, telemetry_hz=telemetry_hz, boot_wait_s=boot_wait_s)
+    return Bench(hand, tracker, operator=operator or ConsoleOperator())
+
+
+def finite_mean(values: list[float] | np.ndarray) -> float:
+    a = np.asarray(values, dtype=float)
+    a = a[np.isfinite(a)]
+    return float(a.mean()) if a.size else math.nan
+
+
+ProgressFn = Callable[[str], None]

@@ -1,0 +1,80 @@
+"""The grasp hold on the emulated board: hits are found in the data, the fingers recover,
+nothing faults; the report's figures recomputed from the samples."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from utrf.cli import main
+from utrf.hil import grasp_hold as gh
+from utrf.hil.bench import EmulatedTruth, open_emulated
+from utrf.hil.static_loading import RunError
+
+
+def test_hits_are_found_and_the_grasp_recovers(firmware_elf: Path, tmp_path: Path) -> None:
+    out = tmp_path / "grasp"
+    config = gh.GraspHoldConfig(duration_s=5.0, hits=2, seed=4, sample_hz=100.0)
+    bench = open_emulated(seed=4, tracked_finger=1, truth=EmulatedTruth(actuator=None))
+    try:
+        result = gh.run(bench, config, out, progress=lambda _s: None)
+    finally:
+        bench.close()
+    assert result["complete"] and not result["faults"]
+    hits = result["hits_applied"]
+    assert len(hits) == 2
+    for h in hits:  # each hit shows as a disturbance of its finger, which then recovers
+        events = result["fingers"][h["finger"]]["disturbances"]
+        near = [e for e in events if 0 <= e["peak_s"] - h["time_s"] < 0.2]
+        assert near, (h, events)
+        assert abs(near[0]["largest_deviation_rad"]) > 0.03
+        assert near[0]["recovery_s"] is not None and near[0]["recovery_s"] < 0.5
+    hit_fingers = {h["finger"] for h in hits}
+    for name, p in result["fingers"].items():
+        if name not in hit_fingers:
+            assert p["disturbances"] == []  # a quiet finger has none
+        assert p["modes"] == ["GRASP"]  # all five closed on the bottle and held it
+        assert abs(p["drift_rad"]) < 0.01
+    assert result["unrecovered_disturbances"] == 0
+    # drift recomputed from the samples: end window against the baseline window
+    with (out / "samples.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    t = np.array([float(r["time_s"]) for r in rows])
+    th = np.array([float(r["middle_theta2_rad"]) for r in rows])
+    base, end = th[t < config.baseline_s].mean(), th[t >= t[-1] - config.baseline_s].mean()
+    assert result["fingers"]["middle"]["drift_rad"] == pytest.approx(end - base, abs=1e-9)
+    cur = np.array([float(r["middle_current_a_a"]) for r in rows])
+    assert result["fingers"]["middle"]["current_a_a"]["max"] == pytest.approx(cur.max())
+    assert (out / "grasp_hold.png").exists()
+    # the results come from the logs alone: `utrf hil analyse` rebuilds them
+    before = json.loads((out / "results.json").read_text())
+    (out / "results.json").unlink()
+    assert main(["hil", "analyse", str(out)]) == 0
+    assert json.loads((out / "results.json").read_text()) == before
+
+
+def test_a_pose_that_is_not_a_grasp_is_refused(firmware_elf: Path, tmp_path: Path) -> None:
+    bench = open_emulated(seed=0, tracked_finger=1, truth=EmulatedTruth(actuator=None))
+    try:
+        with pytest.raises(RunError, match=r"not a grasp pose; grasp poses: .*grasp-bottle"):
+            gh.run(bench, gh.GraspHoldConfig(pose="fist", duration_s=3.0), tmp_path / "g")
+    finally:
+        bench.close()
+    with pytest.raises(RunError, match="hold of at least"):
+        gh.GraspHoldConfig(duration_s=2.0, hits=1)
+
+
+def test_disturbance_detection_on_a_known_trace() -> None:
+    t = np.arange(0, 3, 0.01)
+    dev = np.zeros_like(t)
+    dev[(t >= 1.0) & (t < 1.3)] = -0.05  # knocked off, back after 0.3 s
+    dev[t >= 2.5] = 0.03  # and never back
+    ev = gh._events(t, dev, detect=0.02, recover=0.01)
+    assert len(ev) == 2
+    assert ev[0]["start_s"] == pytest.approx(1.0) and ev[0]["recovery_s"] == pytest.approx(0.3)
+    assert ev[0]["largest_deviation_rad"] == pytest.approx(-0.05)
+    assert ev[1]["recovery_s"] is None

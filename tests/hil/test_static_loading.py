@@ -1,0 +1,216 @@
+"""The static loading run end to end on the emulated board (a shortened schedule): its
+figures recomputed independently from the logged samples, the calibration against the
+emulated truth, a killed run resumed, a fault that stops it, payloads the planner refuses."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from utrf.cli import main
+from utrf.hil import static_loading as sl
+from utrf.hil.bench import EmulatedTruth, open_emulated
+from utrf.models import statics
+from utrf.models.geometry import HandGeometry
+from utrf.models.planning import Target, plan
+from utrf.models.statics import Load
+
+REPO = Path(__file__).resolve().parents[2]
+FINGER = 1
+GEOM = HandGeometry.default().fingers[FINGER].geometry
+QUICK = {
+    "settle_s": 0.8,
+    "record_s": 0.5,
+    "tracker_hz": 40.0,
+    "force": True,
+    "registration_theta2_rad": (-0.3, 0.2, 0.7),
+}
+
+
+def _start(out: Path, config: sl.StaticLoadingConfig, truth: EmulatedTruth) -> None:
+    sl.prepare_output(out, config, resume=False, extra_meta={"emulated_truth": truth.to_json()})
+
+
+@pytest.fixture(scope="module")
+def finished(firmware_elf: Path, tmp_path_factory: pytest.TempPathFactory):
+    out = tmp_path_factory.mktemp("static")
+    truth = EmulatedTruth()
+    config = sl.StaticLoadingConfig(
+        finger=FINGER, loads_kg=(1.0, 2.0, 3.0), repeats=2, seed=11, **QUICK
+    )
+    _start(out, config, truth)
+    bench = open_emulated(seed=11, tracked_finger=FINGER, truth=truth)
+    lines: list[str] = []
+    try:
+        result = sl.run(bench, config, out, geometry=GEOM, progress=lines.append)
+    finally:
+        bench.close()
+    return out, result, truth, lines
+
+
+def _csv(path: Path) -> list[dict[str, str]]:
+    with path.open() as f:
+        return list(csv.DictReader(f))
+
+
+def test_reported_figures_follow_from_the_logged_samples(finished) -> None:
+    out, result, _, lines = finished
+    assert result["complete"] and result["steps_completed"] == 8
+    assert any("repeat 2/2" in ln and "3000 g" in ln for ln in lines)  # progress was shown
+    steps = {int(r["step"]): r for r in _csv(out / "steps.csv")}
+    samples = _csv(out / "samples.csv")
+    tip, th2, load, rep = {}, {}, {}, {}
+    for s, r in steps.items():
+        mine = [x for x in samples if int(x["step"]) == s and x["attempt"] == r["attempt"]]
+        vis = [x for x in mine if x["visible"] == "1"]
+        tip[s] = np.mean([[float(x["tip_x_m"]), float(x["tip_y_m"])] for x in vis], axis=0)
+        th2[s] = np.mean([float(x["theta2_rad"]) for x in mine])
+        load[s], rep[s] = float(r["load_kg"]), int(r["repeat"])
+    ref = {rep[s]: s for s in steps if load[s] == 0}
+    loaded = [s for s in steps if load[s] > 0]
+    measured = {s: tip[s] - tip[ref[rep[s]]] for s in loaded}
+    # The model's prediction by another route: the planner's Joint-2 matching (brentq).
+    predicted = {}
+    for s in loaded:
+        on = plan(GEOM, Target.theta2(th2[s]), Load(payload_kg=load[s]), match="theta2")
+        free = plan(GEOM, Target.theta2(th2[ref[rep[s]]]), Load(), match="theta2")
+        predicted[s] = on.statics.tip_m - free.statics.tip_m
+    err = np.array([np.hypot(*(measured[s] - predicted[s])) for s in loaded])
+    assert result["error"]["mean_m"] == pytest.approx(err.mean(), abs=1e-7)
+    assert result["error"]["max_m"] == pytest.approx(err.max(), abs=1e-7)
+    assert result["error"]["mean_pct"] == pytest.approx(100 * err.mean() / 0.170, abs=1e-4)
+    for p in result["per_payload"]:
+        mags = [np.hypot(*measured[s]) for s in loaded if load[s] == p["load_kg"]]
+        assert p["repeats"] == 2
+        assert p["deflection_m"] == pytest.approx(np.mean(mags), abs=1e-9)
+        assert p["deflection_sd_m"] == pytest.approx(np.std(mags, ddof=1), abs=1e-9)
+        weight = p["load_kg"] * statics.GRAVITY_MPS2
+        assert p["stiffness_n_m"] == pytest.approx(weight / np.mean(mags), rel=1e-6)
+    # Held at Joint 2 the tip rises (Tendon 2's stretch turns Joint 1 up): a few mm at 3 kg,
+    # where the slide stage (q held) would let it sag 24 mm.
+    top = result["per_payload"][-1]
+    assert 2e-3 < top["deflection_xy_m"][1] < 12e-3
+    assert top["slide_stage_model_m"] > 20e-3
+    assert (out / "static_loading.png").stat().st_size > 10_000
+    assert json.loads((out / "results.json").read_text())["error"] == result["error"]
+
+
+def test_calibration_finds_the_emulated_truth(finished) -> None:
+    _, result, truth, _ = finished
+    cal = result["calibration"]
+    fitted, sd = cal["modulus_pa"], cal["modulus_sd_pa"]
+    assert sd is not None and sd < 0.1 * truth.coupling_modulus_pa  # an informative fit
+    assert abs(fitted - truth.coupling_modulus_pa) < 3 * sd
+    # the truth is not the model's: the nominal 200 GPa lies well outside
+    assert abs(200e9 - truth.coupling_modulus_pa) > 3 * sd
+    assert cal["mean_error_m"] < cal["initial_mean_error_m"]
+
+
+def _cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "utrf", "hil", "static-loading", *args]
+
+
+def test_a_killed_run_keeps_its_samples_and_resume_finishes_it(
+    firmware_elf: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "run"
+    args = ["--emulated", "--seed", "3", "--out", str(out), "--loads-kg", "1", "2"]
+    args += ["--repeats", "2", "--settle-s", "0.5", "--record-s", "0.3", "--force", "--quiet"]
+    proc = subprocess.Popen(_cli(*args), cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    steps = out / "steps.csv"
+    try:
+        deadline = time.monotonic() + 120
+        while not (steps.exists() and len(steps.read_text().splitlines()) >= 3):  # 2 steps
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no steps after 120 s"
+            time.sleep(0.05)
+        os.kill(proc.pid, signal.SIGKILL)
+    finally:
+        proc.wait(timeout=30)
+    assert proc.returncode == -signal.SIGKILL
+    before = (out / "samples.csv").read_text().splitlines()
+    done_before = [r["step"] for r in _csv(steps)]
+    assert len(done_before) >= 2 and len(before) > 2 * 12
+    assert main(["hil", "static-loading", "--emulated", "--out", str(out), "--resume",
+                 "--quiet"]) == 0  # fmt: skip
+    after = (out / "samples.csv").read_text().splitlines()
+    assert after[: len(before) - 1] == before[:-1]  # nothing taken before the kill was lost
+    done = [int(r["step"]) for r in _csv(steps)]
+    assert sorted(done) == list(range(6))  # each step once, none twice
+    result = json.loads((out / "results.json").read_text())
+    assert result["complete"] and result["steps_completed"] == 6
+    # a step cut by the kill was done again as a new attempt; its partial samples are kept
+    attempts = {(r["step"], r["attempt"]) for r in _csv(out / "samples.csv")}
+    assert len(attempts) >= 6
+    # resuming a finished run does nothing but analyse
+    assert main(["hil", "static-loading", "--emulated", "--out", str(out), "--resume",
+                 "--quiet"]) == 0  # fmt: skip
+    assert len(_csv(steps)) == 6
+
+
+def test_a_fault_stops_the_run_and_keeps_its_data(firmware_elf: Path, tmp_path: Path) -> None:
+    out = tmp_path / "fault"
+    truth = EmulatedTruth()
+    config = sl.StaticLoadingConfig(finger=FINGER, loads_kg=(1.0,), repeats=2, seed=5, **QUICK)
+    _start(out, config, truth)
+    bench = open_emulated(seed=5, tracked_finger=FINGER, truth=truth)
+
+    def pull_the_cable(line: str) -> None:
+        if line.startswith("[ 2/"):  # after the first loaded step: the encoder comes off
+            bench.board.unplug_encoder(FINGER)
+
+    try:
+        with pytest.raises(sl.RunStopped, match="ENCODER_RANGE"):
+            sl.run(bench, config, out, geometry=GEOM, progress=pull_the_cable)
+        assert not bench.board.tip_force[FINGER].any()  # the payload came off
+    finally:
+        bench.close()
+    assert [int(r["step"]) for r in _csv(out / "steps.csv")] == [0, 1]
+    rows = _csv(out / "samples.csv")
+    assert {int(r["step"]) for r in rows} >= {0, 1}
+    telemetry = _csv(out / "telemetry.csv")  # the board's stream up to the fault, and after
+    assert any(int(r["index_faults"]) for r in telemetry)
+    assert len(telemetry) > 100
+    result = sl.analyse(out, geometry=GEOM, figure=False)
+    assert not result["complete"] and result["steps_completed"] == 2
+
+
+def test_unsafe_payloads_are_refused_without_force(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "refused"
+    code = main(["hil", "static-loading", "--emulated", "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "refused 3 kg" in err and "safety factor" in err and "--force" in err
+    assert "refused 1 kg" not in err  # 1 kg keeps the planner's safety factor of 2
+    assert not out.exists()  # nothing started
+
+
+def test_bad_schedules_are_named() -> None:
+    with pytest.raises(sl.RunError, match="loads_kg"):
+        sl.StaticLoadingConfig(loads_kg=(1.0, -2.0))
+    with pytest.raises(sl.RunError, match="twice"):
+        sl.StaticLoadingConfig(loads_kg=(1.0, 1.0))
+    with pytest.raises(sl.RunError, match="finger"):
+        sl.StaticLoadingConfig(finger=5)
+    cfg = sl.StaticLoadingConfig(loads_kg=(2.0, 1.0), repeats=2)
+    assert [w for _, _, w in cfg.schedule()] == [0.0, 1.0, 2.0] * 2
+    assert math.isclose(cfg.schedule()[-1][0], 5)
+
+
+def test_resume_needs_a_run_and_a_new_run_needs_a_new_directory(tmp_path: Path) -> None:
+    cfg = sl.StaticLoadingConfig()
+    with pytest.raises(sl.RunError, match="no run"):
+        sl.prepare_output(tmp_path / "empty", cfg, resume=True, extra_meta={})
+    sl.prepare_output(tmp_path / "r", cfg, resume=False, extra_meta={})
+    with pytest.raises(sl.RunError, match="--resume"):
+        sl.prepare_output(tmp_path / "r", cfg, resume=False, extra_meta={})
