@@ -251,6 +251,32 @@ def test_pose_uses_the_library_and_grasp_mode(board: HandBoard, hand: Hand) -> N
 # --- telemetry, log, closing -------------------------------------------------------------
 
 
+def test_unsubscribe_waits_for_a_call_under_way_and_stops_the_next(hand: Hand) -> None:
+    import threading
+
+    entered, release = threading.Event(), threading.Event()
+    calls: list[float] = []
+
+    def slow(state) -> None:
+        calls.append(state.board_time)
+        if len(calls) == 1:
+            entered.set()
+            release.wait(5)
+
+    unsubscribe = hand.on_state(slow)
+    assert entered.wait(5)
+    done = threading.Thread(target=unsubscribe)
+    done.start()
+    done.join(0.2)
+    assert done.is_alive()  # a call is under way: unsubscribe waits for it
+    release.set()
+    done.join(5)
+    assert not done.is_alive()
+    n = len(calls)
+    time.sleep(0.1)  # the stream goes on
+    assert len(calls) == n == 1
+
+
 def test_telemetry_reaches_callbacks_and_the_log(tmp_path: Path, board: HandBoard) -> None:
     path = tmp_path / "run.csv"
     seen = []

@@ -198,6 +198,9 @@ class Hand:
             )
         self._telemetry_hz = int(telemetry_hz)
         self._lock = threading.Lock()
+        # Held while callbacks run, so an unsubscribe returns only once no call is under way
+        # (re-entrant: a callback may unsubscribe itself).
+        self._dispatch_lock = threading.RLock()
         self._board_clock = BoardClock()
         self._latest: HandState | None = None
         self._state_callbacks: list[Callable[[HandState], None]] = []
@@ -506,28 +509,33 @@ class Hand:
 
     def on_state(self, callback: Callable[[HandState], None]) -> Callable[[], None]:
         """Call ``callback(HandState)`` for every telemetry sample (from the link's reader
-        thread on a real link: keep it short). Returns a function that unsubscribes."""
+        thread on a real link: keep it short). Returns a function that unsubscribes; once it
+        returns, the callback is not called again."""
+        return self._subscribe(self._state_callbacks, callback)
+
+    def _subscribe(self, callbacks: list[Callable[[Any], None]], callback: Callable[[Any], None]):
         with self._lock:
-            self._state_callbacks.append(callback)
+            callbacks.append(callback)
 
         def unsubscribe() -> None:
             with self._lock:
-                if callback in self._state_callbacks:
-                    self._state_callbacks.remove(callback)
+                if callback in callbacks:
+                    callbacks.remove(callback)
+            with self._dispatch_lock:
+                pass  # a call under way has returned
 
         return unsubscribe
+
+    def _dispatch(self, callbacks: list[Callable[[Any], None]], item: object) -> None:
+        with self._dispatch_lock:
+            for cb in list(callbacks):
+                if cb in callbacks:  # not unsubscribed by an earlier callback
+                    cb(item)
 
     def on_fault(self, callback: Callable[[FaultEvent], None]) -> Callable[[], None]:
-        """Call ``callback(FaultEvent)`` whenever a finger latches a fault."""
-        with self._lock:
-            self._fault_callbacks.append(callback)
-
-        def unsubscribe() -> None:
-            with self._lock:
-                if callback in self._fault_callbacks:
-                    self._fault_callbacks.remove(callback)
-
-        return unsubscribe
+        """Call ``callback(FaultEvent)`` whenever a finger latches a fault. Returns a function
+        that unsubscribes."""
+        return self._subscribe(self._fault_callbacks, callback)
 
     def start_log(self, path: str | Path) -> TelemetryLog:
         """Log every telemetry sample to a CSV file (appended when its columns match)."""
@@ -557,15 +565,13 @@ class Hand:
                     seq=item.seq,
                 )
                 self._latest = st
-                callbacks = list(self._state_callbacks)
                 log_ = self._log
             if log_ is not None:
                 try:
                     log_.write(st)
                 except (OSError, ValueError) as exc:
                     log.error("utrf hand: telemetry log %s failed: %s", log_.path, exc)
-            for cb in callbacks:
-                cb(st)
+            self._dispatch(self._state_callbacks, st)
         elif isinstance(msg, m.Fault):
             with self._lock:
                 event = FaultEvent(
@@ -577,9 +583,7 @@ class Hand:
                     host_time=host_time,
                 )
                 self._faults_seen.append(event)
-                callbacks_f = list(self._fault_callbacks)
-            for cb in callbacks_f:
-                cb(event)
+            self._dispatch(self._fault_callbacks, event)
         elif isinstance(msg, m.Boot):
             with self._lock:
                 self._last_boot = msg
