@@ -169,21 +169,41 @@ def test_a_reading_beyond_the_joint_limit_latches(board: EmulatedBoard, hand: Ha
         hand.set_mode("position", "little")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AttributeError,
-    reason="the emulator has no fault injection that stops the firmware's loop, so nothing "
-    "can make the real firmware miss its watchdog (reported to the emulator's owner)",
-)
-def test_a_hung_firmware_is_reset_by_its_watchdog(board: EmulatedBoard, hand: Hand) -> None:
+def test_a_hung_loop_stops_the_motors_then_the_watchdog_resets(
+    board: EmulatedBoard, hand: Hand
+) -> None:
+    # The timer interrupt still runs: the firmware's tick sees loop() stop (50 ticks), turns
+    # every motor off, and the watchdog (120 ms, fed only by loop()) resets the board.
     hand.pose("fist", duration=0.3)
-    board.hang_firmware()  # type: ignore[attr-defined]
-    hand.clock.sleep(0.5)
+    assert not all(motors_off(board, f) for f in range(5))
+    board.hang_firmware(interrupts=True)
+    hung_at = board.sim_time
+    assert board.run_until(lambda b: all(motors_off(b, f) for f in range(5)), timeout=0.1)
+    assert board.sim_time - hung_at < 0.06  # 50 ticks, before the watchdog
+    hand.clock.sleep(0.3)
     with pytest.raises(BoardResetError):
         hand.state()
     assert hand.last_boot is not None
     assert hand.last_boot.reset_cause == M.ResetCause.WATCHDOG
     assert hand.reconnect().reset_cause == M.ResetCause.WATCHDOG
+    assert all(motors_off(board, f) for f in range(5))  # a reset board waits for the host
+
+
+def test_a_hang_with_interrupts_off_is_reset_by_the_watchdog(
+    board: EmulatedBoard, hand: Hand
+) -> None:
+    # Nothing of the firmware runs (the PWM hardware keeps its last duty): only the watchdog
+    # gets the board back, within its 120 ms period.
+    hand.pose("fist", duration=0.3)
+    board.hang_firmware(interrupts=False)
+    hung_at = board.sim_time
+    assert board.run_until(lambda b: b.reset_cause == "watchdog", timeout=0.3)
+    assert board.sim_time - hung_at < 0.13  # WDTO_120MS: 16K cycles of 128 kHz = 0.128 s
+    hand.clock.sleep(0.05)
+    with pytest.raises(BoardResetError):
+        hand.state()
+    assert hand.reconnect().reset_cause == M.ResetCause.WATCHDOG
+    assert all(motors_off(board, f) for f in range(5))
 
 
 def test_a_corrupt_saved_configuration_boots_on_defaults_and_says_so(

@@ -142,3 +142,21 @@ def test_bad_input_exits_2(
     assert code == 2
     if needle:
         assert needle in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("line", ["hang", "hang cli"])
+def test_the_hang_command_ends_in_a_watchdog_reset(firmware_elf: Path, line: str) -> None:
+    import io
+
+    from utrf.cli.emulate import _command, _Printer
+    from utrf.emulator import EmulatedBoard
+
+    out = io.StringIO()
+    with EmulatedBoard(firmware_elf, realtime=False, seed=3) as board:
+        board.run_for(0.1)
+        resets = board.stats["watchdog_resets"]
+        assert _command(board, line, _Printer(out, as_json=False))
+        board.run_for(0.2)  # the watchdog's period is 0.128 s
+        assert board.stats["watchdog_resets"] == resets + 1
+        assert board.reset_cause == "watchdog"
+    assert out.getvalue().startswith("hung: the firmware")

@@ -32,6 +32,8 @@ FINGER_NAMES = ("thumb", "index", "middle", "ring", "little")
 COMMANDS_HELP = """\
 commands (angles in degrees, fingers 0..4 or thumb/index/middle/ring/little):
   reset [reset_pin|power_on]  reset the board (default: reset_pin, like the auto-reset)
+  hang [cli]                   hang the firmware's loop() (cli: with interrupts off too);
+                               the watchdog resets the board
   unplug FINGER [VOLTS]        disconnect a Joint-2 encoder (its ADC input reads VOLTS, 0 V)
   plug FINGER                  reconnect it
   block FINGER [DEG]           jam a finger at a Joint-2 angle (default: where it is)
@@ -320,6 +322,9 @@ def _command(board: EmulatedBoard, line: str, say: _Printer) -> bool:
         elif cmd == "state":
             st = _plant_state(board)
             say.say(f"state: {_plant_state_text(st)}", **st)
+        elif cmd == "hang":
+            board.hang_firmware(interrupts=not (rest and rest[0] == "cli"))
+            say.say(f"hung: the firmware{' with interrupts off' if rest else ''}")
         elif cmd == "reset":
             board.reset(rest[0] if rest else "reset_pin")
             say.say(f"reset: {rest[0] if rest else 'reset_pin'}")

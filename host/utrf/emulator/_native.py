@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 5
+ABI = 6
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -130,6 +130,9 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_cycle": (ctypes.c_uint64, [p]),
         "utrf_sim_status": (ctypes.c_int, [p]),
         "utrf_sim_pc": (ctypes.c_uint32, [p]),
+        "utrf_sim_jump": (ctypes.c_int, [p, ctypes.c_uint32, ctypes.c_int]),
+        "utrf_sim_flash_word": (ctypes.c_int32, [p, ctypes.c_uint32]),
+        "utrf_sim_jump_at": (ctypes.c_int, [p, ctypes.c_uint32, ctypes.c_uint32, ctypes.c_int]),
         "utrf_sim_adc_volts": (ctypes.POINTER(ctypes.c_double), [p]),
         "utrf_sim_pins": (ctypes.POINTER(ctypes.c_double), [p]),
         "utrf_sim_refresh_pins": (None, [p]),
@@ -214,6 +217,15 @@ class NativeBoard:
     @property
     def pc(self) -> int:
         return self._lib.utrf_sim_pc(self.handle)
+
+    def jump(self, addr: int, interrupts: int = -1) -> bool:
+        return self._lib.utrf_sim_jump(self.handle, addr, interrupts) == 0
+
+    def jump_at(self, at: int, addr: int, interrupts: int = -1) -> bool:
+        return self._lib.utrf_sim_jump_at(self.handle, at, addr, interrupts) == 0
+
+    def flash_word(self, addr: int) -> int:
+        return self._lib.utrf_sim_flash_word(self.handle, addr)
 
     def refresh_pins(self) -> None:
         self._lib.utrf_sim_refresh_pins(self.handle)

@@ -55,6 +55,10 @@ VECTORS = {
 }
 
 
+_CLI = 0x94F8  # cli
+_RJMP_SELF = 0xCFFF  # rjmp . (to itself)
+
+
 class EmulatorError(RuntimeError):
     """A request the emulated board cannot honour; the message says what to do."""
 
@@ -582,6 +586,28 @@ class EmulatedBoard:
             raise EmulatorError(f"direction must be 'to_board' or 'to_host', got {direction!r}")
         with self._lock:
             self._board().inject(d, bytes(data))
+
+    def hang_firmware(self, interrupts: bool = True) -> None:
+        """Hang the firmware in a self-loop, as a bug that never returns would. With
+        ``interrupts`` on, ``loop()`` hangs at its next start (no lock held, no interrupt
+        under way) and the timer interrupts go on, so the firmware's own tick sees ``loop()``
+        stop; off, the CPU stops where it stands with interrupts disabled. Either way only the
+        watchdog gets the board back. The self-loop is libgcc's ``_exit``: ``cli``, then
+        ``__stop_program: rjmp .``."""
+        with self._lock:
+            board = self._board()
+            exit_, loop = board.symbol("_exit"), board.symbol("loop")
+            if exit_ is None or (interrupts and loop is None):
+                raise EmulatorError("the ELF lacks the _exit or loop symbol to hang it with")
+            words = (board.flash_word(exit_), board.flash_word(exit_ + 2))
+            if words != (_CLI, _RJMP_SELF):
+                raise EmulatorError(
+                    f"_exit at {exit_:#x} is not 'cli; rjmp .' (words {words[0]:#06x} "
+                    f"{words[1]:#06x})"
+                )
+            done = board.jump_at(loop, exit_ + 2, 1) if interrupts else board.jump(exit_, -1)
+            if not done:
+                raise EmulatorError(f"_exit at {exit_:#x} or loop is not a flash address")
 
     def reset(self, cause: str = "reset_pin", hold: float = 0.0) -> None:
         """Reset the board: ``reset_pin`` (EXTRF, as the USB-serial auto-reset or the button;

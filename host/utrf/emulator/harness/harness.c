@@ -14,6 +14,7 @@
 #include "avr_adc.h"
 #include "avr_eeprom.h"
 #include "avr_extint.h"
+#include "sim_core.h"
 #include "harness_internal.h"
 
 #define F_CPU_HZ 16000000u
@@ -138,12 +139,17 @@ int utrf_sim_run_to(utrf_sim_t *s, uint64_t target)
         s->stop = 0;
         s->in_run = 1;
         avr_cycle_timer_register(avr, target - avr->cycle, stop_timer, s);
-        if (s->prof_addr >= 0) {
+        if (s->prof_addr >= 0 || s->jump_at >= 0) { /* per-instruction work: the slow loop */
             while (!s->stop) {
                 int st = avr_run(avr);
                 if (st == cpu_Crashed || st == cpu_Done || st == cpu_Stopped)
                     break;
-                profile_step_function(s);
+                if (s->prof_addr >= 0)
+                    profile_step_function(s);
+                if (s->jump_at >= 0 && avr->pc == (uint32_t)s->jump_at) {
+                    s->jump_at = -1;
+                    utrf_sim_jump(s, s->jump_to, s->jump_interrupts);
+                }
             }
         } else {
             while (!s->stop) {
@@ -175,6 +181,35 @@ int utrf_sim_status(const utrf_sim_t *s)
 uint32_t utrf_sim_pc(const utrf_sim_t *s)
 {
     return s->avr->pc;
+}
+
+int utrf_sim_jump(utrf_sim_t *s, uint32_t addr, int interrupts)
+{
+    if ((addr & 1u) != 0 || addr > s->avr->flashend)
+        return -1;
+    s->avr->pc = addr;
+    if (interrupts >= 0)
+        avr_sreg_set(s->avr, S_I, interrupts ? 1 : 0); /* keeps simavr's pending state right */
+    if (s->avr->state == cpu_Sleeping)
+        s->avr->state = cpu_Running;
+    return 0;
+}
+
+int utrf_sim_jump_at(utrf_sim_t *s, uint32_t at, uint32_t addr, int interrupts)
+{
+    if ((at & 1u) != 0 || at > s->avr->flashend || (addr & 1u) != 0 || addr > s->avr->flashend)
+        return -1;
+    s->jump_at = at;
+    s->jump_to = addr;
+    s->jump_interrupts = interrupts;
+    return 0;
+}
+
+int32_t utrf_sim_flash_word(const utrf_sim_t *s, uint32_t addr)
+{
+    if (addr + 1 > s->avr->flashend)
+        return -1;
+    return s->avr->flash[addr] | (s->avr->flash[addr + 1] << 8);
 }
 
 double *utrf_sim_adc_volts(utrf_sim_t *s)
@@ -237,6 +272,7 @@ static void hook_reset(avr_io_t *io)
         avr_cycle_timer_register(avr, s->target - avr->cycle, stop_timer, s);
     bridge_after_reset(s);
     profile_after_reset(s);
+    s->jump_at = -1; /* a reset is a new run: a pending jump belonged to the old one */
 }
 
 void utrf_sim_reset(utrf_sim_t *s, int cause, uint64_t hold_cycles)
@@ -431,6 +467,7 @@ utrf_sim_t *utrf_sim_open(const char *elf_path, uint64_t seed, char *err, size_t
     bridge_init(s);
     serve_init(s);
     profile_init(s);
+    s->jump_at = -1;
     board_io_init(s);
     interrupts_init(s);
     avr_register_io_write(s->avr, board_io_eecr(), eecr_write, s);

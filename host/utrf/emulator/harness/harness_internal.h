@@ -83,6 +83,11 @@ struct utrf_sim {
     int prof_fn_vector; /* the innermost vector when the function was entered (0: none) */
     int running_vector; /* the innermost vector running now (0: none) */
 
+    /* a jump waiting for the PC to reach jump_at (byte address; -1: none) */
+    int64_t jump_at;
+    uint32_t jump_to;
+    int jump_interrupts;
+
     utrf_sim_stats_t stats;
     char log[LOG_SIZE];
     size_t log_len;

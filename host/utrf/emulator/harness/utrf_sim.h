@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 5
+#define UTRF_SIM_ABI 6
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -94,6 +94,16 @@ int utrf_sim_run_to(utrf_sim_t *s, uint64_t target);
 uint64_t utrf_sim_cycle(const utrf_sim_t *s);
 int utrf_sim_status(const utrf_sim_t *s);
 uint32_t utrf_sim_pc(const utrf_sim_t *s);
+/* Move the CPU to a flash byte address at the instruction boundary where it stands, as a
+ * runaway firmware would; interrupts: 1 sets SREG's I flag, 0 clears it, -1 leaves it.
+ * Hanging the firmware in a self-loop this way is how the watchdog is proven. -1 when addr
+ * is odd or past the flash. */
+int utrf_sim_jump(utrf_sim_t *s, uint32_t addr, int interrupts);
+/* The same jump, made when the PC next reaches the byte address at (an instruction
+ * boundary in the code that runs there, e.g. a function's entry); a reset cancels it. */
+int utrf_sim_jump_at(utrf_sim_t *s, uint32_t at, uint32_t addr, int interrupts);
+/* The program word at a flash byte address; -1 past the flash. */
+int32_t utrf_sim_flash_word(const utrf_sim_t *s, uint32_t addr);
 
 /* The voltages on ADC0..7 (UTRF_SIM_ADC_CHANNELS doubles, in volts). Each conversion samples
  * its channel when it starts, and gives the datasheet's code, floor(1024 V / Vref). */
