@@ -1,5 +1,7 @@
 #include "finger.h"
 
+#include <stddef.h>
+
 #include "encoder.h"
 #include "fixed.h"
 
@@ -48,20 +50,30 @@ Finger::Finger()
       limit_(0),
       duty_a_(0),
       duty_b_(0),
-      stall_ref_(0),
-      stall_count_(0),
       last_turn_(0),
       mode_(COAST),
-      faults_(0),
-      new_faults_(0),
       have_theta_(false),
       encoder_ok_(false),
+      faults_(0),
+      new_faults_(0),
       contact_(false),
       target_valid_(false),
+      stall_ref_(0),
+      stall_count_(0),
       duty_cmd_(0),
       effort_(0) {
     params_ = Params();
 }
+
+#if defined(__AVR__)
+// The layout the tick relies on (finger.h): what it reads and writes in closed loop, up to the
+// PID's deadband, within the first 64 bytes. (AVR only: the host pads for alignment.)
+struct LayoutCheck {
+    static_assert(offsetof(Finger, params_) + offsetof(Params, pid) +
+                          offsetof(pid::Coeffs, db_inverse) <= 64,
+                  "the tick's fields must stay within ldd/std reach of the Finger's address");
+};
+#endif
 
 int16_t Finger::limit_for(uint8_t mode) const {
     int16_t lim = params_.limit();
@@ -162,6 +174,55 @@ void Finger::stop_now(hal::MotorCommand& out) {
     out.a.on_counts = out.b.on_counts = 0;
     out.a.drive = out.b.drive = hal::Drive::COAST;
     out.stby = false;
+}
+
+void Finger::idle_outputs(uint8_t mode, hal::MotorCommand& out) {
+    duty_a_ = duty_b_ = 0;
+    out.a.on_counts = out.b.on_counts = 0;
+    out.a.drive = mode == BRAKE ? hal::Drive::BRAKE : hal::Drive::COAST;
+    out.b.drive = (mode == BRAKE && !params_.rotary) ? hal::Drive::BRAKE : hal::Drive::COAST;
+    out.stby = mode == BRAKE && (faults_ & kStopFaults) == 0;
+}
+
+int16_t Finger::duty_step(int16_t th) {
+    int16_t d = duty_cmd_;
+    // Never drive further past a joint limit.
+    if ((th >= params_.theta_max && d > 0) || (th <= params_.theta_min && d < 0)) d = 0;
+    return pid_.step_open(params_.pid, limit_, d, th);
+}
+
+bool Finger::stall_rule(int16_t u, int16_t th, hal::MotorCommand& out) {
+    // Pushing (a large error, or a commanded duty, with the output at its limit) without
+    // moving for the stall time.
+    const uint8_t mode = mode_;
+    bool pushing;
+    if (mode == DUTY) {
+        pushing = u != 0 && fx::abs16(u) >= params_.pid.deadband;
+    } else {
+        pushing = limit_ > 0 && fx::abs16(u) >= limit_ &&
+                  fx::abs16((int16_t)(target_ - th)) > params_.stall_error;
+    }
+    if (pushing) {
+        if (fx::abs16((int16_t)(th - stall_ref_)) > params_.stall_motion) {
+            stall_ref_ = th;
+            stall_count_ = 0;
+        } else if (stall_count_ < params_.stall_checks) {
+            ++stall_count_;
+        }
+        if (stall_count_ >= params_.stall_checks) {
+            if (mode != GRASP) {
+                latch(STALL);
+                stop_now(out);
+                return false;
+            }
+            contact_ = true;  // closed on an object: hold it, the effort bounds the force
+        }
+    } else {
+        stall_ref_ = th;
+        stall_count_ = 0;
+        contact_ = false;
+    }
+    return true;
 }
 
 }  // namespace finger
