@@ -398,21 +398,65 @@ void avr_init() {
     UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
 }
 
-void motors_write(const MotorCommand* cmd) {
-    for (uint8_t f = 0; f < UTRF_FINGER_COUNT; ++f) {
-        FingerHw& h = g_hw[f];
-        const MotorCommand& c = cmd[f];
-        if (!c.stby && h.stby_last) {
-            pin_set(h.stby, false);  // off first
-            h.stby_last = 0;
-        }
-        motor_apply(h.m[0], c.a);
-        motor_apply(h.m[1], c.b);
-        if (c.stby && !h.stby_last) {
-            pin_set(h.stby, true);
-            h.stby_last = 1;
-        }
+namespace {
+
+// The registers of finger F's pins are constants of board_pins.h: with F a template argument
+// the compiler folds the table and the switches below into fixed addresses, so each tick writes
+// the compare registers with plain stores (no pointer loaded from g_hw, no loop). Only a change
+// of drive (direction, coast, brake), which is rare, goes through g_hw in motor_change().
+volatile uint16_t* ocr_reg(uint8_t timer, char channel) {
+    const uint8_t ch = (uint8_t)(channel - 'A');
+    switch (timer) {
+        case 1: return ch == 0 ? &OCR1A : ch == 1 ? &OCR1B : &OCR1C;
+        case 3: return ch == 0 ? &OCR3A : ch == 1 ? &OCR3B : &OCR3C;
+        case 4: return ch == 0 ? &OCR4A : ch == 1 ? &OCR4B : &OCR4C;
+        default: return ch == 0 ? &OCR5A : ch == 1 ? &OCR5B : &OCR5C;
     }
+}
+
+template <uint8_t F, uint8_t K>
+__attribute__((always_inline)) inline void channel_write(const MotorOut& out) {
+    const utrf_motor_pins_t& pins = K == 0 ? UTRF_FINGER_PINS[F].a : UTRF_FINGER_PINS[F].b;
+    static_assert((uint8_t)Drive::FORWARD == 2 && (uint8_t)Drive::REVERSE == 3,
+                  "FORWARD and REVERSE are the drives from 2 up");
+    const Drive d = out.drive;
+    if ((uint8_t)d >= (uint8_t)Drive::FORWARD) {
+        // on_counts is 1..kPwmPeriod; anything else is clamped into it, one compare for both
+        // ends: 0 would wrap to 0xFFFF (the core sends COAST for zero duty; never a spike from
+        // here).
+        uint16_t ocr = (uint16_t)(out.on_counts - 1u);
+        if (__builtin_expect(ocr >= kPwmPeriod, 0)) ocr = out.on_counts == 0 ? 0 : kPwmPeriod - 1;
+        // OCRnx is double-buffered in fast PWM: the new duty starts with the next period.
+        *ocr_reg(pins.pwm.timer, pins.pwm.channel) = ocr;
+    }
+    MotorHw& m = g_hw[F].m[K];
+    if ((uint8_t)d != m.last) motor_change(m, out);
+}
+
+template <uint8_t F>
+__attribute__((always_inline)) inline void finger_write(const MotorCommand& c) {
+    FingerHw& h = g_hw[F];
+    if (!c.stby && h.stby_last) {
+        pin_set(h.stby, false);  // off first
+        h.stby_last = 0;
+    }
+    channel_write<F, 0>(c.a);
+    channel_write<F, 1>(c.b);
+    if (c.stby && !h.stby_last) {
+        pin_set(h.stby, true);
+        h.stby_last = 1;
+    }
+}
+
+}  // namespace
+
+void motors_write(const MotorCommand* cmd) {
+    static_assert(UTRF_FINGER_COUNT == 5, "motors_write() writes five fingers");
+    finger_write<0>(cmd[0]);
+    finger_write<1>(cmd[1]);
+    finger_write<2>(cmd[2]);
+    finger_write<3>(cmd[3]);
+    finger_write<4>(cmd[4]);
 }
 
 void motors_all_off() {
