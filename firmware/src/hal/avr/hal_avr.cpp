@@ -476,13 +476,25 @@ void motors_all_off() {
     }
 }
 
+namespace {
+// One finger's reading, copied with the interrupts off (the ADC interrupt writes them): with F
+// constant, fixed addresses (lds) instead of a loop over a pointer.
+template <uint8_t F>
+__attribute__((always_inline)) inline void copy_reading(EncoderReading* out) {
+    out[F].turn = g_reading[F].turn;
+    out[F].status = g_reading[F].status;
+}
+}  // namespace
+
 void encoders_read(EncoderReading* out) {
+    static_assert(UTRF_FINGER_COUNT == 5, "encoders_read() copies five readings");
     uint8_t round;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
-        for (uint8_t f = 0; f < UTRF_FINGER_COUNT; ++f) {
-            out[f].turn = g_reading[f].turn;
-            out[f].status = g_reading[f].status;
-        }
+        copy_reading<0>(out);
+        copy_reading<1>(out);
+        copy_reading<2>(out);
+        copy_reading<3>(out);
+        copy_reading<4>(out);
         round = g_adc_round;
     }
     if (g_staleness.stale(round)) {
