@@ -8,6 +8,7 @@
 #include <stdint.h>
 
 #include "core/encoder.h"
+#include "core/finger.h"
 #include "core/fixed.h"
 #include "core/pid.h"
 
@@ -44,6 +45,12 @@ inline uint32_t core_check_run() {
         f.add(fx::mul_uu(b, r.next()));
         f.add((uint32_t)fx::mul_q16((int32_t)(((uint32_t)r.next() << 16) | r.next()), r.next()));
         f.add((uint16_t)fx::au_from_bu((int16_t)(a >> 1)));
+    }
+    // Byte products, and Q15 duty to PWM counts (both 8 x 8 multiplies on the AVR).
+    for (uint16_t i = 0; i < 2000; ++i) {
+        const uint16_t x = r.next();
+        f.add(fx::mul8u((uint8_t)x, (uint8_t)(x >> 8)));
+        f.add(finger::pwm_counts((uint16_t)(x >> 1)));
     }
     // Gains over the protocol's range, applied with their saturation.
     const float values[] = {0.0f, 1e-3f, 0.37f, 2.5f, 838.9f, 12345.0f, 1.6e6f, 8.4e7f};

@@ -163,8 +163,8 @@ class Finger {
 // floor((256 hi + lo + 512) / 1024) = (hi + ((lo + 512) >> 8)) >> 2.
 static_assert(hal::kPwmPeriod == 800, "pwm_counts() is written for 800 counts a period");
 UTRF_HOT uint16_t pwm_counts(uint16_t mag) {
-    const uint16_t hi = (uint16_t)((uint8_t)(mag >> 8) * (uint8_t)25u);
-    const uint16_t lo = (uint16_t)((uint8_t)mag * (uint8_t)25u);
+    const uint16_t hi = fx::mul8u((uint8_t)(mag >> 8), 25u);
+    const uint16_t lo = fx::mul8u((uint8_t)mag, 25u);
     return (uint16_t)((uint16_t)(hi + (uint16_t)((uint16_t)(lo + 512u) >> 8)) >> 2);
 }
 

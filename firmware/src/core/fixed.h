@@ -99,6 +99,22 @@ __attribute__((always_inline)) inline uint32_t mul_uu(uint16_t a, uint16_t b) {
 #endif
 }
 
+// 8 x 8 -> 16-bit unsigned multiply: one MUL on the AVR, where avr-gcc widens a product of
+// two bytes it cannot prove small into a 16 x 16 one.
+__attribute__((always_inline)) inline uint16_t mul8u(uint8_t a, uint8_t b) {
+#if defined(__AVR__)
+    uint16_t r;
+    __asm__("mul %[a], %[b]\n\t"
+            "movw %[r], r0\n\t"
+            "clr r1"
+            : [r] "=r"(r)
+            : [a] "r"(a), [b] "r"(b));
+    return r;
+#else
+    return (uint16_t)((uint16_t)a * b);
+#endif
+}
+
 // A gain as a 16-bit mantissa and a byte-multiple exponent: y = x * m * 2^shift with shift
 // one of 16, 8, 0, -8, -16, so the tick needs one 16 x 16 multiply and byte moves. make()
 // picks the exponent that keeps the most mantissa bits (at least 8 for any gain the

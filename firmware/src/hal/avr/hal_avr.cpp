@@ -17,6 +17,7 @@
 #include "../../board_pins.h"
 #include "../../core/app.h"
 #include "../../core/encoder.h"
+#include "../../core/fixed.h"
 #include "../../generated/protocol_messages.h"
 #include "../hal.h"
 
@@ -208,6 +209,37 @@ static volatile uint8_t g_tick_running;
 static volatile uint8_t g_tick_deferred;
 
 namespace {
+Stamp read_stamp() {
+    Stamp s;
+    s.coarse = TCNT2;
+    s.fine = TCNT1;
+    return s;
+}
+
+// Cycles since `start`, up to two tick periods. The tick timer gives the time to within 64
+// cycles; timer 1 (modulo 800) gives it exactly modulo 800: take the value of the second that
+// lies within 400 cycles of the first.
+uint16_t cycles_from(const Stamp& start) {
+    const uint8_t c2 = TCNT2;
+    const uint16_t c1 = TCNT1;
+    int16_t d2 = (int16_t)c2 - (int16_t)start.coarse;
+    if (g_tick_deferred || d2 < 0) d2 = (int16_t)(d2 + (F_CPU / 64 / UTRF_TICK_HZ));
+    const uint16_t coarse = (uint16_t)d2 * 64u;
+    const uint16_t fine = c1 >= start.fine ? (uint16_t)(c1 - start.fine)
+                                           : (uint16_t)(c1 + (UTRF_PWM_TOP + 1) - start.fine);
+    // Whole periods of 800: (coarse - fine + 400) / 800, as x * 82 >> 16 (0 when x < 0). With
+    // 0 <= x < 2^15 that is two 8 x 8 multiplies, not a 32-bit product:
+    // floor((256 xh + xl) * 82 / 2^16) = (82 xh + (82 xl >> 8)) >> 8.
+    const int16_t x = (int16_t)((int16_t)(coarse - fine) + 400);
+    uint8_t k = 0;
+    if (x > 0) {
+        const uint16_t t = (uint16_t)(fx::mul8u((uint8_t)((uint16_t)x >> 8), 82u) +
+                                      (fx::mul8u((uint8_t)x, 82u) >> 8));
+        k = (uint8_t)(t >> 8);
+    }
+    return (uint16_t)(fine + fx::mul8u(k, 25u) * 32u);  // k <= 40 periods of 800
+}
+
 // Runs ticks while any is due. Called with interrupts disabled; returns with them disabled.
 // The UART transmitter's interrupt waits during the tick (the byte in the shift register and
 // the one in UDR0 still go out): the control tick comes first, and its measured time is its
@@ -217,10 +249,10 @@ void run_due_ticks() {
         g_tick_deferred = 0;
         g_tick_running = 1;
         UCSR0B &= (uint8_t)~_BV(UDRIE0);
-        const Stamp start = stamp();
+        const Stamp start = read_stamp();
         sei();
         app::tick();
-        const uint32_t cycles = cycles_since(start);
+        const uint16_t cycles = cycles_from(start);
         const bool overran = g_tick_deferred != 0;
         app::tick_done(cycles, overran);
         cli();
@@ -536,27 +568,9 @@ void tick_unlock() {
     sei();
 }
 
-Stamp stamp() {
-    Stamp s;
-    s.coarse = TCNT2;
-    s.fine = TCNT1;
-    return s;
-}
+Stamp stamp() { return read_stamp(); }
 
-uint32_t cycles_since(const Stamp& start) {
-    const uint8_t c2 = TCNT2;
-    const uint16_t c1 = TCNT1;
-    int16_t d2 = (int16_t)c2 - (int16_t)start.coarse;
-    if (g_tick_deferred || d2 < 0) d2 = (int16_t)(d2 + (F_CPU / 64 / UTRF_TICK_HZ));
-    // The tick timer gives the time to within 64 cycles; timer 1 (modulo 800) gives it exactly
-    // modulo 800: take the value of the second that lies within 400 cycles of the first.
-    const uint16_t coarse = (uint16_t)d2 * 64u;
-    const uint16_t fine = c1 >= start.fine ? (uint16_t)(c1 - start.fine)
-                                           : (uint16_t)(c1 + (UTRF_PWM_TOP + 1) - start.fine);
-    // Whole periods of 800: (coarse - fine + 400) / 800, as a multiply by 82 / 65536.
-    const int16_t k = (int16_t)(((int32_t)((int16_t)(coarse - fine) + 400) * 82) >> 16);
-    return (uint32_t)fine + (uint32_t)(k < 0 ? 0 : k) * (UTRF_PWM_TOP + 1);
-}
+uint32_t cycles_since(const Stamp& start) { return cycles_from(start); }
 
 bool tick_period_elapsed() { return g_tick_deferred != 0; }
 
