@@ -158,9 +158,10 @@ bool queue_reply(uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len) 
 
 void apply_finger_config(uint8_t f) {
     Board& b = g_board;
-    const finger::Params p = finger::compile(b.cfg.finger[f], hand::kDt);
+    pid::Coeffs c;
+    const finger::Params p = finger::compile(b.cfg.finger[f], hand::kDt, c);
     Lock lock;
-    b.hand.configure_finger(f, p);
+    b.hand.configure_finger(f, p, c);
     // A target outside new limits is never kept: clamp it in.
     finger::Finger& fg = b.hand.finger(f);
     const int16_t t = fg.target();

@@ -14,7 +14,7 @@ int16_t q15_milli(uint16_t milli) {
 }
 }  // namespace
 
-Params compile(const config::Finger& cfg, float dt_s) {
+Params compile(const config::Finger& cfg, float dt_s, pid::Coeffs& coeffs) {
     Params p;
     pid::Gains g;
     g.kp = cfg.gains.kp;
@@ -23,7 +23,7 @@ Params compile(const config::Finger& cfg, float dt_s) {
     g.d_cutoff_hz = cfg.gains.d_cutoff_hz;
     g.deadband = cfg.gains.deadband_milli * 1e-3f;
     g.slew_per_s = cfg.gains.slew_per_s;
-    p.pid = pid::compile(g, dt_s);
+    coeffs = pid::compile(g, dt_s);
     p.max_duty = q15_milli(cfg.gains.max_duty_milli);
     p.pretension = q15_milli(cfg.gains.pretension_milli);
     p.theta_min = fx::bu(cfg.limits.theta2_min);
@@ -66,11 +66,11 @@ Finger::Finger()
 }
 
 #if defined(__AVR__)
-// The layout the tick relies on (finger.h): what it reads and writes in closed loop, up to the
-// PID's deadband, within the first 64 bytes. (AVR only: the host pads for alignment.)
+// The layout the tick relies on (finger.h): what it reads and writes in closed loop, the Pid
+// and Params up to its first field read less often, within the first 64 bytes. (AVR only:
+// the host pads for alignment.)
 struct LayoutCheck {
-    static_assert(offsetof(Finger, params_) + offsetof(Params, pid) +
-                          offsetof(pid::Coeffs, db_inverse) <= 64,
+    static_assert(offsetof(Finger, params_) + offsetof(Params, max_duty) <= 64,
                   "the tick's fields must stay within ldd/std reach of the Finger's address");
 };
 #endif
@@ -85,14 +85,13 @@ int16_t Finger::limit_for(uint8_t mode) const {
     return lim < 0 ? (int16_t)0 : lim;
 }
 
-void Finger::configure(const Params& p) {
-    const pid::Coeffs old = params_.pid;
+void Finger::configure(const Params& p, const pid::Coeffs& c) {
     const bool encoder_changed =
         p.zero_turn != params_.zero_turn || p.encoder_invert != params_.encoder_invert;
     params_ = p;
     if (encoder_changed) have_theta_ = false;  // the next reading is not a jump
     limit_ = limit_for(mode_);
-    pid_.rebase(old, params_.pid, limit_);
+    pid_.set_coeffs(c, limit_);
 }
 
 void Finger::enter_closed_loop(uint8_t mode) {
@@ -103,7 +102,7 @@ void Finger::enter_closed_loop(uint8_t mode) {
     // Bumpless: the PID starts from the output the motors have now.
     const int16_t present = idle() ? (int16_t)0 : pid_.output();
     limit_ = limit_for(mode);
-    pid_.reset(params_.pid, limit_, present, theta_);
+    pid_.reset(limit_, present, theta_);
     stall_count_ = 0;
     stall_ref_ = theta_;
     contact_ = false;
@@ -121,13 +120,13 @@ void Finger::set_mode(uint8_t mode, int16_t duty, int16_t effort) {
     } else if (mode == DUTY) {
         const int16_t present = idle() ? (int16_t)0 : pid_.output();
         limit_ = limit_for(DUTY);
-        pid_.reset(params_.pid, limit_, present, theta_);
+        pid_.reset(limit_, present, theta_);
         stall_count_ = 0;
         stall_ref_ = theta_;
     } else {
         target_valid_ = false;
         limit_ = limit_for(mode);
-        pid_.reset(params_.pid, limit_, 0, theta_);
+        pid_.reset(limit_, 0, theta_);
     }
     contact_ = false;
     mode_ = mode;
@@ -153,7 +152,7 @@ void Finger::latch(uint8_t bits) {
         target_valid_ = false;
         contact_ = false;
         limit_ = limit_for(COAST);
-        pid_.reset(params_.pid, limit_, 0, theta_);
+        pid_.reset(limit_, 0, theta_);
     }
 }
 
@@ -163,7 +162,7 @@ void Finger::hold_here() {
     target_valid_ = true;
     const int16_t present = pid_.output();
     limit_ = limit_for(mode);
-    pid_.reset(params_.pid, limit_, present, theta_);
+    pid_.reset(limit_, present, theta_);
     stall_count_ = 0;
     stall_ref_ = theta_;
     mode_ = mode;
@@ -188,7 +187,7 @@ int16_t Finger::duty_step(int16_t th) {
     int16_t d = duty_cmd_;
     // Never drive further past a joint limit.
     if ((th >= params_.theta_max && d > 0) || (th <= params_.theta_min && d < 0)) d = 0;
-    return pid_.step_open(params_.pid, limit_, d, th);
+    return pid_.step_open(limit_, d, th);
 }
 
 bool Finger::stall_rule(int16_t u, int16_t th, hal::MotorCommand& out) {
@@ -197,7 +196,7 @@ bool Finger::stall_rule(int16_t u, int16_t th, hal::MotorCommand& out) {
     const uint8_t mode = mode_;
     bool pushing;
     if (mode == DUTY) {
-        pushing = u != 0 && fx::abs16(u) >= params_.pid.deadband;
+        pushing = u != 0 && fx::abs16(u) >= pid_.coeffs().deadband;
     } else {
         pushing = limit_ > 0 && fx::abs16(u) >= limit_ &&
                   fx::abs16((int16_t)(target_ - th)) > params_.stall_error;

@@ -39,10 +39,10 @@ static const uint8_t kStallEvery = 5;
 // action (which may be to hold in closed loop).
 static const uint8_t kStopFaults = ENCODER_RANGE | ENCODER_JUMP | STALL | JOINT_LIMIT | OVERRUN;
 
-// A finger's configuration, ready for the tick (built in loop() context by compile()).
-// Angles in BU (core/fixed.h: 2 pi / 32768 rad), duties in Q15. The fields every tick reads come
-// first, the PID's coefficients after them: with the finger's working state before them they
-// sit in the first 64 bytes of the Finger (see there).
+// A finger's configuration, ready for the tick (built in loop() context by compile(); the
+// PID's coefficients go to its Pid). Angles in BU (core/fixed.h: 2 pi / 32768 rad), duties in
+// Q15. The fields every tick reads come first: with the finger's working state and its Pid
+// before them they sit in the first 64 bytes of the Finger (see there).
 struct Params {
     int16_t pretension;    // antagonistic pretension
     int16_t fault_low;     // JOINT_LIMIT below this (theta_min - margin)
@@ -52,7 +52,6 @@ struct Params {
     bool encoder_invert;
     bool motor_invert;
     bool rotary;
-    pid::Coeffs pid;
     // Read by the stall rule (a finger's turn every kStallEvery ticks), DUTY and loop().
     int16_t max_duty;      // motor duty limit
     int16_t theta_min;     // joint limits
@@ -67,14 +66,14 @@ struct Params {
     }
 };
 
-Params compile(const config::Finger& cfg, float dt_s);
+Params compile(const config::Finger& cfg, float dt_s, pid::Coeffs& coeffs);
 
 class Finger {
    public:
     Finger();
 
     // ---- from loop(), under the tick lock, after validation ----
-    void configure(const Params& p);  // bumpless when gains or limits change
+    void configure(const Params& p, const pid::Coeffs& c);  // bumpless when gains or limits change
     // Enter `mode`. duty (DUTY) and effort (GRASP) are Q15 fractions.
     void set_mode(uint8_t mode, int16_t duty, int16_t effort);
     void set_target(int16_t theta_bu);
@@ -129,10 +128,11 @@ class Finger {
     void idle_outputs(uint8_t mode, hal::MotorCommand& out);
     void stop_now(hal::MotorCommand& out);
 
-    // The tick's working state first, then the configuration (Params: the fields the tick
-    // reads first): all that a tick in closed loop touches lies within the object's first 64
-    // bytes, which the AVR's ldd/std reach by displacement from one pointer (beyond them,
-    // each access needs an address computed first). static_assert in finger.cpp.
+    // The tick's working state first, then the PID (its state and coefficients), then the
+    // configuration (Params: the fields the tick reads first): all that a tick in closed loop
+    // touches lies within the object's first 64 bytes, which the AVR's ldd/std reach by
+    // displacement from one pointer (beyond them, each access needs an address computed
+    // first). static_assert in finger.cpp.
     int16_t theta_;
     int16_t target_;
     int16_t limit_;  // limit_for(mode_), kept current
@@ -198,7 +198,7 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
     }
 
     // ---- the mode's output u (Q15, positive flexes) ----
-    const int16_t u = mode == DUTY ? duty_step(th) : pid_.step(params_.pid, limit_, target_, th);
+    const int16_t u = mode == DUTY ? duty_step(th) : pid_.step(limit_, target_, th);
 
     // ---- stall: the finger's turn comes every kStallEvery ticks ----
     // The only rule that can stop the finger after its mode was read above.

@@ -35,7 +35,9 @@ class Hand {
     Hand();
 
     // loop() context, under the tick lock.
-    void configure_finger(uint8_t f, const finger::Params& p) { fingers_[f].configure(p); }
+    void configure_finger(uint8_t f, const finger::Params& p, const pid::Coeffs& c) {
+        fingers_[f].configure(p, c);
+    }
     void set_safety(uint16_t timeout_ms, uint8_t safe_action);
     finger::Finger& finger(uint8_t f) { return fingers_[f]; }
     const finger::Finger& finger(uint8_t f) const { return fingers_[f]; }
