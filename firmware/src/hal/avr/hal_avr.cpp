@@ -175,11 +175,15 @@ void adc_select(uint8_t finger) {
 // ---- UART0 ---------------------------------------------------------------------------------
 // Ring buffers shared with the interrupt routines below, which are written in assembly (C
 // names for that reason): at 1 Mbaud and a 500 Hz state stream they run 35,000 times a
-// second, and the compiler's prologues doubled their cost.
+// second, and the compiler's prologues doubled their cost. The receive interrupt also nests
+// in the control tick, once for each byte that arrives while it runs, so its every cycle
+// counts there: the receive ring sits on a 128-byte boundary (a slot's address is the index
+// or'ed into the buffer's, no 16-bit addition), and its indices live in the general-purpose
+// I/O registers GPIOR1 (head, written by the interrupt) and GPIOR2 (tail, written by
+// serial_read()), read and written with in/out (1 cycle; nothing else uses them).
 extern "C" {
-uint8_t utrf_rx_buf[128];  // powers of two: the index arithmetic wraps with a mask
+uint8_t utrf_rx_buf[128] __attribute__((aligned(128)));  // index wraps with a mask
 uint8_t utrf_tx_buf[256];
-volatile uint8_t utrf_rx_head, utrf_rx_tail;
 volatile uint8_t utrf_tx_head, utrf_tx_tail;
 volatile uint16_t utrf_rx_lost;
 }
@@ -287,53 +291,53 @@ ISR(ADC_vect) {
 }
 
 // A received byte into the ring; a byte that finds the ring full, or that the UART itself
-// lost (DOR0), is counted in utrf_rx_lost.
+// lost (DOR0), is counted in utrf_rx_lost. The byte is stored at the head before the ring is
+// found full: that slot is the one a full ring keeps empty, so nothing is overwritten.
 ISR(USART0_RX_vect, ISR_NAKED) {
     __asm__ __volatile__(
-        "push r24\n\t"
-        "in r24, __SREG__\n\t"
-        "push r24\n\t"
-        "push r25\n\t"
+        "push r30\n\t"
+        "in   r30, __SREG__\n\t"
         "push r30\n\t"
         "push r31\n\t"
-        "lds r25, %[ucsra]\n\t"
-        "lds r24, %[udr]\n\t"
-        "sbrs r25, %[dor]\n\t"
-        "rjmp 1f\n\t"
-        "lds r30, utrf_rx_lost\n\t"
-        "lds r31, utrf_rx_lost+1\n\t"
-        "adiw r30, 1\n\t"
-        "sts utrf_rx_lost+1, r31\n\t"
-        "sts utrf_rx_lost, r30\n\t"
+        "push r24\n\t"
+        "lds  r24, %[ucsra]\n\t"
+        "sbrc r24, %[dor]\n\t"
+        "rjmp 2f\n"
         "1:\n\t"
-        "lds r30, utrf_rx_head\n\t"
-        "mov r25, r30\n\t"
-        "inc r25\n\t"
-        "andi r25, 0x7F\n\t"
-        "lds r31, utrf_rx_tail\n\t"
-        "cp r25, r31\n\t"
-        "breq 2f\n\t"
-        "ldi r31, 0\n\t"
-        "subi r30, lo8(-(utrf_rx_buf))\n\t"
-        "sbci r31, hi8(-(utrf_rx_buf))\n\t"
-        "st Z, r24\n\t"
-        "sts utrf_rx_head, r25\n\t"
-        "rjmp 3f\n\t"
+        "lds  r24, %[udr]\n\t"
+        "in   r30, %[head]\n\t"
+        "ori  r30, lo8(utrf_rx_buf)\n\t"
+        "ldi  r31, hi8(utrf_rx_buf)\n\t"
+        "st   Z, r24\n\t"
+        "inc  r30\n\t"
+        "andi r30, 0x7F\n\t"
+        "in   r24, %[tail]\n\t"
+        "cp   r30, r24\n\t"
+        "breq 3f\n\t"
+        "out  %[head], r30\n"
+        "4:\n\t"
+        "pop  r24\n\t"
+        "pop  r31\n\t"
+        "pop  r30\n\t"
+        "out  __SREG__, r30\n\t"
+        "pop  r30\n\t"
+        "reti\n"
         "2:\n\t"
-        "lds r30, utrf_rx_lost\n\t"
-        "lds r31, utrf_rx_lost+1\n\t"
+        "lds  r30, utrf_rx_lost\n\t"
+        "lds  r31, utrf_rx_lost+1\n\t"
         "adiw r30, 1\n\t"
-        "sts utrf_rx_lost+1, r31\n\t"
-        "sts utrf_rx_lost, r30\n\t"
+        "sts  utrf_rx_lost+1, r31\n\t"
+        "sts  utrf_rx_lost, r30\n\t"
+        "rjmp 1b\n"
         "3:\n\t"
-        "pop r31\n\t"
-        "pop r30\n\t"
-        "pop r25\n\t"
-        "pop r24\n\t"
-        "out __SREG__, r24\n\t"
-        "pop r24\n\t"
-        "reti\n\t" ::[ucsra] "n"(_SFR_MEM_ADDR(UCSR0A)),
-        [udr] "n"(_SFR_MEM_ADDR(UDR0)), [dor] "n"(DOR0));
+        "lds  r30, utrf_rx_lost\n\t"
+        "lds  r31, utrf_rx_lost+1\n\t"
+        "adiw r30, 1\n\t"
+        "sts  utrf_rx_lost+1, r31\n\t"
+        "sts  utrf_rx_lost, r30\n\t"
+        "rjmp 4b\n\t" ::[ucsra] "n"(_SFR_MEM_ADDR(UCSR0A)),
+        [udr] "n"(_SFR_MEM_ADDR(UDR0)), [dor] "n"(DOR0), [head] "I"(_SFR_IO_ADDR(GPIOR1)),
+        [tail] "I"(_SFR_IO_ADDR(GPIOR2)));
 }
 
 // The next byte of the ring into UDR0; when the ring is empty, this interrupt goes off.
@@ -424,7 +428,8 @@ void avr_init() {
     UCSR0A = _BV(U2X0);
     UBRR0 = (uint16_t)((F_CPU + 4UL * UTRF_BAUD) / (8UL * UTRF_BAUD) - 1);
     UCSR0C = _BV(UCSZ01) | _BV(UCSZ00);
-    utrf_rx_head = utrf_rx_tail = 0;
+    GPIOR1 = 0;  // receive head
+    GPIOR2 = 0;  // receive tail
     utrf_tx_head = utrf_tx_tail = 0;
     utrf_rx_lost = 0;
     UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
@@ -578,12 +583,12 @@ uint32_t millis() { return ::millis(); }
 
 uint16_t serial_read(uint8_t* buf, uint16_t max) {
     uint16_t n = 0;
-    uint8_t tail = utrf_rx_tail;
-    while (n < max && tail != utrf_rx_head) {
+    uint8_t tail = GPIOR2;
+    while (n < max && tail != GPIOR1) {
         buf[n++] = utrf_rx_buf[tail];
         tail = (uint8_t)((tail + 1) & (kRxSize - 1));
     }
-    utrf_rx_tail = tail;
+    GPIOR2 = tail;
     return n;
 }
 
