@@ -5,9 +5,12 @@
 //   tick_bench <elf> <scenario> <seconds> [<tick entry> <tick return>]   prints one JSON object
 //
 // Scenarios (all five fingers in POSITION, encoders moving, 500 Hz telemetry):
-//   idle      no requests beyond heartbeats
+//   idle      no requests beyond heartbeats (20 Hz)
 //   typical   set_targets at 200 Hz
 //   stress    set_targets back to back: the receive line saturated at 1 Mbaud
+// The host's frames drift against the tick (its clock is not the board's): each period is a
+// little longer than nominal, so that over a run of a second or more the frames start at every
+// phase of the tick, the worst (a frame arriving while the tick runs) included.
 // and `pins`: the driver pins and PWM timers through a sequence of modes, checked against
 // board_pins.h (the table the emulator's harness reads too).
 //
@@ -420,10 +423,10 @@ int main(int argc, char** argv) {
             if (t >= next_send) {
                 if (scenario == "typical") {
                     send(targets(t));
-                    next_send += 0.005;
+                    next_send += 0.005 + 4e-6;  // the phase drifts 0.8 ms a second
                 } else {
                     send(proto::Heartbeat());
-                    next_send += 0.05;
+                    next_send += 0.05 + 40e-6;  // 0.8 ms a second
                 }
             }
             run_until(t + 0.0005);
