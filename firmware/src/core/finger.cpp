@@ -39,8 +39,9 @@ Params compile(const config::Finger& cfg, float dt_s, pid::Coeffs& coeffs) {
     p.jump = fx::bu(cfg.limits.encoder_jump);
     p.zero_turn = encoder::turn_from_rad(cfg.hw.encoder_offset);
     p.encoder_invert = cfg.hw.encoder_invert != 0;
-    p.motor_invert = cfg.hw.motor_invert != 0;
+    p.pull = cfg.hw.motor_invert != 0 ? hal::Drive::REVERSE : hal::Drive::FORWARD;
     p.rotary = cfg.hw.actuation == 1;  // proto::Actuation::ROTARY
+    p.pretension_counts = pwm_counts((uint16_t)p.pretension);
     return p;
 }
 
@@ -67,10 +68,10 @@ Finger::Finger()
 
 #if defined(__AVR__)
 // The layout the tick relies on (finger.h): what it reads and writes in closed loop, the Pid
-// and Params up to its first field read less often, within the first 64 bytes. (AVR only:
+// and Params up to pretension_counts (read once a tick), within the first 64 bytes. (AVR only:
 // the host pads for alignment.)
 struct LayoutCheck {
-    static_assert(offsetof(Finger, params_) + offsetof(Params, max_duty) <= 64,
+    static_assert(offsetof(Finger, params_) + offsetof(Params, pretension_counts) <= 64,
                   "the tick's fields must stay within ldd/std reach of the Finger's address");
 };
 #endif

@@ -50,9 +50,13 @@ struct Params {
     int16_t jump;          // per tick
     uint16_t zero_turn;    // encoder reading at angle 0
     bool encoder_invert;
-    bool motor_invert;
+    hal::Drive pull;       // the drive that pulls a tendon: FORWARD, or REVERSE (motor_invert)
     bool rotary;
-    // Read by the stall rule (a finger's turn every kStallEvery ticks), DUTY and loop().
+    // Read by the antagonistic output mapping every tick, but only on the pulling side's
+    // channel that is not working (one access), by the stall rule (a finger's turn every
+    // kStallEvery ticks), DUTY and loop().
+    uint16_t pretension_counts;  // PWM counts of the pretension alone
+
     int16_t max_duty;      // motor duty limit
     int16_t theta_min;     // joint limits
     int16_t theta_max;
@@ -205,32 +209,50 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
     if (stall_check && !stall_rule(u, th, out)) return;
 
     // ---- driver channels (the finger drives: no stop fault, or its mode would be COAST) ----
-    const bool reverse = params_.motor_invert;
+    const hal::Drive pull = params_.pull;
     if (params_.rotary) {
         duty_a_ = u;
         duty_b_ = 0;
         const bool neg = u < 0;
         const uint16_t c = pwm_counts((uint16_t)(neg ? -u : u));
         out.a.on_counts = c;
-        out.a.drive = c == 0 ? hal::Drive::COAST
-                             : (neg != reverse ? hal::Drive::REVERSE : hal::Drive::FORWARD);
+        // Forward flexes; motor_invert swaps the directions (pull is then REVERSE).
+        const hal::Drive flex = pull;
+        const hal::Drive extend =
+            pull == hal::Drive::FORWARD ? hal::Drive::REVERSE : hal::Drive::FORWARD;
+        out.a.drive = c == 0 ? hal::Drive::COAST : (neg ? extend : flex);
         out.b.drive = hal::Drive::COAST;
         out.b.on_counts = 0;
     } else {
         // Both motors pull (duties >= 0): the flexor takes u > 0 on top of the pretension, the
-        // extensor u < 0.
+        // extensor u < 0; the other one holds the pretension alone, whose counts were worked
+        // out with the configuration.
         const int16_t p = params_.pretension;
-        const int16_t a = u > 0 ? (int16_t)(p + u) : p;
-        const int16_t b = u < 0 ? (int16_t)(p - u) : p;
-        duty_a_ = a;
-        duty_b_ = b;
-        const hal::Drive pull = reverse ? hal::Drive::REVERSE : hal::Drive::FORWARD;
-        const uint16_t ca = pwm_counts((uint16_t)a);
-        const uint16_t cb = pwm_counts((uint16_t)b);
-        out.a.on_counts = ca;
-        out.a.drive = ca == 0 ? hal::Drive::COAST : pull;
-        out.b.on_counts = cb;
-        out.b.drive = cb == 0 ? hal::Drive::COAST : pull;
+        const uint16_t cp = params_.pretension_counts;
+        const hal::Drive dp = cp == 0 ? hal::Drive::COAST : pull;
+        if (u > 0) {
+            const int16_t a = (int16_t)(p + u);
+            const uint16_t ca = pwm_counts((uint16_t)a);
+            duty_a_ = a;
+            duty_b_ = p;
+            out.a.on_counts = ca;
+            out.a.drive = ca == 0 ? hal::Drive::COAST : pull;
+            out.b.on_counts = cp;
+            out.b.drive = dp;
+        } else if (u < 0) {
+            const int16_t b = (int16_t)(p - u);
+            const uint16_t cb = pwm_counts((uint16_t)b);
+            duty_a_ = p;
+            duty_b_ = b;
+            out.a.on_counts = cp;
+            out.a.drive = dp;
+            out.b.on_counts = cb;
+            out.b.drive = cb == 0 ? hal::Drive::COAST : pull;
+        } else {
+            duty_a_ = duty_b_ = p;
+            out.a.on_counts = out.b.on_counts = cp;
+            out.a.drive = out.b.drive = dp;
+        }
     }
     out.stby = true;
 }

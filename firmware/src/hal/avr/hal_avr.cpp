@@ -457,7 +457,7 @@ __attribute__((always_inline)) inline void channel_write(const MotorOut& out) {
     static_assert((uint8_t)Drive::FORWARD == 2 && (uint8_t)Drive::REVERSE == 3,
                   "FORWARD and REVERSE are the drives from 2 up");
     const Drive d = out.drive;
-    if ((uint8_t)d >= (uint8_t)Drive::FORWARD) {
+    if (__builtin_expect((uint8_t)d >= (uint8_t)Drive::FORWARD, 1)) {  // the tick's usual case
         // on_counts is 1..kPwmPeriod; anything else is clamped into it, one compare for both
         // ends: 0 would wrap to 0xFFFF (the core sends COAST for zero duty; never a spike from
         // here).
@@ -467,7 +467,7 @@ __attribute__((always_inline)) inline void channel_write(const MotorOut& out) {
         *ocr_reg(pins.pwm.timer, pins.pwm.channel) = ocr;
     }
     MotorHw& m = g_hw[F].m[K];
-    if ((uint8_t)d != m.last) motor_change(m, out);
+    if (__builtin_expect((uint8_t)d != m.last, 0)) motor_change(m, out);
 }
 
 template <uint8_t F>
