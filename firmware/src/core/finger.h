@@ -180,7 +180,8 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
     // the PID reset that stops the finger is repeated (from theta_) whenever it drives again.
     int16_t th = theta_;
     uint8_t found = 0;
-    if (enc.status != hal::EncoderStatus::OK) {
+    // The usual paths are told to the compiler (UTRF_LIKELY), so they run straight through.
+    if (UTRF_UNLIKELY(enc.status != hal::EncoderStatus::OK)) {
         encoder_ok_ = false;
         found = ENCODER_RANGE;
     } else {
@@ -188,29 +189,31 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
         const uint16_t turn = enc.turn;
         last_turn_ = turn;
         th = encoder::angle_bu(turn, params_.zero_turn, params_.encoder_invert);
-        if (have_theta_ && fx::abs16((int16_t)(th - theta_)) > params_.jump) found = ENCODER_JUMP;
+        if (UTRF_UNLIKELY(have_theta_ && fx::abs16((int16_t)(th - theta_)) > params_.jump)) {
+            found = ENCODER_JUMP;
+        }
         theta_ = th;
         have_theta_ = true;
-        if (th < params_.fault_low || th > params_.fault_high) found |= JOINT_LIMIT;
+        if (UTRF_UNLIKELY(th < params_.fault_low || th > params_.fault_high)) found |= JOINT_LIMIT;
     }
-    if (found) latch(found);
+    if (UTRF_UNLIKELY(found)) latch(found);
 
     const uint8_t mode = mode_;  // after the latches: a stop fault has made it COAST
-    if (mode == COAST || mode == BRAKE) {
+    if (UTRF_UNLIKELY(mode == COAST || mode == BRAKE)) {
         idle_outputs(mode, out);
         return;
     }
 
     // ---- the mode's output u (Q15, positive flexes) ----
-    const int16_t u = mode == DUTY ? duty_step(th) : pid_.step(limit_, target_, th);
+    const int16_t u = UTRF_UNLIKELY(mode == DUTY) ? duty_step(th) : pid_.step(limit_, target_, th);
 
     // ---- stall: the finger's turn comes every kStallEvery ticks ----
     // The only rule that can stop the finger after its mode was read above.
-    if (stall_check && !stall_rule(u, th, out)) return;
+    if (UTRF_UNLIKELY(stall_check) && !stall_rule(u, th, out)) return;
 
     // ---- driver channels (the finger drives: no stop fault, or its mode would be COAST) ----
     const hal::Drive pull = params_.pull;
-    if (params_.rotary) {
+    if (UTRF_UNLIKELY(params_.rotary)) {
         duty_a_ = u;
         duty_b_ = 0;
         const bool neg = u < 0;

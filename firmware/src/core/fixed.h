@@ -38,6 +38,10 @@ inline int16_t sat16(int32_t v) {
 }
 inline int16_t abs16(int16_t v) { return v < 0 ? (int16_t)-v : v; }
 
+// Branch hints for the tick's usual paths (they change no result).
+#define UTRF_LIKELY(x) __builtin_expect(!!(x), 1)
+#define UTRF_UNLIKELY(x) __builtin_expect(!!(x), 0)
+
 // 16 x 16 -> 32-bit multiplies. On the AVR these are inline MUL sequences: libgcc's helpers
 // cost a call, register shuffles and, for signed operands, a wrapper: a third of the time of
 // the tick's 30 multiplies. Elsewhere, plain C++. (Tested on the simulated AVR against the C

@@ -84,7 +84,7 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
         last_frame_tick_ = ticks_;
         timed_out_ = false;
     }
-    if (!timed_out_ && ticks_ - last_frame_tick_ >= timeout_ticks_) {
+    if (UTRF_UNLIKELY(!timed_out_ && ticks_ - last_frame_tick_ >= timeout_ticks_)) {
         timed_out_ = true;
         for (uint8_t f = 0; f < kFingers; ++f) {
             finger::Finger& fg = fingers_[f];
@@ -99,7 +99,7 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
     }
 
     // ---- the previous tick overran: every finger stops ----
-    if (overrun_pending_) {
+    if (UTRF_UNLIKELY(overrun_pending_)) {
         overrun_pending_ = false;
         for (uint8_t f = 0; f < kFingers; ++f) fingers_[f].latch(finger::OVERRUN);
     }
@@ -115,7 +115,7 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
         halted_ = 1;
         hal::watchdog_mark_hang();
     }
-    if (halted_) {
+    if (UTRF_UNLIKELY(halted_)) {
         hal::motors_all_off();
         return;
     }
@@ -129,7 +129,7 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
 
 UTRF_HOT void Hand::record_timing(uint32_t cycles, bool overran) {
     ++timing_.ticks;
-    if (overran) {
+    if (UTRF_UNLIKELY(overran)) {
         ++timing_.overruns;
         overrun_pending_ = true;
     }

@@ -213,7 +213,7 @@ static volatile uint8_t g_tick_running;
 static volatile uint8_t g_tick_deferred;
 
 namespace {
-Stamp read_stamp() {
+__attribute__((always_inline)) inline Stamp read_stamp() {
     Stamp s;
     s.coarse = TCNT2;
     s.fine = TCNT1;
@@ -222,8 +222,8 @@ Stamp read_stamp() {
 
 // Cycles since `start`, up to two tick periods. The tick timer gives the time to within 64
 // cycles; timer 1 (modulo 800) gives it exactly modulo 800: take the value of the second that
-// lies within 400 cycles of the first.
-uint16_t cycles_from(const Stamp& start) {
+// lies within 400 cycles of the first. Inline: the timer interrupt runs it after every tick.
+__attribute__((always_inline)) inline uint16_t cycles_from(const Stamp& start) {
     const uint8_t c2 = TCNT2;
     const uint16_t c1 = TCNT1;
     int16_t d2 = (int16_t)c2 - (int16_t)start.coarse;
