@@ -42,7 +42,11 @@ class Hand {
     finger::Finger& finger(uint8_t f) { return fingers_[f]; }
     const finger::Finger& finger(uint8_t f) const { return fingers_[f]; }
     void reset_timing();
-    TickTiming timing() const { return timing_; }
+    TickTiming timing() const {
+        TickTiming t = timing_;
+        t.ticks = ticks_ - timing_base_;  // each tick is timed: the same count
+        return t;
+    }
 
     // loop() context, no lock needed.
     void note_frame() { frame_seen_ = 1; }
@@ -70,7 +74,8 @@ class Hand {
     volatile uint8_t halted_;
     bool overrun_pending_;
     uint8_t stall_turn_;  // the finger whose stall rule runs this tick
-    TickTiming timing_;
+    TickTiming timing_;     // its ticks field unused: see timing()
+    uint32_t timing_base_;  // ticks_ at reset_timing()
     uint32_t window_sum_;
     uint16_t window_n_;
 };
@@ -128,7 +133,6 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
 }
 
 UTRF_HOT void Hand::record_timing(uint32_t cycles, bool overran) {
-    ++timing_.ticks;
     if (UTRF_UNLIKELY(overran)) {
         ++timing_.overruns;
         overrun_pending_ = true;
