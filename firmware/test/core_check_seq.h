@@ -182,6 +182,27 @@ inline uint32_t core_check_run() {
             }
         }
     }
+    // The derivative term at its saturation bound, where it can show: kp = kd, and e set to the
+    // filtered speed v8, so the P term cancels an unsaturated D term exactly and a saturated
+    // one leaves its remainder in the output. (alpha < 1: v8 has low bits.)
+    {
+        pid::Coeffs cd;
+        cd.kp = fx::make_gain(3001.0f, pid::kPMax23);
+        cd.ki = fx::make_gain(0.0f, pid::kIStepMax31);
+        cd.kd = fx::make_gain(3001.0f, pid::kDMax23);  // xlim 11181
+        cd.alpha = 65000;
+        cd.slew = 32767;
+        cd.deadband = 0;
+        cd.db_inverse = 65535;
+        pid::Pid q;
+        q.load(cd);
+        for (int16_t dm = -63; dm <= 63; ++dm) {
+            q.reset(32767, 0, 0);
+            const int16_t v8 = (int16_t)(((int32_t)(dm * 256) * 65000L + 32768L) >> 16);
+            f.add((uint16_t)q.step(32767, (int16_t)(dm + v8), dm));
+            f.add((uint16_t)q.velocity8());
+        }
+    }
     // The encoder's judgement and angle for every ADC count.
     for (uint16_t adc = 0; adc < 1024; ++adc) {
         const hal::EncoderReading e = encoder::as5600_reading(adc);
