@@ -246,13 +246,15 @@ __attribute__((always_inline)) inline uint16_t cycles_from(const Stamp& start) {
 
 // Runs ticks while any is due. Called with interrupts disabled; returns with them disabled.
 // The UART transmitter's interrupt waits during the tick (the byte in the shift register and
-// the one in UDR0 still go out): the control tick comes first, and its measured time is its
-// own. Receiving stays on, or bytes would be lost.
+// the one in UDR0 still go out), and so does timer 0's overflow (millis(); its flag keeps one
+// overflow, and the tick lasts far less than its 1.024 ms): the control tick comes first, and
+// its measured time is its own. Receiving stays on, or bytes would be lost.
 void run_due_ticks() {
     do {
         g_tick_deferred = 0;
         g_tick_running = 1;
         UCSR0B &= (uint8_t)~_BV(UDRIE0);
+        TIMSK0 &= (uint8_t)~_BV(TOIE0);
         const Stamp start = read_stamp();
         sei();
         app::tick();
@@ -260,6 +262,7 @@ void run_due_ticks() {
         const bool overran = g_tick_deferred != 0;
         app::tick_done(cycles, overran);
         cli();
+        TIMSK0 |= _BV(TOIE0);
         if (utrf_tx_head != utrf_tx_tail) UCSR0B |= _BV(UDRIE0);
         g_tick_running = 0;
     } while (g_tick_deferred && !g_tick_locked);
