@@ -189,7 +189,8 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
         const uint16_t turn = enc.turn;
         last_turn_ = turn;
         th = encoder::angle_bu(turn, params_.zero_turn, params_.encoder_invert);
-        if (UTRF_UNLIKELY(have_theta_ && fx::abs16((int16_t)(th - theta_)) > params_.jump)) {
+        if (UTRF_LIKELY(have_theta_) &&
+            UTRF_UNLIKELY(fx::abs16((int16_t)(th - theta_)) > params_.jump)) {
             found = ENCODER_JUMP;
         }
         theta_ = th;
