@@ -11,6 +11,7 @@
 #include <avr/eeprom.h>
 #include <avr/interrupt.h>
 #include <avr/io.h>
+#include <avr/pgmspace.h>
 #include <avr/wdt.h>
 #include <util/atomic.h>
 
@@ -177,21 +178,41 @@ void adc_select(uint8_t finger) {
 // names for that reason): at 1 Mbaud and a 500 Hz state stream they run 35,000 times a
 // second, and the compiler's prologues doubled their cost. The receive interrupt also nests
 // in the control tick, once for each byte that arrives while it runs, so its every cycle
-// counts there: the receive ring sits on a 128-byte boundary (a slot's address is the index
-// or'ed into the buffer's, no 16-bit addition), and its indices live in the general-purpose
-// I/O registers GPIOR1 (head, written by the interrupt) and GPIOR2 (tail, written by
-// serial_read()), read and written with in/out (1 cycle; nothing else uses them).
+// counts there. Its usual path changes no status flag, so it need not save SREG: the ring
+// sits on a 128-byte boundary and its head and tail are kept as the low bytes of the slots'
+// addresses, in the general-purpose I/O registers GPIOR1 (head, written by the interrupt)
+// and GPIOR2 (tail, written by serial_read()), read and written with in/out (nothing else
+// uses them); the next slot's low byte comes from a table in flash (lpm), and a full ring is
+// found with cpse. Only the rare paths (a byte lost) save SREG to count it.
 extern "C" {
-uint8_t utrf_rx_buf[128] __attribute__((aligned(128)));  // index wraps with a mask
+uint8_t utrf_rx_buf[128] __attribute__((aligned(128)));
 uint8_t utrf_tx_buf[256];
 volatile uint8_t utrf_tx_head, utrf_tx_tail;
 volatile uint16_t utrf_rx_lost;
+// utrf_rx_next[a]: the low byte of the address of the slot after the one at low byte a, for
+// either position of the ring in its 256-byte page (a's top bit is the page half).
+extern const uint8_t utrf_rx_next[256];
+#define UTRF_RX_NEXT(a) (uint8_t)(((a) & 0x80) | (((a) + 1) & 0x7F))
+#define UTRF_RX_NEXT4(a) UTRF_RX_NEXT(a), UTRF_RX_NEXT(a + 1), UTRF_RX_NEXT(a + 2), UTRF_RX_NEXT(a + 3)
+#define UTRF_RX_NEXT16(a) \
+    UTRF_RX_NEXT4(a), UTRF_RX_NEXT4(a + 4), UTRF_RX_NEXT4(a + 8), UTRF_RX_NEXT4(a + 12)
+#define UTRF_RX_NEXT64(a) \
+    UTRF_RX_NEXT16(a), UTRF_RX_NEXT16(a + 16), UTRF_RX_NEXT16(a + 32), UTRF_RX_NEXT16(a + 48)
+const uint8_t utrf_rx_next[256] PROGMEM __attribute__((aligned(256))) = {
+    UTRF_RX_NEXT64(0), UTRF_RX_NEXT64(64), UTRF_RX_NEXT64(128), UTRF_RX_NEXT64(192)};
+#undef UTRF_RX_NEXT64
+#undef UTRF_RX_NEXT16
+#undef UTRF_RX_NEXT4
+#undef UTRF_RX_NEXT
 }
 
 namespace {
-const uint8_t kRxSize = sizeof utrf_rx_buf;
 static_assert(sizeof utrf_tx_buf == 256, "the transmit index wraps by itself at 256");
-static_assert(sizeof utrf_rx_buf == 128, "the receive ISR masks its index with 0x7F");
+static_assert(sizeof utrf_rx_buf == 128, "the receive ring is 128 slots (utrf_rx_next)");
+
+// The receive ring's head or tail (a slot's address low byte) and the slot after it.
+inline uint8_t rx_base() { return (uint8_t)(uintptr_t)utrf_rx_buf; }
+inline uint8_t rx_next(uint8_t a) { return (uint8_t)((a & 0x80) | ((a + 1) & 0x7F)); }
 }  // namespace
 
 // ---- interrupts --------------------------------------------------------------------------------
@@ -299,8 +320,6 @@ ISR(ADC_vect) {
 ISR(USART0_RX_vect, ISR_NAKED) {
     __asm__ __volatile__(
         "push r30\n\t"
-        "in   r30, __SREG__\n\t"
-        "push r30\n\t"
         "push r31\n\t"
         "push r24\n\t"
         "lds  r24, %[ucsra]\n\t"
@@ -309,36 +328,39 @@ ISR(USART0_RX_vect, ISR_NAKED) {
         "1:\n\t"
         "lds  r24, %[udr]\n\t"
         "in   r30, %[head]\n\t"
-        "ori  r30, lo8(utrf_rx_buf)\n\t"
         "ldi  r31, hi8(utrf_rx_buf)\n\t"
         "st   Z, r24\n\t"
-        "inc  r30\n\t"
-        "andi r30, 0x7F\n\t"
+        "ldi  r31, hi8(utrf_rx_next)\n\t"
+        "lpm  r30, Z\n\t"
         "in   r24, %[tail]\n\t"
-        "cp   r30, r24\n\t"
-        "breq 3f\n\t"
+        "cpse r30, r24\n\t"
+        "rjmp 3f\n\t"
+        // full: the byte is not kept
+        "in   r24, __SREG__\n\t"
+        "lds  r30, utrf_rx_lost\n\t"
+        "lds  r31, utrf_rx_lost+1\n\t"
+        "adiw r30, 1\n\t"
+        "sts  utrf_rx_lost+1, r31\n\t"
+        "sts  utrf_rx_lost, r30\n\t"
+        "out  __SREG__, r24\n\t"
+        "rjmp 4f\n"
+        "3:\n\t"
         "out  %[head], r30\n"
         "4:\n\t"
         "pop  r24\n\t"
         "pop  r31\n\t"
         "pop  r30\n\t"
-        "out  __SREG__, r30\n\t"
-        "pop  r30\n\t"
         "reti\n"
         "2:\n\t"
+        // the UART lost a byte before this one
+        "in   r24, __SREG__\n\t"
         "lds  r30, utrf_rx_lost\n\t"
         "lds  r31, utrf_rx_lost+1\n\t"
         "adiw r30, 1\n\t"
         "sts  utrf_rx_lost+1, r31\n\t"
         "sts  utrf_rx_lost, r30\n\t"
-        "rjmp 1b\n"
-        "3:\n\t"
-        "lds  r30, utrf_rx_lost\n\t"
-        "lds  r31, utrf_rx_lost+1\n\t"
-        "adiw r30, 1\n\t"
-        "sts  utrf_rx_lost+1, r31\n\t"
-        "sts  utrf_rx_lost, r30\n\t"
-        "rjmp 4b\n\t" ::[ucsra] "n"(_SFR_MEM_ADDR(UCSR0A)),
+        "out  __SREG__, r24\n\t"
+        "rjmp 1b\n\t" ::[ucsra] "n"(_SFR_MEM_ADDR(UCSR0A)),
         [udr] "n"(_SFR_MEM_ADDR(UDR0)), [dor] "n"(DOR0), [head] "I"(_SFR_IO_ADDR(GPIOR1)),
         [tail] "I"(_SFR_IO_ADDR(GPIOR2)));
 }
@@ -431,8 +453,8 @@ void avr_init() {
     UCSR0A = _BV(U2X0);
     UBRR0 = (uint16_t)((F_CPU + 4UL * UTRF_BAUD) / (8UL * UTRF_BAUD) - 1);
     UCSR0C = _BV(UCSZ01) | _BV(UCSZ00);
-    GPIOR1 = 0;  // receive head
-    GPIOR2 = 0;  // receive tail
+    GPIOR1 = rx_base();  // receive head: empty
+    GPIOR2 = rx_base();  // receive tail
     utrf_tx_head = utrf_tx_tail = 0;
     utrf_rx_lost = 0;
     UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
@@ -588,8 +610,8 @@ uint16_t serial_read(uint8_t* buf, uint16_t max) {
     uint16_t n = 0;
     uint8_t tail = GPIOR2;
     while (n < max && tail != GPIOR1) {
-        buf[n++] = utrf_rx_buf[tail];
-        tail = (uint8_t)((tail + 1) & (kRxSize - 1));
+        buf[n++] = utrf_rx_buf[tail & 0x7F];
+        tail = rx_next(tail);
     }
     GPIOR2 = tail;
     return n;
