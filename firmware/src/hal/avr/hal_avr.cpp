@@ -498,13 +498,15 @@ __attribute__((always_inline)) inline void channel_write(const MotorOut& out) {
 template <uint8_t F>
 __attribute__((always_inline)) inline void finger_write(const MotorCommand& c) {
     FingerHw& h = g_hw[F];
-    if (!c.stby && h.stby_last) {
+    const uint8_t stby = c.stby ? 1 : 0;
+    const bool change = __builtin_expect(stby != h.stby_last, 0);  // one compare, usually
+    if (change && !stby) {
         pin_set(h.stby, false);  // off first
         h.stby_last = 0;
     }
     channel_write<F, 0>(c.a);
     channel_write<F, 1>(c.b);
-    if (c.stby && !h.stby_last) {
+    if (change && stby) {
         pin_set(h.stby, true);
         h.stby_last = 1;
     }
