@@ -220,9 +220,7 @@ void loop() {
 }
 
 void tick() {
-    hal::EncoderReading enc[hand::kFingers];
-    hal::encoders_read(enc);
-    g_board.hand.tick(enc);
+    g_board.hand.tick(hal::encoders_read());
     hal::encoders_sample();
 }
 

@@ -161,7 +161,17 @@ inline void motor_apply(MotorHw& m, const MotorOut& out) {
 
 // ---- ADC: one round over the five encoder channels between two ticks ------------------------
 uint8_t g_adc_mux[UTRF_FINGER_COUNT];
-volatile EncoderReading g_reading[UTRF_FINGER_COUNT];  // judged in the ADC interrupt
+// Two rounds of readings, judged in the ADC interrupt: it fills one while the tick reads the
+// other, the last complete one (a round starts only at the end of a tick, so the one the tick
+// reads is not written under it). g_adc_done points to it and g_adc_fill to the other; both
+// change together, with g_adc_round, when a round completes.
+EncoderReading g_reading[2][UTRF_FINGER_COUNT];
+EncoderReading* volatile g_adc_fill = g_reading[0];
+const EncoderReading* volatile g_adc_done = g_reading[1];
+// What the tick gets while the sampling stands still.
+const EncoderReading kNoData[UTRF_FINGER_COUNT] = {
+    {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA},
+    {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA}};
 volatile uint8_t g_adc_round;    // completed rounds (wraps)
 volatile uint8_t g_adc_at = 0xFF;  // channel being converted, 0xFF: idle
 encoder::Staleness g_staleness;
@@ -301,15 +311,16 @@ ISR(TIMER2_COMPA_vect) {
 ISR(ADC_vect) {
     uint8_t i = g_adc_at;
     // Judged here, between ticks (the round runs after each tick), not in the tick.
-    const EncoderReading r = encoder::as5600_reading(ADC);
-    g_reading[i].turn = r.turn;
-    g_reading[i].status = r.status;
+    EncoderReading* const fill = g_adc_fill;
+    fill[i] = encoder::as5600_reading(ADC);
     if (++i < UTRF_FINGER_COUNT) {
         g_adc_at = i;
         adc_select(i);
         ADCSRA |= _BV(ADSC);
     } else {
         g_adc_at = 0xFF;
+        g_adc_fill = const_cast<EncoderReading*>(g_adc_done);
+        g_adc_done = fill;
         g_adc_round = (uint8_t)(g_adc_round + 1);
     }
 }
@@ -540,30 +551,14 @@ void motors_all_off() {
     }
 }
 
-namespace {
-// One finger's reading, copied with the interrupts off (the ADC interrupt writes them): with F
-// constant, fixed addresses (lds) instead of a loop over a pointer.
-template <uint8_t F>
-__attribute__((always_inline)) inline void copy_reading(EncoderReading* out) {
-    out[F].turn = g_reading[F].turn;
-    out[F].status = g_reading[F].status;
-}
-}  // namespace
-
-void encoders_read(EncoderReading* out) {
-    static_assert(UTRF_FINGER_COUNT == 5, "encoders_read() copies five readings");
+const EncoderReading* encoders_read() {
+    const EncoderReading* done;
     uint8_t round;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
-        copy_reading<0>(out);
-        copy_reading<1>(out);
-        copy_reading<2>(out);
-        copy_reading<3>(out);
-        copy_reading<4>(out);
+        done = g_adc_done;
         round = g_adc_round;
     }
-    if (g_staleness.stale(round)) {
-        for (uint8_t f = 0; f < UTRF_FINGER_COUNT; ++f) out[f].status = EncoderStatus::NO_DATA;
-    }
+    return g_staleness.stale(round) ? kNoData : done;
 }
 
 void encoders_sample() {
