@@ -157,7 +157,7 @@ void send(const Msg& msg) {
 }
 
 void run_until(double t_end) {
-    const uint64_t end = (uint64_t)(t_end * kCpuHz);
+    const uint64_t end = (uint64_t)ceil(t_end * kCpuHz);  // up, so that it always advances
     avr_irq_t* in = avr_io_getirq(g.avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
     while (g.avr->cycle < end) {
         const uint32_t pc0 = g.avr->pc;
@@ -429,7 +429,8 @@ int main(int argc, char** argv) {
                     next_send += 0.05 + 40e-6;  // 0.8 ms a second
                 }
             }
-            run_until(t + 0.0005);
+            // Up to the next frame's time exactly: it starts then, at its own phase.
+            run_until(next_send < t + 0.0005 ? next_send : t + 0.0005);
         }
     }
     const uint32_t frames = g.state_frames - frames_before;
