@@ -280,22 +280,30 @@ __attribute__((always_inline)) inline uint16_t cycles_from(const Stamp& start) {
 // the one in UDR0 still go out), and so does timer 0's overflow (millis(); its flag keeps one
 // overflow, and the tick lasts far less than its 1.024 ms): the control tick comes first, and
 // its measured time is its own. Receiving stays on, or bytes would be lost.
+// One tick, timed. Out of line, so that its timing arithmetic is not hoisted into registers
+// the loop below would keep (and save) across the tick's call; the start is in memory for the
+// same reason.
+Stamp g_tick_start;
+__attribute__((noinline)) void run_one_tick() {
+    g_tick_deferred = 0;
+    g_tick_running = 1;
+    UCSR0B &= (uint8_t)~_BV(UDRIE0);
+    TIMSK0 &= (uint8_t)~_BV(TOIE0);
+    g_tick_start = read_stamp();
+    sei();
+    app::tick();
+    const uint16_t cycles = cycles_from(g_tick_start);
+    const bool overran = g_tick_deferred != 0;
+    app::tick_done(cycles, overran);
+    cli();
+    TIMSK0 |= _BV(TOIE0);
+    if (utrf_tx_head != utrf_tx_tail) UCSR0B |= _BV(UDRIE0);
+    g_tick_running = 0;
+}
+
 void run_due_ticks() {
     do {
-        g_tick_deferred = 0;
-        g_tick_running = 1;
-        UCSR0B &= (uint8_t)~_BV(UDRIE0);
-        TIMSK0 &= (uint8_t)~_BV(TOIE0);
-        const Stamp start = read_stamp();
-        sei();
-        app::tick();
-        const uint16_t cycles = cycles_from(start);
-        const bool overran = g_tick_deferred != 0;
-        app::tick_done(cycles, overran);
-        cli();
-        TIMSK0 |= _BV(TOIE0);
-        if (utrf_tx_head != utrf_tx_tail) UCSR0B |= _BV(UDRIE0);
-        g_tick_running = 0;
+        run_one_tick();
     } while (g_tick_deferred && !g_tick_locked);
 }
 }  // namespace
