@@ -166,10 +166,34 @@ class Finger {
 // hi = 25 (mag >> 8) <= 3175 and lo = 25 (mag & 0xFF) <= 6375,
 // floor((256 hi + lo + 512) / 1024) = (hi + ((lo + 512) >> 8)) >> 2.
 static_assert(hal::kPwmPeriod == 800, "pwm_counts() is written for 800 counts a period");
+// (lo + 512) >> 8 is (lo >> 8) + 2: on the AVR the high byte of the second product, added
+// with the 2, in one sequence (tested against the C in the AVR check).
 UTRF_HOT uint16_t pwm_counts(uint16_t mag) {
+#if defined(__AVR__)
+    uint16_t r;
+    uint8_t k;
+    __asm__(
+        "ldi  %[k], 25\n\t"
+        "mul  %B[m], %[k]\n\t"
+        "movw %A[r], r0\n\t"
+        "mul  %A[m], %[k]\n\t"
+        "add  %A[r], r1\n\t"
+        "clr  r1\n\t"
+        "adc  %B[r], r1\n\t"
+        "subi %A[r], lo8(-2)\n\t"
+        "sbci %B[r], hi8(-2)\n\t"
+        "lsr  %B[r]\n\t"
+        "ror  %A[r]\n\t"
+        "lsr  %B[r]\n\t"
+        "ror  %A[r]"
+        : [r] "=&d"(r), [k] "=&d"(k)
+        : [m] "r"(mag));
+    return r;
+#else
     const uint16_t hi = fx::mul8u((uint8_t)(mag >> 8), 25u);
     const uint16_t lo = fx::mul8u((uint8_t)mag, 25u);
     return (uint16_t)((uint16_t)(hi + (uint16_t)((uint16_t)(lo + 512u) >> 8)) >> 2);
+#endif
 }
 
 UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& out,
