@@ -34,7 +34,9 @@ void fw_tick(uint32_t n) {
         ++state().ms;
         if (state().tick_locked) ++state().lock_errors;  // the tick cannot run while locked
         app::tick();
-        app::tick_done(state().tick_cycles, state().period_elapsed);
+        // As the AVR's timer can tell: at most two periods, well within 16 bits.
+        const uint32_t c = state().tick_cycles;
+        app::tick_done((uint16_t)(c > 0xFFFFu ? 0xFFFFu : c), state().period_elapsed);
     }
 }
 

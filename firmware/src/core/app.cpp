@@ -224,7 +224,7 @@ void tick() {
     hal::encoders_sample();
 }
 
-void tick_done(uint32_t cycles, bool overran) { g_board.hand.record_timing(cycles, overran); }
+void tick_done(uint16_t cycles, bool overran) { g_board.hand.record_timing(cycles, overran); }
 
 }  // namespace app
 }  // namespace utrf

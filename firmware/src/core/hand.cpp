@@ -16,6 +16,7 @@ Hand::Hand()
       halted_(0),
       overrun_pending_(false),
       stall_turn_(0),
+      worst_cycles_(0),
       timing_base_(0),
       window_sum_(0),
       window_n_(0) {
@@ -32,6 +33,7 @@ void Hand::set_safety(uint16_t timeout_ms, uint8_t safe_action) {
 
 void Hand::reset_timing() {
     timing_.ticks = 0;
+    worst_cycles_ = 0;
     timing_base_ = ticks_;
     timing_.overruns = 0;
     timing_.worst_cycles = 0;

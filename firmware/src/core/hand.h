@@ -45,6 +45,7 @@ class Hand {
     TickTiming timing() const {
         TickTiming t = timing_;
         t.ticks = ticks_ - timing_base_;  // each tick is timed: the same count
+        t.worst_cycles = worst_cycles_;
         return t;
     }
 
@@ -54,11 +55,12 @@ class Hand {
     bool halted() const { return halted_ != 0; }
     uint32_t ticks() const;  // atomic read
 
-    // The control tick (interrupt context), and its timing, measured by the caller at its end.
+    // The control tick (interrupt context), and its timing, measured by the caller at its end
+    // (in cycles: a tick lasts at most two periods, 32,000 cycles, so 16 bits hold it).
     // Inline (below): app::tick() and tick_done() call them on the one Hand, a static object,
     // so every field of it is at a fixed address (lds/sts, no pointer).
     inline void tick(const hal::EncoderReading* enc);
-    inline void record_timing(uint32_t cycles, bool overran);
+    inline void record_timing(uint16_t cycles, bool overran);
 
    private:
     finger::Finger fingers_[kFingers];
@@ -74,7 +76,8 @@ class Hand {
     volatile uint8_t halted_;
     bool overrun_pending_;
     uint8_t stall_turn_;  // the finger whose stall rule runs this tick
-    TickTiming timing_;     // its ticks field unused: see timing()
+    TickTiming timing_;     // its ticks and worst_cycles fields unused: see timing()
+    uint16_t worst_cycles_;
     uint32_t timing_base_;  // ticks_ at reset_timing()
     uint32_t window_sum_;
     uint16_t window_n_;
@@ -132,12 +135,12 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
     hal::motors_write(out);
 }
 
-UTRF_HOT void Hand::record_timing(uint32_t cycles, bool overran) {
+UTRF_HOT void Hand::record_timing(uint16_t cycles, bool overran) {
     if (UTRF_UNLIKELY(overran)) {
         ++timing_.overruns;
         overrun_pending_ = true;
     }
-    if (cycles > timing_.worst_cycles) timing_.worst_cycles = cycles;
+    if (cycles > worst_cycles_) worst_cycles_ = cycles;
     window_sum_ += cycles;
     if (++window_n_ == 1024) {
         timing_.mean_cycles = window_sum_ >> 10;
