@@ -301,7 +301,7 @@ __attribute__((noinline)) void run_one_tick() {
     g_tick_running = 0;
 }
 
-void run_due_ticks() {
+inline __attribute__((always_inline)) void run_due_ticks() {
     do {
         run_one_tick();
     } while (g_tick_deferred && !g_tick_locked);
