@@ -164,9 +164,8 @@ def verdict(loads: list[dict]) -> list[str]:
         f"entry to reti). Bound for a whole set_targets frame ({frame} bytes) arriving as the "
         f"tick starts: {bound:,.0f} cycles ({pct(bound)}); with the timer interrupt around it "
         f"(about {overhead:,.0f} cycles more: register saves, the tick's timing and "
-        f"bookkeeping) {pct(bound + overhead)}. The transmitter's interrupt and timer 0's "
-        "(millis) wait while the tick runs. The saturated line is a stress case: the tick stays "
-        "on time, the board drops what it cannot parse (counted). See firmware/README.md, "
+        f"bookkeeping) {pct(bound + overhead)}. The saturated line is a stress case: the tick "
+        "stays on time, the board drops what it cannot parse (counted). See firmware/README.md, "
         "Timing, for what the tick does and what its time went down from.",
     ]
 
@@ -202,7 +201,8 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         "its own figures (get_stats; timer 2 and timer 1, around app::tick() in the timer "
         "interrupt, nested UART/ADC interrupts included). *simavr*: cycles from app::tick()'s "
         "entry to its return, counted by the simulator; *own* is that less the interrupts "
-        "served while it ran (*nested*: UART receive, timer 0), each counted from the step that "
+        "served while it ran (*nested*: the UART's receive interrupt, one a byte; the "
+        "transmitter's and timer 0's wait for the tick's end), each counted from the step that "
         "accepts it to its reti. *whole interrupt*: the timer interrupt that runs the tick, "
         "from its vector to its reti (register saves, the tick's timing and bookkeeping "
         "included). Target: at most 30 % (4,800 cycles).",
