@@ -145,7 +145,10 @@ SIMAVR_INC ?= /usr/include/simavr
 
 firmware-check: $(FW_CHECK_ELF) $(FW_BENCH)
 
-$(FW_CHECK_ELF): $(FW_CHECK_SRCS)
+# One compile of several sources: -MMD keeps only the last one's dependencies, so the headers
+# (the check's sequence among them) are listed here.
+$(FW_CHECK_ELF): $(FW_CHECK_SRCS) firmware/test/core_check_seq.h $(wildcard $(FW_SRC)/core/*.h) \
+                 $(FW_SRC)/hal/hal.h
 	@mkdir -p $(@D)
 	$(AVR_CXX) $(FW_MCU) $(FW_OPT) $(FW_CXXSTD) $(FW_WARN) -I$(FW_SRC) -Ifirmware/test -MMD -MP \
 	  -Wl,--gc-sections -o $@ $(FW_CHECK_SRCS) -lm

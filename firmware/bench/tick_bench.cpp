@@ -5,9 +5,12 @@
 //   tick_bench <elf> <scenario> <seconds> [<tick entry> <tick return>]   prints one JSON object
 //
 // Scenarios (all five fingers in POSITION, encoders moving, 500 Hz telemetry):
-//   idle      no requests beyond heartbeats
+//   idle      no requests beyond heartbeats (20 Hz)
 //   typical   set_targets at 200 Hz
 //   stress    set_targets back to back: the receive line saturated at 1 Mbaud
+// The host's frames drift against the tick (its clock is not the board's): each period is a
+// little longer than nominal, so that over a run of a second or more the frames start at every
+// phase of the tick, the worst (a frame arriving while the tick runs) included.
 // and `pins`: the driver pins and PWM timers through a sequence of modes, checked against
 // board_pins.h (the table the emulator's harness reads too).
 //
@@ -19,6 +22,7 @@
 #include <string.h>
 
 #include <deque>
+#include <vector>
 #include <string>
 
 #include <simavr/avr_adc.h>
@@ -36,6 +40,11 @@ namespace {
 
 const double kCpuHz = 16e6;
 const uint32_t kByteCycles = 160;  // 10 bits at 1 Mbaud
+// The ATmega2560's vector table: 57 vectors of 4 bytes. The simulator leaves the PC there
+// in the step that accepts an interrupt.
+const uint32_t kVectorTableEnd = 57 * 4;
+const uint16_t kSpl = 0x5D;  // SPL/SPH in data space
+const uint32_t kTickVector = 13 * 4;  // TIMER2_COMPA
 
 struct Bench {
     avr_t* avr = nullptr;
@@ -60,6 +69,29 @@ struct Bench {
     uint64_t sim_ticks = 0;
     uint64_t sim_sum = 0;
     uint64_t sim_worst = 0;
+    // Interrupts served while app::tick() runs (UART receive, timer 0, ...): their cycles are
+    // part of the tick's elapsed time but not of its own work, so both are reported.
+    int nest_depth = 0;
+    uint16_t nest_sp[4];          // SP once each nested interrupt had pushed its return
+    uint64_t nest_start[4];
+    uint64_t tick_nested = 0;     // nested cycles in the running tick
+    uint64_t sim_own_sum = 0;
+    uint64_t sim_own_worst = 0;
+    uint64_t sim_nested_sum = 0;
+    uint64_t sim_nested_worst = 0;
+    uint64_t sim_nested_count = 0;
+    // The whole timer interrupt that runs the tick, from its vector to its reti: the tick plus
+    // what surrounds it (register saves, the tick's own timing and bookkeeping).
+    bool in_isr = false;
+    uint16_t isr_sp = 0;
+    uint64_t isr_start = 0;
+    uint64_t isr_ticks_before = 0;
+    uint64_t isr_count = 0;
+    uint64_t isr_sum = 0;
+    uint64_t isr_worst = 0;
+    // Optional profile (UTRF_TICK_PROFILE=file): own cycles per instruction address, of the
+    // tick and of the timer interrupt around it.
+    std::vector<uint64_t> profile;
 };
 
 Bench g;
@@ -125,24 +157,73 @@ void send(const Msg& msg) {
 }
 
 void run_until(double t_end) {
-    const uint64_t end = (uint64_t)(t_end * kCpuHz);
+    const uint64_t end = (uint64_t)ceil(t_end * kCpuHz);  // up, so that it always advances
     avr_irq_t* in = avr_io_getirq(g.avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
     while (g.avr->cycle < end) {
+        const uint32_t pc0 = g.avr->pc;
+        const uint64_t c0 = g.avr->cycle;
+        // This step's instruction runs as the tick's own work, or the timer interrupt's around it.
+        const bool own_step = (g.in_tick && g.nest_depth == 0) || (g.in_isr && !g.in_tick);
+        // An interrupt ends with the reti that finds the stack where its entry left it (SP is
+        // not watched for that: a function's epilogue writes SPH and SPL one at a time).
+        const bool reti = (g.avr->flash[pc0] | (g.avr->flash[pc0 + 1] << 8)) == 0x9518;
+        const uint16_t sp0 = (uint16_t)(g.avr->data[kSpl] | (g.avr->data[kSpl + 1] << 8));
         const int st = avr_run(g.avr);
         if (st == cpu_Done || st == cpu_Crashed) {
             fprintf(stderr, "tick_bench: the simulated CPU stopped (state %d)\n", st);
             exit(1);
         }
         if (g.tick_entry) {
+            const uint16_t sp = (uint16_t)(g.avr->data[kSpl] | (g.avr->data[kSpl + 1] << 8));
+            if (g.in_isr && reti && sp0 == g.isr_sp) {
+                g.in_isr = false;
+                if (g.sim_ticks > g.isr_ticks_before) {  // it ran a tick (not just deferred one)
+                    const uint64_t c = g.avr->cycle - g.isr_start;
+                    ++g.isr_count;
+                    g.isr_sum += c;
+                    if (c > g.isr_worst) g.isr_worst = c;
+                }
+            }
+            if (!g.in_isr && !g.in_tick && g.avr->pc == kTickVector) {
+                g.in_isr = true;
+                g.isr_sp = sp;
+                g.isr_start = c0;
+                g.isr_ticks_before = g.sim_ticks;
+            }
+            if (g.in_tick) {
+                if (g.nest_depth > 0 && reti && sp0 == g.nest_sp[g.nest_depth - 1]) {
+                    --g.nest_depth;
+                    g.tick_nested += g.avr->cycle - g.nest_start[g.nest_depth];
+                    ++g.sim_nested_count;
+                }
+                if (g.avr->pc < kVectorTableEnd && g.nest_depth < 4) {
+                    // Accepted in this step: the step (the instruction before it too, a few
+                    // cycles) counts as the interrupt's.
+                    g.nest_sp[g.nest_depth] = sp;
+                    g.nest_start[g.nest_depth] = c0;
+                    ++g.nest_depth;
+                }
+            }
+            if (own_step && g.avr->pc >= kVectorTableEnd && !g.profile.empty() &&
+                pc0 < g.profile.size()) {
+                g.profile[pc0] += g.avr->cycle - c0;
+            }
             if (g.avr->pc == g.tick_entry && !g.in_tick) {
                 g.in_tick = true;
                 g.tick_start = g.avr->cycle;
-            } else if (g.avr->pc == g.tick_return && g.in_tick) {
+                g.tick_nested = 0;
+                g.nest_depth = 0;
+            } else if (g.avr->pc == g.tick_return && g.in_tick && g.nest_depth == 0) {
                 g.in_tick = false;
                 const uint64_t c = g.avr->cycle - g.tick_start;
+                const uint64_t own = c - g.tick_nested;
                 ++g.sim_ticks;
                 g.sim_sum += c;
                 if (c > g.sim_worst) g.sim_worst = c;
+                g.sim_own_sum += own;
+                if (own > g.sim_own_worst) g.sim_own_worst = own;
+                g.sim_nested_sum += g.tick_nested;
+                if (g.tick_nested > g.sim_nested_worst) g.sim_nested_worst = g.tick_nested;
             }
         }
         if (!g.to_board.empty() && g.xon && g.avr->cycle >= g.next_byte_cycle) {
@@ -323,6 +404,11 @@ int main(int argc, char** argv) {
     send(proto::ResetStats());
     run_until(0.31);
     g.sim_ticks = g.sim_sum = g.sim_worst = 0;
+    g.sim_own_sum = g.sim_own_worst = g.sim_nested_sum = g.sim_nested_worst = 0;
+    g.sim_nested_count = 0;
+    g.isr_count = g.isr_sum = g.isr_worst = 0;
+    const char* profile_path = getenv("UTRF_TICK_PROFILE");
+    if (profile_path && *profile_path) g.profile.assign(256 * 1024, 0);
     const uint32_t frames_before = g.state_frames;
     const uint32_t gaps_before = g.state_gaps;
     const double t0 = g.avr->cycle / kCpuHz;
@@ -337,13 +423,14 @@ int main(int argc, char** argv) {
             if (t >= next_send) {
                 if (scenario == "typical") {
                     send(targets(t));
-                    next_send += 0.005;
+                    next_send += 0.005 + 4e-6;  // the phase drifts 0.8 ms a second
                 } else {
                     send(proto::Heartbeat());
-                    next_send += 0.05;
+                    next_send += 0.05 + 40e-6;  // 0.8 ms a second
                 }
             }
-            run_until(t + 0.0005);
+            // Up to the next frame's time exactly: it starts then, at its own phase.
+            run_until(next_send < t + 0.0005 ? next_send : t + 0.0005);
         }
     }
     const uint32_t frames = g.state_frames - frames_before;
@@ -351,6 +438,28 @@ int main(int argc, char** argv) {
     const uint64_t sim_ticks = g.sim_ticks;
     const uint64_t sim_worst = g.sim_worst;
     const double sim_mean = sim_ticks ? (double)g.sim_sum / (double)sim_ticks : 0.0;
+    const double sim_own_mean = sim_ticks ? (double)g.sim_own_sum / (double)sim_ticks : 0.0;
+    const double sim_nested_mean = sim_ticks ? (double)g.sim_nested_sum / (double)sim_ticks : 0.0;
+    const uint64_t sim_own_worst = g.sim_own_worst;
+    const uint64_t sim_nested_worst = g.sim_nested_worst;
+    const uint64_t sim_nested_count = g.sim_nested_count;
+    const double isr_mean = g.isr_count ? (double)g.isr_sum / (double)g.isr_count : 0.0;
+    const uint64_t isr_worst = g.isr_worst;
+    const uint64_t isr_ticks = g.isr_count;
+    if (!g.profile.empty()) {
+        FILE* pf = fopen(profile_path, "w");
+        if (!pf) {
+            fprintf(stderr, "tick_bench: cannot write %s\n", profile_path);
+            return 1;
+        }
+        fprintf(pf, "# byte address, own cycles in the tick's interrupt over %llu ticks\n",
+                (unsigned long long)sim_ticks);
+        for (size_t a = 0; a < g.profile.size(); ++a) {
+            if (g.profile[a]) fprintf(pf, "%zx %llu\n", a, (unsigned long long)g.profile[a]);
+        }
+        fclose(pf);
+        g.profile.clear();
+    }
     // Let the board work off what it has received, then ask for its counters. A lone 0x00
     // first ends whatever partial frame the board holds (the queue was cut mid-frame).
     g.to_board.clear();
@@ -368,12 +477,19 @@ int main(int argc, char** argv) {
            "\"rx_crc_errors\": %u, \"rx_framing_errors\": %u, \"rx_overruns\": %u, "
            "\"nacks\": %u, \"tx_dropped\": %u, \"state_frames\": %u, \"state_seq_gaps\": %u, "
            "\"fault_frames\": %u, \"sim_ticks\": %llu, \"sim_tick_worst_cycles\": %llu, "
-           "\"sim_tick_mean_cycles\": %.1f}\n",
+           "\"sim_tick_mean_cycles\": %.1f, \"sim_own_worst_cycles\": %llu, "
+           "\"sim_own_mean_cycles\": %.1f, \"sim_nested_worst_cycles\": %llu, "
+           "\"sim_nested_mean_cycles\": %.1f, \"sim_nested_interrupts\": %llu, "
+           "\"sim_isr_mean_cycles\": %.1f, \"sim_isr_worst_cycles\": %llu, "
+           "\"sim_isr_ticks\": %llu}\n",
            scenario.c_str(), seconds, (unsigned)s.ticks, (unsigned)s.tick_overruns,
            (unsigned)s.tick_worst, (unsigned)s.tick_mean, (unsigned)s.rx_frames,
            (unsigned)s.rx_crc_errors, (unsigned)s.rx_framing_errors, (unsigned)s.rx_overruns,
            (unsigned)s.nacks, (unsigned)s.tx_dropped, (unsigned)frames, (unsigned)gaps,
            (unsigned)g.faults, (unsigned long long)sim_ticks, (unsigned long long)sim_worst,
-           sim_mean);
+           sim_mean, (unsigned long long)sim_own_worst, sim_own_mean,
+           (unsigned long long)sim_nested_worst, sim_nested_mean,
+           (unsigned long long)sim_nested_count, isr_mean, (unsigned long long)isr_worst,
+           (unsigned long long)isr_ticks);
     return 0;
 }

@@ -34,7 +34,9 @@ void fw_tick(uint32_t n) {
         ++state().ms;
         if (state().tick_locked) ++state().lock_errors;  // the tick cannot run while locked
         app::tick();
-        app::tick_done(state().tick_cycles, state().period_elapsed);
+        // As the AVR's timer can tell: at most two periods, well within 16 bits.
+        const uint32_t c = state().tick_cycles;
+        app::tick_done((uint16_t)(c > 0xFFFFu ? 0xFFFFu : c), state().period_elapsed);
     }
 }
 
@@ -186,23 +188,23 @@ void fw_pid_config(double kp, double ki, double kd, double fc, double db, double
                    int16_t limit) {
     g_pc = pid::compile(gains(kp, ki, kd, fc, db, slew), 1e-3f);
     g_plimit = limit;
+    g_pid.load(g_pc);
 }
 
 // New gains while running: rebased, so the output does not jump.
 void fw_pid_regain(double kp, double ki, double kd, double fc, double db, double slew,
                    int16_t limit) {
-    const pid::Coeffs old = g_pc;
     g_pc = pid::compile(gains(kp, ki, kd, fc, db, slew), 1e-3f);
     g_plimit = limit;
-    g_pid.rebase(old, g_pc, g_plimit);
+    g_pid.set_coeffs(g_pc, g_plimit);
 }
 
-void fw_pid_reset(int16_t u, int16_t measured) { g_pid.reset(g_pc, g_plimit, u, measured); }
+void fw_pid_reset(int16_t u, int16_t measured) { g_pid.reset(g_plimit, u, measured); }
 int16_t fw_pid_step(int16_t target, int16_t measured) {
-    return g_pid.step(g_pc, g_plimit, target, measured);
+    return g_pid.step(g_plimit, target, measured);
 }
 int16_t fw_pid_step_open(int16_t duty, int16_t measured) {
-    return g_pid.step_open(g_pc, g_plimit, duty, measured);
+    return g_pid.step_open(g_plimit, duty, measured);
 }
 void fw_pid_state(int32_t* i31, int32_t* v8, int32_t* saturated) {
     *i31 = g_pid.integrator31();

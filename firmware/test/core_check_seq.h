@@ -8,6 +8,7 @@
 #include <stdint.h>
 
 #include "core/encoder.h"
+#include "core/finger.h"
 #include "core/fixed.h"
 #include "core/pid.h"
 
@@ -45,6 +46,12 @@ inline uint32_t core_check_run() {
         f.add((uint32_t)fx::mul_q16((int32_t)(((uint32_t)r.next() << 16) | r.next()), r.next()));
         f.add((uint16_t)fx::au_from_bu((int16_t)(a >> 1)));
     }
+    // Byte products, and Q15 duty to PWM counts (both 8 x 8 multiplies on the AVR).
+    for (uint16_t i = 0; i < 2000; ++i) {
+        const uint16_t x = r.next();
+        f.add(fx::mul8u((uint8_t)x, (uint8_t)(x >> 8)));
+        f.add(finger::pwm_counts((uint16_t)(x >> 1)));
+    }
     // Gains over the protocol's range, applied with their saturation.
     const float values[] = {0.0f, 1e-3f, 0.37f, 2.5f, 838.9f, 12345.0f, 1.6e6f, 8.4e7f};
     for (uint8_t k = 0; k < sizeof values / sizeof values[0]; ++k) {
@@ -64,7 +71,8 @@ inline uint32_t core_check_run() {
     c.deadband = 1311;
     c.db_inverse = (uint16_t)(65536UL * pid::kDeadbandRamp15 / (pid::kDeadbandRamp15 + 1311));
     pid::Pid p;
-    p.reset(c, 22937, 3000, 0);
+    p.load(c);
+    p.reset(22937, 3000, 0);
     int16_t target = 0;
     int16_t meas = 0;
     for (uint16_t i = 0; i < 4000; ++i) {
@@ -72,12 +80,128 @@ inline uint32_t core_check_run() {
         meas = (int16_t)(meas + (int16_t)(r.next() % 9) - 4);
         target = fx::clamp16(target, -12000, 12000);
         meas = fx::clamp16(meas, -12000, 12000);
-        const int16_t u = (i % 500) < 450 ? p.step(c, 22937, target, meas)
-                                          : p.step_open(c, 22937, (int16_t)r.next(), meas);
+        const int16_t u = (i % 500) < 450 ? p.step(22937, target, meas)
+                                          : p.step_open(22937, (int16_t)r.next(), meas);
         f.add((uint16_t)u);
         f.add((uint32_t)p.integrator31());
         f.add((uint16_t)p.velocity8());
-        if (i % 1000 == 999) p.rebase(c, c, 16000);
+        if (i % 1000 == 999) p.set_coeffs(c, 16000);
+    }
+    // Every path of the step: gains of each shift (16, 8, 0, -8, -16) and zero, their terms
+    // saturated by large errors and speeds, the deadband's ramp and none, a slew limit that
+    // binds and one that never does, limits from 0 to full, and a limit lowered without a
+    // rebase (the integrator left beyond it).
+    // (kp, ki, kd): each shift of ki in a set whose output is often free, so it integrates.
+    const float sets[][3] = {{1677.7f, 429.5f, 6283.2f}, {0.37f, 100.3f, 100.3f},
+                             {1.6e6f, 4.0e6f, 8.4e7f},   {0.0f, 0.5f, 0.37f},
+                             {8.4e7f, 0.37f, 1.6e6f},    {100.3f, 8.4e7f, 0.0f}};
+    const uint16_t alphas[] = {11000, 65535, 1, 30000, 5000, 40000};
+    const int16_t slews[] = {655, 32767, 1, 100, 3000, 20};
+    const int16_t deadbands[] = {1311, 0, 16384, 0, 200, 100};
+    const int16_t limits[] = {22937, 32767, 0, 3000};
+    for (uint8_t k = 0; k < 6; ++k) {
+        pid::Coeffs ck;
+        ck.kp = fx::make_gain(sets[k][0], pid::kPMax23);
+        ck.ki = fx::make_gain(sets[k][1], pid::kIStepMax31);
+        ck.kd = fx::make_gain(sets[k][2], pid::kDMax23);
+        ck.alpha = alphas[k];
+        ck.slew = slews[k];
+        ck.deadband = deadbands[k];
+        ck.db_inverse =
+            (uint16_t)(65536UL * pid::kDeadbandRamp15 / (pid::kDeadbandRamp15 + deadbands[k]));
+        for (uint8_t l = 0; l < 4; ++l) {
+            int16_t limit = limits[l];
+            pid::Pid q;
+            q.load(ck);
+            q.reset(limit, (int16_t)(limit / 3), 0);
+            target = 0;
+            meas = 0;
+            for (uint16_t i = 0; i < 500; ++i) {
+                const uint16_t n = r.next();
+                if (n % 64 == 0) {
+                    target = (int16_t)((int16_t)(r.next() % 24001) - 12000);  // a step
+                } else {
+                    target = (int16_t)(target + (int16_t)(r.next() % 41) - 20);
+                }
+                meas = (int16_t)(meas + (int16_t)(r.next() % 61) - 30);
+                if (n % 97 == 1) meas = (int16_t)(meas + (int16_t)(r.next() % 400) - 200);
+                target = fx::clamp16(target, -16000, 16000);
+                meas = fx::clamp16(meas, -16000, 16000);
+                if (i == 250) limit = (int16_t)(limit / 2);  // lowered without a rebase
+                if (i == 400) q.set_coeffs(ck, limit);
+                const int16_t u = q.step(limit, target, meas);
+                f.add((uint16_t)u);
+                f.add((uint32_t)q.integrator31());
+                f.add((uint16_t)q.velocity8());
+                f.add(q.saturated() ? 1u : 0u);
+            }
+        }
+    }
+    // Edges the random walks seldom meet: with kp = 256 (shift 0) and no I or D term the
+    // unlimited output v equals e, swept across the deadband's ramp (+-256) and the limit;
+    // d(measured) swept across its clamp (+-63); and integrator steps of about 2^16 from next
+    // to the integrator's bound, where its compares come down to the low bytes.
+    const int16_t edge_db[] = {0, 100, 1311};
+    for (uint8_t k = 0; k < 6; ++k) {
+        const int16_t db = edge_db[k % 3];
+        const int16_t limit = k < 3 ? 200 : 32767;
+        pid::Coeffs ce;
+        ce.kp = fx::make_gain(256.0f, pid::kPMax23);
+        ce.ki = fx::make_gain(0.0f, pid::kIStepMax31);
+        ce.kd = fx::make_gain(6283.2f, pid::kDMax23);
+        ce.alpha = 11000;
+        ce.slew = (k & 1) ? 32767 : 150;
+        ce.deadband = db;
+        ce.db_inverse = (uint16_t)(65536UL * pid::kDeadbandRamp15 / (pid::kDeadbandRamp15 + db));
+        pid::Pid q;
+        q.load(ce);
+        for (int16_t e = -300; e <= 300; ++e) {
+            q.reset(limit, 0, 0);
+            f.add((uint16_t)q.step(limit, e, 0));
+            f.add(q.saturated() ? 1u : 0u);
+        }
+        for (int16_t dm = -70; dm <= 70; ++dm) {
+            q.reset(limit, 0, 0);
+            f.add((uint16_t)q.step(limit, 0, dm));
+            f.add((uint16_t)q.velocity8());
+        }
+        // ki = 4 (shift -8): step = 4 e. From a count inside the bound, +-8001 then
+        // +-(8300..8500) end within 2^8 either side of it (its low bytes decide).
+        ce.kp = fx::make_gain(0.0f, pid::kPMax23);
+        ce.ki = fx::make_gain(4.0f, pid::kIStepMax31);
+        ce.kd = fx::make_gain(0.0f, pid::kDMax23);
+        ce.slew = 32767;
+        q.load(ce);
+        for (int16_t e = 8300; e <= 8500; ++e) {
+            for (int8_t side = -1; side <= 1; side += 2) {
+                q.reset(limit, (int16_t)(side * (limit - 1)), 0);
+                q.step(limit, (int16_t)(side * 8001), 0);
+                f.add((uint32_t)q.integrator31());
+                q.step(limit, (int16_t)(side * e), 0);
+                f.add((uint32_t)q.integrator31());
+            }
+        }
+    }
+    // The derivative term at its saturation bound, where it can show: kp = kd, and e set to the
+    // filtered speed v8, so the P term cancels an unsaturated D term exactly and a saturated
+    // one leaves its remainder in the output. (alpha < 1: v8 has low bits.)
+    {
+        pid::Coeffs cd;
+        cd.kp = fx::make_gain(3001.0f, pid::kPMax23);
+        cd.ki = fx::make_gain(0.0f, pid::kIStepMax31);
+        cd.kd = fx::make_gain(3001.0f, pid::kDMax23);  // xlim 11181
+        cd.alpha = 65000;
+        cd.slew = 32767;
+        cd.deadband = 0;
+        cd.db_inverse = 65535;
+        pid::Pid q;
+        q.load(cd);
+        for (int16_t dm = -63; dm <= 63; ++dm) {
+            q.reset(32767, 0, 0);
+            const int16_t v8 = (int16_t)(((int32_t)(dm * 256) * 65000L + 32768L) >> 16);
+            f.add((uint16_t)q.step(32767, (int16_t)(dm + v8), dm));
+            f.add((uint16_t)q.velocity8());
+        }
     }
     // The encoder's judgement and angle for every ADC count.
     for (uint16_t adc = 0; adc < 1024; ++adc) {

@@ -65,12 +65,14 @@ void motors_all_off() {
     ++g_state.all_off_calls;
 }
 
-void encoders_read(EncoderReading* out) {
+const EncoderReading* encoders_read() {
+    static EncoderReading out[5];
     const bool stale = host::g_staleness.stale(g_state.adc_seq);
     for (uint8_t f = 0; f < 5; ++f) {
         out[f] = encoder::as5600_reading(g_state.adc[f]);
         if (stale) out[f].status = EncoderStatus::NO_DATA;
     }
+    return out;
 }
 
 void encoders_sample() {

@@ -158,9 +158,10 @@ bool queue_reply(uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len) 
 
 void apply_finger_config(uint8_t f) {
     Board& b = g_board;
-    const finger::Params p = finger::compile(b.cfg.finger[f], hand::kDt);
+    pid::Coeffs c;
+    const finger::Params p = finger::compile(b.cfg.finger[f], hand::kDt, c);
     Lock lock;
-    b.hand.configure_finger(f, p);
+    b.hand.configure_finger(f, p, c);
     // A target outside new limits is never kept: clamp it in.
     finger::Finger& fg = b.hand.finger(f);
     const int16_t t = fg.target();
@@ -219,13 +220,11 @@ void loop() {
 }
 
 void tick() {
-    hal::EncoderReading enc[hand::kFingers];
-    hal::encoders_read(enc);
-    g_board.hand.tick(enc);
+    g_board.hand.tick(hal::encoders_read());
     hal::encoders_sample();
 }
 
-void tick_done(uint32_t cycles, bool overran) { g_board.hand.record_timing(cycles, overran); }
+void tick_done(uint16_t cycles, bool overran) { g_board.hand.record_timing(cycles, overran); }
 
 }  // namespace app
 }  // namespace utrf

@@ -62,7 +62,7 @@ void loop();   // one pass: link, dispatch, reports, telemetry, EEPROM, watchdog
 void tick();   // the control tick (timer interrupt context)
 // After each tick, from the hardware layer that timed it: its length in CPU cycles, and
 // whether the next period began before it ended (an overrun).
-void tick_done(uint32_t cycles, bool overran);
+void tick_done(uint16_t cycles, bool overran);
 
 // Apply a finger's configuration (compile in loop() context, swap under the tick lock).
 void apply_finger_config(uint8_t f);

@@ -9,6 +9,7 @@
 #include <stdint.h>
 
 #include "../hal/hal.h"
+#include "fixed.h"
 
 namespace utrf {
 namespace encoder {
@@ -58,7 +59,8 @@ class Staleness {
 // minus the reading at angle 0, wrapped to +-half a turn, counted against flexion for an
 // encoder mounted the other way round. Two instructions' worth of 16-bit arithmetic.
 inline int16_t angle_bu(uint16_t turn, uint16_t zero_turn, bool invert) {
-    const uint16_t d = invert ? (uint16_t)(zero_turn - turn) : (uint16_t)(turn - zero_turn);
+    const uint16_t d =
+        UTRF_UNLIKELY(invert) ? (uint16_t)(zero_turn - turn) : (uint16_t)(turn - zero_turn);
     return (int16_t)((int16_t)d >> 1);  // -16384..16383
 }
 

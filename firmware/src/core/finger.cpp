@@ -1,5 +1,7 @@
 #include "finger.h"
 
+#include <stddef.h>
+
 #include "encoder.h"
 #include "fixed.h"
 
@@ -12,7 +14,7 @@ int16_t q15_milli(uint16_t milli) {
 }
 }  // namespace
 
-Params compile(const config::Finger& cfg, float dt_s) {
+Params compile(const config::Finger& cfg, float dt_s, pid::Coeffs& coeffs) {
     Params p;
     pid::Gains g;
     g.kp = cfg.gains.kp;
@@ -21,7 +23,7 @@ Params compile(const config::Finger& cfg, float dt_s) {
     g.d_cutoff_hz = cfg.gains.d_cutoff_hz;
     g.deadband = cfg.gains.deadband_milli * 1e-3f;
     g.slew_per_s = cfg.gains.slew_per_s;
-    p.pid = pid::compile(g, dt_s);
+    coeffs = pid::compile(g, dt_s);
     p.max_duty = q15_milli(cfg.gains.max_duty_milli);
     p.pretension = q15_milli(cfg.gains.pretension_milli);
     p.theta_min = fx::bu(cfg.limits.theta2_min);
@@ -37,8 +39,9 @@ Params compile(const config::Finger& cfg, float dt_s) {
     p.jump = fx::bu(cfg.limits.encoder_jump);
     p.zero_turn = encoder::turn_from_rad(cfg.hw.encoder_offset);
     p.encoder_invert = cfg.hw.encoder_invert != 0;
-    p.motor_invert = cfg.hw.motor_invert != 0;
+    p.pull = cfg.hw.motor_invert != 0 ? hal::Drive::REVERSE : hal::Drive::FORWARD;
     p.rotary = cfg.hw.actuation == 1;  // proto::Actuation::ROTARY
+    p.pretension_counts = pwm_counts((uint16_t)p.pretension);
     return p;
 }
 
@@ -48,20 +51,30 @@ Finger::Finger()
       limit_(0),
       duty_a_(0),
       duty_b_(0),
-      stall_ref_(0),
-      stall_count_(0),
       last_turn_(0),
       mode_(COAST),
-      faults_(0),
-      new_faults_(0),
       have_theta_(false),
       encoder_ok_(false),
+      faults_(0),
+      new_faults_(0),
       contact_(false),
       target_valid_(false),
+      stall_ref_(0),
+      stall_count_(0),
       duty_cmd_(0),
       effort_(0) {
     params_ = Params();
 }
+
+#if defined(__AVR__)
+// The layout the tick relies on (finger.h): what it reads and writes in closed loop, the Pid
+// and Params up to pretension_counts (read once a tick), within the first 64 bytes. (AVR only:
+// the host pads for alignment.)
+struct LayoutCheck {
+    static_assert(offsetof(Finger, params_) + offsetof(Params, pretension_counts) <= 64,
+                  "the tick's fields must stay within ldd/std reach of the Finger's address");
+};
+#endif
 
 int16_t Finger::limit_for(uint8_t mode) const {
     int16_t lim = params_.limit();
@@ -73,14 +86,13 @@ int16_t Finger::limit_for(uint8_t mode) const {
     return lim < 0 ? (int16_t)0 : lim;
 }
 
-void Finger::configure(const Params& p) {
-    const pid::Coeffs old = params_.pid;
+void Finger::configure(const Params& p, const pid::Coeffs& c) {
     const bool encoder_changed =
         p.zero_turn != params_.zero_turn || p.encoder_invert != params_.encoder_invert;
     params_ = p;
     if (encoder_changed) have_theta_ = false;  // the next reading is not a jump
     limit_ = limit_for(mode_);
-    pid_.rebase(old, params_.pid, limit_);
+    pid_.set_coeffs(c, limit_);
 }
 
 void Finger::enter_closed_loop(uint8_t mode) {
@@ -91,7 +103,7 @@ void Finger::enter_closed_loop(uint8_t mode) {
     // Bumpless: the PID starts from the output the motors have now.
     const int16_t present = idle() ? (int16_t)0 : pid_.output();
     limit_ = limit_for(mode);
-    pid_.reset(params_.pid, limit_, present, theta_);
+    pid_.reset(limit_, present, theta_);
     stall_count_ = 0;
     stall_ref_ = theta_;
     contact_ = false;
@@ -109,13 +121,13 @@ void Finger::set_mode(uint8_t mode, int16_t duty, int16_t effort) {
     } else if (mode == DUTY) {
         const int16_t present = idle() ? (int16_t)0 : pid_.output();
         limit_ = limit_for(DUTY);
-        pid_.reset(params_.pid, limit_, present, theta_);
+        pid_.reset(limit_, present, theta_);
         stall_count_ = 0;
         stall_ref_ = theta_;
     } else {
         target_valid_ = false;
         limit_ = limit_for(mode);
-        pid_.reset(params_.pid, limit_, 0, theta_);
+        pid_.reset(limit_, 0, theta_);
     }
     contact_ = false;
     mode_ = mode;
@@ -141,7 +153,7 @@ void Finger::latch(uint8_t bits) {
         target_valid_ = false;
         contact_ = false;
         limit_ = limit_for(COAST);
-        pid_.reset(params_.pid, limit_, 0, theta_);
+        pid_.reset(limit_, 0, theta_);
     }
 }
 
@@ -151,7 +163,7 @@ void Finger::hold_here() {
     target_valid_ = true;
     const int16_t present = pid_.output();
     limit_ = limit_for(mode);
-    pid_.reset(params_.pid, limit_, present, theta_);
+    pid_.reset(limit_, present, theta_);
     stall_count_ = 0;
     stall_ref_ = theta_;
     mode_ = mode;
@@ -162,6 +174,55 @@ void Finger::stop_now(hal::MotorCommand& out) {
     out.a.on_counts = out.b.on_counts = 0;
     out.a.drive = out.b.drive = hal::Drive::COAST;
     out.stby = false;
+}
+
+void Finger::idle_outputs(uint8_t mode, hal::MotorCommand& out) {
+    duty_a_ = duty_b_ = 0;
+    out.a.on_counts = out.b.on_counts = 0;
+    out.a.drive = mode == BRAKE ? hal::Drive::BRAKE : hal::Drive::COAST;
+    out.b.drive = (mode == BRAKE && !params_.rotary) ? hal::Drive::BRAKE : hal::Drive::COAST;
+    out.stby = mode == BRAKE && (faults_ & kStopFaults) == 0;
+}
+
+int16_t Finger::duty_step(int16_t th) {
+    int16_t d = duty_cmd_;
+    // Never drive further past a joint limit.
+    if ((th >= params_.theta_max && d > 0) || (th <= params_.theta_min && d < 0)) d = 0;
+    return pid_.step_open(limit_, d, th);
+}
+
+bool Finger::stall_rule(int16_t u, int16_t th, hal::MotorCommand& out) {
+    // Pushing (a large error, or a commanded duty, with the output at its limit) without
+    // moving for the stall time.
+    const uint8_t mode = mode_;
+    bool pushing;
+    if (mode == DUTY) {
+        pushing = u != 0 && fx::abs16(u) >= pid_.coeffs().deadband;
+    } else {
+        pushing = limit_ > 0 && fx::abs16(u) >= limit_ &&
+                  fx::abs16((int16_t)(target_ - th)) > params_.stall_error;
+    }
+    if (pushing) {
+        if (fx::abs16((int16_t)(th - stall_ref_)) > params_.stall_motion) {
+            stall_ref_ = th;
+            stall_count_ = 0;
+        } else if (stall_count_ < params_.stall_checks) {
+            ++stall_count_;
+        }
+        if (stall_count_ >= params_.stall_checks) {
+            if (mode != GRASP) {
+                latch(STALL);
+                stop_now(out);
+                return false;
+            }
+            contact_ = true;  // closed on an object: hold it, the effort bounds the force
+        }
+    } else {
+        stall_ref_ = th;
+        stall_count_ = 0;
+        contact_ = false;
+    }
+    return true;
 }
 
 }  // namespace finger

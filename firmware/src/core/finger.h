@@ -39,24 +39,30 @@ static const uint8_t kStallEvery = 5;
 // action (which may be to hold in closed loop).
 static const uint8_t kStopFaults = ENCODER_RANGE | ENCODER_JUMP | STALL | JOINT_LIMIT | OVERRUN;
 
-// A finger's configuration, ready for the tick (built in loop() context by compile()).
-// Angles in BU (core/fixed.h: 2 pi / 32768 rad), duties in Q15.
+// A finger's configuration, ready for the tick (built in loop() context by compile(); the
+// PID's coefficients go to its Pid). Angles in BU (core/fixed.h: 2 pi / 32768 rad), duties in
+// Q15. The fields every tick reads come first: with the finger's working state and its Pid
+// before them they sit in the first 64 bytes of the Finger (see there).
 struct Params {
-    pid::Coeffs pid;
-    int16_t max_duty;      // motor duty limit
     int16_t pretension;    // antagonistic pretension
-    int16_t theta_min;     // joint limits
-    int16_t theta_max;
     int16_t fault_low;     // JOINT_LIMIT below this (theta_min - margin)
     int16_t fault_high;    // ... or above this (theta_max + margin)
-    int16_t stall_error;
-    int16_t stall_motion;
-    uint16_t stall_checks;  // stall time in stall-rule turns (kStallEvery ticks each)
     int16_t jump;          // per tick
     uint16_t zero_turn;    // encoder reading at angle 0
     bool encoder_invert;
-    bool motor_invert;
+    hal::Drive pull;       // the drive that pulls a tendon: FORWARD, or REVERSE (motor_invert)
     bool rotary;
+    // Read by the antagonistic output mapping every tick, but only on the pulling side's
+    // channel that is not working (one access), by the stall rule (a finger's turn every
+    // kStallEvery ticks), DUTY and loop().
+    uint16_t pretension_counts;  // PWM counts of the pretension alone
+
+    int16_t max_duty;      // motor duty limit
+    int16_t theta_min;     // joint limits
+    int16_t theta_max;
+    int16_t stall_error;
+    int16_t stall_motion;
+    uint16_t stall_checks;  // stall time in stall-rule turns (kStallEvery ticks each)
     // The controller's output limit: max_duty, less the pretension when antagonistic.
     int16_t limit() const {
         const int16_t l = rotary ? max_duty : (int16_t)(max_duty - pretension);
@@ -64,14 +70,14 @@ struct Params {
     }
 };
 
-Params compile(const config::Finger& cfg, float dt_s);
+Params compile(const config::Finger& cfg, float dt_s, pid::Coeffs& coeffs);
 
 class Finger {
    public:
     Finger();
 
     // ---- from loop(), under the tick lock, after validation ----
-    void configure(const Params& p);  // bumpless when gains or limits change
+    void configure(const Params& p, const pid::Coeffs& c);  // bumpless when gains or limits change
     // Enter `mode`. duty (DUTY) and effort (GRASP) are Q15 fractions.
     void set_mode(uint8_t mode, int16_t duty, int16_t effort);
     void set_target(int16_t theta_bu);
@@ -117,134 +123,166 @@ class Finger {
    private:
     int16_t limit_for(uint8_t mode) const;
     void enter_closed_loop(uint8_t mode);
-    inline hal::MotorOut drive(int16_t duty) const;
+    // The stall rule, on the finger's turn: false when it stopped the finger (STALL latched,
+    // the motors off in `out`).
+    bool stall_rule(int16_t u, int16_t th, hal::MotorCommand& out);
+    // DUTY: the commanded duty, never further past a joint limit, through the PID's limit and
+    // slew limiter.
+    int16_t duty_step(int16_t th);
+    void idle_outputs(uint8_t mode, hal::MotorCommand& out);
     void stop_now(hal::MotorCommand& out);
 
-    // The tick's working state first: short offsets from the object's address.
+    // The tick's working state first, then the PID (its state and coefficients), then the
+    // configuration (Params: the fields the tick reads first): all that a tick in closed loop
+    // touches lies within the object's first 64 bytes, which the AVR's ldd/std reach by
+    // displacement from one pointer (beyond them, each access needs an address computed
+    // first). static_assert in finger.cpp.
     int16_t theta_;
     int16_t target_;
-    int16_t limit_;      // limit_for(mode_), kept current
+    int16_t limit_;  // limit_for(mode_), kept current
     int16_t duty_a_;
     int16_t duty_b_;
-    int16_t stall_ref_;
-    uint16_t stall_count_;
     uint16_t last_turn_;
     uint8_t mode_;
-    uint8_t faults_;
-    uint8_t new_faults_;
     bool have_theta_;
     bool encoder_ok_;
-    bool contact_;       // GRASP: closed on something and holding
-    bool target_valid_;  // a target was set since the finger last left closed loop
-    int16_t duty_cmd_;
-    int16_t effort_;
     pid::Pid pid_;
     Params params_;
+    // Read less often: by the stall rule, DUTY and loop().
+    uint8_t faults_;
+    uint8_t new_faults_;
+    bool contact_;       // GRASP: closed on something and holding
+    bool target_valid_;  // a target was set since the finger last left closed loop
+    int16_t stall_ref_;
+    uint16_t stall_count_;
+    int16_t duty_cmd_;
+    int16_t effort_;
+
+    friend struct LayoutCheck;
 };
 
-UTRF_HOT hal::MotorOut Finger::drive(int16_t duty) const {
-    hal::MotorOut m;
-    bool forward = duty > 0;
-    const uint16_t mag = (uint16_t)(duty < 0 ? -duty : duty);
-    // Q15 duty to PWM counts, rounded: one 16 x 16 multiply and a byte shift.
-    m.on_counts = (uint16_t)((fx::mul_uu(mag, 2u * hal::kPwmPeriod) + 32768u) >> 16);
-    if (m.on_counts == 0) {
-        m.drive = hal::Drive::COAST;  // zero duty: really off
-    } else {
-        if (params_.motor_invert) forward = !forward;
-        m.drive = forward ? hal::Drive::FORWARD : hal::Drive::REVERSE;
-    }
-    return m;
+// Q15 duty magnitude (0..32767) to PWM counts, rounded: (mag * 2 kPwmPeriod + 2^15) >> 16, which
+// for 800 counts is (25 mag + 512) >> 10. Two 8 x 8 multiplies, all in 16 bits: with
+// hi = 25 (mag >> 8) <= 3175 and lo = 25 (mag & 0xFF) <= 6375,
+// floor((256 hi + lo + 512) / 1024) = (hi + ((lo + 512) >> 8)) >> 2.
+static_assert(hal::kPwmPeriod == 800, "pwm_counts() is written for 800 counts a period");
+// (lo + 512) >> 8 is (lo >> 8) + 2: on the AVR the high byte of the second product, added
+// with the 2, in one sequence (tested against the C in the AVR check).
+UTRF_HOT uint16_t pwm_counts(uint16_t mag) {
+#if defined(__AVR__)
+    uint16_t r;
+    uint8_t k;
+    __asm__(
+        "ldi  %[k], 25\n\t"
+        "mul  %B[m], %[k]\n\t"
+        "movw %A[r], r0\n\t"
+        "mul  %A[m], %[k]\n\t"
+        "add  %A[r], r1\n\t"
+        "clr  r1\n\t"
+        "adc  %B[r], r1\n\t"
+        "subi %A[r], lo8(-2)\n\t"
+        "sbci %B[r], hi8(-2)\n\t"
+        "lsr  %B[r]\n\t"
+        "ror  %A[r]\n\t"
+        "lsr  %B[r]\n\t"
+        "ror  %A[r]"
+        : [r] "=&d"(r), [k] "=&d"(k)
+        : [m] "r"(mag));
+    return r;
+#else
+    const uint16_t hi = fx::mul8u((uint8_t)(mag >> 8), 25u);
+    const uint16_t lo = fx::mul8u((uint8_t)mag, 25u);
+    return (uint16_t)((uint16_t)(hi + (uint16_t)((uint16_t)(lo + 512u) >> 8)) >> 2);
+#endif
 }
 
 UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& out,
                            bool stall_check) {
     // ---- encoder: band and plausibility; joint limits ----
-    // Angles are BU within +-pi, so every difference below fits int16.
+    // Angles are BU within +-pi, so every difference below fits int16. The faults found are
+    // latched together, after theta_ took the new reading: the same bits as one at a time, and
+    // the PID reset that stops the finger is repeated (from theta_) whenever it drives again.
     int16_t th = theta_;
-    encoder_ok_ = enc.status == hal::EncoderStatus::OK;
-    if (!encoder_ok_) {
-        latch(ENCODER_RANGE);
+    uint8_t found = 0;
+    // The usual paths are told to the compiler (UTRF_LIKELY), so they run straight through.
+    if (UTRF_UNLIKELY(enc.status != hal::EncoderStatus::OK)) {
+        encoder_ok_ = false;
+        found = ENCODER_RANGE;
     } else {
-        last_turn_ = enc.turn;
-        th = encoder::angle_bu(enc.turn, params_.zero_turn, params_.encoder_invert);
-        if (have_theta_ && fx::abs16((int16_t)(th - theta_)) > params_.jump) latch(ENCODER_JUMP);
+        encoder_ok_ = true;
+        const uint16_t turn = enc.turn;
+        last_turn_ = turn;
+        th = encoder::angle_bu(turn, params_.zero_turn, params_.encoder_invert);
+        if (UTRF_LIKELY(have_theta_) &&
+            UTRF_UNLIKELY(fx::abs16((int16_t)(th - theta_)) > params_.jump)) {
+            found = ENCODER_JUMP;
+        }
         theta_ = th;
         have_theta_ = true;
-        if (th < params_.fault_low || th > params_.fault_high) latch(JOINT_LIMIT);
+        if (UTRF_UNLIKELY(th < params_.fault_low || th > params_.fault_high)) found |= JOINT_LIMIT;
     }
+    if (UTRF_UNLIKELY(found)) latch(found);
 
-    const uint8_t mode = mode_;
-    if (mode == COAST || mode == BRAKE) {
-        duty_a_ = duty_b_ = 0;
-        out.a.on_counts = out.b.on_counts = 0;
-        out.a.drive = mode == BRAKE ? hal::Drive::BRAKE : hal::Drive::COAST;
-        out.b.drive = (mode == BRAKE && !params_.rotary) ? hal::Drive::BRAKE : hal::Drive::COAST;
-        out.stby = mode == BRAKE && (faults_ & kStopFaults) == 0;
+    const uint8_t mode = mode_;  // after the latches: a stop fault has made it COAST
+    if (UTRF_UNLIKELY(mode == COAST || mode == BRAKE)) {
+        idle_outputs(mode, out);
         return;
     }
 
     // ---- the mode's output u (Q15, positive flexes) ----
-    int16_t u;
-    if (mode == DUTY) {
-        int16_t d = duty_cmd_;
-        // Never drive further past a joint limit.
-        if ((th >= params_.theta_max && d > 0) || (th <= params_.theta_min && d < 0)) d = 0;
-        u = pid_.step_open(params_.pid, limit_, d, th);
-    } else {
-        u = pid_.step(params_.pid, limit_, target_, th);
-    }
+    const int16_t u = UTRF_UNLIKELY(mode == DUTY) ? duty_step(th) : pid_.step(limit_, target_, th);
 
-    // ---- stall: pushing (large error, or a commanded duty, with the output at its limit)
-    // without moving for the stall time ----
-    if (stall_check) {
-        bool pushing;
-        if (mode == DUTY) {
-            pushing = u != 0 && fx::abs16(u) >= params_.pid.deadband;
-        } else {
-            pushing = limit_ > 0 && fx::abs16(u) >= limit_ &&
-                      fx::abs16((int16_t)(target_ - th)) > params_.stall_error;
-        }
-        if (pushing) {
-            if (fx::abs16((int16_t)(th - stall_ref_)) > params_.stall_motion) {
-                stall_ref_ = th;
-                stall_count_ = 0;
-            } else if (stall_count_ < params_.stall_checks) {
-                ++stall_count_;
-            }
-            if (stall_count_ >= params_.stall_checks) {
-                if (mode != GRASP) {
-                    latch(STALL);
-                    stop_now(out);
-                    return;
-                }
-                contact_ = true;  // closed on an object: hold it, the effort bounds the force
-            }
-        } else {
-            stall_ref_ = th;
-            stall_count_ = 0;
-            contact_ = false;
-        }
-    }
-    if (mode_ == COAST) {  // a fault latched in this tick: off now
-        stop_now(out);
-        return;
-    }
+    // ---- stall: the finger's turn comes every kStallEvery ticks ----
+    // The only rule that can stop the finger after its mode was read above.
+    if (UTRF_UNLIKELY(stall_check) && !stall_rule(u, th, out)) return;
 
-    // ---- driver channels ----
-    if (params_.rotary) {
+    // ---- driver channels (the finger drives: no stop fault, or its mode would be COAST) ----
+    const hal::Drive pull = params_.pull;
+    if (UTRF_UNLIKELY(params_.rotary)) {
         duty_a_ = u;
         duty_b_ = 0;
-        out.a = drive(u);
+        const bool neg = u < 0;
+        const uint16_t c = pwm_counts((uint16_t)(neg ? -u : u));
+        out.a.on_counts = c;
+        // Forward flexes; motor_invert swaps the directions (pull is then REVERSE).
+        const hal::Drive flex = pull;
+        const hal::Drive extend =
+            pull == hal::Drive::FORWARD ? hal::Drive::REVERSE : hal::Drive::FORWARD;
+        out.a.drive = c == 0 ? hal::Drive::COAST : (neg ? extend : flex);
         out.b.drive = hal::Drive::COAST;
         out.b.on_counts = 0;
     } else {
-        duty_a_ = (int16_t)(params_.pretension + (u > 0 ? u : 0));
-        duty_b_ = (int16_t)(params_.pretension + (u < 0 ? -u : 0));
-        out.a = drive(duty_a_);
-        out.b = drive(duty_b_);
+        // Both motors pull (duties >= 0): the flexor takes u > 0 on top of the pretension, the
+        // extensor u < 0; the other one holds the pretension alone, whose counts were worked
+        // out with the configuration.
+        const int16_t p = params_.pretension;
+        const uint16_t cp = params_.pretension_counts;
+        const hal::Drive dp = cp == 0 ? hal::Drive::COAST : pull;
+        if (u > 0) {
+            const int16_t a = (int16_t)(p + u);
+            const uint16_t ca = pwm_counts((uint16_t)a);
+            duty_a_ = a;
+            duty_b_ = p;
+            out.a.on_counts = ca;
+            out.a.drive = ca == 0 ? hal::Drive::COAST : pull;
+            out.b.on_counts = cp;
+            out.b.drive = dp;
+        } else if (u < 0) {
+            const int16_t b = (int16_t)(p - u);
+            const uint16_t cb = pwm_counts((uint16_t)b);
+            duty_a_ = p;
+            duty_b_ = b;
+            out.a.on_counts = cp;
+            out.a.drive = dp;
+            out.b.on_counts = cb;
+            out.b.drive = cb == 0 ? hal::Drive::COAST : pull;
+        } else {
+            duty_a_ = duty_b_ = p;
+            out.a.on_counts = out.b.on_counts = cp;
+            out.a.drive = out.b.drive = dp;
+        }
     }
-    out.stby = true;  // no stop fault latched, or the mode would be COAST
+    out.stby = true;
 }
 
 }  // namespace finger

@@ -38,6 +38,10 @@ inline int16_t sat16(int32_t v) {
 }
 inline int16_t abs16(int16_t v) { return v < 0 ? (int16_t)-v : v; }
 
+// Branch hints for the tick's usual paths (they change no result).
+#define UTRF_LIKELY(x) __builtin_expect(!!(x), 1)
+#define UTRF_UNLIKELY(x) __builtin_expect(!!(x), 0)
+
 // 16 x 16 -> 32-bit multiplies. On the AVR these are inline MUL sequences: libgcc's helpers
 // cost a call, register shuffles and, for signed operands, a wrapper: a third of the time of
 // the tick's 30 multiplies. Elsewhere, plain C++. (Tested on the simulated AVR against the C
@@ -96,6 +100,22 @@ __attribute__((always_inline)) inline uint32_t mul_uu(uint16_t a, uint16_t b) {
     return r;
 #else
     return (uint32_t)a * (uint32_t)b;
+#endif
+}
+
+// 8 x 8 -> 16-bit unsigned multiply: one MUL on the AVR, where avr-gcc widens a product of
+// two bytes it cannot prove small into a 16 x 16 one.
+__attribute__((always_inline)) inline uint16_t mul8u(uint8_t a, uint8_t b) {
+#if defined(__AVR__)
+    uint16_t r;
+    __asm__("mul %[a], %[b]\n\t"
+            "movw %[r], r0\n\t"
+            "clr r1"
+            : [r] "=r"(r)
+            : [a] "r"(a), [b] "r"(b));
+    return r;
+#else
+    return (uint16_t)((uint16_t)a * b);
 #endif
 }
 

@@ -35,12 +35,19 @@ class Hand {
     Hand();
 
     // loop() context, under the tick lock.
-    void configure_finger(uint8_t f, const finger::Params& p) { fingers_[f].configure(p); }
+    void configure_finger(uint8_t f, const finger::Params& p, const pid::Coeffs& c) {
+        fingers_[f].configure(p, c);
+    }
     void set_safety(uint16_t timeout_ms, uint8_t safe_action);
     finger::Finger& finger(uint8_t f) { return fingers_[f]; }
     const finger::Finger& finger(uint8_t f) const { return fingers_[f]; }
     void reset_timing();
-    TickTiming timing() const { return timing_; }
+    TickTiming timing() const {
+        TickTiming t = timing_;
+        t.ticks = ticks_ - timing_base_;  // each tick is timed: the same count
+        t.worst_cycles = worst_cycles_;
+        return t;
+    }
 
     // loop() context, no lock needed.
     void note_frame() { frame_seen_ = 1; }
@@ -48,10 +55,12 @@ class Hand {
     bool halted() const { return halted_ != 0; }
     uint32_t ticks() const;  // atomic read
 
-    // The control tick (interrupt context). `cycles_prev`/`overran_prev` time the previous
-    // tick, measured by the caller at its end.
-    void tick(const hal::EncoderReading* enc);
-    void record_timing(uint32_t cycles, bool overran);
+    // The control tick (interrupt context), and its timing, measured by the caller at its end
+    // (in cycles: a tick lasts at most two periods, 32,000 cycles, so 16 bits hold it).
+    // Inline (below): app::tick() and tick_done() call them on the one Hand, a static object,
+    // so every field of it is at a fixed address (lds/sts, no pointer).
+    inline void tick(const hal::EncoderReading* enc);
+    inline void record_timing(uint16_t cycles, bool overran);
 
    private:
     finger::Finger fingers_[kFingers];
@@ -67,10 +76,78 @@ class Hand {
     volatile uint8_t halted_;
     bool overrun_pending_;
     uint8_t stall_turn_;  // the finger whose stall rule runs this tick
-    TickTiming timing_;
+    TickTiming timing_;     // its ticks and worst_cycles fields unused: see timing()
+    uint16_t worst_cycles_;
+    uint32_t timing_base_;  // ticks_ at reset_timing()
     uint32_t window_sum_;
     uint16_t window_n_;
 };
+
+UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
+    ++ticks_;
+
+    // ---- host silence: any valid frame feeds it; the safe action once per silence ----
+    if (frame_seen_) {
+        frame_seen_ = 0;
+        last_frame_tick_ = ticks_;
+        timed_out_ = false;
+    }
+    if (UTRF_UNLIKELY(!timed_out_ && ticks_ - last_frame_tick_ >= timeout_ticks_)) {
+        timed_out_ = true;
+        for (uint8_t f = 0; f < kFingers; ++f) {
+            finger::Finger& fg = fingers_[f];
+            if (!fg.active()) continue;  // nothing runs unsupervised on an idle finger
+            fg.latch(finger::HOST_TIMEOUT);
+            if (safe_action_ == 0) {  // proto::SafeAction::HOLD
+                fg.hold_here();
+            } else {
+                fg.set_mode(finger::COAST, 0, 0);
+            }
+        }
+    }
+
+    // ---- the previous tick overran: every finger stops ----
+    if (UTRF_UNLIKELY(overrun_pending_)) {
+        overrun_pending_ = false;
+        for (uint8_t f = 0; f < kFingers; ++f) fingers_[f].latch(finger::OVERRUN);
+    }
+
+    // ---- loop() must keep running; if it hangs the watchdog is about to reset us ----
+    const uint8_t lc = loop_count_;
+    if (lc != loop_seen_) {
+        loop_seen_ = lc;
+        loop_idle_ticks_ = 0;
+    } else if (loop_idle_ticks_ < kLoopHangTicks) {
+        ++loop_idle_ticks_;
+    } else if (!halted_) {
+        halted_ = 1;
+        hal::watchdog_mark_hang();
+    }
+    if (UTRF_UNLIKELY(halted_)) {
+        hal::motors_all_off();
+        return;
+    }
+
+    hal::MotorCommand out[kFingers];
+    const uint8_t turn = stall_turn_;
+    stall_turn_ = (uint8_t)(turn + 1 == finger::kStallEvery ? 0 : turn + 1);
+    for (uint8_t f = 0; f < kFingers; ++f) fingers_[f].tick(enc[f], out[f], f == turn);
+    hal::motors_write(out);
+}
+
+UTRF_HOT void Hand::record_timing(uint16_t cycles, bool overran) {
+    if (UTRF_UNLIKELY(overran)) {
+        ++timing_.overruns;
+        overrun_pending_ = true;
+    }
+    if (cycles > worst_cycles_) worst_cycles_ = cycles;
+    window_sum_ += cycles;
+    if (++window_n_ == 1024) {
+        timing_.mean_cycles = window_sum_ >> 10;
+        window_sum_ = 0;
+        window_n_ = 0;
+    }
+}
 
 }  // namespace hand
 }  // namespace utrf

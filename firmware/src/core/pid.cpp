@@ -36,12 +36,12 @@ int16_t remove_deadband(int16_t u, int16_t db, uint16_t db_inverse) {
     return (int16_t)(((int32_t)u * db_inverse) >> 16);
 }
 
-Pid::Pid() : i31_(0), v8_(0), m_prev_(0), e_last_(0), u_(0), saturated_(false) {}
+Pid::Pid() : i31_(0), v8_(0), m_prev_(0), e_last_(0), u_(0), saturated_(false), c_() {}
 
-void Pid::reset(const Coeffs& c, int16_t limit, int16_t u, int16_t measured) {
+void Pid::reset(int16_t limit, int16_t u, int16_t measured) {
     u_ = fx::clamp16(u, (int16_t)-limit, limit);
-    const int16_t v = fx::clamp16(remove_deadband(u_, c.deadband, c.db_inverse), (int16_t)-limit,
-                                  limit);
+    const int16_t v = fx::clamp16(remove_deadband(u_, c_.deadband, c_.db_inverse),
+                                  (int16_t)-limit, limit);
     i31_ = (int32_t)((uint32_t)(int32_t)v << 16);
     v8_ = 0;
     m_prev_ = measured;
@@ -49,11 +49,12 @@ void Pid::reset(const Coeffs& c, int16_t limit, int16_t u, int16_t measured) {
     saturated_ = false;
 }
 
-void Pid::rebase(const Coeffs& old_c, const Coeffs& new_c, int16_t new_limit) {
+void Pid::set_coeffs(const Coeffs& c, int16_t new_limit) {
     // The Q23 sum before the change, less the new P and D terms, is the new integrator.
-    const int32_t before = fx::apply(old_c.kp, e_last_, kPMax23) + (i31_ >> 8) -
-                           fx::apply(old_c.kd, v8_, kDMax23);
-    const int32_t after_pd = fx::apply(new_c.kp, e_last_, kPMax23) - fx::apply(new_c.kd, v8_, kDMax23);
+    const int32_t before = fx::apply(c_.kp, e_last_, kPMax23) + (i31_ >> 8) -
+                           fx::apply(c_.kd, v8_, kDMax23);
+    c_ = c;
+    const int32_t after_pd = fx::apply(c.kp, e_last_, kPMax23) - fx::apply(c.kd, v8_, kDMax23);
     const int32_t lim23 = (int32_t)new_limit << 8;
     const int32_t i23 = fx::clamp32(before - after_pd, -lim23, lim23);
     i31_ = (int32_t)((uint32_t)i23 << 8);

@@ -59,16 +59,19 @@ Coeffs compile(const Gains& g, float dt_s);
 class Pid {
    public:
     Pid();
+    // Coefficients for a Pid about to be reset() (no rebase).
+    void load(const Coeffs& c) { c_ = c; }
+    // New gains or limit while running: keep the output where it is (the integrator absorbs the
+    // change of the proportional and derivative terms).
+    void set_coeffs(const Coeffs& c, int16_t new_limit);
+    const Coeffs& coeffs() const { return c_; }
     // Start from the present output u (Q15) at measurement m: no bump.
-    void reset(const Coeffs& c, int16_t limit, int16_t u, int16_t measured);
-    // One tick: returns the output, Q15, within +-limit.
-    inline int16_t step(const Coeffs& c, int16_t limit, int16_t target, int16_t measured);
+    void reset(int16_t limit, int16_t u, int16_t measured);
+    // One tick: returns the output, Q15, within +-limit (0 <= limit <= 32767).
+    inline int16_t step(int16_t limit, int16_t target, int16_t measured);
     // Open loop (DUTY mode): the commanded duty through the same limit and slew limiter, so a
     // later switch to closed loop is bumpless.
-    inline int16_t step_open(const Coeffs& c, int16_t limit, int16_t duty, int16_t measured);
-    // New gains or limit: keep the output where it is (the integrator absorbs the change of
-    // the proportional and derivative terms).
-    void rebase(const Coeffs& old_c, const Coeffs& new_c, int16_t new_limit);
+    inline int16_t step_open(int16_t limit, int16_t duty, int16_t measured);
 
     int16_t output() const { return u_; }
     int32_t integrator31() const { return i31_; }
@@ -77,12 +80,25 @@ class Pid {
     bool saturated() const { return saturated_; }
 
    private:
+    // step() in portable C++: the control law as written above. The host runs it; the AVR runs
+    // the same steps in assembly (pid_step_avr.h), checked against it by
+    // tests/firmware/test_fw_avr.py (the AVR's checksum over thousands of steps).
+    inline int16_t step_c(int16_t limit, int16_t target, int16_t measured);
+#if defined(__AVR__)
+    inline int16_t step_avr(int16_t limit, int16_t target, int16_t measured);
+#endif
+
+    // The state, then the coefficients: one object, every field within a displacement of its
+    // address (the AVR's ldd/std reach 63 bytes).
     int32_t i31_;     // integrator, Q31 duty
     int16_t v8_;      // filtered d(measured), Q8 BU per tick
     int16_t m_prev_;  // last measurement, BU
     int16_t e_last_;  // last error, BU
     int16_t u_;       // last output, Q15 duty
     bool saturated_;
+    Coeffs c_;
+
+    friend struct StepLayout;
 };
 
 // The deadband compensation alone, and its inverse (for bumpless starts). Q15.
@@ -110,7 +126,8 @@ UTRF_HOT int16_t slew_limit(int16_t want, int16_t last, int16_t slew) {
     return want;
 }
 
-UTRF_HOT int16_t Pid::step(const Coeffs& c, int16_t limit, int16_t target, int16_t measured) {
+UTRF_HOT int16_t Pid::step_c(int16_t limit, int16_t target, int16_t measured) {
+    const Coeffs& c = c_;
     // Angles are within +-pi (BU), so these differences fit int16.
     const int16_t e = (int16_t)(target - measured);
     int16_t dm = (int16_t)(measured - m_prev_);
@@ -154,13 +171,31 @@ UTRF_HOT int16_t Pid::step(const Coeffs& c, int16_t limit, int16_t target, int16
     return u;
 }
 
-UTRF_HOT int16_t Pid::step_open(const Coeffs& c, int16_t limit, int16_t duty, int16_t measured) {
+UTRF_HOT int16_t Pid::step_open(int16_t limit, int16_t duty, int16_t measured) {
     int16_t u = fx::clamp16(duty, (int16_t)-limit, limit);
-    u = slew_limit(u, u_, c.slew);
+    u = slew_limit(u, u_, c_.slew);
     saturated_ = u != duty;
     u_ = u;
     m_prev_ = measured;  // a switch to closed loop calls reset() with this output
     return u;
+}
+
+}  // namespace pid
+}  // namespace utrf
+
+#if defined(__AVR__)
+#include "pid_step_avr.h"
+#endif
+
+namespace utrf {
+namespace pid {
+
+UTRF_HOT int16_t Pid::step(int16_t limit, int16_t target, int16_t measured) {
+#if defined(__AVR__)
+    return step_avr(limit, target, measured);
+#else
+    return step_c(limit, target, measured);
+#endif
 }
 
 }  // namespace pid

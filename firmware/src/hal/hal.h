@@ -55,8 +55,10 @@ struct EncoderReading {
     EncoderStatus status;
 };
 
-// Fill readings for all fingers: called once per control tick, from the tick.
-void encoders_read(EncoderReading* out /* [UTRF_FINGER_COUNT] */);
+// The readings of all fingers [UTRF_FINGER_COUNT], from one sampling round: called once per
+// control tick, from the tick; they stay valid until encoders_sample(). All NO_DATA when the
+// sampling has stopped.
+const EncoderReading* encoders_read();
 // Start sampling every encoder once (the AVR's ADC round, ~0.5 ms), to be read by the next
 // tick. Called at the end of each tick, so the sampling interrupts fall between ticks.
 void encoders_sample();

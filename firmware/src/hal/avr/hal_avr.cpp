@@ -11,12 +11,14 @@
 #include <avr/eeprom.h>
 #include <avr/interrupt.h>
 #include <avr/io.h>
+#include <avr/pgmspace.h>
 #include <avr/wdt.h>
 #include <util/atomic.h>
 
 #include "../../board_pins.h"
 #include "../../core/app.h"
 #include "../../core/encoder.h"
+#include "../../core/fixed.h"
 #include "../../generated/protocol_messages.h"
 #include "../hal.h"
 
@@ -159,7 +161,17 @@ inline void motor_apply(MotorHw& m, const MotorOut& out) {
 
 // ---- ADC: one round over the five encoder channels between two ticks ------------------------
 uint8_t g_adc_mux[UTRF_FINGER_COUNT];
-volatile EncoderReading g_reading[UTRF_FINGER_COUNT];  // judged in the ADC interrupt
+// Two rounds of readings, judged in the ADC interrupt: it fills one while the tick reads the
+// other, the last complete one (a round starts only at the end of a tick, so the one the tick
+// reads is not written under it). g_adc_done points to it and g_adc_fill to the other; both
+// change together, with g_adc_round, when a round completes.
+EncoderReading g_reading[2][UTRF_FINGER_COUNT];
+EncoderReading* volatile g_adc_fill = g_reading[0];
+const EncoderReading* volatile g_adc_done = g_reading[1];
+// What the tick gets while the sampling stands still.
+const EncoderReading kNoData[UTRF_FINGER_COUNT] = {
+    {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA},
+    {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA}};
 volatile uint8_t g_adc_round;    // completed rounds (wraps)
 volatile uint8_t g_adc_at = 0xFF;  // channel being converted, 0xFF: idle
 encoder::Staleness g_staleness;
@@ -174,19 +186,43 @@ void adc_select(uint8_t finger) {
 // ---- UART0 ---------------------------------------------------------------------------------
 // Ring buffers shared with the interrupt routines below, which are written in assembly (C
 // names for that reason): at 1 Mbaud and a 500 Hz state stream they run 35,000 times a
-// second, and the compiler's prologues doubled their cost.
+// second, and the compiler's prologues doubled their cost. The receive interrupt also nests
+// in the control tick, once for each byte that arrives while it runs, so its every cycle
+// counts there. Its usual path changes no status flag, so it need not save SREG: the ring
+// sits on a 128-byte boundary and its head and tail are kept as the low bytes of the slots'
+// addresses, in the general-purpose I/O registers GPIOR1 (head, written by the interrupt)
+// and GPIOR2 (tail, written by serial_read()), read and written with in/out (nothing else
+// uses them); the next slot's low byte comes from a table in flash (lpm), and a full ring is
+// found with cpse. Only the rare paths (a byte lost) save SREG to count it.
 extern "C" {
-uint8_t utrf_rx_buf[128];  // powers of two: the index arithmetic wraps with a mask
+uint8_t utrf_rx_buf[128] __attribute__((aligned(128)));
 uint8_t utrf_tx_buf[256];
-volatile uint8_t utrf_rx_head, utrf_rx_tail;
 volatile uint8_t utrf_tx_head, utrf_tx_tail;
 volatile uint16_t utrf_rx_lost;
+// utrf_rx_next[a]: the low byte of the address of the slot after the one at low byte a, for
+// either position of the ring in its 256-byte page (a's top bit is the page half).
+extern const uint8_t utrf_rx_next[256];
+#define UTRF_RX_NEXT(a) (uint8_t)(((a) & 0x80) | (((a) + 1) & 0x7F))
+#define UTRF_RX_NEXT4(a) UTRF_RX_NEXT(a), UTRF_RX_NEXT(a + 1), UTRF_RX_NEXT(a + 2), UTRF_RX_NEXT(a + 3)
+#define UTRF_RX_NEXT16(a) \
+    UTRF_RX_NEXT4(a), UTRF_RX_NEXT4(a + 4), UTRF_RX_NEXT4(a + 8), UTRF_RX_NEXT4(a + 12)
+#define UTRF_RX_NEXT64(a) \
+    UTRF_RX_NEXT16(a), UTRF_RX_NEXT16(a + 16), UTRF_RX_NEXT16(a + 32), UTRF_RX_NEXT16(a + 48)
+const uint8_t utrf_rx_next[256] PROGMEM __attribute__((aligned(256))) = {
+    UTRF_RX_NEXT64(0), UTRF_RX_NEXT64(64), UTRF_RX_NEXT64(128), UTRF_RX_NEXT64(192)};
+#undef UTRF_RX_NEXT64
+#undef UTRF_RX_NEXT16
+#undef UTRF_RX_NEXT4
+#undef UTRF_RX_NEXT
 }
 
 namespace {
-const uint8_t kRxSize = sizeof utrf_rx_buf;
 static_assert(sizeof utrf_tx_buf == 256, "the transmit index wraps by itself at 256");
-static_assert(sizeof utrf_rx_buf == 128, "the receive ISR masks its index with 0x7F");
+static_assert(sizeof utrf_rx_buf == 128, "the receive ring is 128 slots (utrf_rx_next)");
+
+// The receive ring's head or tail (a slot's address low byte) and the slot after it.
+inline uint8_t rx_base() { return (uint8_t)(uintptr_t)utrf_rx_buf; }
+inline uint8_t rx_next(uint8_t a) { return (uint8_t)((a & 0x80) | ((a + 1) & 0x7F)); }
 }  // namespace
 
 // ---- interrupts --------------------------------------------------------------------------------
@@ -208,24 +244,66 @@ static volatile uint8_t g_tick_running;
 static volatile uint8_t g_tick_deferred;
 
 namespace {
+__attribute__((always_inline)) inline Stamp read_stamp() {
+    Stamp s;
+    s.coarse = TCNT2;
+    s.fine = TCNT1;
+    return s;
+}
+
+// Cycles since `start`, up to two tick periods. The tick timer gives the time to within 64
+// cycles; timer 1 (modulo 800) gives it exactly modulo 800: take the value of the second that
+// lies within 400 cycles of the first. Inline: the timer interrupt runs it after every tick.
+__attribute__((always_inline)) inline uint16_t cycles_from(const Stamp& start) {
+    const uint8_t c2 = TCNT2;
+    const uint16_t c1 = TCNT1;
+    int16_t d2 = (int16_t)c2 - (int16_t)start.coarse;
+    if (g_tick_deferred || d2 < 0) d2 = (int16_t)(d2 + (F_CPU / 64 / UTRF_TICK_HZ));
+    const uint16_t coarse = (uint16_t)d2 * 64u;
+    const uint16_t fine = c1 >= start.fine ? (uint16_t)(c1 - start.fine)
+                                           : (uint16_t)(c1 + (UTRF_PWM_TOP + 1) - start.fine);
+    // Whole periods of 800: (coarse - fine + 400) / 800, as x * 82 >> 16 (0 when x < 0). With
+    // 0 <= x < 2^15 that is two 8 x 8 multiplies, not a 32-bit product:
+    // floor((256 xh + xl) * 82 / 2^16) = (82 xh + (82 xl >> 8)) >> 8.
+    const int16_t x = (int16_t)((int16_t)(coarse - fine) + 400);
+    uint8_t k = 0;
+    if (x > 0) {
+        const uint16_t t = (uint16_t)(fx::mul8u((uint8_t)((uint16_t)x >> 8), 82u) +
+                                      (fx::mul8u((uint8_t)x, 82u) >> 8));
+        k = (uint8_t)(t >> 8);
+    }
+    return (uint16_t)(fine + fx::mul8u(k, 25u) * 32u);  // k <= 40 periods of 800
+}
+
 // Runs ticks while any is due. Called with interrupts disabled; returns with them disabled.
 // The UART transmitter's interrupt waits during the tick (the byte in the shift register and
-// the one in UDR0 still go out): the control tick comes first, and its measured time is its
-// own. Receiving stays on, or bytes would be lost.
-void run_due_ticks() {
+// the one in UDR0 still go out), and so does timer 0's overflow (millis(); its flag keeps one
+// overflow, and the tick lasts far less than its 1.024 ms): the control tick comes first, and
+// its measured time is its own. Receiving stays on, or bytes would be lost.
+// One tick, timed. Out of line, so that its timing arithmetic is not hoisted into registers
+// the loop below would keep (and save) across the tick's call; the start is in memory for the
+// same reason.
+Stamp g_tick_start;
+__attribute__((noinline)) void run_one_tick() {
+    g_tick_deferred = 0;
+    g_tick_running = 1;
+    UCSR0B &= (uint8_t)~_BV(UDRIE0);
+    TIMSK0 &= (uint8_t)~_BV(TOIE0);
+    g_tick_start = read_stamp();
+    sei();
+    app::tick();
+    const uint16_t cycles = cycles_from(g_tick_start);
+    const bool overran = g_tick_deferred != 0;
+    app::tick_done(cycles, overran);
+    cli();
+    TIMSK0 |= _BV(TOIE0);
+    if (utrf_tx_head != utrf_tx_tail) UCSR0B |= _BV(UDRIE0);
+    g_tick_running = 0;
+}
+
+inline __attribute__((always_inline)) void run_due_ticks() {
     do {
-        g_tick_deferred = 0;
-        g_tick_running = 1;
-        UCSR0B &= (uint8_t)~_BV(UDRIE0);
-        const Stamp start = stamp();
-        sei();
-        app::tick();
-        const uint32_t cycles = cycles_since(start);
-        const bool overran = g_tick_deferred != 0;
-        app::tick_done(cycles, overran);
-        cli();
-        if (utrf_tx_head != utrf_tx_tail) UCSR0B |= _BV(UDRIE0);
-        g_tick_running = 0;
+        run_one_tick();
     } while (g_tick_deferred && !g_tick_locked);
 }
 }  // namespace
@@ -241,67 +319,69 @@ ISR(TIMER2_COMPA_vect) {
 ISR(ADC_vect) {
     uint8_t i = g_adc_at;
     // Judged here, between ticks (the round runs after each tick), not in the tick.
-    const EncoderReading r = encoder::as5600_reading(ADC);
-    g_reading[i].turn = r.turn;
-    g_reading[i].status = r.status;
+    EncoderReading* const fill = g_adc_fill;
+    fill[i] = encoder::as5600_reading(ADC);
     if (++i < UTRF_FINGER_COUNT) {
         g_adc_at = i;
         adc_select(i);
         ADCSRA |= _BV(ADSC);
     } else {
         g_adc_at = 0xFF;
+        g_adc_fill = const_cast<EncoderReading*>(g_adc_done);
+        g_adc_done = fill;
         g_adc_round = (uint8_t)(g_adc_round + 1);
     }
 }
 
 // A received byte into the ring; a byte that finds the ring full, or that the UART itself
-// lost (DOR0), is counted in utrf_rx_lost.
+// lost (DOR0), is counted in utrf_rx_lost. The byte is stored at the head before the ring is
+// found full: that slot is the one a full ring keeps empty, so nothing is overwritten.
 ISR(USART0_RX_vect, ISR_NAKED) {
     __asm__ __volatile__(
-        "push r24\n\t"
-        "in r24, __SREG__\n\t"
-        "push r24\n\t"
-        "push r25\n\t"
         "push r30\n\t"
         "push r31\n\t"
-        "lds r25, %[ucsra]\n\t"
-        "lds r24, %[udr]\n\t"
-        "sbrs r25, %[dor]\n\t"
-        "rjmp 1f\n\t"
-        "lds r30, utrf_rx_lost\n\t"
-        "lds r31, utrf_rx_lost+1\n\t"
-        "adiw r30, 1\n\t"
-        "sts utrf_rx_lost+1, r31\n\t"
-        "sts utrf_rx_lost, r30\n\t"
+        "push r24\n\t"
+        "lds  r24, %[ucsra]\n\t"
+        "sbrc r24, %[dor]\n\t"
+        "rjmp 2f\n"
         "1:\n\t"
-        "lds r30, utrf_rx_head\n\t"
-        "mov r25, r30\n\t"
-        "inc r25\n\t"
-        "andi r25, 0x7F\n\t"
-        "lds r31, utrf_rx_tail\n\t"
-        "cp r25, r31\n\t"
-        "breq 2f\n\t"
-        "ldi r31, 0\n\t"
-        "subi r30, lo8(-(utrf_rx_buf))\n\t"
-        "sbci r31, hi8(-(utrf_rx_buf))\n\t"
-        "st Z, r24\n\t"
-        "sts utrf_rx_head, r25\n\t"
+        "lds  r24, %[udr]\n\t"
+        "in   r30, %[head]\n\t"
+        "ldi  r31, hi8(utrf_rx_buf)\n\t"
+        "st   Z, r24\n\t"
+        "ldi  r31, hi8(utrf_rx_next)\n\t"
+        "lpm  r30, Z\n\t"
+        "in   r24, %[tail]\n\t"
+        "cpse r30, r24\n\t"
         "rjmp 3f\n\t"
-        "2:\n\t"
-        "lds r30, utrf_rx_lost\n\t"
-        "lds r31, utrf_rx_lost+1\n\t"
+        // full: the byte is not kept
+        "in   r24, __SREG__\n\t"
+        "lds  r30, utrf_rx_lost\n\t"
+        "lds  r31, utrf_rx_lost+1\n\t"
         "adiw r30, 1\n\t"
-        "sts utrf_rx_lost+1, r31\n\t"
-        "sts utrf_rx_lost, r30\n\t"
+        "sts  utrf_rx_lost+1, r31\n\t"
+        "sts  utrf_rx_lost, r30\n\t"
+        "out  __SREG__, r24\n\t"
+        "rjmp 4f\n"
         "3:\n\t"
-        "pop r31\n\t"
-        "pop r30\n\t"
-        "pop r25\n\t"
-        "pop r24\n\t"
-        "out __SREG__, r24\n\t"
-        "pop r24\n\t"
-        "reti\n\t" ::[ucsra] "n"(_SFR_MEM_ADDR(UCSR0A)),
-        [udr] "n"(_SFR_MEM_ADDR(UDR0)), [dor] "n"(DOR0));
+        "out  %[head], r30\n"
+        "4:\n\t"
+        "pop  r24\n\t"
+        "pop  r31\n\t"
+        "pop  r30\n\t"
+        "reti\n"
+        "2:\n\t"
+        // the UART lost a byte before this one
+        "in   r24, __SREG__\n\t"
+        "lds  r30, utrf_rx_lost\n\t"
+        "lds  r31, utrf_rx_lost+1\n\t"
+        "adiw r30, 1\n\t"
+        "sts  utrf_rx_lost+1, r31\n\t"
+        "sts  utrf_rx_lost, r30\n\t"
+        "out  __SREG__, r24\n\t"
+        "rjmp 1b\n\t" ::[ucsra] "n"(_SFR_MEM_ADDR(UCSR0A)),
+        [udr] "n"(_SFR_MEM_ADDR(UDR0)), [dor] "n"(DOR0), [head] "I"(_SFR_IO_ADDR(GPIOR1)),
+        [tail] "I"(_SFR_IO_ADDR(GPIOR2)));
 }
 
 // The next byte of the ring into UDR0; when the ring is empty, this interrupt goes off.
@@ -392,27 +472,74 @@ void avr_init() {
     UCSR0A = _BV(U2X0);
     UBRR0 = (uint16_t)((F_CPU + 4UL * UTRF_BAUD) / (8UL * UTRF_BAUD) - 1);
     UCSR0C = _BV(UCSZ01) | _BV(UCSZ00);
-    utrf_rx_head = utrf_rx_tail = 0;
+    GPIOR1 = rx_base();  // receive head: empty
+    GPIOR2 = rx_base();  // receive tail
     utrf_tx_head = utrf_tx_tail = 0;
     utrf_rx_lost = 0;
     UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
 }
 
-void motors_write(const MotorCommand* cmd) {
-    for (uint8_t f = 0; f < UTRF_FINGER_COUNT; ++f) {
-        FingerHw& h = g_hw[f];
-        const MotorCommand& c = cmd[f];
-        if (!c.stby && h.stby_last) {
-            pin_set(h.stby, false);  // off first
-            h.stby_last = 0;
-        }
-        motor_apply(h.m[0], c.a);
-        motor_apply(h.m[1], c.b);
-        if (c.stby && !h.stby_last) {
-            pin_set(h.stby, true);
-            h.stby_last = 1;
-        }
+namespace {
+
+// The registers of finger F's pins are constants of board_pins.h: with F a template argument
+// the compiler folds the table and the switches below into fixed addresses, so each tick writes
+// the compare registers with plain stores (no pointer loaded from g_hw, no loop). Only a change
+// of drive (direction, coast, brake), which is rare, goes through g_hw in motor_change().
+volatile uint16_t* ocr_reg(uint8_t timer, char channel) {
+    const uint8_t ch = (uint8_t)(channel - 'A');
+    switch (timer) {
+        case 1: return ch == 0 ? &OCR1A : ch == 1 ? &OCR1B : &OCR1C;
+        case 3: return ch == 0 ? &OCR3A : ch == 1 ? &OCR3B : &OCR3C;
+        case 4: return ch == 0 ? &OCR4A : ch == 1 ? &OCR4B : &OCR4C;
+        default: return ch == 0 ? &OCR5A : ch == 1 ? &OCR5B : &OCR5C;
     }
+}
+
+template <uint8_t F, uint8_t K>
+__attribute__((always_inline)) inline void channel_write(const MotorOut& out) {
+    const utrf_motor_pins_t& pins = K == 0 ? UTRF_FINGER_PINS[F].a : UTRF_FINGER_PINS[F].b;
+    static_assert((uint8_t)Drive::FORWARD == 2 && (uint8_t)Drive::REVERSE == 3,
+                  "FORWARD and REVERSE are the drives from 2 up");
+    const Drive d = out.drive;
+    if (__builtin_expect((uint8_t)d >= (uint8_t)Drive::FORWARD, 1)) {  // the tick's usual case
+        // on_counts is 1..kPwmPeriod; anything else is clamped into it, one compare for both
+        // ends: 0 would wrap to 0xFFFF (the core sends COAST for zero duty; never a spike from
+        // here).
+        uint16_t ocr = (uint16_t)(out.on_counts - 1u);
+        if (__builtin_expect(ocr >= kPwmPeriod, 0)) ocr = out.on_counts == 0 ? 0 : kPwmPeriod - 1;
+        // OCRnx is double-buffered in fast PWM: the new duty starts with the next period.
+        *ocr_reg(pins.pwm.timer, pins.pwm.channel) = ocr;
+    }
+    MotorHw& m = g_hw[F].m[K];
+    if (__builtin_expect((uint8_t)d != m.last, 0)) motor_change(m, out);
+}
+
+template <uint8_t F>
+__attribute__((always_inline)) inline void finger_write(const MotorCommand& c) {
+    FingerHw& h = g_hw[F];
+    const uint8_t stby = c.stby ? 1 : 0;
+    const bool change = __builtin_expect(stby != h.stby_last, 0);  // one compare, usually
+    if (change && !stby) {
+        pin_set(h.stby, false);  // off first
+        h.stby_last = 0;
+    }
+    channel_write<F, 0>(c.a);
+    channel_write<F, 1>(c.b);
+    if (change && stby) {
+        pin_set(h.stby, true);
+        h.stby_last = 1;
+    }
+}
+
+}  // namespace
+
+void motors_write(const MotorCommand* cmd) {
+    static_assert(UTRF_FINGER_COUNT == 5, "motors_write() writes five fingers");
+    finger_write<0>(cmd[0]);
+    finger_write<1>(cmd[1]);
+    finger_write<2>(cmd[2]);
+    finger_write<3>(cmd[3]);
+    finger_write<4>(cmd[4]);
 }
 
 void motors_all_off() {
@@ -432,18 +559,14 @@ void motors_all_off() {
     }
 }
 
-void encoders_read(EncoderReading* out) {
+const EncoderReading* encoders_read() {
+    const EncoderReading* done;
     uint8_t round;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
-        for (uint8_t f = 0; f < UTRF_FINGER_COUNT; ++f) {
-            out[f].turn = g_reading[f].turn;
-            out[f].status = g_reading[f].status;
-        }
+        done = g_adc_done;
         round = g_adc_round;
     }
-    if (g_staleness.stale(round)) {
-        for (uint8_t f = 0; f < UTRF_FINGER_COUNT; ++f) out[f].status = EncoderStatus::NO_DATA;
-    }
+    return g_staleness.stale(round) ? kNoData : done;
 }
 
 void encoders_sample() {
@@ -480,27 +603,9 @@ void tick_unlock() {
     sei();
 }
 
-Stamp stamp() {
-    Stamp s;
-    s.coarse = TCNT2;
-    s.fine = TCNT1;
-    return s;
-}
+Stamp stamp() { return read_stamp(); }
 
-uint32_t cycles_since(const Stamp& start) {
-    const uint8_t c2 = TCNT2;
-    const uint16_t c1 = TCNT1;
-    int16_t d2 = (int16_t)c2 - (int16_t)start.coarse;
-    if (g_tick_deferred || d2 < 0) d2 = (int16_t)(d2 + (F_CPU / 64 / UTRF_TICK_HZ));
-    // The tick timer gives the time to within 64 cycles; timer 1 (modulo 800) gives it exactly
-    // modulo 800: take the value of the second that lies within 400 cycles of the first.
-    const uint16_t coarse = (uint16_t)d2 * 64u;
-    const uint16_t fine = c1 >= start.fine ? (uint16_t)(c1 - start.fine)
-                                           : (uint16_t)(c1 + (UTRF_PWM_TOP + 1) - start.fine);
-    // Whole periods of 800: (coarse - fine + 400) / 800, as a multiply by 82 / 65536.
-    const int16_t k = (int16_t)(((int32_t)((int16_t)(coarse - fine) + 400) * 82) >> 16);
-    return (uint32_t)fine + (uint32_t)(k < 0 ? 0 : k) * (UTRF_PWM_TOP + 1);
-}
+uint32_t cycles_since(const Stamp& start) { return cycles_from(start); }
 
 bool tick_period_elapsed() { return g_tick_deferred != 0; }
 
@@ -508,12 +613,12 @@ uint32_t millis() { return ::millis(); }
 
 uint16_t serial_read(uint8_t* buf, uint16_t max) {
     uint16_t n = 0;
-    uint8_t tail = utrf_rx_tail;
-    while (n < max && tail != utrf_rx_head) {
-        buf[n++] = utrf_rx_buf[tail];
-        tail = (uint8_t)((tail + 1) & (kRxSize - 1));
+    uint8_t tail = GPIOR2;
+    while (n < max && tail != GPIOR1) {
+        buf[n++] = utrf_rx_buf[tail & 0x7F];
+        tail = rx_next(tail);
     }
-    utrf_rx_tail = tail;
+    GPIOR2 = tail;
     return n;
 }
 
