@@ -5,6 +5,7 @@ the limits the board holds."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import pytest
 
@@ -49,16 +50,21 @@ def test_limits_bound_moves_before_they_start(board: EmulatedBoard, hand: Hand) 
 
 
 def test_calibrate_zero_takes_the_present_reading(board: EmulatedBoard, hand: Hand) -> None:
+    # One ADC count is 2 pi / (0.8 * 1024) = 7.7 mrad of encoder angle; a reading is within
+    # a count of quantisation plus about one of the encoder's seeded noise: 2 counts.
+    lsb = 2 * math.pi / (0.8 * 1024)
+    board.block_finger(4, 0.0)  # held straight: in COAST it would sag under gravity
     board.shift_encoder(4, 0.05)  # the magnet sits 0.05 rad off
     hand.clock.sleep(0.02)
     reading = hand.state()["little"].theta2
-    assert reading == pytest.approx(0.05 + board.theta2[4], abs=0.01)
+    assert board.theta2[4] == pytest.approx(0.0, abs=1e-3)
+    assert reading == pytest.approx(0.05, abs=2 * lsb)
     old = hand.finger_config("little").encoder_offset
     hand.calibrate_zero("little")  # straight and idle: this reading is zero
     new = hand.finger_config("little").encoder_offset
-    assert new - old == pytest.approx(reading, abs=0.01)  # an ADC count is 7.7 mrad
+    assert new - old == pytest.approx(0.05, abs=2 * lsb)
     hand.clock.sleep(0.02)
-    assert hand.state()["little"].theta2 == pytest.approx(0.0, abs=0.01)
+    assert hand.state()["little"].theta2 == pytest.approx(0.0, abs=2 * lsb)
 
 
 def test_ping_and_stats(hand: Hand) -> None:

@@ -175,14 +175,10 @@ def test_simulated_sleeps_of_any_length_end_on_time(board: EmulatedBoard, hand: 
         assert abs(board.sim_time - t0 - seconds) <= half + 1e-9
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="firmware: at 500 Hz a get_state answered and a set_targets right after it make "
-    "the firmware skip a state frame about one time in three (tx_dropped), with the line "
-    "two-thirds idle and room in its 256-byte transmit buffer (reported to the firmware)",
-)
 def test_back_to_back_requests_do_not_cost_stream_frames(board: EmulatedBoard, hand: Hand) -> None:
+    # A stream frame is lost when one loop() pass outlasts the frame period (2 ms at 500 Hz).
+    # Answering get_state then set_targets made passes of 1.7 ms plus the tick's share; with
+    # the faster tick the worst pass here is 1.34 ms (simavr, the emulator's function profile).
     hand.set_telemetry(M.MAX_TELEMETRY_HZ)
     hand.move([0.3] * 5, 0.2)
     hand.reset_stats()
