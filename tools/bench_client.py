@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from utrf.benchdoc import write_section
 from utrf.emulator import DEFAULT_ELF, EmulatedBoard
 from utrf.hand import Hand
 from utrf.protocol import messages as m
@@ -214,17 +215,6 @@ def report(lat: dict[int, dict], sweep: list[dict], args: argparse.Namespace, to
     return "\n".join(lines)
 
 
-def update_doc(section: str) -> None:
-    text = BENCH_DOC.read_text() if BENCH_DOC.exists() else "# Benchmarks\n"
-    if BEGIN in text and END in text:
-        head, rest = text.split(BEGIN, 1)
-        tail = rest.split(END, 1)[1]
-        text = head + section + tail
-    else:
-        text = text.rstrip("\n") + "\n\n" + section + "\n"
-    BENCH_DOC.write_text(text)
-
-
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--elf", type=Path, default=DEFAULT_ELF)
@@ -251,7 +241,7 @@ def main(argv: list[str] | None = None) -> int:
     section = report(lat, sweep, args, time.perf_counter() - t0)
     print(section)
     if not args.no_update:
-        update_doc(section)
+        write_section(BENCH_DOC, section, BEGIN, END)
     return 0 if all(math.isfinite(r["received"]) for r in sweep) else 1
 
 

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from utrf.benchdoc import write_section
 from utrf.emulator import DEFAULT_ELF, BoardProcess, EmulatedBoard, SimClient
 from utrf.protocol import Link
 from utrf.protocol import messages as m
@@ -332,17 +333,6 @@ def report(runs: list[dict], ticks: list[dict], rt: dict, apart: dict, seconds: 
     return "\n".join(lines)
 
 
-def update_doc(section: str) -> None:
-    text = BENCH_DOC.read_text() if BENCH_DOC.exists() else "# Benchmarks\n"
-    if BEGIN in text and END in text:
-        head, rest = text.split(BEGIN, 1)
-        tail = rest.split(END, 1)[1]
-        text = head + section + tail
-    else:
-        text = text.rstrip("\n") + "\n\n" + section + "\n"
-    BENCH_DOC.write_text(text)
-
-
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--elf", type=Path, default=DEFAULT_ELF)
@@ -357,7 +347,7 @@ def main(argv: list[str] | None = None) -> int:
     section = report(runs, ticks, rt, apart, args.seconds)
     print(section)
     if not args.no_update:
-        update_doc(section)
+        write_section(BENCH_DOC, section, BEGIN, END)
         print(f"\nwritten to {BENCH_DOC}", file=sys.stderr)
     return 0
 

@@ -21,10 +21,11 @@ import argparse
 import datetime
 import json
 import platform
-import re
 import subprocess
 import sys
 from pathlib import Path
+
+from utrf.benchdoc import write_section
 
 REPO = Path(__file__).resolve().parents[1]
 ELF = REPO / "build" / "firmware" / "utrf.elf"
@@ -258,13 +259,6 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
     return "\n".join(lines) + "\n"
 
 
-def update(path: Path, section: str) -> None:
-    text = path.read_text() if path.exists() else "# Benchmarks\n"
-    pattern = re.compile(re.escape(BEGIN) + r".*?" + re.escape(END) + r"\n?", re.S)
-    text = pattern.sub(section, text) if pattern.search(text) else text.rstrip() + "\n\n" + section
-    path.write_text(text)
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     parser.add_argument("--update", type=Path, help="write the section into this markdown file")
@@ -277,7 +271,7 @@ def main(argv: list[str] | None = None) -> int:
     section = render(mem, tbl, loads, steps, args.seconds)
     print(section)
     if args.update:
-        update(args.update, section)
+        write_section(args.update, section, BEGIN, END)
         print(f"updated {args.update}")
     return 0
 

@@ -23,6 +23,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from utrf.benchdoc import write_section
 from utrf.protocol import Link
 from utrf.protocol import messages as M
 from utrf.protocol.framing import Frame, FrameDecoder, encode_frame
@@ -303,14 +304,7 @@ def main() -> int:
     ]
     section = "\n".join(lines)
     print(section)
-    current = BENCH_DOC.read_text(encoding="utf-8") if BENCH_DOC.exists() else "# Benchmarks\n"
-    if BEGIN in current and END in current:
-        head, rest = current.split(BEGIN, 1)
-        new = head + section + rest.split(END, 1)[1]
-    else:
-        new = current.rstrip("\n") + "\n\n" + section + "\n"
-    BENCH_DOC.parent.mkdir(parents=True, exist_ok=True)
-    BENCH_DOC.write_text(new, encoding="utf-8")
+    write_section(BENCH_DOC, section, BEGIN, END)
     print(f"bench_protocol: wrote {BENCH_DOC.relative_to(REPO_ROOT)}", file=sys.stderr)
     return 0
 

@@ -15,7 +15,6 @@ import argparse
 import json
 import os
 import platform
-import re
 import statistics
 import time
 from collections.abc import Callable
@@ -25,6 +24,7 @@ from typing import Any
 import numpy as np
 import scipy
 
+from utrf.benchdoc import write_section
 from utrf.models import statics, tendons
 from utrf.models.geometry import FingerGeometry
 from utrf.models.statics import Load
@@ -281,15 +281,7 @@ def markdown(result: dict[str, Any]) -> str:
 
 def update_section(path: Path, section: str) -> None:
     """Replace the "## Models" section of ``path`` (or append it); keep everything else."""
-    text = path.read_text() if path.exists() else "# Benchmarks\n"
-    pattern = re.compile(r"^## Models\n.*?(?=^## |\Z)", re.S | re.M)
-    body = section.rstrip("\n") + "\n"
-    if pattern.search(text):
-        text = pattern.sub(lambda _: body + "\n", text, count=1).rstrip("\n") + "\n"
-    else:
-        text = text.rstrip("\n") + "\n\n" + body
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
+    write_section(path, section, "## Models")
 
 
 def main(argv: list[str] | None = None) -> int:
