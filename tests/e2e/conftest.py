@@ -3,12 +3,12 @@
 Most tests drive the board (``realtime=False``) through a Hand over a SimLink: simulated
 time, as fast as the machine goes, the same on every run. The tests of the real-time path
 (a Hand over ``socket://``, the CLI, the demo) serve the board paced to the wall clock.
-``make test`` builds everything first; run alone, these fixtures bring the builds up to date.
+``make test`` builds everything first; run alone, ``firmware_elf`` (tests/conftest.py) brings
+the builds up to date.
 """
 
 from __future__ import annotations
 
-import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -16,23 +16,6 @@ import pytest
 
 from utrf.emulator import EmulatedBoard
 from utrf.hand import Hand
-
-REPO = Path(__file__).resolve().parents[2]
-FIRMWARE_ELF = REPO / "build" / "firmware" / "utrf.elf"
-
-
-@pytest.fixture(scope="session")
-def firmware_elf() -> Path:
-    proc = subprocess.run(
-        ["make", "-s", "--no-print-directory", "emulator", "firmware"],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    if proc.returncode:
-        pytest.fail(f"`make emulator firmware` failed:\n{proc.stdout}\n{proc.stderr}")
-    return FIRMWARE_ELF
 
 
 @pytest.fixture
