@@ -25,7 +25,15 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from utrf.protocol import messages as m
 from utrf.protocol.codec import Message, Request
-from utrf.protocol.engine import Done, Engine, LinkStats, Telemetry, Transmit, call_each
+from utrf.protocol.engine import (
+    Done,
+    Engine,
+    EngineDriver,
+    LinkStats,
+    Telemetry,
+    Transmit,
+    call_each,
+)
 from utrf.protocol.errors import DisconnectedError
 
 if TYPE_CHECKING:
@@ -36,7 +44,7 @@ R = TypeVar("R", bound=Message)
 PUMP_INTERVAL_S = 1e-3
 
 
-class SimLink:
+class SimLink(EngineDriver):
     """Requests, replies and telemetry over a driven board's UART0, in simulated time."""
 
     def __init__(
@@ -62,26 +70,6 @@ class SimLink:
 
     # --- Link's interface ----------------------------------------------------------------
 
-    @property
-    def identity(self) -> m.Identity | None:
-        return self._engine.identity
-
-    @property
-    def retries(self) -> int:
-        return self._engine.retries
-
-    @retries.setter
-    def retries(self, value: int) -> None:
-        self._engine.retries = value
-
-    @property
-    def heartbeat_period_s(self) -> float | None:
-        return self._engine.heartbeat_period_s
-
-    @heartbeat_period_s.setter
-    def heartbeat_period_s(self, value: float | None) -> None:
-        self._engine.heartbeat_period_s = value
-
     def stats(self) -> LinkStats:
         return self._engine.stats()
 
@@ -93,12 +81,6 @@ class SimLink:
 
     def close(self) -> None:
         self._engine.fail(DisconnectedError("the link was closed"))
-
-    def __enter__(self) -> SimLink:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     def request(
         self, msg: Request[R], *, timeout_s: float | None = None, retries: int | None = None

@@ -29,7 +29,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, fields
 from enum import Enum
-from typing import Any
+from typing import Any, Self
 
 from utrf.protocol import messages as m
 from utrf.protocol.codec import Message, Request
@@ -508,6 +508,45 @@ class Engine:
         if self._pending is not None:
             self._pending.inbox.append(error)
         return None if boot is None else Telemetry(boot, frame.seq, now)
+
+
+class EngineDriver:
+    """What :class:`~utrf.protocol.link.Link` and :class:`~utrf.hand.simlink.SimLink` show of
+    their engine alike: the identity, the settings, and closing as a context manager."""
+
+    _engine: Engine
+
+    @property
+    def identity(self) -> m.Identity | None:
+        """The board's identity from the last successful handshake."""
+        return self._engine.identity
+
+    @property
+    def retries(self) -> int:
+        """Resends of an idempotent request after the first attempt."""
+        return self._engine.retries
+
+    @retries.setter
+    def retries(self, value: int) -> None:
+        self._engine.retries = value
+
+    @property
+    def heartbeat_period_s(self) -> float | None:
+        """Longest silence before a heartbeat, once handshaken (None: no heartbeats)."""
+        return self._engine.heartbeat_period_s
+
+    @heartbeat_period_s.setter
+    def heartbeat_period_s(self, value: float | None) -> None:
+        self._engine.heartbeat_period_s = value
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def call_each(callbacks: Iterable[Callable[[Telemetry], None]], item: Telemetry) -> None:

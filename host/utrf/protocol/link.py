@@ -34,6 +34,7 @@ from utrf.protocol.codec import Message, Request
 from utrf.protocol.engine import (
     Done,
     Engine,
+    EngineDriver,
     LinkStats,
     StreamMessage,
     Telemetry,
@@ -49,7 +50,7 @@ __all__ = ["Link", "LinkStats", "StreamMessage", "Telemetry"]
 R = TypeVar("R", bound=Message)
 
 
-class Link:
+class Link(EngineDriver):
     """Request/response and telemetry over a :class:`Transport`.
 
     ``heartbeat_period_s``: after a successful :meth:`handshake`, send a ``heartbeat`` when
@@ -92,12 +93,6 @@ class Link:
         """A link over ``serial.serial_for_url(url)``; keyword arguments go to :class:`Link`."""
         return cls(SerialTransport(url, baudrate), **kwargs)  # type: ignore[arg-type]
 
-    def __enter__(self) -> Link:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     def close(self) -> None:
         """Close the line; a waiting request raises DisconnectedError."""
         self._stop.set()
@@ -110,27 +105,6 @@ class Link:
             self._heartbeat_thread.join(timeout=1.0)
 
     # --- public API ----------------------------------------------------------------------
-
-    @property
-    def identity(self) -> m.Identity | None:
-        """The board's identity from the last successful handshake."""
-        return self._engine.identity
-
-    @property
-    def retries(self) -> int:
-        return self._engine.retries
-
-    @retries.setter
-    def retries(self, value: int) -> None:
-        self._engine.retries = value
-
-    @property
-    def heartbeat_period_s(self) -> float | None:
-        return self._engine.heartbeat_period_s
-
-    @heartbeat_period_s.setter
-    def heartbeat_period_s(self, value: float | None) -> None:
-        self._engine.heartbeat_period_s = value
 
     def stats(self) -> LinkStats:
         with self._cond:
