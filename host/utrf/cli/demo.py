@@ -24,26 +24,13 @@ from rich.console import Console
 from rich.live import Live
 
 from utrf.cli._hand_common import EXIT_BAD_INPUT, EXIT_NOT_DONE, EXIT_OK, guarded
+from utrf.cli.emulate import speed_arg
 from utrf.hand import Hand
 from utrf.hand.demo import DEFAULT_SEQUENCE, Step, run_demo
 from utrf.hand.view import state_table
 from utrf.poses import PoseLibrary
 
 DEFAULT_OUT = Path("out/demo")
-
-
-def _speed(text: str) -> float | None:
-    if text == "max":
-        return None
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"speed must be a factor > 0 or 'max', got {text!r}"
-        ) from None
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"speed must be a factor > 0 or 'max', got {text!r}")
-    return v
 
 
 def _step_line(step: Step, total: int) -> str:
@@ -157,7 +144,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--hold", type=float, default=0.5, metavar="S", help="pause at each pose")
     p.add_argument(
         "--speed",
-        type=_speed,
+        type=speed_arg,
         default=1.0,
         metavar="X|max",
         help="the board's pace: X times real time (1), or 'max' (as fast as it goes)",

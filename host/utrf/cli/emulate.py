@@ -88,7 +88,8 @@ def _probability(text: str) -> float:
     return p
 
 
-def _speed(text: str) -> float | None:
+def speed_arg(text: str) -> float | None:
+    """``--speed``: an emulated board's pace, a factor of real time or ``max`` (None)."""
     if text == "max":
         return None
     try:
@@ -115,7 +116,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the encoder noise and line faults")
     p.add_argument(
         "--speed",
-        type=_speed,
+        type=speed_arg,
         default=1.0,
         metavar="X|max",
         help="pace at X times real time (default 1); 'max': as fast as it goes",
