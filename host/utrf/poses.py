@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from importlib import resources
@@ -20,7 +19,7 @@ from typing import Any, Literal
 import numpy as np
 
 from utrf.models import kinematics
-from utrf.models.geometry import HandGeometry
+from utrf.models.geometry import HandGeometry, read_toml
 
 TargetKind = Literal["flexion", "theta2", "q"]
 _OVERRIDE_KEYS = {
@@ -170,12 +169,7 @@ class PoseLibrary(Mapping[str, Pose]):
 
     def add_file(self, path: str | Path, hand: HandGeometry) -> None:
         path = Path(path)
-        try:
-            doc = tomllib.loads(path.read_text())
-        except FileNotFoundError:
-            raise PoseError(f"{path}: no such pose file") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise PoseError(f"{path}: not valid TOML: {exc}") from None
+        doc = read_toml(path, "pose", PoseError)
         poses = doc.get("pose")
         if not isinstance(poses, Mapping):
             raise PoseError(f"{path}: needs [pose.NAME] tables")

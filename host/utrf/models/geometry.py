@@ -38,6 +38,17 @@ class GeometryError(ValueError):
     """A finger or hand description that cannot describe a real finger."""
 
 
+def read_toml(path: Path, what: str, error: type[ValueError] = GeometryError) -> dict[str, Any]:
+    """The TOML document at ``path``; ``error`` naming the file (a ``what`` file) when there
+    is none or it is not TOML."""
+    try:
+        return tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise error(f"{path}: no such {what} file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{path}: not valid TOML: {exc}") from None
+
+
 def _triple(data: Mapping[str, Any], key: str, where: str, *, positive: bool) -> tuple[float, ...]:
     value = data.get(key)
     if not isinstance(value, Sequence) or isinstance(value, str) or len(value) != 3:
@@ -109,12 +120,7 @@ class FingerGeometry:
     @classmethod
     def from_toml(cls, path: str | Path) -> FingerGeometry:
         path = Path(path)
-        try:
-            doc = tomllib.loads(path.read_text())
-        except FileNotFoundError:
-            raise GeometryError(f"{path}: no such geometry file") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise GeometryError(f"{path}: not valid TOML: {exc}") from None
+        doc = read_toml(path, "geometry")
         if "finger" not in doc or not isinstance(doc["finger"], dict):
             raise GeometryError(f"{path}: needs a [finger] table")
         return cls.from_dict(doc["finger"], source=str(path))
@@ -227,12 +233,7 @@ class HandGeometry:
     @classmethod
     def from_toml(cls, path: str | Path) -> HandGeometry:
         path = Path(path)
-        try:
-            doc = tomllib.loads(path.read_text())
-        except FileNotFoundError:
-            raise GeometryError(f"{path}: no such hand file") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise GeometryError(f"{path}: not valid TOML: {exc}") from None
+        doc = read_toml(path, "hand")
         hand = doc.get("hand")
         if not isinstance(hand, dict):
             raise GeometryError(f"{path}: needs a [hand] table")
