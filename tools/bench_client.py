@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from utrf.benchdoc import write_section
+from utrf.benchdoc import cpu_name, write_section
 from utrf.emulator import DEFAULT_ELF, EmulatedBoard
 from utrf.hand import Hand
 from utrf.protocol import messages as m
@@ -37,16 +37,6 @@ BEGIN = "<!-- BEGIN client (make bench-client) -->"
 END = "<!-- END client -->"
 BITS_PER_BYTE = 10  # 8N1
 FIST = [1.15, 1.40, 1.40, 1.40, 1.40]
-
-
-def cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def wire_us(request: m.Message) -> float:

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from utrf.benchdoc import write_section
+from utrf.benchdoc import cpu_name, write_section
 from utrf.emulator import DEFAULT_ELF, BoardProcess, EmulatedBoard, SimClient
 from utrf.protocol import Link
 from utrf.protocol import messages as m
@@ -50,16 +50,6 @@ def served_apart(elf: Path, seconds: float) -> dict:
         final = board.close()
     assert final is not None
     return {"rtf": final["realtime_factor"], "capacity": final["capacity"], "stream_lost": lost}
-
-
-def cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def targets_at(t: float) -> tuple[float, ...]:

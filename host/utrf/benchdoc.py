@@ -11,12 +11,24 @@ stands, or appended to the file when it is not there yet.
 
 from __future__ import annotations
 
+import platform
 import re
 from pathlib import Path
 
 NEW_FILE = "# Benchmarks\n"
 # where a section without an end marker ends: the next heading or marker line
 _NEXT_SECTION = re.compile(r"^(## |<!-- )", re.M)
+
+
+def cpu_name() -> str:
+    """The processor's model, for the line that says where figures were measured."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
 
 
 def replace_section(text: str, section: str, begin: str, end: str | None = None) -> str:

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import scipy
 
-from utrf.benchdoc import write_section
+from utrf.benchdoc import cpu_name, write_section
 from utrf.models import statics, tendons
 from utrf.models.geometry import FingerGeometry
 from utrf.models.statics import Load
@@ -41,16 +41,6 @@ def _median_time(fn: Callable[[], object], repeats: int) -> float:
         fn()
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
-
-
-def _cpu() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def random_cases(geom: FingerGeometry, n: int, seed: int = 0) -> dict[str, np.ndarray]:
@@ -119,7 +109,7 @@ def run(
     load = Load(payload_kg=3.0)
     out: dict[str, Any] = {
         "machine": {
-            "cpu": _cpu(),
+            "cpu": cpu_name(),
             "cores": os.cpu_count(),
             "python": platform.python_version(),
             "numpy": np.__version__,
@@ -128,19 +118,24 @@ def run(
         "models": {},
     }
     cases = random_cases(geom, batch_size)
+
+    def solve_cases(**options: Any) -> statics.StaticsBatch:
+        """The random cases in one vectorised solve."""
+        return statics.solve_batch(
+            geom,
+            cases["q"],
+            payload_kg=cases["payload_kg"],
+            tip_force_n=cases["tip_force_n"],
+            tip_moment_nm=cases["tip_moment_nm"],
+            **options,
+        )
+
     for model in statics.MODELS:
         one = _median_time(lambda m=model: statics.solve(geom, 0.0, load, model=m), repeats_one)
         res = statics.solve(geom, 0.0, load, model=model)
 
         def batch(m: str = model) -> statics.StaticsBatch:
-            return statics.solve_batch(
-                geom,
-                cases["q"],
-                payload_kg=cases["payload_kg"],
-                tip_force_n=cases["tip_force_n"],
-                tip_moment_nm=cases["tip_moment_nm"],
-                model=m,
-            )
+            return solve_cases(model=m)
 
         t_batch = _median_time(batch, repeats_batch)
         b = batch()
@@ -150,17 +145,7 @@ def run(
         ]
         batch_iters = {
             f"{thr:g}": {
-                "mean": float(
-                    statics.solve_batch(
-                        geom,
-                        cases["q"],
-                        payload_kg=cases["payload_kg"],
-                        tip_force_n=cases["tip_force_n"],
-                        tip_moment_nm=cases["tip_moment_nm"],
-                        model=model,
-                        threshold_m=thr,
-                    ).iterations.mean()
-                ),
+                "mean": float(solve_cases(model=model, threshold_m=thr).iterations.mean()),
             }
             for thr in (1e-6, 1e-9, 1e-12)
         }
@@ -184,14 +169,7 @@ def run(
     for rx in statics.RELAXATIONS:
 
         def relaxed(r: str = rx) -> statics.StaticsBatch:
-            return statics.solve_batch(
-                geom,
-                cases["q"],
-                payload_kg=cases["payload_kg"],
-                tip_force_n=cases["tip_force_n"],
-                tip_moment_nm=cases["tip_moment_nm"],
-                relaxation=r,
-            )
+            return solve_cases(relaxation=r)
 
         b = relaxed()
         out["relaxation"][rx] = {
