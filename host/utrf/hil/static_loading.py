@@ -20,11 +20,14 @@ Files in the output directory (every CSV append-safe, ``utrf.datalog``):
 - ``registration.json``, ``registration.csv``: the tracker-to-finger registration and the
   samples it was fitted from;
 - ``samples.csv``: every tracker sample with the board's telemetry at that moment (step,
-  attempt, repeat, load, tracker position raw and in the finger frame, encoder θ2, duties,
-  motor currents where known);
+  attempt, repeat, load, tracker position raw and in the finger frame, the encoder's θ2 as
+  the mean of every telemetry frame since the previous sample and their count and spread,
+  duties, motor currents where known);
 - ``steps.csv``: one row per *completed* step (the samples' attempt it used): the resume
   marker; ``telemetry.csv``: the Hand's full telemetry stream;
-- ``results.json``, ``static_loading.png``: :func:`analyse` (recomputable from the CSVs).
+- ``results.json``, ``static_loading.png``: :func:`analyse` (recomputable from the CSVs);
+  the calibration's uncertainty carries the Joint-2 reading's (:func:`calibrate`,
+  ``utrf.hil.joint2``, ``hil/README.md``).
 """
 
 from __future__ import annotations
