@@ -27,7 +27,10 @@ static const uint8_t kStaleTicks = 3;
 __attribute__((always_inline)) inline hal::EncoderReading as5600_reading(uint16_t sample) {
     hal::EncoderReading r;
     // 102.4..921.6 counts mapped to 0..65536, i.e. sample * 80 - 8192, modulo 2^16 (16-bit
-    // arithmetic wraps exactly so).
+    // arithmetic wraps exactly so). Code c goes to the angle of the input c * Vref / 1024: the
+    // centre of the inputs that give c on the datasheet's ideal converter (first transition at
+    // 0.5 LSB, last at 1.5 LSB below Vref), so the reading is unbiased. (Against a floor
+    // converter it would be the bottom, half a count, 3.8 mrad, low.)
     r.turn = (uint16_t)((uint16_t)(sample * 80u) - 8192u);
     r.status = (sample < kAdcBandLow || sample > kAdcBandHigh) ? hal::EncoderStatus::OUT_OF_BAND
                                                                : hal::EncoderStatus::OK;

@@ -31,7 +31,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from utrf.emulator.plant import MotorParams, PlantParams
+from utrf.emulator.plant import EncoderParams, MotorParams, PlantParams
 from utrf.hil.tracker import Registration, SimulatedTracker, Tracker, rotation_from_euler
 
 #: the emulated static-loading bench's actuator (a linear slide stage; ASSUMED values)
@@ -49,11 +49,16 @@ class EmulatedTruth:
     tracker_translation_m: tuple[float, float, float] = (-0.080, 0.210, -0.045)
     tracker_noise_m: float = 1e-4
     actuator: MotorParams | None = field(default_factory=lambda: BENCH_ACTUATOR)
+    #: the Joint-2 encoders' output noise (V RMS; the plant's default, 0.41 ADC count)
+    encoder_noise_v: float = EncoderParams().noise_v
 
     def plant_params(self) -> PlantParams:
+        encoder = EncoderParams(noise_v=self.encoder_noise_v)
         if self.actuator is None:
-            return PlantParams(coupling_modulus_pa=self.coupling_modulus_pa)
-        return PlantParams(motor=self.actuator, coupling_modulus_pa=self.coupling_modulus_pa)
+            return PlantParams(encoder=encoder, coupling_modulus_pa=self.coupling_modulus_pa)
+        return PlantParams(
+            motor=self.actuator, encoder=encoder, coupling_modulus_pa=self.coupling_modulus_pa
+        )
 
     def tracker_frame(self) -> Registration:
         return Registration(
@@ -66,6 +71,7 @@ class EmulatedTruth:
             "tracker_euler_rad": list(self.tracker_euler_rad),
             "tracker_translation_m": list(self.tracker_translation_m),
             "tracker_noise_m": self.tracker_noise_m,
+            "encoder_noise_v": self.encoder_noise_v,
             "actuator_stall_force_n": None
             if self.actuator is None
             else self.actuator.stall_force_n,

@@ -20,11 +20,14 @@ Files in the output directory (every CSV append-safe, ``utrf.datalog``):
 - ``registration.json``, ``registration.csv``: the tracker-to-finger registration and the
   samples it was fitted from;
 - ``samples.csv``: every tracker sample with the board's telemetry at that moment (step,
-  attempt, repeat, load, tracker position raw and in the finger frame, encoder θ2, duties,
-  motor currents where known);
+  attempt, repeat, load, tracker position raw and in the finger frame, the encoder's θ2 as
+  the mean of every telemetry frame since the previous sample and their count and spread,
+  duties, motor currents where known);
 - ``steps.csv``: one row per *completed* step (the samples' attempt it used): the resume
   marker; ``telemetry.csv``: the Hand's full telemetry stream;
-- ``results.json``, ``static_loading.png``: :func:`analyse` (recomputable from the CSVs).
+- ``results.json``, ``static_loading.png``: :func:`analyse` (recomputable from the CSVs);
+  the calibration's uncertainty carries the Joint-2 reading's (:func:`calibrate`,
+  ``utrf.hil.joint2``, ``hil/README.md``).
 """
 
 from __future__ import annotations
@@ -33,14 +36,16 @@ import json
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from utrf.datalog import CsvLog, read_log
+from utrf.hil import joint2
 from utrf.hil.bench import Bench, ProgressFn, finite_mean
+from utrf.hil.joint2 import Joint2Frames
 from utrf.hil.tracker import Registration, TrackerError, register
 from utrf.models import calibration, kinematics, statics
 from utrf.models.geometry import FingerGeometry
@@ -64,6 +69,8 @@ SAMPLE_COLUMNS = (
     "tip_y_m",
     "out_of_plane_m",
     "theta2_rad",
+    "theta2_frames",
+    "theta2_frames_sd_rad",
     "target_rad",
     "duty_a",
     "duty_b",
@@ -85,6 +92,7 @@ STEP_COLUMNS = (
     "tip_sd_m",
     "theta2_rad",
     "theta2_sd_rad",
+    "theta2_frames",
     "duty_a",
     "duty_b",
     "current_a_a",
@@ -120,6 +128,8 @@ class StaticLoadingConfig:
     settle_s: float = 1.5
     record_s: float = 1.0
     tracker_hz: float = 40.0
+    #: the board's state stream during the run: every frame's Joint-2 reading is averaged
+    telemetry_hz: int = 500
     registration_theta2_rad: tuple[float, ...] = (-0.35, 0.0, 0.35, 0.7)
     force: bool = False
     actuator_rating_n: float | None = None  # None: the planner's default (Limits)
@@ -145,6 +155,8 @@ class StaticLoadingConfig:
                 raise RunError(f"{name} must be > 0 s, got {v}")
         if not (math.isfinite(self.tracker_hz) and 1 <= self.tracker_hz <= 1000):
             raise RunError(f"tracker_hz must lie in [1, 1000], got {self.tracker_hz}")
+        if not (isinstance(self.telemetry_hz, int) and 1 <= self.telemetry_hz <= 500):
+            raise RunError(f"telemetry_hz must be an integer in [1, 500], got {self.telemetry_hz}")
         if self.record_s * self.tracker_hz < 3:
             raise RunError("record_s x tracker_hz must give at least 3 samples a step")
         if len(self.registration_theta2_rad) < 3:
@@ -276,6 +288,7 @@ def prepare_output(
 def _sample_row(
     bench: Bench,
     reg: Registration,
+    frames: Joint2Frames,
     finger: int,
     step: int,
     attempt: int,
@@ -285,6 +298,9 @@ def _sample_row(
     s = bench.tracker.read()
     st = bench.hand.latest
     f = st.fingers[finger] if st is not None else None
+    theta2, n_frames, frames_sd = frames.take()
+    if n_frames == 0 and f is not None:  # no frame since the last sample: the latest one
+        theta2 = f.theta2
     cur = bench.currents()[finger]
     if s.visible:
         xy = reg.to_finger(s.position_m)[0]
@@ -305,7 +321,9 @@ def _sample_row(
         "tip_x_m": f"{xy[0]:.7f}",
         "tip_y_m": f"{xy[1]:.7f}",
         "out_of_plane_m": f"{oop:.7f}",
-        "theta2_rad": f"{f.theta2:.5f}" if f else "nan",
+        "theta2_rad": f"{theta2:.6f}",
+        "theta2_frames": n_frames,
+        "theta2_frames_sd_rad": f"{frames_sd:.6f}",
         "target_rad": f"{f.target:.5f}" if f else "nan",
         "duty_a": f"{f.duty_a:.3f}" if f else "nan",
         "duty_b": f"{f.duty_b:.3f}" if f else "nan",
@@ -346,6 +364,7 @@ def _registration(
     config: StaticLoadingConfig,
     geometry: FingerGeometry,
     out: Path,
+    frames: Joint2Frames,
     progress: ProgressFn,
 ) -> Registration:
     path = out / "registration.json"
@@ -360,19 +379,20 @@ def _registration(
             bench.hand.move({f: th}, duration=0.4, tolerance=config.settle_tolerance_rad)
             bench.sleep(config.settle_s)
             _check_faults(bench, f, seen, "registration")
-            samples, thetas = [], []
+            samples = []
+            frames.take()  # from here on
             for _ in range(n):
                 bench.sleep(1.0 / config.tracker_hz)
                 s = bench.tracker.read()
                 if s.visible:
                     samples.append(s.position_m)
-                st = bench.hand.latest
-                if st is not None:
-                    thetas.append(st.fingers[f].theta2)
             if not samples:
                 raise RunStopped(f"registration: the tracker never saw the sensor at pose {k}")
             raw = np.mean(samples, axis=0)
-            th_m = float(np.mean(thetas)) if thetas else th
+            th_m, n_frames, _ = frames.take()  # every frame of the pose's recording
+            if n_frames == 0:
+                st = bench.hand.latest
+                th_m = st.fingers[f].theta2 if st is not None else th
             tip = kinematics.tip_position(geometry, kinematics.q_from_theta2(geometry, th_m))
             log.write([k, f"{th_m:.6f}", tip[0], tip[1], *raw, len(samples)])
             model_pts.append(tip)
@@ -413,13 +433,36 @@ def run(
     if done:
         progress(f"resuming: {len(done)} of {len(schedule)} steps done, {len(todo)} to go")
     hand.start_log(out / "telemetry.csv")
+    hand.set_telemetry(config.telemetry_hz)
     if bench.emulated and bench.board is not None:
         from utrf.hil.bench import BENCH_GAINS
 
         hand.set_gains(f, **BENCH_GAINS)
     hand.clear_faults(f)
     hand.move({f: config.theta2_rad}, duration=0.5, tolerance=config.settle_tolerance_rad)
-    reg = _registration(bench, config, geometry, out, progress)
+    frames = Joint2Frames(hand, f)
+    try:
+        reg = _registration(bench, config, geometry, out, frames, progress)
+        _run_steps(bench, config, out, todo, attempts, reg, frames, progress, stop_after_steps)
+    finally:
+        frames.close()
+    return analyse(out, geometry=geometry)
+
+
+def _run_steps(
+    bench: Bench,
+    config: StaticLoadingConfig,
+    out: Path,
+    todo: list[tuple[int, int, float]],
+    attempts: dict[int, int],
+    reg: Registration,
+    frames: Joint2Frames,
+    progress: ProgressFn,
+    stop_after_steps: int | None,
+) -> None:
+    f = config.finger
+    hand = bench.hand
+    n_steps = len(config.schedule())
     hand.move({f: config.theta2_rad}, duration=0.4, tolerance=config.settle_tolerance_rad)
     n = max(3, round(config.record_s * config.tracker_hz))
     current_load: float | None = None
@@ -443,10 +486,11 @@ def run(
                     config.settle_tolerance_rad, timeout=5.0 * config.settle_s, fingers=[f]
                 )
                 t0 = bench.now()
+                frames.take()  # the step's frames start now
 
                 def write(step: int = step, attempt: int = attempt, repeat: int = repeat,
                           load: float = load) -> dict[str, Any]:  # fmt: skip
-                    row = _sample_row(bench, reg, f, step, attempt, repeat, load)
+                    row = _sample_row(bench, reg, frames, f, step, attempt, repeat, load)
                     samples.write(row)
                     return row
 
@@ -456,6 +500,7 @@ def run(
                     raise RunStopped(f"{during}: the tracker never saw the sensor")
                 xy = np.array([[float(r["tip_x_m"]), float(r["tip_y_m"])] for r in vis])
                 th = np.array([float(r["theta2_rad"]) for r in rows])
+                n_frames = np.array([int(r["theta2_frames"]) for r in rows])
                 steps.write(
                     {
                         "step": step,
@@ -469,8 +514,9 @@ def run(
                         "tip_x_m": f"{xy[:, 0].mean():.7f}",
                         "tip_y_m": f"{xy[:, 1].mean():.7f}",
                         "tip_sd_m": f"{np.hypot(*xy.std(axis=0)):.7f}",
-                        "theta2_rad": f"{finite_mean(th):.6f}",
+                        "theta2_rad": f"{_frames_mean(th, n_frames):.6f}",
                         "theta2_sd_rad": f"{np.nanstd(th):.6f}",
+                        "theta2_frames": int(n_frames.sum()),
                         "duty_a": f"{finite_mean([float(r['duty_a']) for r in rows]):.4f}",
                         "duty_b": f"{finite_mean([float(r['duty_b']) for r in rows]):.4f}",
                         "current_a_a": f"{finite_mean([float(r['current_a_a']) for r in rows]):.4f}",  # noqa: E501
@@ -478,10 +524,10 @@ def run(
                 )
                 ran += 1
                 progress(
-                    f"[{step + 1:2d}/{len(schedule)}] repeat {repeat + 1}/{config.repeats}  "
+                    f"[{step + 1:2d}/{n_steps}] repeat {repeat + 1}/{config.repeats}  "
                     f"payload {load * 1e3:5.0f} g  tip ({xy[:, 0].mean() * 1e3:8.3f}, "
                     f"{xy[:, 1].mean() * 1e3:7.3f}) mm  sd {np.hypot(*xy.std(axis=0)) * 1e3:.3f} mm"
-                    f"  theta2 {math.degrees(finite_mean(th)):+.2f} deg  "
+                    f"  theta2 {math.degrees(_frames_mean(th, n_frames)):+.2f} deg  "
                     f"duty A {finite_mean([float(r['duty_a']) for r in rows]):.2f}"
                 )
         finally:
@@ -490,7 +536,17 @@ def run(
                     bench.set_payload(f, 0.0, current_load)
                 except Exception as exc:  # the run is stopping anyway: say so, keep going
                     progress(f"could not remove the payload: {exc}")
-    return analyse(out, geometry=geometry)
+
+
+def _frames_mean(theta2: np.ndarray, frames: np.ndarray) -> float:
+    """A step's Joint-2 angle: the mean over every telemetry frame of its samples (each row
+    holds its frames' mean), or over the rows where no frame came (telemetry off)."""
+    th = np.asarray(theta2, dtype=float)
+    w = np.asarray(frames, dtype=float)
+    ok = np.isfinite(th)
+    if not (w[ok] > 0).any():
+        return finite_mean(th)
+    return float((th[ok] * w[ok]).sum() / w[ok].sum())
 
 
 # -- analysis -------------------------------------------------------------------------------------
@@ -502,6 +558,11 @@ class StepData:
     tip_m: np.ndarray
     theta2_rad: float
     samples: int
+    #: the visible samples, each tracker position with its frames' Joint-2 mean and count
+    sample_tips_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    sample_theta2_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    sample_frames: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    sample_frames_sd_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def load_steps(out: Path) -> list[StepData]:
@@ -519,10 +580,22 @@ def load_steps(out: Path) -> list[StepData]:
         vis = [r for r in rs if int(r["visible"])]
         if not vis:
             continue
-        tip = np.array([[float(r["tip_x_m"]), float(r["tip_y_m"])] for r in vis]).mean(axis=0)
-        th = finite_mean([float(r["theta2_rad"]) for r in rs])
+        tips = np.array([[float(r["tip_x_m"]), float(r["tip_y_m"])] for r in vis])
+        th = np.array([float(r["theta2_rad"]) for r in rs])
+        n_frames = np.array([int(r["theta2_frames"]) for r in rs])
         out_steps.append(
-            StepData(step, int(srow["repeat"]), float(srow["load_kg"]), tip, th, len(rs))
+            StepData(
+                step,
+                int(srow["repeat"]),
+                float(srow["load_kg"]),
+                tips.mean(axis=0),
+                _frames_mean(th, n_frames),
+                len(rs),
+                sample_tips_m=tips,
+                sample_theta2_rad=np.array([float(r["theta2_rad"]) for r in vis]),
+                sample_frames=np.array([int(r["theta2_frames"]) for r in vis]),
+                sample_frames_sd_rad=np.array([float(r["theta2_frames_sd_rad"]) for r in vis]),
+            )
         )
     return out_steps
 
@@ -619,21 +692,8 @@ def analyse(out: Path, *, geometry: FingerGeometry, figure: bool = True) -> dict
         "at_largest_payload": per[-1]["stiffness_n_m"],
         "paper_slide_stage": 3 * 9.81 / 0.024386,
     }
-    # Calibration: absolute tips held at the measured Joint-2 angles; the tracker frame's
-    # residual offset is fitted with the modulus.
-    all_loads = np.array([s.load_kg for s in steps])
-    data = calibration.CalibrationData(
-        all_loads,
-        np.zeros(len(steps)),
-        tip_m=np.array([s.tip_m for s in steps]),
-        source=str(out / "samples.csv"),
-        theta2_rad=np.array([s.theta2_rad for s in steps]),
-    )
     try:
-        fit = calibration.fit(data, geometry, fit_params=["modulus", "tip_offset"])
-        result["calibration"] = fit.to_json()
-        result["calibration"]["modulus_pa"] = fit.params.geometry.tendon_youngs_modulus_pa
-        result["calibration"]["modulus_sd_pa"] = fit.std_errors["modulus"]
+        result["calibration"] = calibrate(steps, geometry, source=str(out / "samples.csv"))
     except calibration.CalibrationError as exc:
         result["calibration"] = {"error": str(exc)}
     if config.emulated:
@@ -642,6 +702,97 @@ def analyse(out: Path, *, geometry: FingerGeometry, figure: bool = True) -> dict
     if figure:
         plot(result, out / "static_loading.png", geometry)
     return result
+
+
+def calibrate(
+    steps: Sequence[StepData], geometry: FingerGeometry, *, source: str = "<steps>"
+) -> dict[str, Any]:
+    """The coupling tendons' effective modulus and the tracker's residual offset, fitted to
+    the steps' absolute tips held at their measured Joint-2 angles, with what the Joint-2
+    reading does to its uncertainty (``utrf.hil.joint2``).
+
+    Each step's tip residual has the covariance of its paired samples (the tracker's noise
+    and the readings' random error through the tip's Jacobian), so the fit weighs the steps
+    by it and states the modulus's statistical error from it. The readings' leftover bias
+    (:func:`joint2.dither_bias_bound` for the noise the run saw, taken as a rectangular
+    uncertainty) may follow the load: it is carried as the change of the modulus when the
+    loaded steps' angles move by it one way and the unloaded ones' the other. The modulus's
+    standard uncertainty is the two combined."""
+    loads = np.array([s.load_kg for s in steps])
+    theta2 = np.array([s.theta2_rad for s in steps])
+    jac = joint2.tip_jacobian(geometry, theta2, loads)
+    cov, pooled = joint2.step_covariances(
+        [s.sample_tips_m for s in steps], [s.sample_theta2_rad for s in steps], jac
+    )
+    data = calibration.CalibrationData(
+        loads,
+        np.zeros(len(steps)),
+        tip_m=np.array([s.tip_m for s in steps]),
+        source=source,
+        theta2_rad=theta2,
+        tip_cov_m2=cov,
+    )
+    names = ["modulus", "tip_offset"]
+    fit = calibration.fit(data, geometry, fit_params=names)
+    modulus = fit.params.geometry.tendon_youngs_modulus_pa
+    sd_stat = fit.std_errors["modulus"]
+    # The same fit if the encoder were perfect: the tracker's noise alone, taken as the paired
+    # samples' spread across the tip's Jacobian (the tracker's noise is isotropic in the plane).
+    across = np.array([[-j[1], j[0]] / np.hypot(*j) for j in jac])
+    tracker_var = np.mean([a @ pooled @ a for a in across])
+    n = np.array([max(len(s.sample_theta2_rad), 1) for s in steps])
+    tracker_only = calibration.fit(
+        replace(data, tip_cov_m2=tracker_var * np.eye(2)[None] / n[:, None, None]),
+        geometry,
+        fit_params=names,
+    ).std_errors["modulus"]
+    frames = np.concatenate([s.sample_frames for s in steps])
+    frames_sd = np.concatenate([s.sample_frames_sd_rad for s in steps])
+    noise = joint2.encoder_noise_counts(frames, frames_sd)
+    bound_rad = joint2.dither_bias_bound(noise) * joint2.COUNT_RAD  # NaN noise: half a count
+    shift = np.where(loads > 0, 1.0, -1.0) * bound_rad / math.sqrt(3)
+    moved = [
+        calibration.fit(replace(data, theta2_rad=theta2 + sign * shift), geometry,
+                        fit_params=names).params.geometry.tendon_youngs_modulus_pa
+        for sign in (1.0, -1.0)
+    ]  # fmt: skip
+    sd_resolution = max(abs(m - modulus) for m in moved)
+    out = fit.to_json()
+    warnings = list(out["warnings"])
+    if not noise >= joint2.DITHER_MIN_COUNTS:
+        warnings.append(
+            f"the Joint-2 readings are hardly dithered (encoder noise {noise:.2f} counts RMS): "
+            "a held finger can settle at a count's edge under load, so the modulus carries "
+            f"+-{sd_resolution / 1e9:.1f} GPa for the encoder's resolution"
+        )
+    total_frames = int(frames[frames > 0].sum())
+    many = (frames > 1) & np.isfinite(frames_sd)
+    frame_sd = (
+        math.sqrt((frames * frames_sd**2)[many].sum() / (frames[many] - 1).sum())
+        if many.any()
+        else math.nan
+    )  # one reading's error, dithered: noise and quantisation
+    out.update(
+        {
+            "modulus_pa": modulus,
+            "modulus_sd_pa": None if sd_stat is None else math.hypot(sd_stat, sd_resolution),
+            "modulus_sd_statistical_pa": sd_stat,
+            "modulus_sd_joint2_resolution_pa": sd_resolution,
+            "modulus_sd_tracker_only_pa": tracker_only,
+            "joint2": {
+                "count_rad": joint2.COUNT_RAD,
+                "frames_per_step": float(total_frames / len(steps)),
+                "encoder_noise_counts": noise,
+                "dither_bias_bound_rad": bound_rad,
+                "frame_sd_rad": frame_sd,
+                # a step's mean reading, dithered: one reading's error over sqrt(its frames)
+                "step_se_rad": frame_sd / math.sqrt(max(total_frames / len(steps), 1.0)),
+                "paired_sample_sd_m": np.sqrt(np.diag(pooled)).tolist(),
+            },
+            "warnings": warnings,
+        }
+    )
+    return out
 
 
 def plot(result: dict[str, Any], path: Path, geometry: FingerGeometry) -> Path:
@@ -665,8 +816,6 @@ def plot(result: dict[str, Any], path: Path, geometry: FingerGeometry) -> Path:
     ax.plot(grid, nominal, "-", label="model, Joint 2 held at the setpoint")
     cal = result.get("calibration", {})
     if "modulus_pa" in cal:
-        from dataclasses import replace
-
         gcal = replace(geometry, tendon_youngs_modulus_pa=cal["modulus_pa"])
         fitted = np.hypot(*_model_deflection(gcal, grid, th, th).T) * 1e3
         ax.plot(
@@ -713,11 +862,24 @@ def describe(result: dict[str, Any]) -> str:
     cal = result.get("calibration", {})
     if "modulus_pa" in cal:
         sd = cal["modulus_sd_pa"]
+        j2 = cal.get("joint2", {})
         lines.append(
             f"calibration: effective tendon modulus {cal['modulus_pa'] / 1e9:.1f} "
             f"± {(sd or math.nan) / 1e9:.1f} GPa; after the fit mean error "
             f"{cal['mean_error_m'] * 1e3:.3f} mm, max {cal['max_error_m'] * 1e3:.3f} mm"
         )
+        if j2:
+            lines.append(
+                f"  its uncertainty: statistical "
+                f"{(cal['modulus_sd_statistical_pa'] or math.nan) / 1e9:.1f} GPa (the tracker "
+                f"and a step's Joint-2 reading, +-{j2['step_se_rad'] * 1e3:.2f} mrad from "
+                f"{j2['frames_per_step']:.0f} frames; with a perfect encoder "
+                f"{(cal['modulus_sd_tracker_only_pa'] or math.nan) / 1e9:.1f}), the encoder's "
+                f"resolution {cal['modulus_sd_joint2_resolution_pa'] / 1e9:.1f} GPa (its noise "
+                f"{j2['encoder_noise_counts']:.2f} ADC counts RMS)"
+            )
+        for w in cal.get("warnings", []):
+            lines.append(f"  WARNING: {w}")
     truth = result.get("emulated_truth")
     if truth:
         lines.append(

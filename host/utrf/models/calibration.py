@@ -24,6 +24,15 @@ finds, per row, the q at which the loaded finger's Joint-2 angle is the row's
 (:func:`hold_q`), so the actuating tendon's stretch drops out and Tendons 2 and 3 stretch
 the finger. Such data have no q to offset; position data fit ``modulus`` and ``tip_offset``
 by default.
+
+Uncertainty. Without more, the fit weighs every coordinate of every row alike and takes the
+standard errors from the scatter of its residuals. Position data may instead carry each row's
+tip covariance (``tip_cov_m2``, (n, 2, 2), m²: how well the row's measured tip *and* the
+model's prediction at its measured pose are known, e.g. a held Joint-2 angle read through a
+quantising encoder moves the prediction along the tip's Jacobian). The fit then minimises the
+whitened residuals (generalised least squares) and takes its standard errors from those
+covariances, scaled up by sqrt(chi²/dof) when the residuals scatter more than they say (never
+down); ``chi2_per_dof`` reports the check.
 """
 
 from __future__ import annotations
@@ -60,6 +69,7 @@ class CalibrationData:
     deflection_m: np.ndarray | None = None  # (n,)
     source: str = "<data>"
     theta2_rad: np.ndarray | None = None  # (n,): held at this Joint-2 angle, not at q_m
+    tip_cov_m2: np.ndarray | None = None  # (n, 2, 2): each row's tip covariance (position)
 
     @property
     def kind(self) -> str:
@@ -267,6 +277,9 @@ class CalibrationResult:
     initial_errors_m: np.ndarray  # per row, before
     condition_number: float
     warnings: tuple[str, ...]
+    #: weighted fits (rows with covariances): chi² of the whitened residuals per degree of
+    #: freedom; None otherwise
+    chi2_per_dof: float | None = None
 
     @property
     def finger_length_m(self) -> float:
@@ -305,6 +318,7 @@ class CalibrationResult:
             "initial_max_error_m": float(self.initial_errors_m.max()),
             "finger_length_m": length,
             "condition_number": self.condition_number,
+            "chi2_per_dof": self.chi2_per_dof,
             "warnings": list(self.warnings),
         }
 
@@ -352,6 +366,7 @@ def fit(
                 f"deflection data cannot fit {bad}: they need tip positions; "
                 f"fit from {list(_STIFFNESS_ONLY)}"
             )
+    whiten = _whitening(data)
     start = initial if initial is not None else Parameters(geom)
     base = start.geometry
     n_unknowns = sum(2 if n == "tip_offset" else 1 for n in names)
@@ -414,6 +429,8 @@ def fit(
         pred = predict(p, data, model)
         if data.kind == "position":
             assert data.tip_m is not None
+            if whiten is not None:  # in standard deviations of each row
+                return np.einsum("nij,nj->ni", whiten, pred - data.tip_m).ravel()
             return ((pred - data.tip_m) * 1e3).ravel()  # mm, for conditioning
         assert data.deflection_m is not None
         return (pred - data.deflection_m) * 1e3
@@ -427,7 +444,7 @@ def fit(
         raise CalibrationError(f"the fit left the valid geometry: {exc}") from None
     fitted = unpack(sol.x)
 
-    # Standard errors from the Jacobian (mm residuals), mapped back to SI.
+    # Standard errors from the Jacobian (mm residuals, or whitened ones), mapped back to SI.
     jac = np.asarray(sol.jac)
     sv = np.linalg.svd(jac, compute_uv=False)
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
@@ -435,8 +452,11 @@ def fit(
     warnings: list[str] = []
     std: dict[str, float | list[float] | None] = {}
     cov = None
+    chi2_per_dof = 2 * sol.cost / dof if whiten is not None and dof > 0 else None
     if dof > 0 and math.isfinite(cond) and cond < 1e10:
-        s2 = 2 * sol.cost / dof
+        # Weighted: the rows' covariances say how well each is known; the residuals' scatter
+        # only ever widens that (a model or a covariance that falls short).
+        s2 = 2 * sol.cost / dof if whiten is None else max(1.0, 2 * sol.cost / dof)
         cov = np.linalg.inv(jac.T @ jac) * s2
     if cond >= 1e8:
         warnings.append(
@@ -476,7 +496,36 @@ def fit(
         initial_errors_m=errors_m(start, data, model),
         condition_number=cond,
         warnings=tuple(warnings),
+        chi2_per_dof=chi2_per_dof,
     )
+
+
+def _whitening(data: CalibrationData) -> np.ndarray | None:
+    """Per row, the matrix W with W C Wᵀ = I for the row's tip covariance C (m²); None when
+    the data carry none. Errors name the bad row."""
+    cov = data.tip_cov_m2
+    if cov is None:
+        return None
+    if data.kind != "position":
+        raise CalibrationError("tip_cov_m2 goes with tip positions, not with deflections")
+    cov = np.asarray(cov, dtype=float)
+    if cov.shape != (len(data), 2, 2):
+        raise CalibrationError(
+            f"tip_cov_m2 must be one 2 x 2 covariance per row, shape ({len(data)}, 2, 2); "
+            f"got {cov.shape}"
+        )
+    out = np.empty_like(cov)
+    for i, c in enumerate(cov):
+        if not (np.all(np.isfinite(c)) and np.allclose(c, c.T, rtol=1e-9, atol=0.0)):
+            raise CalibrationError(f"tip_cov_m2 row {i}: not a finite symmetric matrix: {c}")
+        try:
+            out[i] = np.linalg.inv(np.linalg.cholesky(c))
+        except np.linalg.LinAlgError:
+            raise CalibrationError(
+                f"tip_cov_m2 row {i}: not positive definite (a row known exactly cannot be "
+                f"weighed): {c}"
+            ) from None
+    return out
 
 
 def synthesize(

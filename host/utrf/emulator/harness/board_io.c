@@ -142,8 +142,12 @@ void board_io_read_pins(utrf_sim_t *s)
 }
 
 /* A conversion starts: sample its channel now (the ADC's sample-and-hold) and hand simavr a
- * value that its own arithmetic, floor(mV * 1023 / Vref), turns into the datasheet's code,
- * floor(V * 1024 / Vref). */
+ * value that its own arithmetic, floor(mV * 1023 / Vref), turns into the ideal converter of
+ * the datasheet's "ADC Accuracy Definitions": the first transition (0x000 -> 0x001) at
+ * 0.5 LSB and the last (0x3FE -> 0x3FF) at 1.5 LSB below Vref, i.e. code c for inputs within
+ * half an LSB of c * Vref / 1024: code = floor(1024 V / Vref + 1/2), within 0..1023. (The
+ * result formula ADC = V * 1024 / Vref is that converter's nominal value; taken as floor() it
+ * would read every input half an LSB low, 3.8 mrad of Joint-2 angle.) */
 static void on_adc_trigger(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     (void)irq;
@@ -164,7 +168,7 @@ static void on_adc_trigger(struct avr_irq_t *irq, uint32_t value, void *param)
     default: vref_mv = 2560; break;
     }
     double volts = s->adc_volts[e.mux.src];
-    double code = floor(volts * 1024.0 / (vref_mv * 1e-3));
+    double code = floor(volts * 1024.0 / (vref_mv * 1e-3) + 0.5);
     if (!(code > 0.0)) /* also NaN */
         code = 0.0;
     if (code > 1023.0)
