@@ -122,7 +122,7 @@ def draw_pose(
         ax.plot([6, 6], [-reach * 0.6, 0], color="#b09070", lw=10, solid_capstyle="butt")  # palm
         ax.set_aspect("equal")
         ax.set_xlim(-reach * 1.05, reach * 0.45)
-        ax.set_ylim(-reach * 0.7, reach * 1.08)
+        ax.set_ylim(-reach * 0.7, reach * 1.15)  # room for the line caps of a straight finger
         m_deg, t_deg = math.degrees(measured[i]), math.degrees(target[i])
         ax.set_title(f"{f.name}\nθ2 {m_deg:.1f}° (target {t_deg:.1f}°)", fontsize=9)
         ax.tick_params(labelsize=7)
