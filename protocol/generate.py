@@ -56,7 +56,6 @@ class SpecError(ValueError):
 class WireType:
     name: str
     size: int
-    struct_code: str
     ctype: str
     lo: int | float
     hi: int | float
@@ -71,13 +70,13 @@ class WireType:
 
 
 TYPES: dict[str, WireType] = {
-    "u8": WireType("u8", 1, "B", "uint8_t", 0, 0xFF),
-    "i8": WireType("i8", 1, "b", "int8_t", -0x80, 0x7F),
-    "u16": WireType("u16", 2, "H", "uint16_t", 0, 0xFFFF),
-    "i16": WireType("i16", 2, "h", "int16_t", -0x8000, 0x7FFF),
-    "u32": WireType("u32", 4, "I", "uint32_t", 0, 0xFFFFFFFF),
-    "i32": WireType("i32", 4, "i", "int32_t", -0x80000000, 0x7FFFFFFF),
-    "f32": WireType("f32", 4, "f", "float", -math.inf, math.inf),
+    "u8": WireType("u8", 1, "uint8_t", 0, 0xFF),
+    "i8": WireType("i8", 1, "int8_t", -0x80, 0x7F),
+    "u16": WireType("u16", 2, "uint16_t", 0, 0xFFFF),
+    "i16": WireType("i16", 2, "int16_t", -0x8000, 0x7FFF),
+    "u32": WireType("u32", 4, "uint32_t", 0, 0xFFFFFFFF),
+    "i32": WireType("i32", 4, "int32_t", -0x80000000, 0x7FFFFFFF),
+    "f32": WireType("f32", 4, "float", -math.inf, math.inf),
 }
 
 
@@ -160,7 +159,6 @@ class MessageDef:
 
 @dataclass
 class Spec:
-    raw: dict[str, Any]
     protocol: dict[str, Any]
     enums: list[EnumDef]
     messages: list[MessageDef]
@@ -486,7 +484,7 @@ def load_spec(path: Path = SPEC_PATH) -> Spec:
             )
     if "ErrorCode" not in enums:
         raise SpecError("the protocol needs an ErrorCode enum")
-    return Spec(raw, proto, list(enums.values()), messages, schema_hash(raw))
+    return Spec(proto, list(enums.values()), messages, schema_hash(raw))
 
 
 # --------------------------------------------------------------------------------------------
