@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from utrf.benchdoc import write_section
+from utrf.benchdoc import cpu_name, write_section
 from utrf.protocol import Link
 from utrf.protocol import messages as M
 from utrf.protocol.framing import Frame, FrameDecoder, encode_frame
@@ -288,12 +288,11 @@ def link_round_trip() -> list[tuple[str, str]]:
 
 def main() -> int:
     rows = python_codec() + cpp_host() + avr_footprint() + avr_cycles() + link_round_trip()
-    cpu = platform.processor() or platform.machine()
     lines = [
         BEGIN,
         "## Protocol",
         "",
-        f"Measured with `{COMMAND}` on {cpu}, Python {platform.python_version()}"
+        f"Measured with `{COMMAND}` on {cpu_name()}, Python {platform.python_version()}"
         f" ({time.strftime('%Y-%m-%d')}). The line itself: a state frame is 70 bytes,"
         " 0.7 ms at 1 Mbaud, so 500 Hz of telemetry uses 35 % of it.",
         "",
