@@ -70,6 +70,7 @@ class Field:
     _lo: float = field(init=False, repr=False, compare=False)
     _hi: float = field(init=False, repr=False, compare=False)
     _inv: float | None = field(init=False, repr=False, compare=False)
+    _bits: int = field(init=False, repr=False, compare=False)  # every bit ``flags`` defines
 
     def __post_init__(self) -> None:
         if self.type not in WIRE_TYPES:
@@ -91,6 +92,12 @@ class Field:
             if candidate > 0 and abs(candidate * self.scale - 1.0) < 1e-12:
                 inv = float(candidate)
         object.__setattr__(self, "_inv", inv)
+        # The flag bits, once: decode checks them for every element of every stream frame.
+        bits = 0
+        if self.flags is not None:
+            for member in self.flags.__members__.values():
+                bits |= int(member)
+        object.__setattr__(self, "_bits", bits)
 
     @property
     def n(self) -> int:
@@ -128,7 +135,7 @@ class Field:
             if raw not in self.enum._value2member_map_:
                 raise DecodeError(message, label, f"{raw} is not a {self.enum.__name__}")
         elif self.flags is not None:
-            unknown = int(raw) & ~_all_bits(self.flags)
+            unknown = int(raw) & ~self._bits
             if unknown:
                 raise DecodeError(
                     message, label, f"0x{int(raw):02X} sets undefined {self.flags.__name__} bits"
@@ -159,7 +166,7 @@ class Field:
                 raise ValueError(f"{where}: {value!r} is not a {self.enum.__name__}") from None
         if self.flags is not None:
             bits = _as_int(value, where)
-            if bits & ~_all_bits(self.flags) or bits < 0:
+            if bits & ~self._bits or bits < 0:
                 raise ValueError(f"{where}: {value!r} sets bits {self.flags.__name__} lacks")
             return bits
         if self.type == "f32":
@@ -187,13 +194,6 @@ class Field:
             lo, hi = self.si_bounds()
             raise ValueError(f"{where}: {value!r} is outside [{lo:g}, {hi:g}]{self._unit}")
         return raw
-
-
-def _all_bits(flags: type[IntFlag]) -> int:
-    total = 0
-    for member in flags.__members__.values():
-        total |= int(member)
-    return total
 
 
 def _as_int(value: Any, where: str) -> int:
