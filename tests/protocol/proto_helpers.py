@@ -9,12 +9,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from utrf.protocol.framing import Frame, FrameError, RxEvent
+from utrf.protocol.framing import MAX_BODY_BYTES, Frame, FrameError, RxEvent
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 VECTOR_DIR = REPO_ROOT / "protocol" / "vectors"
 LIB_PATH = REPO_ROOT / "build" / "host" / "libutrf_proto.so"
-MAX_BODY = 64
 
 
 def load_vectors(name: str) -> dict[str, Any]:
@@ -27,7 +26,7 @@ class RxRecord(ctypes.Structure):
         ("seq", ctypes.c_uint8),
         ("msg_id", ctypes.c_uint8),
         ("body_len", ctypes.c_uint8),
-        ("body", ctypes.c_uint8 * MAX_BODY),
+        ("body", ctypes.c_uint8 * MAX_BODY_BYTES),
     ]
 
 
@@ -122,9 +121,9 @@ class CppCodec:
 
     def decode_message(self, msg_id: int, body: bytes) -> CppDecodeResult:
         bad = ctypes.c_uint8(0xEE)
-        values = (ctypes.c_double * MAX_BODY)()
+        values = (ctypes.c_double * MAX_BODY_BYTES)()
         n = ctypes.c_uint8(0)
-        out = (ctypes.c_uint8 * MAX_BODY)()
+        out = (ctypes.c_uint8 * MAX_BODY_BYTES)()
         status = self.lib.utrf_decode_message(
             msg_id, body, len(body), ctypes.byref(bad), values, ctypes.byref(n), out
         )
@@ -134,8 +133,8 @@ class CppCodec:
         )
 
     def encode_message(self, msg_id: int, values: list[float]) -> bytes:
-        arr = (ctypes.c_double * MAX_BODY)(*values)
-        out = (ctypes.c_uint8 * MAX_BODY)()
+        arr = (ctypes.c_double * MAX_BODY_BYTES)(*values)
+        out = (ctypes.c_uint8 * MAX_BODY_BYTES)()
         n = self.lib.utrf_encode_message(msg_id, arr, out)
         assert n >= 0, f"unknown id {msg_id}"
         return bytes(out[:n])
