@@ -26,7 +26,7 @@ from pathlib import Path
 from utrf.benchdoc import cpu_name, write_section
 from utrf.protocol import Link
 from utrf.protocol import messages as M
-from utrf.protocol.framing import Frame, FrameDecoder, encode_frame
+from utrf.protocol.framing import MAX_BODY_BYTES, Frame, FrameDecoder, encode_frame
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 LIB = REPO_ROOT / "build" / "host" / "libutrf_proto.so"
@@ -34,6 +34,7 @@ BENCH_DOC = REPO_ROOT / "docs" / "benchmarks.md"
 BEGIN = "<!-- BEGIN protocol (make protocol-bench) -->"
 END = "<!-- END protocol -->"
 COMMAND = "make protocol-bench"
+RECORD_BYTES = 4 + MAX_BODY_BYTES  # tests/protocol/cpp/shim.cpp's UtrfRxRecord
 
 
 def per_call_us(fn: Callable[[], object], min_time_s: float = 0.3) -> float:
@@ -105,7 +106,7 @@ def cpp_host() -> list[tuple[str, str]]:
     ]
     frame = encode_frame(0x80, M.State.ID, sample_state().encode())
     stream = frame * 2000
-    records = ctypes.create_string_buffer(68 * 2001)
+    records = ctypes.create_string_buffer(RECORD_BYTES * 2001)
     decoder = lib.utrf_decoder_new()
     t = per_call_us(lambda: lib.utrf_decoder_feed(decoder, stream, len(stream), records, 2001))
     lib.utrf_decoder_free(decoder)
