@@ -148,17 +148,6 @@ void __attribute__((noinline)) motor_change(MotorHw& m, const MotorOut& out) {
     m.last = (uint8_t)out.drive;
 }
 
-inline void motor_apply(MotorHw& m, const MotorOut& out) {
-    if (out.drive == Drive::FORWARD || out.drive == Drive::REVERSE) {
-        uint16_t c = out.on_counts;
-        if (c > kPwmPeriod) c = kPwmPeriod;
-        if (c == 0) c = 1;  // the core sends COAST for zero duty; never a spike from here
-        // OCRnx is double-buffered in fast PWM: the new duty starts with the next period.
-        *m.ocr = (uint16_t)(c - 1);
-    }
-    if ((uint8_t)out.drive != m.last) motor_change(m, out);
-}
-
 // ---- ADC: one round over the five encoder channels between two ticks ------------------------
 uint8_t g_adc_mux[UTRF_FINGER_COUNT];
 // Two rounds of readings, judged in the ADC interrupt: it fills one while the tick reads the
