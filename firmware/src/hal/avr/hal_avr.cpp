@@ -594,8 +594,6 @@ void tick_unlock() {
 
 Stamp stamp() { return read_stamp(); }
 
-uint32_t cycles_since(const Stamp& start) { return cycles_from(start); }
-
 bool tick_period_elapsed() { return g_tick_deferred != 0; }
 
 uint32_t millis() { return ::millis(); }
@@ -631,7 +629,6 @@ uint16_t serial_take_overruns() {
     return n;
 }
 
-uint16_t eeprom_size() { return E2END + 1; }
 uint8_t eeprom_read(uint16_t addr) { return eeprom_read_byte((const uint8_t*)addr); }
 bool eeprom_ready() { return eeprom_is_ready(); }
 void eeprom_write(uint16_t addr, uint8_t value) { eeprom_write_byte((uint8_t*)addr, value); }
