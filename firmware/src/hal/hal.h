@@ -64,10 +64,11 @@ const EncoderReading* encoders_read();
 void encoders_sample();
 
 // ---- control tick ------------------------------------------------------------------------------
-// The tick is a hardware timer interrupt at UTRF_TICK_HZ that calls app_tick().
+// The tick is a hardware timer interrupt at UTRF_TICK_HZ that calls app::tick().
 void tick_start();
-// Keep the tick from running while loop() changes state it reads (masks the timer interrupt
-// only; UART and ADC interrupts keep running). Not nestable; loop() context only.
+// Keep the tick from running while loop() changes state it reads: a tick that falls due
+// meanwhile runs at tick_unlock(), late but not lost; UART and ADC interrupts keep running.
+// Not nestable; loop() context only.
 void tick_lock();
 void tick_unlock();
 // The tick timer's count (4 us each) and timer 1's (16 MHz, modulo 800): cycle-exact. The
