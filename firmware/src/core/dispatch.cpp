@@ -43,10 +43,7 @@ int8_t hundredths(int16_t q15) {
     return q15 < 0 ? (int8_t)-h : h;
 }
 
-struct Lock {  // the tick does not run while one of these lives
-    Lock() { hal::tick_lock(); }
-    ~Lock() { hal::tick_unlock(); }
-};
+using app::Lock;
 
 template <typename Msg>
 bool reply(app::Board&, uint8_t seq, const Msg& m) {
