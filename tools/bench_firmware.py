@@ -81,38 +81,16 @@ def tick_load(scenario: str, seconds: float) -> dict:
 def step_figures() -> list[tuple[float, dict[str, float]]]:
     import ctypes
 
-    from fwsim import ClosedLoop, FingerPlant, Sim, build_library, load_library, m
+    import fwsim
 
-    lib = load_library(build_library())
-    eeprom = (ctypes.c_uint8 * lib.fw_eeprom_size()).from_address(
-        ctypes.addressof(lib.fw_eeprom().contents)
-    )
+    lib = fwsim.load_library(fwsim.build_library())
     rows = []
     for step in (0.2, 0.5, 1.0):
-        ctypes.memset(eeprom, 0xFF, len(eeprom))
-        sim = Sim(lib)
+        sim = fwsim.Sim(lib)
+        eeprom = sim.eeprom()
+        ctypes.memset(eeprom, 0xFF, len(eeprom))  # blank: the default gains
         sim.power_on()
-        sim.ok(m.SetSafety(heartbeat_timeout=10.0, safe_action=m.SafeAction.HOLD))
-        loop = ClosedLoop(sim, {0: FingerPlant()})
-        sim.ok(m.SetMode(mask=1, mode=(2, 0, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
-        sim.ok(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=1, value=(step, 0, 0, 0, 0)))
-        trace = loop.run(1500, record=0)
-        t10 = next(t for t, x, _ in trace if x >= 0.1 * step)
-        t90 = next(t for t, x, _ in trace if x >= 0.9 * step)
-        peak = max(x for _, x, _ in trace)
-        settle = max((t for t, x, _ in trace if abs(x - step) > 0.02 * step), default=0.0)
-        final = sum(x for _, x, _ in trace[-200:]) / 200
-        rows.append(
-            (
-                step,
-                {
-                    "rise": t90 - t10,
-                    "overshoot": max(0.0, (peak - step) / step),
-                    "settle": settle,
-                    "error": final - step,
-                },
-            )
-        )
+        rows.append((step, fwsim.step_figures(fwsim.step_response(sim, step), step)))
     return rows
 
 
@@ -252,8 +230,8 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
     ]
     for step, f in steps:
         lines.append(
-            f"| {step:g} rad | {f['rise'] * 1e3:.0f} ms | {100 * f['overshoot']:.1f} % | "
-            f"{f['settle'] * 1e3:.0f} ms | {1e3 * f['error']:+.1f} mrad |"
+            f"| {step:g} rad | {f['rise_s'] * 1e3:.0f} ms | {100 * f['overshoot']:.1f} % | "
+            f"{f['settle_s'] * 1e3:.0f} ms | {1e3 * f['final_error_rad']:+.1f} mrad |"
         )
     lines.append(END)
     return "\n".join(lines) + "\n"

@@ -11,8 +11,9 @@
 // The host's frames drift against the tick (its clock is not the board's): each period is a
 // little longer than nominal, so that over a run of a second or more the frames start at every
 // phase of the tick, the worst (a frame arriving while the tick runs) included.
-// and `pins`: the driver pins and PWM timers through a sequence of modes, checked against
-// board_pins.h (the table the emulator's harness reads too).
+// And `pins` (<seconds> unused): the driver pins and PWM timers through a sequence of modes,
+// for tests/firmware/test_fw_avr.py to check against board_pins.h (the table the emulator's
+// harness reads too).
 //
 // Frames are built and parsed with the firmware's own framing and generated messages, so the
 // bench speaks exactly the protocol the firmware does.
@@ -341,8 +342,8 @@ int run_pins() {
 int main(int argc, char** argv) {
     if (argc != 4 && argc != 6) {
         fprintf(stderr,
-                "usage: tick_bench <elf> idle|typical|stress <seconds> [<tick entry> <tick "
-                "return>] (byte addresses, hex)\n");
+                "usage: tick_bench <elf> idle|typical|stress|pins <seconds> [<tick entry> "
+                "<tick return>] (byte addresses, hex)\n");
         return 2;
     }
     if (argc == 6) {

@@ -99,7 +99,6 @@ Stamp stamp() {
     return s;
 }
 
-uint32_t cycles_since(const Stamp&) { return g_state.tick_cycles; }
 bool tick_period_elapsed() { return g_state.period_elapsed; }
 uint32_t millis() { return g_state.ms; }
 
@@ -132,7 +131,6 @@ uint16_t serial_take_overruns() {
     return n;
 }
 
-uint16_t eeprom_size() { return host::kEepromBytes; }
 uint8_t eeprom_read(uint16_t addr) { return g_state.eeprom[addr % host::kEepromBytes]; }
 
 bool eeprom_ready() {

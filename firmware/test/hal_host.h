@@ -30,7 +30,7 @@ struct State {
     bool tick_started;
     bool tick_locked;
     uint32_t lock_errors;   // nested lock, unlock without lock, tick while locked
-    uint32_t tick_cycles;   // what cycles_since() reports
+    uint32_t tick_cycles;   // each tick's length, as fw_tick() reports it to app::tick_done()
     bool period_elapsed;    // what tick_period_elapsed() reports
     uint32_t ms;
     // serial

@@ -17,13 +17,11 @@ def fwlib() -> ctypes.CDLL:
 @pytest.fixture
 def sim(fwlib: ctypes.CDLL) -> Iterator[Sim]:
     """A freshly powered board with a blank EEPROM, encoders at the straight pose."""
-    eeprom = (ctypes.c_uint8 * fwlib.fw_eeprom_size()).from_address(
-        ctypes.addressof(fwlib.fw_eeprom().contents)
-    )
+    s = Sim(fwlib)
+    eeprom = s.eeprom()
     ctypes.memset(eeprom, 0xFF, len(eeprom))
     fwlib.fw_set_eeprom_busy_polls(0)
     fwlib.fw_set_eeprom_stuck(-1)
-    s = Sim(fwlib)
     s.power_on()
     yield s
     # No test may leave the firmware having broken its own locking or transmit rules.

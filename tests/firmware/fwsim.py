@@ -390,3 +390,29 @@ class ClosedLoop:
             self.sim.lib.fw_loop(1)
         self.sim._drain()
         return trace
+
+
+def step_response(sim: Sim, step: float, ms: int = 1500) -> list[tuple[float, float, float]]:
+    """Finger 0 on a FingerPlant, in POSITION with the board's gains, from 0 to a target
+    `step` rad: (t, θ, u) each tick (the host silent meanwhile, under a 10 s timeout)."""
+    sim.ok(m.SetSafety(heartbeat_timeout=10.0, safe_action=m.SafeAction.HOLD))
+    loop = ClosedLoop(sim, {0: FingerPlant()})
+    sim.ok(m.SetMode(mask=1, mode=(2, 0, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
+    sim.ok(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=1, value=(step, 0, 0, 0, 0)))
+    return loop.run(ms, record=0)
+
+
+def step_figures(trace: list[tuple[float, float, float]], step: float) -> dict[str, float]:
+    """A positive step's rise (10-90 %), overshoot, settling time (into +-2 %) and its mean
+    error over the last 200 ms."""
+    t10 = next(t for t, x, _ in trace if x >= 0.1 * step)
+    t90 = next(t for t, x, _ in trace if x >= 0.9 * step)
+    peak = max(x for _, x, _ in trace)
+    settle = max((t for t, x, _ in trace if abs(x - step) > 0.02 * step), default=0.0)
+    final = sum(x for _, x, _ in trace[-200:]) / 200
+    return {
+        "rise_s": t90 - t10,
+        "overshoot": max(0.0, (peak - step) / step),
+        "settle_s": settle,
+        "final_error_rad": final - step,
+    }

@@ -11,7 +11,7 @@ import itertools
 import math
 
 import pytest
-from fwsim import BU, Q15, ClosedLoop, FingerPlant, Sim, m
+from fwsim import BU, Q15, ClosedLoop, FingerPlant, Sim, m, step_figures, step_response
 
 LIMIT = round(0.7 * Q15)  # default max_duty 0.8 less the pretension 0.1
 
@@ -26,33 +26,10 @@ def bu(rad: float) -> int:
     return round(rad / BU)
 
 
-def step_response(sim: Sim, step: float, ms: int = 1500) -> list[tuple[float, float, float]]:
-    sim.ok(m.SetSafety(heartbeat_timeout=10.0, safe_action=m.SafeAction.HOLD))
-    loop = ClosedLoop(sim, {0: FingerPlant()})
-    sim.ok(m.SetMode(mask=1, mode=(2, 0, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
-    sim.ok(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=1, value=(step, 0, 0, 0, 0)))
-    return loop.run(ms, record=0)
-
-
-def figures(trace: list[tuple[float, float, float]], step: float) -> dict[str, float]:
-    t10 = next(t for t, x, _ in trace if x >= 0.1 * step)
-    t90 = next(t for t, x, _ in trace if x >= 0.9 * step)
-    peak = max(x for _, x, _ in trace)
-    band = 0.02 * step
-    settle = max((t for t, x, _ in trace if abs(x - step) > band), default=0.0)
-    final = sum(x for _, x, _ in trace[-200:]) / 200
-    return {
-        "rise_s": t90 - t10,
-        "overshoot": (peak - step) / step,
-        "settle_s": settle,
-        "final_error_rad": final - step,
-    }
-
-
 @pytest.mark.parametrize("step", [0.5, -0.4, 1.2])
 def test_step_response_figures(sim: Sim, step: float) -> None:
     """Default gains on the reference plant: a clean, well-damped step in closed loop."""
-    fig = figures(
+    fig = step_figures(
         [(t, x * math.copysign(1, step), u) for t, x, u in step_response(sim, step)], abs(step)
     )
     # The motor saturates at 0.7 duty (4 rad/s on this plant): the rise is speed-limited.

@@ -11,11 +11,6 @@ namespace app {
 namespace {
 Board g_board;
 
-struct Lock {
-    Lock() { hal::tick_lock(); }
-    ~Lock() { hal::tick_unlock(); }
-};
-
 // Bytes taken from the UART per loop() pass: bounds the pass, the rest waits in the buffer.
 const uint8_t kRxBurst = 64;
 

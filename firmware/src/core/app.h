@@ -7,6 +7,7 @@
 
 #include <stdint.h>
 
+#include "../hal/hal.h"
 #include "config.h"
 #include "framing.h"
 #include "hand.h"
@@ -56,6 +57,12 @@ struct Board {
 };
 
 Board& board();
+
+// The tick does not run while one of these lives (hal::tick_lock()); loop() context.
+struct Lock {
+    Lock() { hal::tick_lock(); }
+    ~Lock() { hal::tick_unlock(); }
+};
 
 void setup();  // after hal init: load the configuration, arm the tick and the watchdog
 void loop();   // one pass: link, dispatch, reports, telemetry, EEPROM, watchdog

@@ -89,32 +89,13 @@ bool valid(const Config& cfg) {
     for (uint8_t f = 0; f < proto::kFingerCount; ++f) {
         const Finger& c = cfg.finger[f];
         proto::SetGains g;
-        g.finger = f;
-        g.kp = c.gains.kp;
-        g.ki = c.gains.ki;
-        g.kd = c.gains.kd;
-        g.d_cutoff_hz = c.gains.d_cutoff_hz;
-        g.deadband_duty = c.gains.deadband_milli;
-        g.slew_per_s = c.gains.slew_per_s;
-        g.max_duty = c.gains.max_duty_milli;
-        g.pretension_duty = c.gains.pretension_milli;
+        fill_gains(c.gains, f, g);
         if (!passes(g) || check_gains(c.gains) != 0xFF) return false;
         proto::SetLimits l;
-        l.finger = f;
-        l.theta2_min = c.limits.theta2_min;
-        l.theta2_max = c.limits.theta2_max;
-        l.limit_margin = c.limits.limit_margin;
-        l.stall_error = c.limits.stall_error;
-        l.stall_motion = c.limits.stall_motion;
-        l.stall_time = c.limits.stall_time_ms;
-        l.encoder_jump = c.limits.encoder_jump;
+        fill_limits(c.limits, f, l);
         if (!passes(l) || check_limits(f, c.limits) != 0xFF) return false;
         proto::SetFingerConfig h;
-        h.finger = f;
-        h.actuation = c.hw.actuation;
-        h.encoder_offset = c.hw.encoder_offset;
-        h.encoder_invert = c.hw.encoder_invert;
-        h.motor_invert = c.hw.motor_invert;
+        fill_hardware(c.hw, f, h);
         if (!passes(h)) return false;
     }
     proto::SetSafety s;

@@ -89,6 +89,42 @@ uint8_t check_limits(uint8_t finger, const Limits& l);
 // Every value within the protocol's ranges and the checks above (an EEPROM image's body).
 bool valid(const Config& cfg);
 
+// A finger's settings into the protocol message that carries them: the get_* reply or the
+// set_* request (the two have the same fields).
+template <typename Msg>
+void fill_gains(const Gains& g, uint8_t f, Msg& m) {
+    m.finger = f;
+    m.kp = g.kp;
+    m.ki = g.ki;
+    m.kd = g.kd;
+    m.d_cutoff_hz = g.d_cutoff_hz;
+    m.deadband_duty = g.deadband_milli;
+    m.slew_per_s = g.slew_per_s;
+    m.max_duty = g.max_duty_milli;
+    m.pretension_duty = g.pretension_milli;
+}
+
+template <typename Msg>
+void fill_limits(const Limits& l, uint8_t f, Msg& m) {
+    m.finger = f;
+    m.theta2_min = l.theta2_min;
+    m.theta2_max = l.theta2_max;
+    m.limit_margin = l.limit_margin;
+    m.stall_error = l.stall_error;
+    m.stall_motion = l.stall_motion;
+    m.stall_time = l.stall_time_ms;
+    m.encoder_jump = l.encoder_jump;
+}
+
+template <typename Msg>
+void fill_hardware(const Hardware& h, uint8_t f, Msg& m) {
+    m.finger = f;
+    m.actuation = h.actuation;
+    m.encoder_offset = h.encoder_offset;
+    m.encoder_invert = h.encoder_invert;
+    m.motor_invert = h.motor_invert;
+}
+
 // ---- EEPROM ------------------------------------------------------------------------------------
 enum class LoadStatus : uint8_t {  // values match proto::ConfigStatus
     LOADED = 0,

@@ -43,10 +43,7 @@ int8_t hundredths(int16_t q15) {
     return q15 < 0 ? (int8_t)-h : h;
 }
 
-struct Lock {  // the tick does not run while one of these lives
-    Lock() { hal::tick_lock(); }
-    ~Lock() { hal::tick_unlock(); }
-};
+using app::Lock;
 
 template <typename Msg>
 bool reply(app::Board&, uint8_t seq, const Msg& m) {
@@ -189,24 +186,11 @@ void set_telemetry(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len)
     ack(b, seq, m.kId);
 }
 
-template <typename Msg>
-void fill_gains(const config::Gains& g, uint8_t f, Msg& m) {
-    m.finger = f;
-    m.kp = g.kp;
-    m.ki = g.ki;
-    m.kd = g.kd;
-    m.d_cutoff_hz = g.d_cutoff_hz;
-    m.deadband_duty = g.deadband_milli;
-    m.slew_per_s = g.slew_per_s;
-    m.max_duty = g.max_duty_milli;
-    m.pretension_duty = g.pretension_milli;
-}
-
 void get_gains(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     GetGains m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
     Gains r;
-    fill_gains(b.cfg.finger[m.finger].gains, m.finger, r);
+    config::fill_gains(b.cfg.finger[m.finger].gains, m.finger, r);
     reply(b, seq, r);
 }
 
@@ -233,23 +217,11 @@ void set_gains(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     ack(b, seq, m.kId);
 }
 
-template <typename Msg>
-void fill_limits(const config::Limits& l, uint8_t f, Msg& m) {
-    m.finger = f;
-    m.theta2_min = l.theta2_min;
-    m.theta2_max = l.theta2_max;
-    m.limit_margin = l.limit_margin;
-    m.stall_error = l.stall_error;
-    m.stall_motion = l.stall_motion;
-    m.stall_time = l.stall_time_ms;
-    m.encoder_jump = l.encoder_jump;
-}
-
 void get_limits(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     GetLimits m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
     Limits r;
-    fill_limits(b.cfg.finger[m.finger].limits, m.finger, r);
+    config::fill_limits(b.cfg.finger[m.finger].limits, m.finger, r);
     reply(b, seq, r);
 }
 
@@ -300,13 +272,8 @@ void set_safety(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
 void get_finger_config(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     GetFingerConfig m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
-    const config::Hardware& h = b.cfg.finger[m.finger].hw;
     FingerConfig r;
-    r.finger = m.finger;
-    r.actuation = h.actuation;
-    r.encoder_offset = h.encoder_offset;
-    r.encoder_invert = h.encoder_invert;
-    r.motor_invert = h.motor_invert;
+    config::fill_hardware(b.cfg.finger[m.finger].hw, m.finger, r);
     reply(b, seq, r);
 }
 

@@ -16,8 +16,6 @@ int16_t bu(float rad) {
     return (int16_t)clamp32(round_sat(rad * kBuPerRad), -kBuHalfTurn, kBuHalfTurn - 1);
 }
 
-float rad_from_bu(int16_t b) { return (float)b / kBuPerRad; }
-
 Gain make_gain(float value, int32_t ymax) {
     Gain g;
     g.m = 0;

@@ -164,7 +164,6 @@ __attribute__((always_inline)) inline int32_t mul_q16(int32_t x, uint16_t c) {
 int32_t round_sat(float v);
 // Radians to BU, clamped to +-pi.
 int16_t bu(float rad);
-float rad_from_bu(int16_t bu);
 // BU to the protocol's 1e-4 rad, rounded (x 62832 / 32768).
 inline int16_t au_from_bu(int16_t b) {
     return (int16_t)((mul_su(b, 62832u) * 2 + 32768L) >> 16);

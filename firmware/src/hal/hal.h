@@ -64,20 +64,20 @@ const EncoderReading* encoders_read();
 void encoders_sample();
 
 // ---- control tick ------------------------------------------------------------------------------
-// The tick is a hardware timer interrupt at UTRF_TICK_HZ that calls app_tick().
+// The tick is a hardware timer interrupt at UTRF_TICK_HZ that calls app::tick().
 void tick_start();
-// Keep the tick from running while loop() changes state it reads (masks the timer interrupt
-// only; UART and ADC interrupts keep running). Not nestable; loop() context only.
+// Keep the tick from running while loop() changes state it reads: a tick that falls due
+// meanwhile runs at tick_unlock(), late but not lost; UART and ADC interrupts keep running.
+// Not nestable; loop() context only.
 void tick_lock();
 void tick_unlock();
-// Cycle-exact timing (the AVR combines the tick timer, 4 us per count, with timer 1's 16 MHz
-// count modulo 800). The AVR layer times each tick itself and reports it to app::tick_done().
+// The tick timer's count (4 us each) and timer 1's (16 MHz, modulo 800): cycle-exact. The
+// AVR layer times each tick with them itself and reports it to app::tick_done().
 struct Stamp {
     uint8_t coarse;
     uint16_t fine;
 };
 Stamp stamp();
-uint32_t cycles_since(const Stamp& start);
 static const uint32_t kCpuHz = 16000000UL;
 // True when the tick timer reached its period again before the tick finished (an overrun).
 bool tick_period_elapsed();
@@ -93,7 +93,6 @@ void serial_write(const uint8_t* data, uint16_t len);
 uint16_t serial_take_overruns();
 
 // ---- EEPROM ------------------------------------------------------------------------------------
-uint16_t eeprom_size();
 uint8_t eeprom_read(uint16_t addr);
 bool eeprom_ready();                           // no write under way
 void eeprom_write(uint16_t addr, uint8_t value);  // starts one byte's write; needs eeprom_ready()

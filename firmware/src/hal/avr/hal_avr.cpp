@@ -148,17 +148,6 @@ void __attribute__((noinline)) motor_change(MotorHw& m, const MotorOut& out) {
     m.last = (uint8_t)out.drive;
 }
 
-inline void motor_apply(MotorHw& m, const MotorOut& out) {
-    if (out.drive == Drive::FORWARD || out.drive == Drive::REVERSE) {
-        uint16_t c = out.on_counts;
-        if (c > kPwmPeriod) c = kPwmPeriod;
-        if (c == 0) c = 1;  // the core sends COAST for zero duty; never a spike from here
-        // OCRnx is double-buffered in fast PWM: the new duty starts with the next period.
-        *m.ocr = (uint16_t)(c - 1);
-    }
-    if ((uint8_t)out.drive != m.last) motor_change(m, out);
-}
-
 // ---- ADC: one round over the five encoder channels between two ticks ------------------------
 uint8_t g_adc_mux[UTRF_FINGER_COUNT];
 // Two rounds of readings, judged in the ADC interrupt: it fills one while the tick reads the
@@ -605,8 +594,6 @@ void tick_unlock() {
 
 Stamp stamp() { return read_stamp(); }
 
-uint32_t cycles_since(const Stamp& start) { return cycles_from(start); }
-
 bool tick_period_elapsed() { return g_tick_deferred != 0; }
 
 uint32_t millis() { return ::millis(); }
@@ -642,7 +629,6 @@ uint16_t serial_take_overruns() {
     return n;
 }
 
-uint16_t eeprom_size() { return E2END + 1; }
 uint8_t eeprom_read(uint16_t addr) { return eeprom_read_byte((const uint8_t*)addr); }
 bool eeprom_ready() { return eeprom_is_ready(); }
 void eeprom_write(uint16_t addr, uint8_t value) { eeprom_write_byte((uint8_t*)addr, value); }
