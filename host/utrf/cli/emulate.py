@@ -324,7 +324,9 @@ def _command(board: EmulatedBoard, line: str, say: _Printer) -> bool:
             st = _plant_state(board)
             say.say(f"state: {_plant_state_text(st)}", **st)
         elif cmd == "hang":
-            board.hang_firmware(interrupts=not (rest and rest[0] == "cli"))
+            if rest not in ([], ["cli"]):
+                raise ValueError(f"hang takes nothing or 'cli', got {' '.join(rest)!r}")
+            board.hang_firmware(interrupts=not rest)
             say.say(f"hung: the firmware{' with interrupts off' if rest else ''}")
         elif cmd == "reset":
             board.reset(rest[0] if rest else "reset_pin")
