@@ -61,14 +61,14 @@ def _finger(text: str) -> int:
     return f
 
 
-def _finger_value(text: str, what: str, default: float | None) -> tuple[int, float | None]:
-    """FINGER or FINGER:VALUE."""
+def _finger_value(text: str, required: bool = False) -> tuple[int, float | None]:
+    """FINGER or FINGER:VALUE (the value None when absent)."""
     name, sep, value = text.partition(":")
     finger = _finger(name)
     if not sep:
-        if default is None and what == "required":
+        if required:
             raise argparse.ArgumentTypeError(f"expected FINGER:DEG, got {text!r}")
-        return finger, default
+        return finger, None
     try:
         v = float(value)
     except ValueError:
@@ -158,7 +158,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="append",
         default=[],
         metavar="F[:V]",
-        type=lambda t: _finger_value(t, "volts", None),
+        type=_finger_value,
         help="finger F's encoder disconnected (ADC input at V volts, default 0)",
     )
     f.add_argument(
@@ -166,7 +166,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="append",
         default=[],
         metavar="F[:DEG]",
-        type=lambda t: _finger_value(t, "deg", None),
+        type=_finger_value,
         help="finger F jammed at a Joint-2 angle in degrees (default: where it starts)",
     )
     f.add_argument(
@@ -174,7 +174,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="append",
         default=[],
         metavar="F:DEG",
-        type=lambda t: _finger_value(t, "required", None),
+        type=lambda t: _finger_value(t, required=True),
         help="finger F cannot flex past DEG degrees",
     )
     f.add_argument(
