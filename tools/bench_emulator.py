@@ -307,8 +307,7 @@ def report(runs: list[dict], ticks: list[dict], rt: dict, apart: dict, seconds: 
             f"the nested interrupts, after starting up to {tk.worst_latency:,} cycles late, and "
             f"the firmware latched {five['faults'].name} within {five['calls']} ticks and "
             "stopped the fingers: this build cannot run five fingers under position control at "
-            "1 kHz (about 1,650 cycles a finger on top of 5,000 a tick, and the tick masked for "
-            "thousands of cycles at a time while `loop()` works)."
+            "1 kHz (the rows above give the cycles each finger adds and how late the tick starts)."
         ),
         "",
         "The driven factor is how much faster than real time tests and scripts run the board; "

@@ -143,8 +143,12 @@ def test_bad_input_exits_2(
         assert needle in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("line", ["hang", "hang cli"])
-def test_the_hang_command_ends_in_a_watchdog_reset(firmware_elf: Path, line: str) -> None:
+@pytest.mark.parametrize(
+    ("line", "said"), [("hang", "hung: the firmware\n"), ("hang cli", "with interrupts off\n")]
+)
+def test_the_hang_command_ends_in_a_watchdog_reset(
+    firmware_elf: Path, line: str, said: str
+) -> None:
     import io
 
     from utrf.cli.emulate import _command, _Printer
@@ -154,8 +158,14 @@ def test_the_hang_command_ends_in_a_watchdog_reset(firmware_elf: Path, line: str
     with EmulatedBoard(firmware_elf, realtime=False, seed=3) as board:
         board.run_for(0.1)
         resets = board.stats["watchdog_resets"]
-        assert _command(board, line, _Printer(out, as_json=False))
+        say = _Printer(out, as_json=False)
+        assert _command(board, "hang now", say)  # refused: the firmware runs on
+        board.run_for(0.2)
+        assert board.stats["watchdog_resets"] == resets
+        assert _command(board, line, say)
         board.run_for(0.2)  # the watchdog's period is 0.128 s
         assert board.stats["watchdog_resets"] == resets + 1
         assert board.reset_cause == "watchdog"
-    assert out.getvalue().startswith("hung: the firmware")
+    refusal, hung = out.getvalue().splitlines(keepends=True)
+    assert refusal.startswith("error: hang:")
+    assert hung.startswith("hung: the firmware") and hung.endswith(said)

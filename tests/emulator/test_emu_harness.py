@@ -241,6 +241,19 @@ class TestResets:
         assert console.line(timeout=0.1) == "boot 2"
         assert board.sim_time - start >= 0.05
 
+    @pytest.mark.timeout(30)
+    def test_a_timed_read_ends_on_a_board_held_in_reset(self, board: EmulatedBoard) -> None:
+        """Held in reset, time moves in whole exchanges, so a read's deadline can fall on
+        one exactly: float rounding then left a sliver too short to run, and the read spun."""
+        board.reset(hold=30.0)
+        port = board.serial()
+        for i in range(40):
+            port.timeout = (0.2, 0.1, 0.05, 0.3, 0.15)[i % 5]
+            start = board.sim_time
+            assert port.read(1) == b""
+            late = board.sim_time - start - port.timeout
+            assert -1e-9 < late < board.exchange_period  # the timeout, to the next exchange
+
     def test_a_reset_cuts_the_transmission(self, board: EmulatedBoard, console: Console) -> None:
         console.port.write(b"z 200\n")
         board.run_for(0.5e-3)  # a few dozen bytes out of 200

@@ -61,14 +61,14 @@ def _finger(text: str) -> int:
     return f
 
 
-def _finger_value(text: str, what: str, default: float | None) -> tuple[int, float | None]:
-    """FINGER or FINGER:VALUE."""
+def _finger_value(text: str, required: bool = False) -> tuple[int, float | None]:
+    """FINGER or FINGER:VALUE (the value None when absent)."""
     name, sep, value = text.partition(":")
     finger = _finger(name)
     if not sep:
-        if default is None and what == "required":
+        if required:
             raise argparse.ArgumentTypeError(f"expected FINGER:DEG, got {text!r}")
-        return finger, default
+        return finger, None
     try:
         v = float(value)
     except ValueError:
@@ -158,7 +158,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="append",
         default=[],
         metavar="F[:V]",
-        type=lambda t: _finger_value(t, "volts", None),
+        type=_finger_value,
         help="finger F's encoder disconnected (ADC input at V volts, default 0)",
     )
     f.add_argument(
@@ -166,7 +166,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="append",
         default=[],
         metavar="F[:DEG]",
-        type=lambda t: _finger_value(t, "deg", None),
+        type=_finger_value,
         help="finger F jammed at a Joint-2 angle in degrees (default: where it starts)",
     )
     f.add_argument(
@@ -174,7 +174,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="append",
         default=[],
         metavar="F:DEG",
-        type=lambda t: _finger_value(t, "required", None),
+        type=lambda t: _finger_value(t, required=True),
         help="finger F cannot flex past DEG degrees",
     )
     f.add_argument(
@@ -324,7 +324,9 @@ def _command(board: EmulatedBoard, line: str, say: _Printer) -> bool:
             st = _plant_state(board)
             say.say(f"state: {_plant_state_text(st)}", **st)
         elif cmd == "hang":
-            board.hang_firmware(interrupts=not (rest and rest[0] == "cli"))
+            if rest not in ([], ["cli"]):
+                raise ValueError(f"hang takes nothing or 'cli', got {' '.join(rest)!r}")
+            board.hang_firmware(interrupts=not rest)
             say.say(f"hung: the firmware{' with interrupts off' if rest else ''}")
         elif cmd == "reset":
             board.reset(rest[0] if rest else "reset_pin")

@@ -796,12 +796,14 @@ class SimSerial:
         self._buffer += self.board.read()
 
     def _run_until(self, done: Callable[[], bool]) -> None:
-        """Run one exchange period at a time (the finest step the board has) until done."""
+        """Run one exchange period at a time (the finest step the board has) until done or
+        the deadline. Within half a cycle of it counts as there: when time lands on the
+        deadline, float rounding can leave a sliver no exchange runs, and the read would spin."""
         deadline = math.inf if self.timeout is None else self.board.sim_time + self.timeout
         step = self.board.exchange_period
         self._pull()
-        while not done() and self.board.sim_time < deadline:
-            self.board.run_for(min(step, deadline - self.board.sim_time))
+        while not done() and deadline - self.board.sim_time > 0.5 / F_CPU_HZ:
+            self.board.run_for(step)
             self._pull()
 
     def read(self, size: int = 1) -> bytes:

@@ -328,10 +328,7 @@ class HandPlant:
 
     def _phi(self) -> np.ndarray:
         """Absolute link angles (5, 3) with the coupling stretch."""
-        shift = np.column_stack(
-            (np.zeros(FINGERS), self.coupling_stretch[:, 0], self.coupling_stretch.sum(axis=1))
-        )
-        return np.cumsum((self.q[:, None] - shift) / self.R, axis=1)
+        return np.cumsum(self.theta, axis=1)
 
     def _tip_terms(self) -> None:
         """The coupling stretch and the tip force's generalised force on q, for the force
@@ -516,7 +513,7 @@ class HandPlant:
     def tip(self) -> np.ndarray:
         """Fingertips in each finger's frame (m), shape (5, 2): Eq. 1 at the joint angles
         (``utrf.models.kinematics`` for the rigid finger)."""
-        phi = np.cumsum(self.theta, axis=1)
+        phi = self._phi()
         return np.stack(
             ((self.L * np.cos(phi)).sum(axis=1), (self.L * np.sin(phi)).sum(axis=1)), axis=-1
         )
@@ -555,12 +552,11 @@ class HandPlant:
     def energy(self) -> tuple[float, float]:
         """(kinetic, potential) energy of the whole hand in J: links, actuators, taut tendons
         and gravity (zero at the straight finger's height). For checking the integrator."""
-        phi = self.q[:, None] * self.c
-        J = self._Ac @ np.stack((-np.sin(phi), np.cos(phi)), axis=-1)
-        M = (self.link_mass[:, :, None] * J * J).sum(axis=(1, 2)) + self._rot_inertia
+        M = self._inertia(self.q)
         xd = self.xd.copy()
         xd[self.rotary, 1] = 0.0
         kinetic = 0.5 * (M * self.qd**2).sum() + 0.5 * self._ma * (xd**2).sum()
+        phi = self.q[:, None] * self.c
         com = self._A @ np.stack((np.cos(phi), np.sin(phi)), axis=-1)  # (5, 3, 2)
         potential = -(self.link_mass[:, :, None] * com @ self._gravity).sum()
         xb = np.where(self.rotary, -self.x[:, 0], self.x[:, 1])

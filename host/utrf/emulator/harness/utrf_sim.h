@@ -106,7 +106,8 @@ int utrf_sim_jump_at(utrf_sim_t *s, uint32_t at, uint32_t addr, int interrupts);
 int32_t utrf_sim_flash_word(const utrf_sim_t *s, uint32_t addr);
 
 /* The voltages on ADC0..7 (UTRF_SIM_ADC_CHANNELS doubles, in volts). Each conversion samples
- * its channel when it starts, and gives the datasheet's code, floor(1024 V / Vref). */
+ * its channel when it starts, and gives the datasheet's ideal converter's code,
+ * floor(1024 V / Vref + 1/2) within 0..1023 (board_io.c). */
 double *utrf_sim_adc_volts(utrf_sim_t *s);
 /* The pin block (UTRF_SIM_PIN_VALUES doubles), refreshed after each run. */
 const double *utrf_sim_pins(utrf_sim_t *s);
