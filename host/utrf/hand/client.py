@@ -833,9 +833,9 @@ class Hand:
             i: (st.fingers[i].target if st.fingers[i].closed_loop else st.fingers[i].theta2)
             for i in idx
         }
-        mask = sum(1 << i for i in idx)
-        wire = [start.get(i, 0.0) for i in range(len(self.fingers))]
-        self._request(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=mask, value=tuple(wire)))
+        a = np.array([start[i] for i in idx])
+        b = np.array([end[i] for i in idx])
+        self._send_joint2(idx, a)
         seen = len(self.faults_seen)
         if mode_ == m.ControlMode.GRASP:
             # GRASP bounds the controller's output both ways: a finger that opens or stays
@@ -849,8 +849,6 @@ class Hand:
         todo = [i for i in opening if st.fingers[i].mode != m.ControlMode.POSITION]
         if todo:
             self.set_mode(m.ControlMode.POSITION, todo)
-        a = np.array([start[i] for i in idx])
-        b = np.array([end[i] for i in idx])
         self._goal[idx] = b
         t0 = self.clock.now()
         k = 0
