@@ -338,11 +338,15 @@ class Hand:
             )
         self._identity = identity
         self._request(m.SetTelemetry(rate_hz=self._telemetry_hz))
+        self._read_limits()
+        self._goal[:] = np.nan
+        self._handshaken = True
+
+    def _read_limits(self) -> None:
+        """The Joint-2 limits the board holds, which move and pose check targets against."""
         for i in range(len(self.fingers)):
             lim = self._request(m.GetLimits(finger=i))
             self._limits[i] = (lim.theta2_min, lim.theta2_max)
-        self._goal[:] = np.nan
-        self._handshaken = True
 
     # --- lifetime ------------------------------------------------------------------------
 
@@ -1103,9 +1107,7 @@ class Hand:
             except KeyError:
                 raise ValueError(f"source must be 'eeprom' or 'defaults', got {source!r}") from None
         self._request(m.LoadConfig(source=source))
-        for i in range(len(self.fingers)):
-            lim = self._request(m.GetLimits(finger=i))
-            self._limits[i] = (lim.theta2_min, lim.theta2_max)
+        self._read_limits()
 
     def calibrate_zero(self, fingers: Iterable[FingerKey] | FingerKey) -> None:
         """Take the present readings as Joint-2 angle 0 (fingers straight and idle)."""
