@@ -15,7 +15,6 @@ Run with ``make bench-client``.
 from __future__ import annotations
 
 import argparse
-import math
 import platform
 import statistics
 import sys
@@ -37,6 +36,12 @@ BEGIN = "<!-- BEGIN client (make bench-client) -->"
 END = "<!-- END client -->"
 BITS_PER_BYTE = 10  # 8N1
 FIST = [1.15, 1.40, 1.40, 1.40, 1.40]
+#: the commands whose round trip is measured
+REQUESTS: dict[str, m.Message] = {
+    "ping": m.Ping(token=0x1234),
+    "set_targets": m.SetTargets(m.TargetKind.JOINT2_ANGLE, 0b11111, (0.3,) * 5),
+    "get_state": m.GetState(),
+}
 
 
 def wire_us(request: m.Message) -> float:
@@ -56,12 +61,7 @@ def wire_us(request: m.Message) -> float:
 
 def latency(elf: Path, exchange_s: float, n: int, telemetry_hz: int, seed: int) -> dict:
     """Round trips (s, simulated) of ping, set_targets and get_state."""
-    requests = {
-        "ping": m.Ping(token=0x1234),
-        "set_targets": m.SetTargets(m.TargetKind.JOINT2_ANGLE, 0b11111, (0.3,) * 5),
-        "get_state": m.GetState(),
-    }
-    out: dict[str, list[float]] = {k: [] for k in requests}
+    out: dict[str, list[float]] = {k: [] for k in REQUESTS}
     rng = np.random.default_rng(seed)
     with (
         EmulatedBoard(elf, realtime=False, seed=seed, exchange_period=exchange_s) as board,
@@ -70,7 +70,7 @@ def latency(elf: Path, exchange_s: float, n: int, telemetry_hz: int, seed: int) 
         hand.move([0.3] * 5, 0.2)  # five fingers under position control meanwhile
         retries0 = hand.link_stats().retries
         for _ in range(n):
-            for name, req in requests.items():
+            for name, req in REQUESTS.items():
                 hand.clock.sleep(float(rng.uniform(0.5e-3, 3e-3)))  # off the loop's phase
                 t0 = board.sim_time
                 hand.link.request(req)
@@ -145,15 +145,10 @@ def report(lat: dict[int, dict], sweep: list[dict], args: argparse.Namespace, to
     ]
     for hz, res in lat.items():
         for name, xs in res["samples"].items():
-            req = {
-                "ping": m.Ping(token=1),
-                "set_targets": m.SetTargets(m.TargetKind.JOINT2_ANGLE, 31, (0.3,) * 5),
-                "get_state": m.GetState(),
-            }[name]
             lines.append(
                 f"| `{name}` | {hz or 'off'}{' Hz' if hz else ''} | "
                 f"**{us(statistics.median(xs))}** | {us(float(np.percentile(xs, 99)))} | "
-                f"{us(max(xs))} | {wire_us(req):,.0f} µs | {res['retries']} |"
+                f"{us(max(xs))} | {wire_us(REQUESTS[name]):,.0f} µs | {res['retries']} |"
             )
     moving = [r for r in sweep if r["command_hz"]]
     clean = [r for r in moving if r["lost"] == 0 and r["tx_dropped"] == 0]
@@ -232,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
     print(section)
     if not args.no_update:
         write_section(BENCH_DOC, section, BEGIN, END)
-    return 0 if all(math.isfinite(r["received"]) for r in sweep) else 1
+    return 0
 
 
 if __name__ == "__main__":

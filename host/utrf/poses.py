@@ -86,7 +86,9 @@ class Pose:
     def theta2(self, hand: HandGeometry) -> np.ndarray:
         """Joint-2 target per finger (rad), in board order: what the firmware controls."""
         q = self.q(hand)
-        return np.array([q[i] / f.geometry.guide_radii_m[1] for i, f in enumerate(hand.fingers)])
+        return np.array(
+            [kinematics.theta2_from_q(f.geometry, q[i]) for i, f in enumerate(hand.fingers)]
+        )
 
 
 def _number(value: Any, where: str) -> float:

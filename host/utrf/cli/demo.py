@@ -23,12 +23,18 @@ from pathlib import Path
 from rich.console import Console
 from rich.live import Live
 
-from utrf.cli._hand_common import EXIT_BAD_INPUT, EXIT_NOT_DONE, EXIT_OK, guarded
+from utrf.cli._hand_common import (
+    EXIT_BAD_INPUT,
+    EXIT_NOT_DONE,
+    EXIT_OK,
+    add_poses,
+    guarded,
+    load_poses,
+)
 from utrf.cli.emulate import speed_arg
 from utrf.hand import Hand
 from utrf.hand.demo import DEFAULT_SEQUENCE, Step, run_demo
 from utrf.hand.view import state_table
-from utrf.poses import PoseLibrary
 
 DEFAULT_OUT = Path("out/demo")
 
@@ -50,10 +56,10 @@ def run(args: argparse.Namespace) -> int:
     from utrf.emulator import EmulatorError
 
     sequence = [s.strip() for s in args.sequence.split(",") if s.strip()]
-    library = PoseLibrary.load(extra=args.poses)
+    library = load_poses(args)
     console = Console()
     live_view = console.is_terminal and not args.no_live
-    state: dict[str, object] = {"hand": None, "step": None, "board": None}
+    state: dict[str, object] = {"hand": None, "step": None}
     lock = threading.Lock()
     live: Live | None = None
 
@@ -69,9 +75,9 @@ def run(args: argparse.Namespace) -> int:
         footer = f"the real firmware on the emulated board at {hand.url}"
         return state_table(hand.latest, title=title, footer=footer)
 
-    def on_connect(hand: Hand, board: object) -> None:
+    def on_connect(hand: Hand, _board: object) -> None:
         with lock:
-            state["hand"], state["board"] = hand, board
+            state["hand"] = hand
         print(f"emulated board up, the Hand connected to it at {hand.url}", flush=True)
 
     def on_step(step: Step) -> None:
@@ -137,9 +143,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="P1,P2,...",
         help=f"poses in order (default {','.join(DEFAULT_SEQUENCE)})",
     )
-    p.add_argument(
-        "--poses", action="append", type=Path, default=[], metavar="FILE", help="more poses (TOML)"
-    )
+    add_poses(p)
     p.add_argument("--duration", type=float, default=1.0, metavar="S", help="move time per pose")
     p.add_argument("--hold", type=float, default=0.5, metavar="S", help="pause at each pose")
     p.add_argument(

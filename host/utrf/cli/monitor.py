@@ -38,7 +38,7 @@ class _Watch:
         self.latest: HandState | None = None
         self.times: deque[float] = deque(maxlen=1000)
         self.events: list[str] = []
-        self.json_lines: list[str] = []
+        self.samples: list[HandState] = []  # for --json, printed by the display loop
         self.as_json = False
 
     def on_state(self, st: HandState) -> None:
@@ -46,18 +46,7 @@ class _Watch:
             self.latest = st
             self.times.append(time.monotonic())
             if self.as_json:
-                self.json_lines.append(
-                    json.dumps(
-                        {
-                            "board_time_s": st.board_time,
-                            "seq": st.seq,
-                            "theta2_rad": dict(zip(st.names, st.theta2.tolist(), strict=True)),
-                            "target_rad": dict(zip(st.names, st.target.tolist(), strict=True)),
-                            "mode": {f.name: f.mode.name for f in st},
-                            "faults": {f.name: int(f.faults) for f in st},
-                        }
-                    )
-                )
+                self.samples.append(st)
 
     def on_fault(self, event: FaultEvent) -> None:
         with self.lock:
@@ -69,11 +58,24 @@ class _Watch:
             recent = [t for t in self.times if t > now - 1.0]
         return float(len(recent))
 
-    def take(self) -> tuple[list[str], list[str]]:
+    def take(self) -> tuple[list[str], list[HandState]]:
         with self.lock:
             events, self.events = self.events, []
-            lines, self.json_lines = self.json_lines, []
-        return events, lines
+            samples, self.samples = self.samples, []
+        return events, samples
+
+
+def _json_line(st: HandState) -> str:
+    return json.dumps(
+        {
+            "board_time_s": st.board_time,
+            "seq": st.seq,
+            "theta2_rad": dict(zip(st.names, st.theta2.tolist(), strict=True)),
+            "target_rad": dict(zip(st.names, st.target.tolist(), strict=True)),
+            "mode": {f.name: f.mode.name for f in st},
+            "faults": {f.name: int(f.faults) for f in st},
+        }
+    )
 
 
 def _footer(hand: Hand, watch: _Watch) -> str:
@@ -120,11 +122,11 @@ def run(args: argparse.Namespace) -> int:
         try:
             while end is None or time.monotonic() < end:
                 time.sleep(0.05)
-                events, lines = watch.take()
+                events, samples = watch.take()
                 for e in events:
                     (live.console.print if live_view else print)(e)
-                for line in lines:
-                    print(line)
+                for st in samples:
+                    print(_json_line(st))
                 if hand.last_boot is not boot:  # the board reset: say so, handshake again
                     boot = hand.last_boot
                     with watch.lock:

@@ -15,6 +15,7 @@ reached or spoke another protocol.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import sys
@@ -71,21 +72,20 @@ def run(args: argparse.Namespace) -> int:
         hand.on_state(on_state)
         title = f"{pose.name}: {pose.description}"
         outcome: BaseException | None = None
+
+        def render():  # type: ignore[no-untyped-def]
+            with lock:
+                st = latest["st"]
+            return state_table(st, title=title, goal=goal, tolerance=tolerance)
+
+        display: contextlib.AbstractContextManager[object]
         if live_view:
-
-            def render():  # type: ignore[no-untyped-def]
-                with lock:
-                    st = latest["st"]
-                return state_table(st, title=title, goal=goal, tolerance=tolerance)
-
-            with Live(get_renderable=render, console=console, refresh_per_second=10):
-                try:
-                    hand.pose(pose, args.duration, tolerance=tolerance, timeout=args.timeout)
-                except (NotSettledError, FingerFaultError, NotControlledError) as exc:
-                    outcome = exc
+            display = Live(get_renderable=render, console=console, refresh_per_second=10)
         else:
+            display = contextlib.nullcontext()
             if not args.json:
                 print(f"moving to {pose.name} over {args.duration:g} s ...", flush=True)
+        with display:
             try:
                 hand.pose(pose, args.duration, tolerance=tolerance, timeout=args.timeout)
             except (NotSettledError, FingerFaultError, NotControlledError) as exc:

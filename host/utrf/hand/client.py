@@ -338,11 +338,15 @@ class Hand:
             )
         self._identity = identity
         self._request(m.SetTelemetry(rate_hz=self._telemetry_hz))
+        self._read_limits()
+        self._goal[:] = np.nan
+        self._handshaken = True
+
+    def _read_limits(self) -> None:
+        """The Joint-2 limits the board holds, which move and pose check targets against."""
         for i in range(len(self.fingers)):
             lim = self._request(m.GetLimits(finger=i))
             self._limits[i] = (lim.theta2_min, lim.theta2_max)
-        self._goal[:] = np.nan
-        self._handshaken = True
 
     # --- lifetime ------------------------------------------------------------------------
 
@@ -833,9 +837,9 @@ class Hand:
             i: (st.fingers[i].target if st.fingers[i].closed_loop else st.fingers[i].theta2)
             for i in idx
         }
-        mask = sum(1 << i for i in idx)
-        wire = [start.get(i, 0.0) for i in range(len(self.fingers))]
-        self._request(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=mask, value=tuple(wire)))
+        a = np.array([start[i] for i in idx])
+        b = np.array([end[i] for i in idx])
+        self._send_joint2(idx, a)
         seen = len(self.faults_seen)
         if mode_ == m.ControlMode.GRASP:
             # GRASP bounds the controller's output both ways: a finger that opens or stays
@@ -849,8 +853,6 @@ class Hand:
         todo = [i for i in opening if st.fingers[i].mode != m.ControlMode.POSITION]
         if todo:
             self.set_mode(m.ControlMode.POSITION, todo)
-        a = np.array([start[i] for i in idx])
-        b = np.array([end[i] for i in idx])
         self._goal[idx] = b
         t0 = self.clock.now()
         k = 0
@@ -1105,9 +1107,7 @@ class Hand:
             except KeyError:
                 raise ValueError(f"source must be 'eeprom' or 'defaults', got {source!r}") from None
         self._request(m.LoadConfig(source=source))
-        for i in range(len(self.fingers)):
-            lim = self._request(m.GetLimits(finger=i))
-            self._limits[i] = (lim.theta2_min, lim.theta2_max)
+        self._read_limits()
 
     def calibrate_zero(self, fingers: Iterable[FingerKey] | FingerKey) -> None:
         """Take the present readings as Joint-2 angle 0 (fingers straight and idle)."""

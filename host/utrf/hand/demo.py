@@ -96,7 +96,7 @@ def run_demo(
     a missing firmware ELF raises EmulatorError saying to run ``make firmware``."""
     from utrf.emulator import EmulatedBoard  # the harness library: only when a demo runs
 
-    library = poses or PoseLibrary.load()
+    library = poses if poses is not None else PoseLibrary.load()
     for name in sequence:
         library[name]
     if not sequence:

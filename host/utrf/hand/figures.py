@@ -1,9 +1,10 @@
 """Pictures of the hand: a pose drawn from the kinematics model at measured angles (with the
 target), and the joint trajectories against their targets.
 
-The finger chain comes from :func:`utrf.models.kinematics.chain_positions` with the coupled
-angles θ_i = θ2 · R2 / R_i of each finger's geometry, so what is drawn is what the model says
-the measured Joint-2 angle means. Drawings are in mm and degrees, and say so.
+The finger chain comes from :func:`utrf.models.kinematics.joint_positions` at the tendon
+displacement q = R2 · θ2 (through the coupling θ_i = q / R_i of each finger's geometry), so
+what is drawn is what the model says the measured Joint-2 angle means. Drawings are in mm and
+degrees, and say so.
 """
 
 from __future__ import annotations
@@ -29,9 +30,7 @@ TARGET = "#d2691e"
 
 def finger_chain(geom: FingerGeometry, theta2: float) -> np.ndarray:
     """Joint 1, 2, 3 and the tip (m), shape (4, 2), for a Joint-2 angle, through the coupling."""
-    r = np.asarray(geom.guide_radii_m)
-    theta = theta2 * r[1] / r
-    return kinematics.chain_positions(geom, theta)
+    return kinematics.joint_positions(geom, kinematics.q_from_theta2(geom, theta2))
 
 
 # Where each finger's Joint 1 sits on the palm in the front view (mm), and its direction.

@@ -13,7 +13,6 @@ from rich.table import Table
 from rich.text import Text
 
 from utrf.hand.state import HandState, fault_names
-from utrf.protocol import messages as m
 
 UNITS_NOTE = "Joint-2 angles in degrees; A/B: motor duties in %; tip x, y in mm (API and logs: SI)"
 
@@ -53,13 +52,12 @@ def state_table(
         style = ""
         if tolerance is not None:
             style = "green" if abs(err) <= tolerance else "yellow"
-        controlled = f.mode in (m.ControlMode.POSITION, m.ControlMode.GRASP)
         table.add_row(
             f.name,
             f.mode.name,
             _deg(f.theta2),
-            _deg(target) if controlled else "-",  # a target means nothing out of closed loop
-            Text(_deg(err), style=style) if controlled else "-",
+            _deg(target) if f.closed_loop else "-",  # a target means nothing out of closed loop
+            Text(_deg(err), style=style) if f.closed_loop else "-",
             f"{100 * f.duty_a:.0f}/{100 * f.duty_b:.0f}",
             f"{1e3 * f.tip_x:.0f}, {1e3 * f.tip_y:.0f}",
             Text(fault_names(f.faults), style="bold red" if f.faults else "dim"),
