@@ -217,20 +217,25 @@ def _statics(args: argparse.Namespace) -> int:
     q, _ = _q_from_pose(args, geom)
     load = _load(args)
     limits = _limits_from(args)
-    res = statics.solve(
-        geom,
-        q,
-        load,
-        model=args.model,
-        threshold_m=args.threshold_m,
-        max_iterations=args.max_iterations,
-        limits=limits,
-    )
+
+    def solve(model: str) -> statics.StaticsResult:
+        return statics.solve(
+            geom,
+            q,
+            load,
+            model=model,
+            threshold_m=args.threshold_m,
+            max_iterations=args.max_iterations,
+            limits=limits,
+            relaxation=args.relaxation,
+        )
+
+    res = solve(args.model)
     out = res.to_json()
     other = None
     if args.compare:
         other_model = "printed" if args.model == "serial" else "serial"
-        other = statics.solve(geom, q, load, model=other_model, limits=limits)
+        other = solve(other_model)
         out["compare"] = {
             "model": other_model,
             "tip_m": other.tip_m.tolist(),
