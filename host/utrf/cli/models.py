@@ -566,13 +566,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "calibrate", help="fit effective parameters to measured (load, tip) data"
     )
     p.add_argument(
-        "data", metavar="DATA.csv", help="load_kg, [q_m], tip_x_m, tip_y_m | deflection_m"
+        "data",
+        metavar="DATA.csv",
+        help="load_kg, [q_m | theta2_rad], tip_x_m, tip_y_m | deflection_m",
     )
     p.add_argument(
         "--fit",
         metavar="P1,P2",
         help=f"parameters to fit, from {','.join(calibration.PARAMETERS)} (default: "
-        "modulus,q_offset for tip data, modulus for deflection data)",
+        "modulus,q_offset for tip data, modulus,tip_offset for tip data held at theta2, "
+        "modulus for deflection data)",
     )
     p.add_argument("--model", choices=statics.MODELS, default=statics.DEFAULT_MODEL)
     _common(p)
