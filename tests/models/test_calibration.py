@@ -58,11 +58,16 @@ def test_deflection_data_fit_the_modulus(geom: FingerGeometry) -> None:
 
 
 def test_inseparable_parameters_are_flagged(geom: FingerGeometry) -> None:
-    # At one pose the deflection depends on E·A/L_T1 and E·A/L_T2..3 together: modulus and
-    # actuating length separate only through the coupling tendons, barely.
+    # At one pose the deflection scales roughly as 1 / (E R²): modulus and radius scale
+    # separate only through the nonlinearity, barely.
     data = calibration.synthesize(Parameters(geom), LOADS[3:], kind="deflection")
     res = calibration.fit(data, geom, fit_params=["modulus", "radius_scale"])
     assert any("barely separate" in w for w in res.warnings) or res.condition_number > 1e3
+    # Rows at one pose and one load cannot tell a q offset from a tracker shift at all.
+    same = calibration.synthesize(Parameters(geom), [1.0] * 4, q_m=0.003, noise_m=1e-5)
+    res = calibration.fit(same, geom, fit_params=["q_offset", "tip_offset"])
+    assert any("barely separate ['q_offset', 'tip_offset']" in w for w in res.warnings)
+    assert res.std_errors == {"q_offset": None, "tip_offset": None}
 
 
 def test_csv_round_trip_and_units(geom: FingerGeometry, tmp_path: Path) -> None:

@@ -88,6 +88,23 @@ def test_statics_compare_and_verify(capsys: pytest.CaptureFixture[str]) -> None:
     assert code == 0 and "warning: Tendon 1 would break" in text and "tension N" in text
 
 
+def test_statics_solver_options_reach_the_solver(capsys: pytest.CaptureFixture[str]) -> None:
+    g, load = FingerGeometry.default(), statics.Load(payload_kg=3.0)
+    aitken = statics.solve(g, 0.0, load, relaxation="aitken", threshold_m=1e-12)
+    plain = statics.solve(g, 0.0, load, relaxation="none", threshold_m=1e-12)
+    assert aitken.iterations != plain.iterations  # so the option shows in the count
+    for rx, ref in (("aitken", aitken), ("none", plain)):
+        out = run_json(
+            capsys, "statics", "--load-kg", "3", "--relaxation", rx, "--threshold-m", "1e-12"
+        )
+        assert out["iterations"] == ref.iterations and out["threshold_m"] == 1e-12
+    # --compare solves the other model with the same options.
+    out = run_json(capsys, "statics", "--load-kg", "3", "--compare", "--threshold-m", "1e-3")
+    printed = statics.solve(g, 0.0, load, model="printed", threshold_m=1e-3)
+    assert printed.iterations < statics.solve(g, 0.0, load, model="printed").iterations
+    np.testing.assert_allclose(out["compare"]["tip_m"], printed.tip_m)
+
+
 def test_thumb_by_name_or_file(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     thumb = HandGeometry.default().fingers[0].geometry
     out = run_json(capsys, "kinematics", "--q", "0", "--finger", "thumb")

@@ -217,20 +217,25 @@ def _statics(args: argparse.Namespace) -> int:
     q, _ = _q_from_pose(args, geom)
     load = _load(args)
     limits = _limits_from(args)
-    res = statics.solve(
-        geom,
-        q,
-        load,
-        model=args.model,
-        threshold_m=args.threshold_m,
-        max_iterations=args.max_iterations,
-        limits=limits,
-    )
+
+    def solve(model: str) -> statics.StaticsResult:
+        return statics.solve(
+            geom,
+            q,
+            load,
+            model=model,
+            threshold_m=args.threshold_m,
+            max_iterations=args.max_iterations,
+            limits=limits,
+            relaxation=args.relaxation,
+        )
+
+    res = solve(args.model)
     out = res.to_json()
     other = None
     if args.compare:
         other_model = "printed" if args.model == "serial" else "serial"
-        other = statics.solve(geom, q, load, model=other_model, limits=limits)
+        other = solve(other_model)
         out["compare"] = {
             "model": other_model,
             "tip_m": other.tip_m.tolist(),
@@ -561,13 +566,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "calibrate", help="fit effective parameters to measured (load, tip) data"
     )
     p.add_argument(
-        "data", metavar="DATA.csv", help="load_kg, [q_m], tip_x_m, tip_y_m | deflection_m"
+        "data",
+        metavar="DATA.csv",
+        help="load_kg, [q_m | theta2_rad], tip_x_m, tip_y_m | deflection_m",
     )
     p.add_argument(
         "--fit",
         metavar="P1,P2",
         help=f"parameters to fit, from {','.join(calibration.PARAMETERS)} (default: "
-        "modulus,q_offset for tip data, modulus for deflection data)",
+        "modulus,q_offset for tip data, modulus,tip_offset for tip data held at theta2, "
+        "modulus for deflection data)",
     )
     p.add_argument("--model", choices=statics.MODELS, default=statics.DEFAULT_MODEL)
     _common(p)

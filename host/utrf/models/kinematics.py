@@ -33,12 +33,7 @@ def joint_angles(geom: FingerGeometry, q: ArrayLike) -> np.ndarray:
 
 def joint_positions(geom: FingerGeometry, q: ArrayLike) -> np.ndarray:
     """Joint 1, Joint 2, Joint 3 and the tip (m), shape q.shape + (4, 2); Joint 1 at the origin."""
-    q = np.asarray(q, dtype=float)
-    phi = q[..., None] * _cumulative_ratios(geom)
-    seg = geom.L * np.stack([np.cos(phi), np.sin(phi)], axis=-1).swapaxes(-1, -2)
-    pts = np.cumsum(seg, axis=-1).swapaxes(-1, -2)
-    origin = np.zeros((*q.shape, 1, 2))
-    return np.concatenate([origin, pts], axis=-2)
+    return chain_positions(geom, joint_angles(geom, q))
 
 
 def tip_position(geom: FingerGeometry, q: ArrayLike) -> np.ndarray:

@@ -304,14 +304,14 @@ def solve_batch(
     active = np.arange(n[0])
     for k in range(1, max_iterations + 1):
         sel = slice(None) if everyone else active
-        th = theta[sel]
+        th, pts_a = theta[sel], pts[sel]
         net_a = net_tensions(
-            geom, _torques(geom, th, pts[sel], force[sel], moment[sel], grasp[sel], gravity)
+            geom, _torques(geom, th, pts_a, force[sel], moment[sel], grasp[sel], gravity)
         )
         stretch_a = net_a * compliance
         plain = configuration(geom, qa[sel], stretch_a, model)  # one pass of Algorithm 1
         pts_plain = kinematics.chain_positions(geom, plain)
-        change = np.hypot(*(pts_plain[:, 3, :] - pts[sel][:, 3, :]).T)
+        change = np.hypot(*(pts_plain[:, 3, :] - pts_a[:, 3, :]).T)
         done = change <= threshold_m
         step = plain - th
         rel = relaxed[sel]
