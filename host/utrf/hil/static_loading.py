@@ -46,7 +46,7 @@ from utrf.datalog import CsvLog, read_log
 from utrf.hil import joint2
 from utrf.hil.bench import Bench, ProgressFn, finite_mean
 from utrf.hil.joint2 import Joint2Frames
-from utrf.hil.tracker import Registration, TrackerError, register
+from utrf.hil.tracker import Registration, TrackerError, mean_position, register
 from utrf.models import calibration, kinematics, statics
 from utrf.models.geometry import FingerGeometry
 from utrf.models.planning import Target, plan
@@ -379,22 +379,20 @@ def _registration(
             bench.hand.move({f: th}, duration=0.4, tolerance=config.settle_tolerance_rad)
             bench.sleep(config.settle_s)
             _check_faults(bench, f, seen, "registration")
-            samples = []
+            readings = []
             frames.take()  # from here on
             for _ in range(n):
                 bench.sleep(1.0 / config.tracker_hz)
-                s = bench.tracker.read()
-                if s.visible:
-                    samples.append(s.position_m)
-            if not samples:
+                readings.append(bench.tracker.read())
+            raw, visible = mean_position(readings)
+            if not visible:
                 raise RunStopped(f"registration: the tracker never saw the sensor at pose {k}")
-            raw = np.mean(samples, axis=0)
             th_m, n_frames, _ = frames.take()  # every frame of the pose's recording
             if n_frames == 0:
                 st = bench.hand.latest
                 th_m = st.fingers[f].theta2 if st is not None else th
             tip = kinematics.tip_position(geometry, kinematics.q_from_theta2(geometry, th_m))
-            log.write([k, f"{th_m:.6f}", tip[0], tip[1], *raw, len(samples)])
+            log.write([k, f"{th_m:.6f}", tip[0], tip[1], *raw, visible])
             model_pts.append(tip)
             raw_pts.append(raw)
     try:
