@@ -43,8 +43,9 @@ from typing import Any
 import numpy as np
 
 from utrf.datalog import CsvLog, read_log
+from utrf.hand.state import fault_names
 from utrf.hil import joint2
-from utrf.hil.bench import Bench, ProgressFn, finite_mean
+from utrf.hil.bench import BENCH_GAINS, Bench, ProgressFn, finite_mean
 from utrf.hil.joint2 import Joint2Frames
 from utrf.hil.tracker import Registration, TrackerError, mean_position, register
 from utrf.models import calibration, kinematics, statics
@@ -339,8 +340,6 @@ def _check_faults(bench: Bench, finger: int, seen: int, during: str) -> None:
     if new:
         raise RunStopped(f"{during}: {new[0]}")
     if st is not None and st.fingers[finger].faults:
-        from utrf.hand.state import fault_names
-
         raise RunStopped(
             f"{during}: finger {finger} has latched {fault_names(int(st.fingers[finger].faults))}"
         )
@@ -432,9 +431,7 @@ def run(
         progress(f"resuming: {len(done)} of {len(schedule)} steps done, {len(todo)} to go")
     hand.start_log(out / "telemetry.csv")
     hand.set_telemetry(config.telemetry_hz)
-    if bench.emulated and bench.board is not None:
-        from utrf.hil.bench import BENCH_GAINS
-
+    if bench.emulated:
         hand.set_gains(f, **BENCH_GAINS)
     hand.clear_faults(f)
     hand.move({f: config.theta2_rad}, duration=0.5, tolerance=config.settle_tolerance_rad)
