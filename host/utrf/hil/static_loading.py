@@ -494,8 +494,14 @@ def _run_steps(
                 if not vis:
                     raise RunStopped(f"{during}: the tracker never saw the sensor")
                 xy = np.array([[float(r["tip_x_m"]), float(r["tip_y_m"])] for r in vis])
+                tip, tip_sd = xy.mean(axis=0), np.hypot(*xy.std(axis=0))
                 th = np.array([float(r["theta2_rad"]) for r in rows])
                 n_frames = np.array([int(r["theta2_frames"]) for r in rows])
+                theta2 = _frames_mean(th, n_frames)
+                mean = {
+                    c: finite_mean([float(r[c]) for r in rows])
+                    for c in ("duty_a", "duty_b", "current_a_a")
+                }
                 steps.write(
                     {
                         "step": step,
@@ -506,24 +512,21 @@ def _run_steps(
                         "t_end_s": f"{bench.now():.6f}",
                         "samples": len(rows),
                         "visible": len(vis),
-                        "tip_x_m": f"{xy[:, 0].mean():.7f}",
-                        "tip_y_m": f"{xy[:, 1].mean():.7f}",
-                        "tip_sd_m": f"{np.hypot(*xy.std(axis=0)):.7f}",
-                        "theta2_rad": f"{_frames_mean(th, n_frames):.6f}",
+                        "tip_x_m": f"{tip[0]:.7f}",
+                        "tip_y_m": f"{tip[1]:.7f}",
+                        "tip_sd_m": f"{tip_sd:.7f}",
+                        "theta2_rad": f"{theta2:.6f}",
                         "theta2_sd_rad": f"{np.nanstd(th):.6f}",
                         "theta2_frames": int(n_frames.sum()),
-                        "duty_a": f"{finite_mean([float(r['duty_a']) for r in rows]):.4f}",
-                        "duty_b": f"{finite_mean([float(r['duty_b']) for r in rows]):.4f}",
-                        "current_a_a": f"{finite_mean([float(r['current_a_a']) for r in rows]):.4f}",  # noqa: E501
+                        **{c: f"{v:.4f}" for c, v in mean.items()},
                     }
                 )
                 ran += 1
                 progress(
                     f"[{step + 1:2d}/{n_steps}] repeat {repeat + 1}/{config.repeats}  "
-                    f"payload {load * 1e3:5.0f} g  tip ({xy[:, 0].mean() * 1e3:8.3f}, "
-                    f"{xy[:, 1].mean() * 1e3:7.3f}) mm  sd {np.hypot(*xy.std(axis=0)) * 1e3:.3f} mm"
-                    f"  theta2 {math.degrees(_frames_mean(th, n_frames)):+.2f} deg  "
-                    f"duty A {finite_mean([float(r['duty_a']) for r in rows]):.2f}"
+                    f"payload {load * 1e3:5.0f} g  tip ({tip[0] * 1e3:8.3f}, "
+                    f"{tip[1] * 1e3:7.3f}) mm  sd {tip_sd * 1e3:.3f} mm"
+                    f"  theta2 {math.degrees(theta2):+.2f} deg  duty A {mean['duty_a']:.2f}"
                 )
         finally:
             if current_load:
