@@ -57,13 +57,23 @@ def test_hits_are_found_and_the_grasp_recovers(firmware_elf: Path, tmp_path: Pat
     assert json.loads((out / "results.json").read_text()) == before
 
 
-def test_a_pose_that_is_not_a_grasp_is_refused(firmware_elf: Path, tmp_path: Path) -> None:
+def test_a_pose_that_is_not_a_grasp_is_refused(
+    firmware_elf: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     bench = open_emulated(seed=0, tracked_finger=1, truth=EmulatedTruth(actuator=None))
     try:
         with pytest.raises(RunError, match=r"not a grasp pose; grasp poses: .*grasp-bottle"):
             gh.run(bench, gh.GraspHoldConfig(pose="fist", duration_s=3.0), tmp_path / "g")
+        with pytest.raises(RunError, match="'nope' is not a grasp pose"):
+            gh.run(bench, gh.GraspHoldConfig(pose="nope", duration_s=3.0), tmp_path / "g")
     finally:
         bench.close()
+    assert not (tmp_path / "g").exists()  # refused before anything was written
+    # the command says so and exits 2 (bad input), with nothing left behind
+    cli = ["hil", "grasp-hold", "--emulated", "--out", str(tmp_path / "c"), "--quiet"]
+    assert main([*cli, "--pose", "nope", "--duration-s", "3"]) == 2
+    assert "'nope' is not a grasp pose" in capsys.readouterr().err
+    assert not (tmp_path / "c").exists()
     with pytest.raises(RunError, match="hold of at least"):
         gh.GraspHoldConfig(duration_s=2.0, hits=1)
 

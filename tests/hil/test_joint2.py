@@ -11,7 +11,7 @@ import pytest
 
 from utrf.hil import joint2
 from utrf.hil.joint2 import COUNT_RAD, Joint2Frames
-from utrf.models import calibration
+from utrf.models import calibration, kinematics
 from utrf.models.geometry import HandGeometry
 
 GEOM = HandGeometry.default().fingers[1].geometry
@@ -73,8 +73,11 @@ def test_step_covariances_see_through_the_finger_moving() -> None:
 def test_the_jacobian_is_the_held_tips_slope() -> None:
     th, loads = np.array([0.0, 0.3]), np.array([2.0, 0.0])
     jac = joint2.tip_jacobian(GEOM, th, loads)
-    # about R2 * (L-weighted) per rad at the straight finger: the tip rises ~0.33 mm a mrad
+    # about R2 * (L-weighted) per rad at the straight finger: the tip rises ~0.31 mm a mrad
     assert jac[0, 1] == pytest.approx(0.33, rel=0.1)
+    # the tendons' stretch hardly changes the slope: the rigid finger's R2 d tip / dq
+    rigid = GEOM.guide_radii_m[1] * kinematics.jacobian(GEOM, kinematics.q_from_theta2(GEOM, th))
+    np.testing.assert_allclose(jac, rigid, atol=0.01)
     h = 1e-3
     hi = calibration.hold_q(GEOM, th + h, loads)
     lo = calibration.hold_q(GEOM, th - h, loads)

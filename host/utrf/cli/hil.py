@@ -165,10 +165,7 @@ def _run_guarded(command: str, body: Any) -> int:
 
     try:
         return int(body())
-    except RunStopped as exc:
-        error(command, f"stopped: {exc}; every sample taken is in the output directory")
-        return EXIT_NOT_DONE
-    except HandError as exc:
+    except (RunStopped, HandError) as exc:
         error(command, f"stopped: {exc}; every sample taken is in the output directory")
         return EXIT_NOT_DONE
     except (RunError, ValueError) as exc:

@@ -121,11 +121,11 @@ def run(
     names = list(hand.fingers)
     if (out / "samples.csv").exists():
         raise RunError(f"{out} already holds a grasp hold; give a new --out")
-    out.mkdir(parents=True, exist_ok=True)
-    pose = hand.poses[config.pose]
-    if pose.grasp is None:
+    pose = hand.poses.get(config.pose)
+    if pose is None or pose.grasp is None:  # refused before anything is written
         grasps = [p for p in hand.poses if hand.poses[p].grasp is not None]
         raise RunError(f"pose {config.pose!r} is not a grasp pose; grasp poses: {grasps}")
+    out.mkdir(parents=True, exist_ok=True)
     goal = pose.theta2(hand.geometry)
     _write_json(out / "meta.json", {"config": config.to_json(), **(meta or {})})
     hand.start_log(out / "telemetry.csv")

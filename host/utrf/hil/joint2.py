@@ -2,7 +2,7 @@
 
 The firmware reads each finger's AS5600 (analog, 10-90 % of 5 V a turn) with the MEGA's
 10-bit ADC: one count is ``COUNT_RAD`` = 2π / (0.8 · 1024) = 7.67 mrad of Joint-2 angle,
-about 2.5 mm at the straight finger's tip, as much as the deflections a static loading run
+about 2.4 mm at the straight finger's tip, as much as the deflections a static loading run
 fits. A step's angle is therefore the mean of many readings, and what that mean is worth
 depends on the encoder's noise (``hil/README.md`` has the measurements):
 
@@ -13,8 +13,9 @@ depends on the encoder's noise (``hil/README.md`` has the measurements):
   0.43 count of noise).
 - **Not dithered** (a quiet encoder): the readings barely move, and the finger's hold, closed
   on the reading with integral action, parks a loaded finger at one edge of a count (measured:
-  without encoder noise the loaded steps sat 3.7 mrad from the unloaded ones and the fitted
-  modulus came out 9 % low). Averaging does not help; only the bound of half a count does.
+  without encoder noise the loaded steps' true angle sat 3.6-3.8 mrad above the reading, the
+  unloaded ones' 1.9, and the fitted modulus came out 8 % low). Averaging does not help; only
+  the bound of half a count does.
 
 :class:`Joint2Frames` collects every telemetry frame's reading so a tracker sample gets the
 mean of all of them, not the last one; :func:`step_covariances` turns the paired samples into

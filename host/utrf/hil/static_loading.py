@@ -43,10 +43,11 @@ from typing import Any
 import numpy as np
 
 from utrf.datalog import CsvLog, read_log
+from utrf.hand.state import fault_names
 from utrf.hil import joint2
-from utrf.hil.bench import Bench, ProgressFn, finite_mean
+from utrf.hil.bench import BENCH_GAINS, Bench, ProgressFn, finite_mean
 from utrf.hil.joint2 import Joint2Frames
-from utrf.hil.tracker import Registration, TrackerError, register
+from utrf.hil.tracker import Registration, TrackerError, mean_position, register
 from utrf.models import calibration, kinematics, statics
 from utrf.models.geometry import FingerGeometry
 from utrf.models.planning import Target, plan
@@ -339,8 +340,6 @@ def _check_faults(bench: Bench, finger: int, seen: int, during: str) -> None:
     if new:
         raise RunStopped(f"{during}: {new[0]}")
     if st is not None and st.fingers[finger].faults:
-        from utrf.hand.state import fault_names
-
         raise RunStopped(
             f"{during}: finger {finger} has latched {fault_names(int(st.fingers[finger].faults))}"
         )
@@ -379,22 +378,20 @@ def _registration(
             bench.hand.move({f: th}, duration=0.4, tolerance=config.settle_tolerance_rad)
             bench.sleep(config.settle_s)
             _check_faults(bench, f, seen, "registration")
-            samples = []
+            readings = []
             frames.take()  # from here on
             for _ in range(n):
                 bench.sleep(1.0 / config.tracker_hz)
-                s = bench.tracker.read()
-                if s.visible:
-                    samples.append(s.position_m)
-            if not samples:
+                readings.append(bench.tracker.read())
+            raw, visible = mean_position(readings)
+            if not visible:
                 raise RunStopped(f"registration: the tracker never saw the sensor at pose {k}")
-            raw = np.mean(samples, axis=0)
             th_m, n_frames, _ = frames.take()  # every frame of the pose's recording
             if n_frames == 0:
                 st = bench.hand.latest
                 th_m = st.fingers[f].theta2 if st is not None else th
             tip = kinematics.tip_position(geometry, kinematics.q_from_theta2(geometry, th_m))
-            log.write([k, f"{th_m:.6f}", tip[0], tip[1], *raw, len(samples)])
+            log.write([k, f"{th_m:.6f}", tip[0], tip[1], *raw, visible])
             model_pts.append(tip)
             raw_pts.append(raw)
     try:
@@ -434,9 +431,7 @@ def run(
         progress(f"resuming: {len(done)} of {len(schedule)} steps done, {len(todo)} to go")
     hand.start_log(out / "telemetry.csv")
     hand.set_telemetry(config.telemetry_hz)
-    if bench.emulated and bench.board is not None:
-        from utrf.hil.bench import BENCH_GAINS
-
+    if bench.emulated:
         hand.set_gains(f, **BENCH_GAINS)
     hand.clear_faults(f)
     hand.move({f: config.theta2_rad}, duration=0.5, tolerance=config.settle_tolerance_rad)
@@ -499,8 +494,14 @@ def _run_steps(
                 if not vis:
                     raise RunStopped(f"{during}: the tracker never saw the sensor")
                 xy = np.array([[float(r["tip_x_m"]), float(r["tip_y_m"])] for r in vis])
+                tip, tip_sd = xy.mean(axis=0), np.hypot(*xy.std(axis=0))
                 th = np.array([float(r["theta2_rad"]) for r in rows])
                 n_frames = np.array([int(r["theta2_frames"]) for r in rows])
+                theta2 = _frames_mean(th, n_frames)
+                mean = {
+                    c: finite_mean([float(r[c]) for r in rows])
+                    for c in ("duty_a", "duty_b", "current_a_a")
+                }
                 steps.write(
                     {
                         "step": step,
@@ -511,24 +512,21 @@ def _run_steps(
                         "t_end_s": f"{bench.now():.6f}",
                         "samples": len(rows),
                         "visible": len(vis),
-                        "tip_x_m": f"{xy[:, 0].mean():.7f}",
-                        "tip_y_m": f"{xy[:, 1].mean():.7f}",
-                        "tip_sd_m": f"{np.hypot(*xy.std(axis=0)):.7f}",
-                        "theta2_rad": f"{_frames_mean(th, n_frames):.6f}",
+                        "tip_x_m": f"{tip[0]:.7f}",
+                        "tip_y_m": f"{tip[1]:.7f}",
+                        "tip_sd_m": f"{tip_sd:.7f}",
+                        "theta2_rad": f"{theta2:.6f}",
                         "theta2_sd_rad": f"{np.nanstd(th):.6f}",
                         "theta2_frames": int(n_frames.sum()),
-                        "duty_a": f"{finite_mean([float(r['duty_a']) for r in rows]):.4f}",
-                        "duty_b": f"{finite_mean([float(r['duty_b']) for r in rows]):.4f}",
-                        "current_a_a": f"{finite_mean([float(r['current_a_a']) for r in rows]):.4f}",  # noqa: E501
+                        **{c: f"{v:.4f}" for c, v in mean.items()},
                     }
                 )
                 ran += 1
                 progress(
                     f"[{step + 1:2d}/{n_steps}] repeat {repeat + 1}/{config.repeats}  "
-                    f"payload {load * 1e3:5.0f} g  tip ({xy[:, 0].mean() * 1e3:8.3f}, "
-                    f"{xy[:, 1].mean() * 1e3:7.3f}) mm  sd {np.hypot(*xy.std(axis=0)) * 1e3:.3f} mm"
-                    f"  theta2 {math.degrees(_frames_mean(th, n_frames)):+.2f} deg  "
-                    f"duty A {finite_mean([float(r['duty_a']) for r in rows]):.2f}"
+                    f"payload {load * 1e3:5.0f} g  tip ({tip[0] * 1e3:8.3f}, "
+                    f"{tip[1] * 1e3:7.3f}) mm  sd {tip_sd * 1e3:.3f} mm"
+                    f"  theta2 {math.degrees(theta2):+.2f} deg  duty A {mean['duty_a']:.2f}"
                 )
         finally:
             if current_load:
