@@ -151,6 +151,25 @@ class TestFaultInjection:
         assert not board.pins.stby.any()  # all off after the reset
         assert client.request(m.GetState()).mode == COAST5
 
+    def test_a_reset_that_cuts_a_frame_still_delivers_boot(
+        self, board: EmulatedBoard, client: SimClient
+    ) -> None:
+        # The board sends a lone 0x00 before boot: the state frame the reset cut off ends
+        # there (one damaged frame) instead of swallowing boot, so the host learns of the reset.
+        assert isinstance(client.request(m.SetTelemetry(rate_hz=m.MAX_TELEMETRY_HZ)), m.Ack)
+        for _ in range(100):
+            board.run_for(board.exchange_period)
+            data = client.port.read(1 << 16)
+            list(client.decoder.feed(data))
+            if data and data[-1] != 0:
+                break  # the host holds part of a frame
+        else:
+            pytest.fail("never caught the line mid-frame")
+        damaged = client.errors
+        board.reset()
+        assert client.wait_boot().reset_cause == m.ResetCause.RESET_PIN
+        assert client.errors == damaged + 1
+
 
 def test_saved_configuration_survives_in_the_eeprom_file(
     firmware_elf: Path, tmp_path: Path

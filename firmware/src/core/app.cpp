@@ -176,6 +176,10 @@ void setup() {
     b.save_seq = -1;
     b.board_seq = proto::kBoardSeqFlag;
     b.boot_sent = false;
+    // A lone 0x00 ahead of boot ends whatever frame the reset cut off on the host's side, so
+    // boot arrives whole (protocol/README.md, Receiving). The transmit buffer is empty here.
+    static const uint8_t kDelimiter = 0;
+    hal::serial_write(&kDelimiter, 1);
     b.reply_len = 0;
     b.telemetry_hz = 0;
     b.telemetry_acc = 0;
