@@ -20,12 +20,11 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
-import platform
 import subprocess
 import sys
 from pathlib import Path
 
-from utrf.benchdoc import write_section
+from utrf.benchdoc import cpu_name, write_section
 
 REPO = Path(__file__).resolve().parents[1]
 ELF = REPO / "build" / "firmware" / "utrf.elf"
@@ -149,6 +148,20 @@ def verdict(loads: list[dict]) -> list[str]:
     ]
 
 
+def silent_verdict(loads: list[dict]) -> list[str]:
+    """The one tick in which the host's silence puts every finger on the safe action."""
+    silent = next((d for d in loads if d["scenario"] == "silent"), None)
+    if silent is None:
+        return []
+    own, isr = silent["sim_own_worst_cycles"], silent["sim_isr_worst_cycles"]
+    return [
+        "",
+        f"When the host falls silent, the tick that puts all five fingers on the safe action "
+        f"(HOLD) is the row's worst: {own:,} cycles ({pct(own)}), {isr:,} ({pct(isr)}) for "
+        f"the whole interrupt; {silent['fault_frames']} fault frames report it.",
+    ]
+
+
 def pct(cycles: float) -> str:
     return f"{100 * cycles / TICK_CYCLES:.1f} %"
 
@@ -160,7 +173,7 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         "## Firmware",
         "",
         f"Measured with `make bench-firmware` (`python tools/bench_firmware.py`) on "
-        f"{platform.machine()}, avr-gcc 5.4 (Debian), simavr 1.6, {now}.",
+        f"{cpu_name()}, avr-gcc 5.4 (Debian), simavr 1.6, {now}.",
         "",
         "### Memory (`avr-size -A build/firmware/utrf.elf`)",
         "",
@@ -194,6 +207,7 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         "idle": "heartbeats only",
         "typical": "set_targets at 200 Hz",
         "stress": "set_targets back to back (line saturated)",
+        "silent": "none: the host falls silent, HOLD at the heartbeat timeout",
     }
     for d in loads:
         fm, fw = d["tick_mean_us"] * 16, d["tick_worst_us"] * 16
@@ -218,7 +232,7 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
             f"| {what[d['scenario']]} | {d['state_frames']} / {d['tx_dropped']} | "
             f"{d['rx_frames']} / {d['rx_overruns']} | {d['sim_nested_interrupts']:,} |"
         )
-    lines += ["", *verdict(loads), ""]
+    lines += ["", *verdict(loads), *silent_verdict(loads), ""]
     lines += [
         "### PID step response (default gains, reference plant, host build of the core)",
         "",
@@ -244,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     mem = memory()
     tbl = table()
-    loads = [tick_load(s, args.seconds) for s in ("idle", "typical", "stress")]
+    loads = [tick_load(s, args.seconds) for s in ("idle", "typical", "stress", "silent")]
     steps = step_figures()
     section = render(mem, tbl, loads, steps, args.seconds)
     print(section)

@@ -8,6 +8,8 @@
 //   idle      no requests beyond heartbeats (20 Hz)
 //   typical   set_targets at 200 Hz
 //   stress    set_targets back to back: the receive line saturated at 1 Mbaud
+//   silent    nothing at all: after the heartbeat timeout (0.5 s by default) the safe action
+//             (HOLD by default) takes every finger in one tick, the tick this row's worst shows
 // The host's frames drift against the tick (its clock is not the board's): each period is a
 // little longer than nominal, so that over a run of a second or more the frames start at every
 // phase of the tick, the worst (a frame arriving while the tick runs) included.
@@ -342,7 +344,7 @@ int run_pins() {
 int main(int argc, char** argv) {
     if (argc != 4 && argc != 6) {
         fprintf(stderr,
-                "usage: tick_bench <elf> idle|typical|stress|pins <seconds> [<tick entry> "
+                "usage: tick_bench <elf> idle|typical|stress|silent|pins <seconds> [<tick entry> "
                 "<tick return>] (byte addresses, hex)\n");
         return 2;
     }
@@ -353,7 +355,7 @@ int main(int argc, char** argv) {
     const std::string scenario = argv[2];
     const double seconds = atof(argv[3]);
     if (scenario != "idle" && scenario != "typical" && scenario != "stress" &&
-        scenario != "pins") {
+        scenario != "silent" && scenario != "pins") {
         fprintf(stderr, "tick_bench: unknown scenario %s\n", scenario.c_str());
         return 2;
     }
@@ -419,6 +421,8 @@ int main(int argc, char** argv) {
         const double t = g.avr->cycle / kCpuHz;
         if (scenario == "stress") {
             if (g.to_board.size() < 64) send(targets(t));
+            run_until(t + 0.0005);
+        } else if (scenario == "silent") {
             run_until(t + 0.0005);
         } else {
             if (t >= next_send) {
