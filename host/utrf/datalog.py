@@ -3,7 +3,9 @@
 Every row is written and flushed to the kernel as it arrives, so a run killed at any moment
 keeps every sample it took; an fsync every ``fsync_period_s`` bounds the loss on power
 failure. Reopening a log appends to it when the header matches. A row cut short by a kill
-is skipped, and counted, by :func:`read_log`.
+is skipped, and counted, by :func:`read_log`; reopening the log drops it (it was never a
+whole sample, and a row cut inside its last field would otherwise read as a full row with a
+shortened number).
 """
 
 from __future__ import annotations
@@ -39,20 +41,18 @@ class CsvLog:
         if existing:
             with self.path.open("rb") as f:
                 header = f.readline().decode("utf-8", "replace").rstrip("\r\n")
-                f.seek(-1, os.SEEK_END)
-                ends_clean = f.read(1) == b"\n"
             found = next(csv.reader([header]), [])
             if tuple(found) != self.columns:
                 raise LogFormatError(
                     f"{self.path}: existing log has columns {found}, not {list(self.columns)}; "
                     "write to a new file"
                 )
+            _drop_cut_row(self.path)
+            existing = self.path.stat().st_size > 0  # not if all there was, was a cut header
         self._file = self.path.open("a", newline="", encoding="utf-8")
         self._writer = csv.writer(self._file, lineterminator="\n")
         if not existing:
             self._writer.writerow(self.columns)
-        elif not ends_clean:
-            self._file.write("\n")  # end the row a killed writer left half-written
         self._file.flush()
         self._last_sync = time.monotonic()
         self.rows_written = 0
@@ -93,6 +93,25 @@ class CsvLog:
         tb: TracebackType | None,
     ) -> None:
         self.close()
+
+
+def _drop_cut_row(path: Path, chunk: int = 1 << 16) -> None:
+    """Truncate a file that does not end in a newline back to its last one."""
+    with path.open("r+b") as f:
+        end = f.seek(0, os.SEEK_END)
+        pos = end
+        while pos > 0:
+            start = max(0, pos - chunk)
+            f.seek(start)
+            block = f.read(pos - start)
+            if pos == end and block.endswith(b"\n"):
+                return  # ends clean
+            nl = block.rfind(b"\n")
+            if nl >= 0:
+                f.truncate(start + nl + 1)
+                return
+            pos = start
+        f.truncate(0)  # not one whole line
 
 
 @dataclass(frozen=True)

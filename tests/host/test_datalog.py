@@ -59,7 +59,28 @@ def test_a_half_written_row_is_skipped_and_the_next_append_is_clean(tmp_path: Pa
         log.write([2, 5, 6])
     data = read_log(p)
     assert data.column("t") == [0.0, 2.0]
-    assert data.skipped == 1  # the cut row, now ended, has the wrong width
+    assert data.skipped == 0  # the cut row, never a whole sample, was dropped on reopening
+    assert p.read_text() == "t,a,b\n0,1,2\n2,5,6\n"
+
+
+def test_a_row_cut_inside_its_last_field_is_not_read_as_a_shortened_value(
+    tmp_path: Path,
+) -> None:
+    p = tmp_path / "log.csv"
+    p.write_text("t,a,b\n0,1,2\n1,3,4")  # killed while writing b = 45: full width, cut value
+    with CsvLog(p, COLS) as log:
+        log.write([2, 5, 6])
+    data = read_log(p)
+    assert data.column("b") == [2.0, 6.0]
+    assert data.skipped == 0
+
+
+def test_a_log_cut_inside_its_first_row_gets_its_header_again(tmp_path: Path) -> None:
+    p = tmp_path / "log.csv"
+    p.write_text("t,a,b")  # killed before the header's newline
+    with CsvLog(p, COLS) as log:
+        log.write([1, 2, 3])
+    assert read_log(p, COLS).column("t") == [1.0]
 
 
 def test_a_killed_writer_keeps_every_row_it_wrote(tmp_path: Path) -> None:
