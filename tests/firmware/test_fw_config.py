@@ -76,6 +76,7 @@ def custom_config(sim: Sim) -> None:
             motor_invert=1,
         )
     )
+    sim.ok(m.SetMotion(finger=3, max_speed=2.5, max_accel=20.0, kv=0.5, ka=0.01))
 
 
 def settings(sim: Sim) -> list[m.Message]:
@@ -85,6 +86,7 @@ def settings(sim: Sim) -> list[m.Message]:
             sim.ok(m.GetGains(finger=f)),
             sim.ok(m.GetLimits(finger=f)),
             sim.ok(m.GetFingerConfig(finger=f)),
+            sim.ok(m.GetMotion(finger=f)),
         ]
     return out
 
@@ -98,7 +100,7 @@ def test_image_layout_magic_version_length_crc(sim: Sim) -> None:
     assert isinstance(save(sim), m.Ack)
     data = image(sim)
     magic, version, length = HEADER.unpack_from(data)
-    assert (magic, version) == (MAGIC, 1)
+    assert (magic, version) == (MAGIC, 2)
     assert length == sim.lib.fw_config_body_bytes() == len(data) - HEADER.size - 2
     assert int.from_bytes(data[-2:], "little") == crc16_ccitt(data[:-2])
 
@@ -134,7 +136,7 @@ def test_any_damaged_byte_loads_defaults(sim: Sim, offset: int) -> None:
 def test_another_layout_version_loads_defaults(sim: Sim) -> None:
     assert isinstance(save(sim), m.Ack)
     data = bytearray(image(sim))
-    struct.pack_into("<H", data, 4, 2)
+    struct.pack_into("<H", data, 4, 1)  # the layout before Motion
     write_image(sim, reseal(bytes(data)))
     sim.power_on()
     assert sim.status().config_status == m.ConfigStatus.DEFAULTS_VERSION

@@ -27,6 +27,15 @@ VALID: dict[type[m.Message], m.Message] = {
     ),
     m.SetMode: m.SetMode(mask=0b1, mode=(1, 0, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5),
     m.SetTelemetry: m.SetTelemetry(rate_hz=0),
+    m.Move: m.Move(
+        move_id=1,
+        kind=m.TargetKind.JOINT2_ANGLE,
+        mask=0b1,
+        value=(0.2, 0, 0, 0, 0),
+        duration=(0.5, 0, 0, 0, 0),
+    ),
+    m.GetMotion: m.GetMotion(finger=1),
+    m.SetMotion: m.SetMotion(finger=1, max_speed=2.0, max_accel=10.0, kv=0.3, ka=0.01),
     m.GetGains: m.GetGains(finger=1),
     m.SetGains: m.SetGains(
         finger=1,
@@ -78,6 +87,7 @@ def snapshot(sim: Sim) -> tuple:
             sim.ok(m.GetGains(finger=f)),
             sim.ok(m.GetLimits(finger=f)),
             sim.ok(m.GetFingerConfig(finger=f)),
+            sim.ok(m.GetMotion(finger=f)),
         ]
     fingers = [(x.mode, x.faults, x.target) for x in (sim.finger(f) for f in range(5))]
     eeprom = bytes(sim.eeprom()[: sim.lib.fw_config_image_bytes()])
@@ -143,6 +153,9 @@ def test_boot_is_the_first_frame(fwlib) -> None:
 def test_every_request_gets_its_reply(sim: Sim, cls: type[m.Message]) -> None:
     if cls is m.CalibrateZero:
         sim.run(2)  # needs a reading first
+    if cls is m.Move:  # moves a finger under closed-loop control
+        sim.run(2)
+        sim.ok(m.SetMode(mask=0b1, mode=(2, 0, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
     reply = sim.request(VALID[cls], ms=2 if cls is not m.SaveConfig else 2000)
     expected = cls.REPLY
     assert isinstance(reply.msg, expected), reply.msg
@@ -172,7 +185,7 @@ def test_out_of_range_field_is_refused_and_changes_nothing(sim: Sim, cls, index,
     assert snapshot(sim) == before
 
 
-@pytest.mark.parametrize("msg_id", [0x00, 0x04, 0x13, 0x37, 0x81, 0x90, 0xF0, 0xFF])
+@pytest.mark.parametrize("msg_id", [0x00, 0x04, 0x14, 0x37, 0x81, 0x90, 0xF0, 0xFF])
 def test_unknown_ids_are_refused(sim: Sim, msg_id: int) -> None:
     before = snapshot(sim)
     nack = sim.nack(msg_id, b"\x01\x02")

@@ -54,6 +54,13 @@ struct Board {
 
     uint32_t watch_ticks;  // loop()'s view of the tick, for the watchdog
     uint32_t watch_ms;
+
+    // The last move (dispatch.cpp): a resend (same seq and body) gets its reply again and
+    // restarts nothing. Zero at start-up (static storage): no move yet.
+    bool move_memo;
+    uint8_t move_seq;
+    uint8_t move_body[34];   // proto::Move::kSize
+    uint8_t move_reply[13];  // proto::Moving::kSize
 };
 
 Board& board();

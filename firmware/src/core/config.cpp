@@ -10,9 +10,10 @@
 namespace utrf {
 namespace config {
 
-static_assert(sizeof(Gains) == 26 && sizeof(Limits) == 26 && sizeof(Hardware) == 7,
+static_assert(sizeof(Gains) == 26 && sizeof(Limits) == 26 && sizeof(Hardware) == 7 &&
+                  sizeof(Motion) == 16,
               "the EEPROM layout is packed: no padding may creep in");
-static_assert(sizeof(Config) == 5 * 59 + 3, "a change of layout needs a new kLayoutVersion");
+static_assert(sizeof(Config) == 5 * 75 + 3, "a change of layout needs a new kLayoutVersion");
 
 Gains default_gains() {
     // Conservative gains for a tendon finger on a geared DC motor: full duty at about 0.3 rad
@@ -42,11 +43,27 @@ Limits default_limits(uint8_t finger) {
     return l;
 }
 
+Motion default_motion() {
+    // For the reference plant (the emulator's, host/utrf/emulator/plant.py): two 100 N,
+    // 50 mm/s actuators pulling against each other through R2 = 9.5 mm. Their back-EMF makes
+    // the finger's speed about proportional to the net duty: 25 mm/s of tendon per unit of
+    // duty, 2.6 rad/s of Joint 2, so kv = 0.38 duty per rad/s; the 2 x 20 kg reflected mass
+    // needs 0.4 duty per m/s^2 of tendon, ka = 0.0038 duty per rad/s^2. max_speed leaves the
+    // PID a quarter of the 0.7 duty the default gains give the controller (0.45 / kv).
+    Motion m;
+    m.max_speed = 1.2f;
+    m.max_accel = 8.0f;
+    m.kv = 0.38f;
+    m.ka = 0.0038f;
+    return m;
+}
+
 void defaults(Config& cfg) {
     memset(&cfg, 0, sizeof cfg);
     for (uint8_t f = 0; f < proto::kFingerCount; ++f) {
         cfg.finger[f].gains = default_gains();
         cfg.finger[f].limits = default_limits(f);
+        cfg.finger[f].motion = default_motion();
         cfg.finger[f].hw.actuation = (uint8_t)proto::Actuation::ANTAGONISTIC;
         // Mounted so the straight finger reads mid-band (2.5 V): the Joint-2 range then stays
         // clear of the sensor's wrap from 90 % to 10 %.
@@ -97,6 +114,9 @@ bool valid(const Config& cfg) {
         proto::SetFingerConfig h;
         fill_hardware(c.hw, f, h);
         if (!passes(h)) return false;
+        proto::SetMotion mo;
+        fill_motion(c.motion, f, mo);
+        if (!passes(mo)) return false;
     }
     proto::SetSafety s;
     s.heartbeat_timeout = cfg.safety.heartbeat_timeout_ms;

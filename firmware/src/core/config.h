@@ -49,10 +49,19 @@ struct Hardware {
     uint8_t motor_invert;
 };
 
+// Moves (set_motion; core/path.h): the limits a move's path keeps, and the feedforward gains.
+struct Motion {
+    float max_speed;  // rad/s
+    float max_accel;  // rad/s^2
+    float kv;         // duty per rad/s of the path's speed
+    float ka;         // duty per rad/s^2 of its acceleration
+};
+
 struct Finger {
     Gains gains;
     Limits limits;
     Hardware hw;
+    Motion motion;
 };
 
 struct Safety {
@@ -73,12 +82,13 @@ struct Header {
 #pragma pack(pop)
 
 static const uint32_t kMagic = 0x46525455UL;  // "UTRF" in little-endian bytes
-static const uint16_t kLayoutVersion = 1;
+static const uint16_t kLayoutVersion = 2;  // 2: Motion added
 static const uint16_t kImageBytes = sizeof(Header) + sizeof(Config) + 2;
 
 void defaults(Config& cfg);
 Gains default_gains();
 Limits default_limits(uint8_t finger);
+Motion default_motion();
 
 // Checks beyond the protocol's per-field ranges. They return 0xFF when the values are
 // acceptable, or the field index (the nack detail) of the first field that is not.
@@ -123,6 +133,15 @@ void fill_hardware(const Hardware& h, uint8_t f, Msg& m) {
     m.encoder_offset = h.encoder_offset;
     m.encoder_invert = h.encoder_invert;
     m.motor_invert = h.motor_invert;
+}
+
+template <typename Msg>
+void fill_motion(const Motion& v, uint8_t f, Msg& m) {
+    m.finger = f;
+    m.max_speed = v.max_speed;
+    m.max_accel = v.max_accel;
+    m.kv = v.kv;
+    m.ka = v.ka;
 }
 
 // ---- EEPROM ------------------------------------------------------------------------------------

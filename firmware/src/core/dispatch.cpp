@@ -1,10 +1,13 @@
 #include "dispatch.h"
 
+#include <string.h>
+
 #include "../generated/protocol_messages.h"
 #include "../hal/hal.h"
 #include "encoder.h"
 #include "fixed.h"
 #include "kinematics.h"
+#include "path.h"
 
 namespace utrf {
 namespace dispatch {
@@ -138,6 +141,108 @@ void set_targets(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
             if (m.mask & (1u << f)) b.hand.finger(f).set_target(bu[f]);
         }
     }
+    ack(b, seq, m.kId);
+}
+
+// ---- move: a path per finger on the board's clock (core/path.h) -------------------------------
+
+static_assert(sizeof(((app::Board*)0)->move_body) == Move::kSize &&
+                  sizeof(((app::Board*)0)->move_reply) == Moving::kSize,
+              "the move memo holds one move and its reply");
+
+void move(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
+    Move m;
+    if (!decode_or_nack(b, seq, body, len, m)) return;
+    // A resend of the last move (same seq and bytes: the host lost the reply): the same
+    // reply, and the paths under way go on.
+    if (b.move_memo && b.move_seq == seq && memcmp(b.move_body, body, Move::kSize) == 0) {
+        app::queue_reply(seq, Moving::kId, b.move_reply, Moving::kSize);
+        return;
+    }
+    int16_t end[kFingerCount];
+    for (uint8_t f = 0; f < kFingerCount; ++f) {
+        if (!(m.mask & (1u << f))) continue;
+        float th;
+        const finger::Params& p = b.hand.finger(f).params();
+        const int32_t a =
+            target_angle(m.kind, f, m.value[f], th) ? fx::round_sat(th * fx::kBuPerRad) : 0x7FFFFFFF;
+        if (a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1) {
+            nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
+            return;
+        }
+        end[f] = (int16_t)fx::clamp32(a, p.theta_min, p.theta_max);
+    }
+    // The paths start from the setpoints in use: read them (a moving finger's changes a few
+    // counts before its new path starts, which moves its start by as much), plan outside the
+    // lock, then check the modes again and start them under one lock.
+    int16_t from[kFingerCount];
+    {
+        Lock lock;
+        for (uint8_t f = 0; f < kFingerCount; ++f) from[f] = b.hand.finger(f).target();
+    }
+    path::Plan plan[kFingerCount];
+    Moving r;
+    r.move_id = m.move_id;
+    r.stretched = 0;
+    for (uint8_t f = 0; f < kFingerCount; ++f) {
+        r.duration[f] = 0;
+        if (!(m.mask & (1u << f))) continue;
+        const float d = (float)(int16_t)(end[f] - from[f]) * (1.0f / fx::kBuPerRad);
+        plan[f] = path::plan(d, (float)m.duration[f] * Move::kDurationScale, end[f],
+                             b.cfg.finger[f].motion, hand::kDt);
+        r.duration[f] = plan[f].ticks;  // ms: one tick is 1 ms
+        if (plan[f].stretched) r.stretched |= (uint8_t)(1u << f);
+    }
+    static_assert(hand::kTickHz == 1000, "moving.duration counts ticks as ms");
+    uint8_t code = 0;
+    uint8_t detail = kNoDetail;
+    {
+        Lock lock;
+        for (uint8_t f = 0; f < kFingerCount && code == 0; ++f) {
+            if (!(m.mask & (1u << f))) continue;
+            const finger::Finger& fg = b.hand.finger(f);
+            if (fg.faults() != 0) {
+                code = (uint8_t)ErrorCode::FAULTED;
+                detail = f;
+            } else if (fg.mode() != finger::POSITION && fg.mode() != finger::GRASP) {
+                code = (uint8_t)ErrorCode::BUSY;
+                detail = f;
+            }
+        }
+        if (code == 0) {
+            for (uint8_t f = 0; f < kFingerCount; ++f) {
+                if (m.mask & (1u << f)) b.hand.finger(f).start_path(plan[f]);
+            }
+        }
+    }
+    if (code != 0) {
+        nack(b, seq, m.kId, code, detail);
+        return;
+    }
+    b.move_seq = seq;
+    memcpy(b.move_body, body, Move::kSize);
+    encode(r, b.move_reply);
+    b.move_memo = true;
+    reply(b, seq, r);
+}
+
+void get_motion(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
+    GetMotion m;
+    if (!decode_or_nack(b, seq, body, len, m)) return;
+    Motion r;
+    config::fill_motion(b.cfg.finger[m.finger].motion, m.finger, r);
+    reply(b, seq, r);
+}
+
+void set_motion(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
+    SetMotion m;
+    if (!decode_or_nack(b, seq, body, len, m)) return;
+    if (config_busy(b, seq, m.kId)) return;
+    config::Motion& c = b.cfg.finger[m.finger].motion;
+    c.max_speed = m.max_speed;
+    c.max_accel = m.max_accel;
+    c.kv = m.kv;
+    c.ka = m.ka;
     ack(b, seq, m.kId);
 }
 
@@ -494,6 +599,9 @@ void handle(app::Board& b, uint8_t seq, uint8_t msg_id, const uint8_t* body, uin
         }
         case MsgId::SET_TARGETS: set_targets(b, seq, body, len); return;
         case MsgId::SET_MODE: set_mode(b, seq, body, len); return;
+        case MsgId::MOVE: move(b, seq, body, len); return;
+        case MsgId::GET_MOTION: get_motion(b, seq, body, len); return;
+        case MsgId::SET_MOTION: set_motion(b, seq, body, len); return;
         case MsgId::SET_TELEMETRY: set_telemetry(b, seq, body, len); return;
         case MsgId::GET_GAINS: get_gains(b, seq, body, len); return;
         case MsgId::SET_GAINS: set_gains(b, seq, body, len); return;

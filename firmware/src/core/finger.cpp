@@ -116,6 +116,7 @@ void Finger::set_mode(uint8_t mode, int16_t duty, int16_t effort) {
         limit_ = limit_for(mode_);
         return;
     }
+    path_.stop();
     if (mode == POSITION || mode == GRASP) {
         enter_closed_loop(mode);
     } else if (mode == DUTY) {
@@ -134,6 +135,7 @@ void Finger::set_mode(uint8_t mode, int16_t duty, int16_t effort) {
 }
 
 void Finger::set_target(int16_t theta_bu) {
+    path_.stop();
     target_ = theta_bu;
     target_valid_ = true;
 }
@@ -149,6 +151,7 @@ void Finger::latch(uint8_t bits) {
     new_faults_ |= bits & (uint8_t)~faults_;
     faults_ |= bits;
     if ((bits & kStopFaults) && mode_ != COAST) {
+        path_.stop();
         mode_ = COAST;
         target_valid_ = false;
         contact_ = false;
@@ -159,6 +162,7 @@ void Finger::latch(uint8_t bits) {
 
 void Finger::hold_here() {
     const uint8_t mode = mode_ == GRASP ? GRASP : POSITION;
+    path_.stop();
     target_ = fx::clamp16(theta_, params_.theta_min, params_.theta_max);
     target_valid_ = true;
     const int16_t present = pid_.output();

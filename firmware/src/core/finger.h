@@ -17,6 +17,7 @@
 #include "../hal/hal.h"
 #include "config.h"
 #include "encoder.h"
+#include "path.h"
 #include "pid.h"
 
 namespace utrf {
@@ -80,7 +81,13 @@ class Finger {
     void configure(const Params& p, const pid::Coeffs& c);  // bumpless when gains or limits change
     // Enter `mode`. duty (DUTY) and effort (GRASP) are Q15 fractions.
     void set_mode(uint8_t mode, int16_t duty, int16_t effort);
-    void set_target(int16_t theta_bu);
+    void set_target(int16_t theta_bu);  // a step: ends a move's path
+    // A move (core/path.h): the path starts from the present setpoint; the finger must be in
+    // POSITION or GRASP. set_target, a mode change and any stopping fault end it.
+    void start_path(const path::Plan& p) {
+        path_.start(p, target_);
+        target_valid_ = true;
+    }
     void clear_faults();
     void set_zero_turn(uint16_t turn) { params_.zero_turn = turn; have_theta_ = false; }
 
@@ -109,7 +116,9 @@ class Finger {
     bool idle() const { return mode_ == COAST || mode_ == BRAKE; }
     bool has_theta() const { return have_theta_; }
     int16_t theta() const { return theta_; }    // measured, BU
-    int16_t target() const { return target_; }  // BU
+    int16_t target() const { return target_; }  // BU: the setpoint in use (a path's, moving)
+    bool moving() const { return path_.active(); }
+    const path::Path& path() const { return path_; }
     int16_t duty_a() const { return duty_a_; }  // Q15, signed, positive pulls
     int16_t duty_b() const { return duty_b_; }
     int16_t output() const { return pid_.output(); }  // the controller's u, Q15
@@ -157,6 +166,7 @@ class Finger {
     uint16_t stall_count_;
     int16_t duty_cmd_;
     int16_t effort_;
+    path::Path path_;  // a move under way: the setpoint and feedforward each tick
 
     friend struct LayoutCheck;
 };
@@ -230,7 +240,18 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
     }
 
     // ---- the mode's output u (Q15, positive flexes) ----
-    const int16_t u = UTRF_UNLIKELY(mode == DUTY) ? duty_step(th) : pid_.step(limit_, target_, th);
+    int16_t u;
+    if (UTRF_UNLIKELY(mode == DUTY)) {
+        u = duty_step(th);
+    } else if (UTRF_LIKELY(!path_.active())) {
+        u = pid_.step(limit_, target_, th);
+    } else {
+        // A move: the path sets the setpoint, and its feedforward joins the PID's output.
+        const int16_t ff = path_.tick(target_, stall_check);
+        u = pid_.step(limit_, target_, th);
+        const int16_t lim = limit_;
+        u = fx::clamp16(fx::sat16((int32_t)u + ff), (int16_t)-lim, lim);
+    }
 
     // ---- stall: the finger's turn comes every kStallEvery ticks ----
     // The only rule that can stop the finger after its mode was read above.

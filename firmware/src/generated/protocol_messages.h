@@ -23,7 +23,7 @@ namespace proto {
 
 static const uint16_t kProtocolVersion = 1;
 // CRC-32 of the canonical spec (doc texts excluded); compared at the handshake.
-static const uint32_t kSchemaHash = 0x1556907BUL;
+static const uint32_t kSchemaHash = 0xBC1F0006UL;
 static const uint8_t kMaxPayload = 64;  // body bytes
 static const uint8_t kFingerCount = 5;
 static const uint32_t kDefaultBaud = 1000000UL;
@@ -121,6 +121,7 @@ static const uint8_t HEARTBEAT = 0x03;
 static const uint8_t SET_TARGETS = 0x10;
 static const uint8_t SET_MODE = 0x11;
 static const uint8_t SET_TELEMETRY = 0x12;
+static const uint8_t MOVE = 0x13;
 static const uint8_t GET_GAINS = 0x20;
 static const uint8_t SET_GAINS = 0x21;
 static const uint8_t GET_LIMITS = 0x22;
@@ -129,6 +130,8 @@ static const uint8_t GET_SAFETY = 0x24;
 static const uint8_t SET_SAFETY = 0x25;
 static const uint8_t GET_FINGER_CONFIG = 0x26;
 static const uint8_t SET_FINGER_CONFIG = 0x27;
+static const uint8_t GET_MOTION = 0x28;
+static const uint8_t SET_MOTION = 0x29;
 static const uint8_t SAVE_CONFIG = 0x30;
 static const uint8_t LOAD_CONFIG = 0x31;
 static const uint8_t CALIBRATE_ZERO = 0x32;
@@ -138,6 +141,7 @@ static const uint8_t GET_STATS = 0x35;
 static const uint8_t RESET_STATS = 0x36;
 static const uint8_t IDENTITY = 0x81;
 static const uint8_t PONG = 0x82;
+static const uint8_t MOVING = 0x83;
 static const uint8_t STATE = 0x90;
 static const uint8_t FAULT = 0x91;
 static const uint8_t BOOT = 0x92;
@@ -145,6 +149,7 @@ static const uint8_t GAINS = 0xA0;
 static const uint8_t LIMITS = 0xA2;
 static const uint8_t SAFETY = 0xA4;
 static const uint8_t FINGER_CONFIG = 0xA6;
+static const uint8_t MOTION = 0xA8;
 static const uint8_t STATS = 0xB5;
 static const uint8_t ACK = 0xF0;
 static const uint8_t NACK = 0xF1;
@@ -253,6 +258,28 @@ struct SetTelemetry {
   uint16_t rate_hz;  // Hz; [0, 500]
 };
 
+// move (0x13, host to board, reply moving, idempotent)
+// Move the fingers in `mask` to targets along a minimum-jerk path the board generates in its
+// tick, with velocity and acceleration feedforward (set_motion). Each path starts at rest from
+// the finger's present setpoint. A finger's duration 0 asks for the fastest path its limits
+// allow; a path faster than the finger's max_speed or max_accel allows (peak speed 1.875 D/T,
+// peak acceleration 5.7735 D/T^2 for a distance D in a time T) is stretched to the shortest that
+// keeps both, and the reply says so. The fingers must be in POSITION or GRASP (BUSY, detail =
+// finger, otherwise; FAULTED for a latched fault); targets beyond the limits are refused as
+// set_targets' are. A resent frame (the same move_id as the last move) changes nothing and gets
+// the same reply. set_targets, set_mode and any fault end a path.
+struct Move {
+  static const uint8_t kId = 0x13;
+  static const uint8_t kSize = 34;
+  static constexpr float kValueScale = 1e-06f;
+  static constexpr float kDurationScale = 0.001f;
+  uint16_t move_id;  // chosen by the host, a new one for every move: a resend repeats it
+  uint8_t kind;  // TargetKind
+  uint8_t mask;  // [0, 31]; bit i set: finger i moves
+  int32_t value[5];  // x 1e-06; rad | m | 1; per finger, the end of the path in the unit of `kind`
+  uint16_t duration[5];  // x 0.001; s; [0.0, 60.0]; per finger; 0: as fast as its limits allow
+};
+
 // get_gains (0x20, host to board, reply gains, idempotent)
 struct GetGains {
   static const uint8_t kId = 0x20;
@@ -339,6 +366,27 @@ struct SetFingerConfig {
   uint8_t motor_invert;  // [0, 1]; 1: swap the direction of motor A and B
 };
 
+// get_motion (0x28, host to board, reply motion, idempotent)
+struct GetMotion {
+  static const uint8_t kId = 0x28;
+  static const uint8_t kSize = 1;
+  uint8_t finger;  // [0, 4]
+};
+
+// set_motion (0x29, host to board, reply ack, idempotent)
+// Set one finger's move limits and feedforward gains (see move). The feedforward duty is kv *
+// speed + ka * acceleration of the path, added to the PID's output. Takes effect at the next
+// move.
+struct SetMotion {
+  static const uint8_t kId = 0x29;
+  static const uint8_t kSize = 17;
+  uint8_t finger;  // [0, 4]
+  float max_speed;  // rad/s; [0.1, 100.0]; largest Joint-2 speed a move may ask for
+  float max_accel;  // rad/s^2; [0.1, 10000.0]; largest Joint-2 acceleration a move may ask for
+  float kv;  // s/rad; [0.0, 10.0]; feedforward duty per rad/s of the path's speed
+  float ka;  // s^2/rad; [0.0, 1.0]; feedforward duty per rad/s^2 of the path's acceleration
+};
+
 // save_config (0x30, host to board, reply ack, idempotent)
 // Write the running configuration to EEPROM. The ack comes when the write is done (~1 s).
 struct SaveConfig {
@@ -419,6 +467,17 @@ struct Pong {
   static constexpr float kBoardTimeScale = 1e-06f;
   uint32_t token;
   uint32_t board_time;  // x 1e-06; s; board clock, wraps every 71.6 min
+};
+
+// moving (0x83, board to host)
+// The reply to move: the paths under way.
+struct Moving {
+  static const uint8_t kId = 0x83;
+  static const uint8_t kSize = 13;
+  static constexpr float kDurationScale = 0.001f;
+  uint16_t move_id;  // the move's
+  uint8_t stretched;  // [0, 31]; bit i set: finger i's path was stretched to keep its limits
+  uint16_t duration[5];  // x 0.001; s; per finger, the duration of its path (0 for a finger not moved)
 };
 
 // state (0x90, board to host)
@@ -525,6 +584,20 @@ struct FingerConfig {
   float encoder_offset;  // rad; [-6.3, 6.3]; encoder reading at Joint-2 angle 0
   uint8_t encoder_invert;  // [0, 1]; 1: the encoder counts against flexion
   uint8_t motor_invert;  // [0, 1]; 1: swap the direction of motor A and B
+};
+
+// motion (0xA8, board to host)
+// Set one finger's move limits and feedforward gains (see move). The feedforward duty is kv *
+// speed + ka * acceleration of the path, added to the PID's output. Takes effect at the next
+// move.
+struct Motion {
+  static const uint8_t kId = 0xA8;
+  static const uint8_t kSize = 17;
+  uint8_t finger;  // [0, 4]
+  float max_speed;  // rad/s; [0.1, 100.0]; largest Joint-2 speed a move may ask for
+  float max_accel;  // rad/s^2; [0.1, 10000.0]; largest Joint-2 acceleration a move may ask for
+  float kv;  // s/rad; [0.0, 10.0]; feedforward duty per rad/s of the path's speed
+  float ka;  // s^2/rad; [0.0, 1.0]; feedforward duty per rad/s^2 of the path's acceleration
 };
 
 // stats (0xB5, board to host)
@@ -687,6 +760,42 @@ inline DecodeStatus decode(const uint8_t* body, uint8_t len, SetTelemetry& out,
 inline uint8_t encode(const SetTelemetry& msg, uint8_t* body) {
   detail::wr_u16(body + 0, msg.rate_hz);
   return SetTelemetry::kSize;
+}
+
+inline DecodeStatus decode(const uint8_t* body, uint8_t len, Move& out,
+                           uint8_t& bad_field) {
+  bad_field = 0xFF;
+  if (len != Move::kSize) return DecodeStatus::BAD_LENGTH;
+  out.move_id = detail::rd_u16(body + 0);
+  out.kind = detail::rd_u8(body + 2);
+  if (out.kind > 2) {
+    bad_field = 1;
+    return DecodeStatus::OUT_OF_RANGE;
+  }
+  out.mask = detail::rd_u8(body + 3);
+  if (out.mask > 31) {
+    bad_field = 2;
+    return DecodeStatus::OUT_OF_RANGE;
+  }
+  for (uint8_t i = 0; i < 5; ++i) {
+    out.value[i] = detail::rd_i32(body + 4 + 4 * i);
+  }
+  for (uint8_t i = 0; i < 5; ++i) {
+    out.duration[i] = detail::rd_u16(body + 24 + 2 * i);
+    if (out.duration[i] > 60000UL) {
+      bad_field = 4;
+      return DecodeStatus::OUT_OF_RANGE;
+    }
+  }
+  return DecodeStatus::OK;
+}
+inline uint8_t encode(const Move& msg, uint8_t* body) {
+  detail::wr_u16(body + 0, msg.move_id);
+  detail::wr_u8(body + 2, msg.kind);
+  detail::wr_u8(body + 3, msg.mask);
+  for (uint8_t i = 0; i < 5; ++i) detail::wr_i32(body + 4 + 4 * i, msg.value[i]);
+  for (uint8_t i = 0; i < 5; ++i) detail::wr_u16(body + 24 + 2 * i, msg.duration[i]);
+  return Move::kSize;
 }
 
 inline DecodeStatus decode(const uint8_t* body, uint8_t len, GetGains& out,
@@ -934,6 +1043,62 @@ inline uint8_t encode(const SetFingerConfig& msg, uint8_t* body) {
   return SetFingerConfig::kSize;
 }
 
+inline DecodeStatus decode(const uint8_t* body, uint8_t len, GetMotion& out,
+                           uint8_t& bad_field) {
+  bad_field = 0xFF;
+  if (len != GetMotion::kSize) return DecodeStatus::BAD_LENGTH;
+  out.finger = detail::rd_u8(body + 0);
+  if (out.finger > 4) {
+    bad_field = 0;
+    return DecodeStatus::OUT_OF_RANGE;
+  }
+  return DecodeStatus::OK;
+}
+inline uint8_t encode(const GetMotion& msg, uint8_t* body) {
+  detail::wr_u8(body + 0, msg.finger);
+  return GetMotion::kSize;
+}
+
+inline DecodeStatus decode(const uint8_t* body, uint8_t len, SetMotion& out,
+                           uint8_t& bad_field) {
+  bad_field = 0xFF;
+  if (len != SetMotion::kSize) return DecodeStatus::BAD_LENGTH;
+  out.finger = detail::rd_u8(body + 0);
+  if (out.finger > 4) {
+    bad_field = 0;
+    return DecodeStatus::OUT_OF_RANGE;
+  }
+  out.max_speed = detail::rd_f32(body + 1);
+  if (!detail::is_finite(out.max_speed) || out.max_speed < 0.10000000149011612f || out.max_speed > 100.0f) {
+    bad_field = 1;
+    return DecodeStatus::OUT_OF_RANGE;
+  }
+  out.max_accel = detail::rd_f32(body + 5);
+  if (!detail::is_finite(out.max_accel) || out.max_accel < 0.10000000149011612f || out.max_accel > 10000.0f) {
+    bad_field = 2;
+    return DecodeStatus::OUT_OF_RANGE;
+  }
+  out.kv = detail::rd_f32(body + 9);
+  if (!detail::is_finite(out.kv) || out.kv < 0.0f || out.kv > 10.0f) {
+    bad_field = 3;
+    return DecodeStatus::OUT_OF_RANGE;
+  }
+  out.ka = detail::rd_f32(body + 13);
+  if (!detail::is_finite(out.ka) || out.ka < 0.0f || out.ka > 1.0f) {
+    bad_field = 4;
+    return DecodeStatus::OUT_OF_RANGE;
+  }
+  return DecodeStatus::OK;
+}
+inline uint8_t encode(const SetMotion& msg, uint8_t* body) {
+  detail::wr_u8(body + 0, msg.finger);
+  detail::wr_f32(body + 1, msg.max_speed);
+  detail::wr_f32(body + 5, msg.max_accel);
+  detail::wr_f32(body + 9, msg.kv);
+  detail::wr_f32(body + 13, msg.ka);
+  return SetMotion::kSize;
+}
+
 inline DecodeStatus decode(const uint8_t* body, uint8_t len, SaveConfig& out,
                            uint8_t& bad_field) {
   (void)body;
@@ -1094,6 +1259,28 @@ inline uint8_t encode(const Pong& msg, uint8_t* body) {
   detail::wr_u32(body + 0, msg.token);
   detail::wr_u32(body + 4, msg.board_time);
   return Pong::kSize;
+}
+
+inline DecodeStatus decode(const uint8_t* body, uint8_t len, Moving& out,
+                           uint8_t& bad_field) {
+  bad_field = 0xFF;
+  if (len != Moving::kSize) return DecodeStatus::BAD_LENGTH;
+  out.move_id = detail::rd_u16(body + 0);
+  out.stretched = detail::rd_u8(body + 2);
+  if (out.stretched > 31) {
+    bad_field = 1;
+    return DecodeStatus::OUT_OF_RANGE;
+  }
+  for (uint8_t i = 0; i < 5; ++i) {
+    out.duration[i] = detail::rd_u16(body + 3 + 2 * i);
+  }
+  return DecodeStatus::OK;
+}
+inline uint8_t encode(const Moving& msg, uint8_t* body) {
+  detail::wr_u16(body + 0, msg.move_id);
+  detail::wr_u8(body + 2, msg.stretched);
+  for (uint8_t i = 0; i < 5; ++i) detail::wr_u16(body + 3 + 2 * i, msg.duration[i]);
+  return Moving::kSize;
 }
 
 inline DecodeStatus decode(const uint8_t* body, uint8_t len, State& out,
@@ -1390,6 +1577,46 @@ inline uint8_t encode(const FingerConfig& msg, uint8_t* body) {
   return FingerConfig::kSize;
 }
 
+inline DecodeStatus decode(const uint8_t* body, uint8_t len, Motion& out,
+                           uint8_t& bad_field) {
+  bad_field = 0xFF;
+  if (len != Motion::kSize) return DecodeStatus::BAD_LENGTH;
+  out.finger = detail::rd_u8(body + 0);
+  if (out.finger > 4) {
+    bad_field = 0;
+    return DecodeStatus::OUT_OF_RANGE;
+  }
+  out.max_speed = detail::rd_f32(body + 1);
+  if (!detail::is_finite(out.max_speed) || out.max_speed < 0.10000000149011612f || out.max_speed > 100.0f) {
+    bad_field = 1;
+    return DecodeStatus::OUT_OF_RANGE;
+  }
+  out.max_accel = detail::rd_f32(body + 5);
+  if (!detail::is_finite(out.max_accel) || out.max_accel < 0.10000000149011612f || out.max_accel > 10000.0f) {
+    bad_field = 2;
+    return DecodeStatus::OUT_OF_RANGE;
+  }
+  out.kv = detail::rd_f32(body + 9);
+  if (!detail::is_finite(out.kv) || out.kv < 0.0f || out.kv > 10.0f) {
+    bad_field = 3;
+    return DecodeStatus::OUT_OF_RANGE;
+  }
+  out.ka = detail::rd_f32(body + 13);
+  if (!detail::is_finite(out.ka) || out.ka < 0.0f || out.ka > 1.0f) {
+    bad_field = 4;
+    return DecodeStatus::OUT_OF_RANGE;
+  }
+  return DecodeStatus::OK;
+}
+inline uint8_t encode(const Motion& msg, uint8_t* body) {
+  detail::wr_u8(body + 0, msg.finger);
+  detail::wr_f32(body + 1, msg.max_speed);
+  detail::wr_f32(body + 5, msg.max_accel);
+  detail::wr_f32(body + 9, msg.kv);
+  detail::wr_f32(body + 13, msg.ka);
+  return Motion::kSize;
+}
+
 inline DecodeStatus decode(const uint8_t* body, uint8_t len, Stats& out,
                            uint8_t& bad_field) {
   bad_field = 0xFF;
@@ -1461,6 +1688,7 @@ inline int16_t message_size(uint8_t msg_id) {
     case MsgId::SET_TARGETS: return SetTargets::kSize;
     case MsgId::SET_MODE: return SetMode::kSize;
     case MsgId::SET_TELEMETRY: return SetTelemetry::kSize;
+    case MsgId::MOVE: return Move::kSize;
     case MsgId::GET_GAINS: return GetGains::kSize;
     case MsgId::SET_GAINS: return SetGains::kSize;
     case MsgId::GET_LIMITS: return GetLimits::kSize;
@@ -1469,6 +1697,8 @@ inline int16_t message_size(uint8_t msg_id) {
     case MsgId::SET_SAFETY: return SetSafety::kSize;
     case MsgId::GET_FINGER_CONFIG: return GetFingerConfig::kSize;
     case MsgId::SET_FINGER_CONFIG: return SetFingerConfig::kSize;
+    case MsgId::GET_MOTION: return GetMotion::kSize;
+    case MsgId::SET_MOTION: return SetMotion::kSize;
     case MsgId::SAVE_CONFIG: return SaveConfig::kSize;
     case MsgId::LOAD_CONFIG: return LoadConfig::kSize;
     case MsgId::CALIBRATE_ZERO: return CalibrateZero::kSize;
@@ -1478,6 +1708,7 @@ inline int16_t message_size(uint8_t msg_id) {
     case MsgId::RESET_STATS: return ResetStats::kSize;
     case MsgId::IDENTITY: return Identity::kSize;
     case MsgId::PONG: return Pong::kSize;
+    case MsgId::MOVING: return Moving::kSize;
     case MsgId::STATE: return State::kSize;
     case MsgId::FAULT: return Fault::kSize;
     case MsgId::BOOT: return Boot::kSize;
@@ -1485,6 +1716,7 @@ inline int16_t message_size(uint8_t msg_id) {
     case MsgId::LIMITS: return Limits::kSize;
     case MsgId::SAFETY: return Safety::kSize;
     case MsgId::FINGER_CONFIG: return FingerConfig::kSize;
+    case MsgId::MOTION: return Motion::kSize;
     case MsgId::STATS: return Stats::kSize;
     case MsgId::ACK: return Ack::kSize;
     case MsgId::NACK: return Nack::kSize;
@@ -1500,6 +1732,7 @@ inline int16_t message_size(uint8_t msg_id) {
   X(SetTargets, SET_TARGETS) \
   X(SetMode, SET_MODE) \
   X(SetTelemetry, SET_TELEMETRY) \
+  X(Move, MOVE) \
   X(GetGains, GET_GAINS) \
   X(SetGains, SET_GAINS) \
   X(GetLimits, GET_LIMITS) \
@@ -1508,6 +1741,8 @@ inline int16_t message_size(uint8_t msg_id) {
   X(SetSafety, SET_SAFETY) \
   X(GetFingerConfig, GET_FINGER_CONFIG) \
   X(SetFingerConfig, SET_FINGER_CONFIG) \
+  X(GetMotion, GET_MOTION) \
+  X(SetMotion, SET_MOTION) \
   X(SaveConfig, SAVE_CONFIG) \
   X(LoadConfig, LOAD_CONFIG) \
   X(CalibrateZero, CALIBRATE_ZERO) \
@@ -1517,6 +1752,7 @@ inline int16_t message_size(uint8_t msg_id) {
   X(ResetStats, RESET_STATS) \
   X(Identity, IDENTITY) \
   X(Pong, PONG) \
+  X(Moving, MOVING) \
   X(State, STATE) \
   X(Fault, FAULT) \
   X(Boot, BOOT) \
@@ -1524,6 +1760,7 @@ inline int16_t message_size(uint8_t msg_id) {
   X(Limits, LIMITS) \
   X(Safety, SAFETY) \
   X(FingerConfig, FINGER_CONFIG) \
+  X(Motion, MOTION) \
   X(Stats, STATS) \
   X(Ack, ACK) \
   X(Nack, NACK)
@@ -1535,6 +1772,7 @@ inline int16_t message_size(uint8_t msg_id) {
   X(SetTargets, SET_TARGETS) \
   X(SetMode, SET_MODE) \
   X(SetTelemetry, SET_TELEMETRY) \
+  X(Move, MOVE) \
   X(GetGains, GET_GAINS) \
   X(SetGains, SET_GAINS) \
   X(GetLimits, GET_LIMITS) \
@@ -1543,6 +1781,8 @@ inline int16_t message_size(uint8_t msg_id) {
   X(SetSafety, SET_SAFETY) \
   X(GetFingerConfig, GET_FINGER_CONFIG) \
   X(SetFingerConfig, SET_FINGER_CONFIG) \
+  X(GetMotion, GET_MOTION) \
+  X(SetMotion, SET_MOTION) \
   X(SaveConfig, SAVE_CONFIG) \
   X(LoadConfig, LOAD_CONFIG) \
   X(CalibrateZero, CALIBRATE_ZERO) \
@@ -1554,6 +1794,7 @@ inline int16_t message_size(uint8_t msg_id) {
 #define UTRF_PROTO_BOARD_MESSAGES(X) \
   X(Identity, IDENTITY) \
   X(Pong, PONG) \
+  X(Moving, MOVING) \
   X(State, STATE) \
   X(Fault, FAULT) \
   X(Boot, BOOT) \
@@ -1561,6 +1802,7 @@ inline int16_t message_size(uint8_t msg_id) {
   X(Limits, LIMITS) \
   X(Safety, SAFETY) \
   X(FingerConfig, FINGER_CONFIG) \
+  X(Motion, MOTION) \
   X(Stats, STATS) \
   X(Ack, ACK) \
   X(Nack, NACK)
@@ -1654,6 +1896,37 @@ inline uint8_t flatten(const SetTelemetry& m, double* out) {
 }
 inline void unflatten(const double* in, SetTelemetry& m) {
   m.rate_hz = static_cast<uint16_t>(in[0]);
+}
+inline uint8_t flatten(const Move& m, double* out) {
+  out[0] = static_cast<double>(m.move_id);
+  out[1] = static_cast<double>(m.kind);
+  out[2] = static_cast<double>(m.mask);
+  out[3] = static_cast<double>(m.value[0]);
+  out[4] = static_cast<double>(m.value[1]);
+  out[5] = static_cast<double>(m.value[2]);
+  out[6] = static_cast<double>(m.value[3]);
+  out[7] = static_cast<double>(m.value[4]);
+  out[8] = static_cast<double>(m.duration[0]);
+  out[9] = static_cast<double>(m.duration[1]);
+  out[10] = static_cast<double>(m.duration[2]);
+  out[11] = static_cast<double>(m.duration[3]);
+  out[12] = static_cast<double>(m.duration[4]);
+  return 13;
+}
+inline void unflatten(const double* in, Move& m) {
+  m.move_id = static_cast<uint16_t>(in[0]);
+  m.kind = static_cast<uint8_t>(in[1]);
+  m.mask = static_cast<uint8_t>(in[2]);
+  m.value[0] = static_cast<int32_t>(in[3]);
+  m.value[1] = static_cast<int32_t>(in[4]);
+  m.value[2] = static_cast<int32_t>(in[5]);
+  m.value[3] = static_cast<int32_t>(in[6]);
+  m.value[4] = static_cast<int32_t>(in[7]);
+  m.duration[0] = static_cast<uint16_t>(in[8]);
+  m.duration[1] = static_cast<uint16_t>(in[9]);
+  m.duration[2] = static_cast<uint16_t>(in[10]);
+  m.duration[3] = static_cast<uint16_t>(in[11]);
+  m.duration[4] = static_cast<uint16_t>(in[12]);
 }
 inline uint8_t flatten(const GetGains& m, double* out) {
   out[0] = static_cast<double>(m.finger);
@@ -1752,6 +2025,28 @@ inline void unflatten(const double* in, SetFingerConfig& m) {
   m.encoder_offset = static_cast<float>(in[2]);
   m.encoder_invert = static_cast<uint8_t>(in[3]);
   m.motor_invert = static_cast<uint8_t>(in[4]);
+}
+inline uint8_t flatten(const GetMotion& m, double* out) {
+  out[0] = static_cast<double>(m.finger);
+  return 1;
+}
+inline void unflatten(const double* in, GetMotion& m) {
+  m.finger = static_cast<uint8_t>(in[0]);
+}
+inline uint8_t flatten(const SetMotion& m, double* out) {
+  out[0] = static_cast<double>(m.finger);
+  out[1] = static_cast<double>(m.max_speed);
+  out[2] = static_cast<double>(m.max_accel);
+  out[3] = static_cast<double>(m.kv);
+  out[4] = static_cast<double>(m.ka);
+  return 5;
+}
+inline void unflatten(const double* in, SetMotion& m) {
+  m.finger = static_cast<uint8_t>(in[0]);
+  m.max_speed = static_cast<float>(in[1]);
+  m.max_accel = static_cast<float>(in[2]);
+  m.kv = static_cast<float>(in[3]);
+  m.ka = static_cast<float>(in[4]);
 }
 inline uint8_t flatten(const SaveConfig& m, double* out) {
   (void)m;
@@ -1855,6 +2150,25 @@ inline uint8_t flatten(const Pong& m, double* out) {
 inline void unflatten(const double* in, Pong& m) {
   m.token = static_cast<uint32_t>(in[0]);
   m.board_time = static_cast<uint32_t>(in[1]);
+}
+inline uint8_t flatten(const Moving& m, double* out) {
+  out[0] = static_cast<double>(m.move_id);
+  out[1] = static_cast<double>(m.stretched);
+  out[2] = static_cast<double>(m.duration[0]);
+  out[3] = static_cast<double>(m.duration[1]);
+  out[4] = static_cast<double>(m.duration[2]);
+  out[5] = static_cast<double>(m.duration[3]);
+  out[6] = static_cast<double>(m.duration[4]);
+  return 7;
+}
+inline void unflatten(const double* in, Moving& m) {
+  m.move_id = static_cast<uint16_t>(in[0]);
+  m.stretched = static_cast<uint8_t>(in[1]);
+  m.duration[0] = static_cast<uint16_t>(in[2]);
+  m.duration[1] = static_cast<uint16_t>(in[3]);
+  m.duration[2] = static_cast<uint16_t>(in[4]);
+  m.duration[3] = static_cast<uint16_t>(in[5]);
+  m.duration[4] = static_cast<uint16_t>(in[6]);
 }
 inline uint8_t flatten(const State& m, double* out) {
   out[0] = static_cast<double>(m.board_time);
@@ -2044,6 +2358,21 @@ inline void unflatten(const double* in, FingerConfig& m) {
   m.encoder_offset = static_cast<float>(in[2]);
   m.encoder_invert = static_cast<uint8_t>(in[3]);
   m.motor_invert = static_cast<uint8_t>(in[4]);
+}
+inline uint8_t flatten(const Motion& m, double* out) {
+  out[0] = static_cast<double>(m.finger);
+  out[1] = static_cast<double>(m.max_speed);
+  out[2] = static_cast<double>(m.max_accel);
+  out[3] = static_cast<double>(m.kv);
+  out[4] = static_cast<double>(m.ka);
+  return 5;
+}
+inline void unflatten(const double* in, Motion& m) {
+  m.finger = static_cast<uint8_t>(in[0]);
+  m.max_speed = static_cast<float>(in[1]);
+  m.max_accel = static_cast<float>(in[2]);
+  m.kv = static_cast<float>(in[3]);
+  m.ka = static_cast<float>(in[4]);
 }
 inline uint8_t flatten(const Stats& m, double* out) {
   out[0] = static_cast<double>(m.rx_frames);

@@ -16,7 +16,7 @@ from utrf.protocol.codec import Direction, Field, Message, Request
 
 PROTOCOL_VERSION = 1
 #: CRC-32 of the canonical spec (doc texts excluded), compared at the handshake.
-SCHEMA_HASH = 0x1556907B
+SCHEMA_HASH = 0xBC1F0006
 MAX_PAYLOAD = 64
 FINGER_COUNT = 5
 DEFAULT_BAUD = 1000000
@@ -268,6 +268,44 @@ class SetTelemetry(Request["Ack"]):
 
 
 @dataclass(frozen=True, slots=True)
+class Move(Request["Moving"]):
+    """Move the fingers in `mask` to targets along a minimum-jerk path the board generates in its
+    tick, with velocity and acceleration feedforward (set_motion). Each path starts at rest from
+    the finger's present setpoint. A finger's duration 0 asks for the fastest path its limits
+    allow; a path faster than the finger's max_speed or max_accel allows (peak speed 1.875 D/T,
+    peak acceleration 5.7735 D/T^2 for a distance D in a time T) is stretched to the shortest
+    that keeps both, and the reply says so. The fingers must be in POSITION or GRASP (BUSY,
+    detail = finger, otherwise; FAULTED for a latched fault); targets beyond the limits are
+    refused as set_targets' are. A resent frame (the same move_id as the last move) changes
+    nothing and gets the same reply. set_targets, set_mode and any fault end a path.
+    """
+
+    NAME: ClassVar[str] = "move"
+    ID: ClassVar[int] = 0x13
+    SIZE: ClassVar[int] = 34
+    DIRECTION: ClassVar[Direction] = Direction.HOST_TO_BOARD
+    IDEMPOTENT: ClassVar[bool] = True
+    REPLY_TIMEOUT_S: ClassVar[float] = 0.1
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        Field("move_id", "u16", 0),
+        Field("kind", "u8", 1, enum=TargetKind),
+        Field("mask", "u8", 2, raw_max=31),
+        Field("value", "i32", 3, count=5, scale=1e-06, unit="rad | m | 1"),
+        Field("duration", "u16", 4, count=5, scale=0.001, raw_max=60000, unit="s"),
+    )
+
+    #: chosen by the host, a new one for every move: a resend repeats it
+    move_id: int
+    kind: TargetKind
+    #: bit i set: finger i moves
+    mask: int
+    #: per finger, the end of the path in the unit of `kind` [rad | m | 1]
+    value: tuple[float, ...]
+    #: per finger; 0: as fast as its limits allow [s]
+    duration: tuple[float, ...]
+
+
+@dataclass(frozen=True, slots=True)
 class GetGains(Request["Gains"]):
     NAME: ClassVar[str] = "get_gains"
     ID: ClassVar[int] = 0x20
@@ -462,6 +500,51 @@ class SetFingerConfig(Request["Ack"]):
 
 
 @dataclass(frozen=True, slots=True)
+class GetMotion(Request["Motion"]):
+    NAME: ClassVar[str] = "get_motion"
+    ID: ClassVar[int] = 0x28
+    SIZE: ClassVar[int] = 1
+    DIRECTION: ClassVar[Direction] = Direction.HOST_TO_BOARD
+    IDEMPOTENT: ClassVar[bool] = True
+    REPLY_TIMEOUT_S: ClassVar[float] = 0.1
+    FIELDS: ClassVar[tuple[Field, ...]] = (Field("finger", "u8", 0, raw_max=4),)
+
+    finger: int
+
+
+@dataclass(frozen=True, slots=True)
+class SetMotion(Request["Ack"]):
+    """Set one finger's move limits and feedforward gains (see move). The feedforward duty is kv *
+    speed + ka * acceleration of the path, added to the PID's output. Takes effect at the next
+    move.
+    """
+
+    NAME: ClassVar[str] = "set_motion"
+    ID: ClassVar[int] = 0x29
+    SIZE: ClassVar[int] = 17
+    DIRECTION: ClassVar[Direction] = Direction.HOST_TO_BOARD
+    IDEMPOTENT: ClassVar[bool] = True
+    REPLY_TIMEOUT_S: ClassVar[float] = 0.1
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        Field("finger", "u8", 0, raw_max=4),
+        Field("max_speed", "f32", 1, min=0.10000000149011612, max=100.0, unit="rad/s"),
+        Field("max_accel", "f32", 2, min=0.10000000149011612, max=10000.0, unit="rad/s^2"),
+        Field("kv", "f32", 3, min=0.0, max=10.0, unit="s/rad"),
+        Field("ka", "f32", 4, min=0.0, max=1.0, unit="s^2/rad"),
+    )
+
+    finger: int
+    #: largest Joint-2 speed a move may ask for [rad/s]
+    max_speed: float
+    #: largest Joint-2 acceleration a move may ask for [rad/s^2]
+    max_accel: float
+    #: feedforward duty per rad/s of the path's speed [s/rad]
+    kv: float
+    #: feedforward duty per rad/s^2 of the path's acceleration [s^2/rad]
+    ka: float
+
+
+@dataclass(frozen=True, slots=True)
 class SaveConfig(Request["Ack"]):
     """Write the running configuration to EEPROM. The ack comes when the write is done (~1 s)."""
 
@@ -613,6 +696,28 @@ class Pong(Message):
     token: int
     #: board clock, wraps every 71.6 min [s]
     board_time: float
+
+
+@dataclass(frozen=True, slots=True)
+class Moving(Message):
+    """The reply to move: the paths under way."""
+
+    NAME: ClassVar[str] = "moving"
+    ID: ClassVar[int] = 0x83
+    SIZE: ClassVar[int] = 13
+    DIRECTION: ClassVar[Direction] = Direction.BOARD_TO_HOST
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        Field("move_id", "u16", 0),
+        Field("stretched", "u8", 1, raw_max=31),
+        Field("duration", "u16", 2, count=5, scale=0.001, unit="s"),
+    )
+
+    #: the move's
+    move_id: int
+    #: bit i set: finger i's path was stretched to keep its limits
+    stretched: int
+    #: per finger, the duration of its path (0 for a finger not moved) [s]
+    duration: tuple[float, ...]
 
 
 @dataclass(frozen=True, slots=True)
@@ -838,6 +943,36 @@ class FingerConfig(Message):
 
 
 @dataclass(frozen=True, slots=True)
+class Motion(Message):
+    """Set one finger's move limits and feedforward gains (see move). The feedforward duty is kv *
+    speed + ka * acceleration of the path, added to the PID's output. Takes effect at the next
+    move.
+    """
+
+    NAME: ClassVar[str] = "motion"
+    ID: ClassVar[int] = 0xA8
+    SIZE: ClassVar[int] = 17
+    DIRECTION: ClassVar[Direction] = Direction.BOARD_TO_HOST
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        Field("finger", "u8", 0, raw_max=4),
+        Field("max_speed", "f32", 1, min=0.10000000149011612, max=100.0, unit="rad/s"),
+        Field("max_accel", "f32", 2, min=0.10000000149011612, max=10000.0, unit="rad/s^2"),
+        Field("kv", "f32", 3, min=0.0, max=10.0, unit="s/rad"),
+        Field("ka", "f32", 4, min=0.0, max=1.0, unit="s^2/rad"),
+    )
+
+    finger: int
+    #: largest Joint-2 speed a move may ask for [rad/s]
+    max_speed: float
+    #: largest Joint-2 acceleration a move may ask for [rad/s^2]
+    max_accel: float
+    #: feedforward duty per rad/s of the path's speed [s/rad]
+    kv: float
+    #: feedforward duty per rad/s^2 of the path's acceleration [s^2/rad]
+    ka: float
+
+
+@dataclass(frozen=True, slots=True)
 class Stats(Message):
     """Link and timing counters since boot or reset_stats."""
 
@@ -921,6 +1056,7 @@ Heartbeat.REPLY = Ack
 SetTargets.REPLY = Ack
 SetMode.REPLY = Ack
 SetTelemetry.REPLY = Ack
+Move.REPLY = Moving
 GetGains.REPLY = Gains
 SetGains.REPLY = Ack
 GetLimits.REPLY = Limits
@@ -929,6 +1065,8 @@ GetSafety.REPLY = Safety
 SetSafety.REPLY = Ack
 GetFingerConfig.REPLY = FingerConfig
 SetFingerConfig.REPLY = Ack
+GetMotion.REPLY = Motion
+SetMotion.REPLY = Ack
 SaveConfig.REPLY = Ack
 LoadConfig.REPLY = Ack
 CalibrateZero.REPLY = Ack
@@ -945,6 +1083,7 @@ MESSAGES: tuple[type[Message], ...] = (
     SetTargets,
     SetMode,
     SetTelemetry,
+    Move,
     GetGains,
     SetGains,
     GetLimits,
@@ -953,6 +1092,8 @@ MESSAGES: tuple[type[Message], ...] = (
     SetSafety,
     GetFingerConfig,
     SetFingerConfig,
+    GetMotion,
+    SetMotion,
     SaveConfig,
     LoadConfig,
     CalibrateZero,
@@ -962,6 +1103,7 @@ MESSAGES: tuple[type[Message], ...] = (
     ResetStats,
     Identity,
     Pong,
+    Moving,
     State,
     Fault,
     Boot,
@@ -969,6 +1111,7 @@ MESSAGES: tuple[type[Message], ...] = (
     Limits,
     Safety,
     FingerConfig,
+    Motion,
     Stats,
     Ack,
     Nack,
