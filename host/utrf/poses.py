@@ -61,6 +61,8 @@ class Pose:
     targets: Mapping[str, FingerTarget]  # by finger name; every finger of the hand
     grasp: Grasp | None = None
     source: str = field(default="<dict>", compare=False)
+    #: the move's duration (s) when none is asked for; None: the Hand's default (1 s)
+    duration_s: float | None = None
 
     def q(self, hand: HandGeometry) -> np.ndarray:
         """Tendon displacement per finger (m), in board order."""
@@ -102,7 +104,7 @@ def parse_pose(
 ) -> Pose:
     names = list(finger_names)
     where = f"{source}: pose {name!r}"
-    unknown = sorted(set(table) - {"description", "flexion", "override", "grasp"})
+    unknown = sorted(set(table) - {"description", "flexion", "override", "grasp", "duration_s"})
     if unknown:
         raise PoseError(f"{where}: unknown key(s) {unknown}")
     flexion = table.get("flexion", {})
@@ -143,10 +145,22 @@ def parse_pose(
         if load < 0:
             raise PoseError(f"{where}: grasp.load_kg = {load} must be >= 0")
         grasp = Grasp(effort=effort, load_kg=load)
+    duration = None
+    if "duration_s" in table:
+        duration = _number(table["duration_s"], f"{where}: duration_s")
+        if not 0.0 < duration <= 60.0:
+            raise PoseError(f"{where}: duration_s = {duration} is outside (0, 60] s")
     description = table.get("description", "")
     if not isinstance(description, str):
         raise PoseError(f"{where}: description must be a string")
-    return Pose(name=name, description=description, targets=targets, grasp=grasp, source=source)
+    return Pose(
+        name=name,
+        description=description,
+        targets=targets,
+        grasp=grasp,
+        source=source,
+        duration_s=duration,
+    )
 
 
 class PoseLibrary(Mapping[str, Pose]):

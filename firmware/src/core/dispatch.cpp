@@ -141,6 +141,7 @@ void set_targets(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
             if (m.mask & (1u << f)) b.hand.finger(f).set_target(bu[f]);
         }
     }
+    b.move_memo = false;  // the paths it ended cannot be resumed by a resent move
     ack(b, seq, m.kId);
 }
 
@@ -279,6 +280,7 @@ void set_mode(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
         nack(b, seq, m.kId, (uint8_t)ErrorCode::FAULTED, refused);
         return;
     }
+    b.move_memo = false;  // as set_targets
     ack(b, seq, m.kId);
 }
 

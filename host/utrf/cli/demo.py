@@ -34,6 +34,7 @@ from utrf.cli._hand_common import (
 from utrf.cli.emulate import speed_arg
 from utrf.hand import Hand
 from utrf.hand.demo import DEFAULT_SEQUENCE, Step, run_demo
+from utrf.hand.tracking import format_tracking
 from utrf.hand.view import state_table
 
 DEFAULT_OUT = Path("out/demo")
@@ -126,6 +127,9 @@ def run(args: argparse.Namespace) -> int:
     )
     for path in result.files:
         print(f"  {path}")
+    print(format_tracking(result.tracking))
+    for name, fingers in result.stretched.items():
+        print(f"  {name}: the board stretched the paths of {', '.join(fingers)}")
     return EXIT_OK if result.ok else EXIT_NOT_DONE
 
 
@@ -144,7 +148,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help=f"poses in order (default {','.join(DEFAULT_SEQUENCE)})",
     )
     add_poses(p)
-    p.add_argument("--duration", type=float, default=1.0, metavar="S", help="move time per pose")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="move time per pose (default: the pose's own, 1 s when it names none)",
+    )
     p.add_argument("--hold", type=float, default=0.5, metavar="S", help="pause at each pose")
     p.add_argument(
         "--speed",

@@ -3,7 +3,7 @@
 See :mod:`utrf.hand.client` for the API and ``docs/hand.md`` for a guide.
 """
 
-from utrf.hand.client import DEFAULT_TELEMETRY_HZ, DEFAULT_TOLERANCE, TRAJECTORY_RATE_HZ, Hand
+from utrf.hand.client import DEFAULT_TELEMETRY_HZ, DEFAULT_TOLERANCE, Hand, MoveResult
 from utrf.hand.clock import Clock, WallClock
 from utrf.hand.errors import (
     FingerFaultError,
@@ -18,7 +18,6 @@ from utrf.hand.telemetry_log import TelemetryLog, log_columns
 __all__ = [
     "DEFAULT_TELEMETRY_HZ",
     "DEFAULT_TOLERANCE",
-    "TRAJECTORY_RATE_HZ",
     "Clock",
     "FaultEvent",
     "FingerFaultError",
@@ -26,6 +25,7 @@ __all__ = [
     "Hand",
     "HandError",
     "HandState",
+    "MoveResult",
     "NotControlledError",
     "NotSettledError",
     "TargetError",

@@ -19,11 +19,12 @@ names both versions and hashes). After a board reset or a lost line the next cal
 (``BoardResetError``, ``DisconnectedError``); :meth:`Hand.reconnect` does the handshake again.
 Nothing reconnects silently, and nothing moves again on its own after a reset.
 
-Trajectories: :meth:`Hand.move` and :meth:`Hand.pose` stream ``set_targets`` along a
-minimum-jerk path at ``TRAJECTORY_RATE_HZ`` (50 Hz): steps of 20 ms that the board's 1 kHz PID
-follows smoothly, about 1.5 kB/s of the 1 Mbaud line, and a rate the host keeps without
-real-time scheduling. The streamed targets are Joint-2 angles converted on the host with the
-finger models (the same models the firmware's kinematics table is generated from).
+Moves: :meth:`Hand.move` and :meth:`Hand.pose` send one ``move`` command; the board generates
+each finger's minimum-jerk path in its 1 kHz tick, with velocity and acceleration feedforward,
+and stretches a path its finger's speed or acceleration limits cannot follow (the reply says
+which, and how long each path takes: :attr:`Hand.last_move`). The targets go as Joint-2 angles
+converted on the host with the finger models (the same models the firmware's kinematics table
+is generated from). ``set_targets`` stays for streaming targets (teleoperation): a step each.
 
 Closing (``with`` or :meth:`Hand.close`) stops the stream and leaves the hand in the safe mode
 ``on_close``: ``"brake"`` (the default: motor terminals shorted, no power; the fingers relax
@@ -37,9 +38,10 @@ from __future__ import annotations
 
 import logging
 import math
+import random
 import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, Protocol, TypeVar
 
@@ -67,7 +69,6 @@ from utrf.protocol.errors import (
     ReplyTimeout,
 )
 from utrf.protocol.link import Link, LinkStats, Telemetry
-from utrf.trajectory import min_jerk
 
 if TYPE_CHECKING:
     from utrf.emulator import EmulatedBoard
@@ -89,12 +90,34 @@ KIND_UNITS = {"theta2": "rad", "q": "m", "flexion": ""}
 ON_CLOSE = ("brake", "coast", "hold")
 ALL_FINGERS = (1 << m.FINGER_COUNT) - 1
 
-#: set_targets per second along a trajectory (see the module's docstring)
-TRAJECTORY_RATE_HZ = 50.0
+#: the longest move a command asks for (the protocol's range of move.duration)
+MAX_MOVE_S = 60.0
+#: a pose's move time when neither the call nor the pose names one
+DEFAULT_MOVE_S = 1.0
 #: default settling tolerance on the Joint-2 angle: 2 degrees
 DEFAULT_TOLERANCE = math.radians(2.0)
 #: default telemetry rate: a sample every 10 ms, 7 % of the line
 DEFAULT_TELEMETRY_HZ = 100
+
+
+@dataclass(frozen=True)
+class MoveResult:
+    """The board's answer to a move: per finger moved, its path's duration (s), and the
+    fingers whose paths were stretched to keep their speed and acceleration limits."""
+
+    requested: float
+    duration: dict[str, float]
+    stretched: tuple[str, ...] = ()
+
+    @property
+    def longest(self) -> float:
+        return max(self.duration.values(), default=0.0)
+
+    def describe(self) -> str:
+        if not self.stretched:
+            return f"move of {self.longest:.3f} s"
+        slow = ", ".join(f"{n} {self.duration[n]:.3f} s" for n in self.stretched)
+        return f"move stretched from {self.requested:.3f} s to keep the fingers' limits: {slow}"
 
 
 class LinkLike(Protocol):
@@ -160,8 +183,6 @@ def _faulted(st: HandState, idx: Iterable[int]) -> dict[str, int]:
 class Hand:
     """A connected UTRF-RoboHand. Build one with :meth:`connect` or :meth:`emulated`."""
 
-    TRAJECTORY_RATE_HZ = TRAJECTORY_RATE_HZ
-
     def __init__(
         self,
         link: LinkLike,
@@ -215,6 +236,10 @@ class Hand:
             f.geometry.theta2_range_rad for f in self.geometry.fingers
         ]
         self._goal = np.full(m.FINGER_COUNT, np.nan)  # the last Joint-2 targets commanded
+        # A fresh move id per Hand: a board that kept the last session's move cannot take
+        # this session's first for a resend of it.
+        self._move_id = random.randrange(0x10000)
+        self._last_move: MoveResult | None = None
         self._identity: m.Identity | None = None
         self._forward = forward or _Forward()
         if forward is None:
@@ -807,21 +832,23 @@ class Hand:
         timeout: float | None = None,
         mode: m.ControlMode | str = m.ControlMode.POSITION,
         effort: float = 1.0,
-        rate_hz: float = TRAJECTORY_RATE_HZ,
-    ) -> None:
-        """Move fingers to targets along a minimum-jerk path over ``duration`` s, streaming
-        Joint-2 targets at ``rate_hz``; with ``wait``, then :meth:`wait_settled`.
+    ) -> MoveResult:
+        """Move fingers to targets along minimum-jerk paths of ``duration`` s that the board
+        generates on its own clock (one ``move`` command); with ``wait``, then wait until they
+        end and :meth:`wait_settled`. ``duration`` 0 asks for the fastest path each finger's
+        limits allow (:meth:`motion`); a path faster than they allow is stretched by the board,
+        and the result says which fingers and how long their paths take.
 
-        Each finger starts from the target the board holds (closed loop) or where it is
-        (otherwise), so nothing jumps. ``mode``: POSITION, or GRASP with ``effort`` (the
-        largest closing duty) for the fingers that close by more than ``tolerance`` (those that
-        open or stay move in POSITION). Fingers not named keep what they do. A fault latched
-        during the move stops it with FingerFaultError.
+        Each finger's path starts from the setpoint the board holds (closed loop) or where it
+        is (otherwise), at rest. ``mode``: POSITION, or GRASP with ``effort`` (the largest
+        closing duty) for the fingers that close by more than ``tolerance`` (those that open or
+        stay move in POSITION). Fingers not named keep what they do. A fault latched during the
+        move stops it with FingerFaultError.
         """
-        if not (math.isfinite(duration) and duration >= 0):
-            raise ValueError(f"duration must be a finite number of seconds >= 0, got {duration}")
-        if not rate_hz > 0:
-            raise ValueError(f"rate_hz must be > 0, got {rate_hz}")
+        if not (math.isfinite(duration) and 0 <= duration <= MAX_MOVE_S):
+            raise ValueError(
+                f"duration must be a number of seconds in [0, {MAX_MOVE_S:g}], got {duration}"
+            )
         mode_ = _mode(mode)
         if mode_ not in CLOSED_LOOP:
             raise ValueError(f"move needs POSITION or GRASP, got {mode_.name}")
@@ -837,15 +864,17 @@ class Hand:
             i: (st.fingers[i].target if st.fingers[i].closed_loop else st.fingers[i].theta2)
             for i in idx
         }
-        a = np.array([start[i] for i in idx])
-        b = np.array([end[i] for i in idx])
-        self._send_joint2(idx, a)
+        # Fingers not under control yet hold where they are first: their paths start there.
+        idle = [i for i in idx if not st.fingers[i].closed_loop]
+        if idle:
+            self._send_joint2(idle, np.array([start[i] for i in idle]))
         seen = len(self.faults_seen)
         if mode_ == m.ControlMode.GRASP:
             # GRASP bounds the controller's output both ways: a finger that opens or stays
             # goes in POSITION, so a gentle effort does not leave it lagging on the way out.
             closing = [i for i in idx if end[i] > start[i] + tolerance]
             opening = [i for i in idx if i not in closing]
+            closing = [i for i in closing if st.fingers[i].mode != m.ControlMode.GRASP]
             if closing:
                 self.set_mode(m.ControlMode.GRASP, closing, effort=effort)
         else:
@@ -853,26 +882,70 @@ class Hand:
         todo = [i for i in opening if st.fingers[i].mode != m.ControlMode.POSITION]
         if todo:
             self.set_mode(m.ControlMode.POSITION, todo)
-        self._goal[idx] = b
-        t0 = self.clock.now()
-        k = 0
-        while duration > 0:
-            k += 1
-            due = t0 + k / rate_hz
-            self.clock.sleep(due - self.clock.now())
-            t = self.clock.now() - t0
-            if t >= duration:
-                break
-            self._check_new_faults(seen, idx, "move")
-            self._send_joint2(idx, min_jerk(a, b, duration, t))
-        self._send_joint2(idx, b)
-        self._check_new_faults(seen, idx, "move")
+        result = self._send_move(idx, end, duration)
+        self._goal[idx] = [end[i] for i in idx]
+        if result.stretched:
+            log.info("utrf hand: %s", result.describe())
         if wait:
+            # The paths end on the board's clock; then the fingers settle.
+            self._wait_board_time(st.board_time, result.longest, seen, idx)
             self.wait_settled(
                 tolerance,
-                timeout if timeout is not None else max(3.0, duration + 2.0),
+                timeout if timeout is not None else 3.0,
                 fingers=idx,
             )
+        else:
+            self._check_new_faults(seen, idx, "move")
+        return result
+
+    def _send_move(
+        self, idx: Sequence[int], end: Mapping[int, float], duration: float
+    ) -> MoveResult:
+        n = len(self.fingers)
+        self._move_id = (self._move_id + 1) & 0xFFFF
+        try:
+            reply = self._request(
+                m.Move(
+                    move_id=self._move_id,
+                    kind=m.TargetKind.JOINT2_ANGLE,
+                    mask=sum(1 << i for i in idx),
+                    value=tuple(float(end.get(i, 0.0)) for i in range(n)),
+                    duration=tuple(duration if i in end else 0.0 for i in range(n)),
+                )
+            )
+        except NackError as exc:
+            if exc.code == m.ErrorCode.FAULTED:
+                raise self._fault_error(exc, "move") from exc
+            raise
+        self._last_move = MoveResult(
+            requested=duration,
+            duration={self.fingers[i]: float(reply.duration[i]) for i in idx},
+            stretched=tuple(self.fingers[i] for i in idx if reply.stretched & (1 << i)),
+        )
+        return self._last_move
+
+    def _wait_board_time(
+        self, since: float, duration: float, seen: int, idx: Sequence[int]
+    ) -> None:
+        """Until the board's clock passes ``since + duration`` (the paths' end), watching for
+        faults. Board time comes from telemetry (or get_state without a stream)."""
+        deadline = self.clock.now() + duration + 1.0  # a board that stopped talking
+        period = 1.0 / self._telemetry_hz if self._telemetry_hz else 0.02
+        period = min(max(period, 0.002), 0.02)
+        st: HandState | None = None
+        while True:
+            self._check_new_faults(seen, idx, "move")
+            st = self._fresh_state(st)
+            left = since + duration - st.board_time
+            if left <= 0 or self.clock.now() >= deadline:
+                return
+            self.clock.sleep(min(max(left, period), 0.1))
+
+    @property
+    def last_move(self) -> MoveResult | None:
+        """What the board reported for the last move: its paths' durations, which were
+        stretched."""
+        return self._last_move
 
     def _send_joint2(self, idx: Sequence[int], values: np.ndarray) -> None:
         wire = [0.0] * len(self.fingers)
@@ -901,16 +974,19 @@ class Hand:
     def pose(
         self,
         pose: str | Pose,
-        duration: float = 1.0,
+        duration: float | None = None,
         *,
         wait: bool = True,
         tolerance: float = DEFAULT_TOLERANCE,
         timeout: float | None = None,
     ) -> Pose:
-        """Move to a pose of the library (by name) or a :class:`~utrf.poses.Pose`. A grasp
+        """Move to a pose of the library (by name) or a :class:`~utrf.poses.Pose`, in one
+        :meth:`move` of ``duration`` s (default: the pose's ``duration_s``, else 1 s). A grasp
         pose closes its fingers in GRASP mode with its effort (see :meth:`move`); they count as
         settled when they reach their targets or stop against the object."""
         p = self.poses[pose] if isinstance(pose, str) else pose
+        if duration is None:
+            duration = p.duration_s if p.duration_s is not None else DEFAULT_MOVE_S
         theta2 = p.theta2(self.geometry)
         if p.grasp is not None:
             self.move(
@@ -1026,6 +1102,19 @@ class Hand:
         new = self._changed(current, changes, "set_gains")
         self._request(m.SetGains(**{f.name: getattr(new, f.name) for f in m.SetGains.FIELDS}))
         return self.gains(i)
+
+    def motion(self, finger: FingerKey) -> m.Motion:
+        """A finger's move limits (``max_speed`` rad/s, ``max_accel`` rad/s^2) and feedforward
+        gains (``kv`` duty per rad/s, ``ka`` duty per rad/s^2)."""
+        return self._request(m.GetMotion(finger=self.finger_index(finger)))
+
+    def set_motion(self, finger: FingerKey, **changes: float) -> m.Motion:
+        """Change some of a finger's move limits and feedforward gains (``max_speed``,
+        ``max_accel``, ``kv``, ``ka``; SI); they apply from the next move. Returns them."""
+        i = self.finger_index(finger)
+        new = self._changed(self.motion(i), changes, "set_motion")
+        self._request(m.SetMotion(**{f.name: getattr(new, f.name) for f in m.SetMotion.FIELDS}))
+        return self.motion(i)
 
     def limits(self, finger: FingerKey) -> m.Limits:
         return self._request(m.GetLimits(finger=self.finger_index(finger)))

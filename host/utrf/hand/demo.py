@@ -22,6 +22,7 @@ from utrf.hand.errors import FingerFaultError, NotControlledError, NotSettledErr
 from utrf.hand.figures import Segment, draw_pose, plot_trajectories
 from utrf.hand.state import HandState
 from utrf.hand.telemetry_log import log_columns
+from utrf.hand.tracking import Tracking, tracking_from_log
 from utrf.poses import PoseLibrary
 
 DEFAULT_SEQUENCE = ("open", "rock-and-roll", "shaka", "fist", "open")
@@ -53,6 +54,10 @@ class DemoResult:
     trajectories: Path | None = None
     url: str = ""
     realtime_factor: float = math.nan
+    #: per finger, Joint 2 against the controller's setpoint over the whole run
+    tracking: dict[str, Tracking] = field(default_factory=dict)
+    #: per pose, the fingers whose paths the board stretched to keep their limits
+    stretched: dict[str, tuple[str, ...]] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -84,7 +89,7 @@ def run_demo(
     *,
     elf: str | Path | None = None,
     speed: float | None = 1.0,
-    move_s: float = 1.0,
+    move_s: float | None = None,
     hold_s: float = 0.5,
     seed: int = 0,
     poses: PoseLibrary | None = None,
@@ -101,7 +106,7 @@ def run_demo(
         library[name]
     if not sequence:
         raise ValueError("the pose sequence is empty")
-    if not (move_s > 0 and hold_s >= 0):
+    if not ((move_s is None or move_s > 0) and hold_s >= 0):
         raise ValueError(f"move_s must be > 0 and hold_s >= 0, got {move_s}, {hold_s}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -110,6 +115,7 @@ def run_demo(
     csv = out / "telemetry.csv"
     steps = [Step(i + 1, name) for i, name in enumerate(sequence)]
     recorder = _Recorder()
+    stretched: dict[str, tuple[str, ...]] = {}
     with EmulatedBoard(elf, realtime=True, speed=speed, pty=False, seed=seed) as board:
         url = board.url or ""
         with Hand.connect(url, poses=library, log_path=csv) as hand:
@@ -121,8 +127,10 @@ def run_demo(
                 if on_step is not None:
                     on_step(step)
                 try:
-                    pose = hand.pose(step.name, move_s, timeout=move_s + 3.0)
+                    pose = hand.pose(step.name, move_s, timeout=3.0)
                     step.settled = True
+                    if hand.last_move is not None and hand.last_move.stretched:
+                        stretched[step.name] = hand.last_move.stretched
                 except (NotSettledError, FingerFaultError, NotControlledError) as exc:
                     pose = library[step.name]
                     step.reason = str(exc)
@@ -136,7 +144,7 @@ def run_demo(
                 if on_step is not None:
                     on_step(step)
         factor = board.realtime_factor
-    result = DemoResult(out, steps, csv, url=url, realtime_factor=factor)
+    result = DemoResult(out, steps, csv, url=url, realtime_factor=factor, stretched=stretched)
     geometry = hand.geometry
     for step in steps:
         step.picture = draw_pose(
@@ -149,6 +157,7 @@ def run_demo(
             note=library[step.name].description,
         )
     data = read_log(csv, log_columns(hand.fingers))
+    result.tracking = tracking_from_log(data, hand.fingers)
     t = np.array(data.column("board_time_s"), dtype=float)
     if len(t) > 1:
         names = list(hand.fingers)
