@@ -8,6 +8,7 @@ holds it (``stuck``). Tests script the rest: refuse, drop or delay any request.
 
 from __future__ import annotations
 
+import math
 import sys
 import threading
 from pathlib import Path
@@ -49,6 +50,7 @@ class HandBoard(FakeBoard):
             (M.GetLimits, self._get_limits),
             (M.SetTargets, self._set_targets),
             (M.SetMode, self._set_mode),
+            (M.Move, self._move),
             (M.GetState, self._get_state),
             (M.ClearFaults, self._clear_faults),
             (M.GetSafety, lambda f: [(f.seq, self.safety)]),
@@ -147,6 +149,41 @@ class HandBoard(FakeBoard):
                     self.mode[i] = msg.mode[i]
             self._settle()
         return [(f.seq, M.Ack(f.msg_id))]
+
+    #: the limits the fake's moves keep (rad/s, rad/s^2): the firmware's defaults
+    max_speed = 1.2
+    max_accel = 8.0
+
+    def _move(self, f: Frame) -> Reply:
+        """The firmware's checks and stretching rule; the ideal plant is at the end at once."""
+        msg = M.Move.decode(f.body)
+        assert msg.kind == M.TargetKind.JOINT2_ANGLE  # what the Hand sends
+        durations = [0.0] * N
+        stretched = 0
+        with self.lock:
+            for i in range(N):
+                if not msg.mask & (1 << i):
+                    continue
+                lo, hi = self.limits[i]
+                if not lo - 1e-4 <= msg.value[i] <= hi + 1e-4:
+                    return [(f.seq, M.Nack(f.msg_id, M.ErrorCode.OUT_OF_RANGE, 0x80 | i))]
+                if self.faults[i]:
+                    return [(f.seq, M.Nack(f.msg_id, M.ErrorCode.FAULTED, i))]
+                if self.mode[i] not in (M.ControlMode.POSITION, M.ControlMode.GRASP):
+                    return [(f.seq, M.Nack(f.msg_id, M.ErrorCode.BUSY, i))]
+                d = abs(msg.value[i] - self.target[i])
+                t_min = max(1.875 * d / self.max_speed, math.sqrt(5.7735 * d / self.max_accel))
+                t = msg.duration[i]
+                if t == 0 or t_min > t + 5e-4:
+                    stretched |= (1 << i) if t else 0
+                    t = t_min
+                durations[i] = math.ceil(t * 1000 - 1e-3) / 1000
+            for i in range(N):
+                if msg.mask & (1 << i):
+                    self.target[i] = msg.value[i]
+                    self.target_valid[i] = True
+            self._settle()
+        return [(f.seq, M.Moving(msg.move_id, stretched, tuple(durations)))]
 
     def _clear_faults(self, f: Frame) -> Reply:
         mask = M.ClearFaults.decode(f.body).mask

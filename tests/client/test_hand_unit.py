@@ -30,7 +30,6 @@ from utrf.protocol.errors import (
     ReplyTimeout,
     SchemaMismatchError,
 )
-from utrf.trajectory import min_jerk
 
 
 @pytest.fixture
@@ -162,6 +161,8 @@ def test_bad_input_is_refused_with_what_was_wrong(hand: Hand) -> None:
         hand.set_mode("grasp", "index", effort=1.5)
     with pytest.raises(ValueError, match="duration must be"):
         hand.move({"index": 0.1}, duration=-1)
+    with pytest.raises(ValueError, match=r"duration must be a number of seconds in \[0, 60\]"):
+        hand.move({"index": 0.1}, duration=61)
     with pytest.raises(KeyError, match="no pose named 'vulcan'"):
         hand.pose("vulcan")
     with pytest.raises(TypeError, match=r"unknown field.*'kq'"):
@@ -186,26 +187,41 @@ def test_targets_by_name_index_and_kind(board: HandBoard, hand: Hand) -> None:
     assert st[3].target == pytest.approx(hand.to_theta2("ring", 0.5, "flexion"), abs=1e-3)
 
 
-def test_move_streams_a_minimum_jerk_path(board: HandBoard, hand: Hand) -> None:
+def test_move_is_one_command_timed_by_the_board(board: HandBoard, hand: Hand) -> None:
     hand.move({"thumb": 0.2, "middle": -0.3}, 0.1)  # a known start, settled
     n0 = len(board.requests(M.SetTargets))
+    moves0 = len(board.requests(M.Move))
+    result = hand.move({"thumb": 0.5, "middle": 0.0}, 0.6, wait=False)
+    (sent,) = board.requests(M.Move)[moves0:]
+    assert len(board.requests(M.SetTargets)) == n0  # in closed loop already: no step first
+    assert sent.kind == M.TargetKind.JOINT2_ANGLE and sent.mask == 0b00101
+    assert sent.value[0] == pytest.approx(0.5, abs=1e-6)
+    assert sent.value[2] == pytest.approx(0.0, abs=1e-6)
+    assert sent.duration == (0.6, 0.0, 0.6, 0.0, 0.0)
+    assert result.duration == {"thumb": 0.6, "middle": 0.6} and result.stretched == ()
+    assert hand.last_move == result
+    # waiting lasts until the board's clock passes the paths' end
     t0 = time.monotonic()
-    hand.move({"thumb": 1.0, "middle": 0.5}, 0.5, wait=False, rate_hz=40)
-    took = time.monotonic() - t0
-    frames = board.requests(M.SetTargets)[n0:]
-    assert 0.5 <= took < 2.0  # the move takes its duration (more on a busy machine)
-    assert all(f.mask == 0b00101 and f.kind == M.TargetKind.JOINT2_ANGLE for f in frames)
-    thumb = np.array([f.value[0] for f in frames])
-    # the first frame holds the start, the last the end; about rate x duration in between
-    assert thumb[0] == pytest.approx(0.2, abs=1e-5) and thumb[-1] == pytest.approx(1.0, abs=1e-5)
-    assert 10 <= len(frames) <= 22  # about rate x duration; a late host skips, never bunches
-    assert np.all(np.diff(thumb) >= -1e-9)  # monotonic: no overshoot in the targets
-    # each streamed value is the minimum-jerk path at some time in [0, T]
-    t = np.linspace(0, 0.5, 2001)
-    path = min_jerk(0.2, 1.0, 0.5, t)
-    assert max(np.min(np.abs(path - v)) for v in thumb) < 1e-3
-    middle = np.array([f.value[2] for f in frames])
-    assert middle[0] == pytest.approx(-0.3, abs=1e-5) and middle[-1] == pytest.approx(0.5)
+    hand.move({"thumb": 0.8}, 0.4)
+    assert time.monotonic() - t0 >= 0.4
+    # a path faster than the finger's limits is stretched, and the result names it
+    result = hand.move({"thumb": -0.7, "index": 0.1}, 0.5, wait=False)
+    assert result.stretched == ("thumb",)
+    assert result.duration["thumb"] == pytest.approx(1.875 * 1.5 / board.max_speed, abs=1e-3)
+    assert result.duration["index"] == 0.5
+    assert "thumb 2.344 s" in result.describe()
+    assert board.requests(M.Move)[-1].move_id != board.requests(M.Move)[-2].move_id
+
+
+def test_move_holds_an_idle_finger_before_its_path(board: HandBoard, hand: Hand) -> None:
+    with board.lock:
+        board.theta2[3] = 0.25  # in COAST, resting bent
+    hand.move({"ring": 0.6}, 0.2, wait=False)
+    (hold,) = board.requests(M.SetTargets)
+    assert hold.mask == 0b01000 and hold.value[3] == pytest.approx(0.25, abs=1e-4)
+    (mode,) = board.requests(M.SetMode)
+    assert mode.mask == 0b01000 and mode.mode[3] == M.ControlMode.POSITION
+    assert board.received[-1].msg_id == M.Move.ID  # the move goes last
 
 
 def test_wait_settled_names_the_finger_and_how_far(board: HandBoard, hand: Hand) -> None:

@@ -84,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
         else:
             display = contextlib.nullcontext()
             if not args.json:
-                print(f"moving to {pose.name} over {args.duration:g} s ...", flush=True)
+                took = args.duration if args.duration is not None else pose.duration_s or 1.0
+                print(f"moving to {pose.name} over {took:g} s ...", flush=True)
         with display:
             try:
                 hand.pose(pose, args.duration, tolerance=tolerance, timeout=args.timeout)
@@ -127,7 +128,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("name", help="a pose of the library (`utrf poses` lists them)")
     add_port(p)
     add_poses(p)
-    p.add_argument("--duration", type=float, default=1.0, metavar="S", help="move time (1 s)")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="move time (default: the pose's own, 1 s when it names none)",
+    )
     p.add_argument(
         "--tolerance",
         type=float,
@@ -140,7 +147,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         type=float,
         default=None,
         metavar="S",
-        help="settling time allowed after the move (the larger of 3 s and duration + 2 s)",
+        help="settling time allowed after the move's paths end (3 s)",
     )
     p.add_argument(
         "--then",
