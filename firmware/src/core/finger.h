@@ -223,14 +223,10 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
     int16_t u;
     if (UTRF_UNLIKELY(mode == DUTY)) {
         u = duty_step(th);
-    } else if (UTRF_LIKELY(!path_.active())) {
-        u = pid_.step(limit_, target_, th);
     } else {
-        // A move: the path sets the setpoint, and its feedforward joins the PID's output.
-        const int16_t ff = path_.tick(target_, stall_check);
-        u = pid_.step(limit_, target_, th);
-        const int16_t lim = limit_;
-        u = fx::clamp16(fx::sat16((int32_t)u + ff), (int16_t)-lim, lim);
+        // A move: the path sets the setpoint, and its feedforward enters the PID's sum.
+        const int16_t ff = UTRF_UNLIKELY(path_.active()) ? path_.tick(target_, stall_check) : 0;
+        u = pid_.step(limit_, target_, th, ff);
     }
 
     // ---- stall: the finger's turn comes every kStallEvery ticks ----

@@ -61,6 +61,19 @@ void Path::start(const Plan& p, int16_t from_bu) {
     left_ = p.ticks;
 }
 
+int16_t Path::tick(int16_t& target, bool turn) {
+    if (UTRF_UNLIKELY(turn)) evaluate();
+    acc_ += inc_;
+    if (--left_ == 0) {  // the end: exactly there, at rest
+        target = end_;
+        ff_ = 0;
+        return 0;
+    }
+    pos8_ += step8_;
+    target = (int16_t)(pos8_ >> 8);
+    return ff_;
+}
+
 void Path::evaluate() {
     // The point n ticks ahead: the end once the path has no more than kEvery ticks to go.
     uint8_t n;

@@ -65,7 +65,8 @@ class Path {
     void stop() { left_ = 0; }
     // One tick: the setpoint for it in `target`, the feedforward duty (Q15) as the result.
     // `turn`: this tick evaluates the path (the finger's turn, every kEvery ticks).
-    inline int16_t tick(int16_t& target, bool turn);
+    // Out of line: the hand's five finger ticks are written out, and this is their rare path.
+    int16_t tick(int16_t& target, bool turn);
 
    private:
     void evaluate();  // on the turn: the point kEvery ticks ahead, the step toward it, ff
@@ -82,19 +83,6 @@ class Path {
     int16_t ff_;
     uint16_t left_;
 };
-
-__attribute__((always_inline)) inline int16_t Path::tick(int16_t& target, bool turn) {
-    if (UTRF_UNLIKELY(turn)) evaluate();
-    acc_ += inc_;
-    if (--left_ == 0) {  // the end: exactly there, at rest
-        target = end_;
-        ff_ = 0;
-        return 0;
-    }
-    pos8_ += step8_;
-    target = (int16_t)(pos8_ >> 8);
-    return ff_;
-}
 
 }  // namespace path
 }  // namespace utrf
