@@ -138,6 +138,10 @@ void fw_finger(uint8_t f, FwFinger* out) {
     out->integrator31 = fg.pid().integrator31();
 }
 
+// A move's path (core/path.h): its feedforward duty (Q15) and the ticks it has to go.
+int16_t fw_path_ff(uint8_t f) { return app::board().hand.finger(f).path().feedforward(); }
+uint16_t fw_path_left(uint8_t f) { return app::board().hand.finger(f).path().left(); }
+
 struct FwStatus {
     uint32_t lock_errors;
     uint32_t wdt_feeds;

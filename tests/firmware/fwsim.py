@@ -108,6 +108,8 @@ def load_library(path: Path = LIB_PATH) -> ctypes.CDLL:
         "fw_eeprom_writes": (c.c_uint32, []),
         "fw_motor": (None, [c.c_uint8, c.POINTER(FwMotor)]),
         "fw_finger": (None, [c.c_uint8, c.POINTER(FwFinger)]),
+        "fw_path_ff": (c.c_int16, [c.c_uint8]),
+        "fw_path_left": (c.c_uint16, [c.c_uint8]),
         "fw_status": (None, [c.POINTER(FwStatus)]),
         "fw_pid_config": (
             None,
