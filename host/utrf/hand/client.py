@@ -939,7 +939,7 @@ class Hand:
             left = since + duration - st.board_time
             if left <= 0 or self.clock.now() >= deadline:
                 return
-            self.clock.sleep(min(max(left, period), 0.1))
+            self.clock.sleep(min(left, period))  # a fault or reset is seen within a period
 
     @property
     def last_move(self) -> MoveResult | None:
