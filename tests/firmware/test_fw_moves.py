@@ -119,10 +119,11 @@ def test_the_feedforward_is_kv_speed_plus_ka_acceleration(held: Sim) -> None:
         ff.append(sim.lib.fw_path_ff(1) / 32768.0)
     got = np.array(ff)
     k = np.arange(800)
-    # each evaluation is of the point 5 ms ahead, held for 5 ticks: compare within that window
+    # each segment's feedforward is its end point's (5 ticks ahead at most), held for its 5
+    # ticks: compare within that window
     want = [
-        kv * distance * ds(np.arange(i + 1, i + 7) / 800) / duration
-        + ka * distance * dds(np.arange(i + 1, i + 7) / 800) / duration**2
+        kv * distance * ds(np.arange(i, i + 7) / 800) / duration
+        + ka * distance * dds(np.arange(i, i + 7) / 800) / duration**2
         for i in k
     ]
     lo = np.array([w.min() for w in want]) - 2e-3

@@ -199,6 +199,7 @@ void setup() {
 void loop() {
     Board& b = g_board;
     watchdog(b);
+    b.hand.plan_paths();  // first: a segment is due every 5 ticks (core/path.h)
     if (!b.boot_sent) {
         uint8_t body[proto::kMaxPayload];
         const uint8_t n = dispatch::encode_boot(b, body);

@@ -212,7 +212,9 @@ void move(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
         }
         if (code == 0) {
             for (uint8_t f = 0; f < kFingerCount; ++f) {
-                if (m.mask & (1u << f)) b.hand.finger(f).start_path(plan[f]);
+                // first segments of 1..5 ticks: the fingers' segment ends fall on
+                // different ticks (core/path.h)
+                if (m.mask & (1u << f)) b.hand.finger(f).start_path(plan[f], (uint8_t)(f + 1));
             }
         }
     }
@@ -220,6 +222,7 @@ void move(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
         nack(b, seq, m.kId, code, detail);
         return;
     }
+    b.hand.plan_paths();  // the first segments, before the next tick if it can
     b.move_seq = seq;
     memcpy(b.move_body, body, Move::kSize);
     encode(r, b.move_reply);

@@ -86,8 +86,8 @@ class Finger {
     void set_target(int16_t theta_bu);  // a step: ends a move's path
     // A move (core/path.h): the path starts from the present setpoint; the finger must be in
     // POSITION or GRASP. set_target, a mode change and any stopping fault end it.
-    void start_path(const path::Plan& p) {
-        path_.start(p, target_);
+    void start_path(const path::Plan& p, uint8_t first_segment) {
+        path_.start(p, target_, first_segment);
         target_valid_ = true;
     }
     void clear_faults();
@@ -121,6 +121,8 @@ class Finger {
     int16_t target() const { return target_; }  // BU: the setpoint in use (a path's, moving)
     bool moving() const { return path_.active(); }
     const path::Path& path() const { return path_; }
+    // loop() context, without the lock: the path's next segment, when it needs one.
+    void plan_path() { path_.plan_next(); }
     int16_t duty_a() const { return duty_a_; }  // Q15, signed, positive pulls
     int16_t duty_b() const { return duty_b_; }
     int16_t output() const { return pid_.output(); }  // the controller's u, Q15
@@ -225,7 +227,7 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
         u = duty_step(th);
     } else {
         // A move: the path sets the setpoint, and its feedforward enters the PID's sum.
-        const int16_t ff = UTRF_UNLIKELY(path_.active()) ? path_.tick(target_, stall_check) : 0;
+        const int16_t ff = UTRF_UNLIKELY(path_.active()) ? path_.tick(target_) : 0;
         u = pid_.step(limit_, target_, th, ff);
     }
 

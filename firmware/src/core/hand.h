@@ -40,6 +40,10 @@ class Hand {
     }
     void set_safety(uint16_t timeout_ms, uint8_t safe_action);
     finger::Finger& finger(uint8_t f) { return fingers_[f]; }
+    // loop() context, every pass, without the lock: the moves' next path segments.
+    void plan_paths() {
+        for (uint8_t f = 0; f < kFingers; ++f) fingers_[f].plan_path();
+    }
     const finger::Finger& finger(uint8_t f) const { return fingers_[f]; }
     void reset_timing();
     TickTiming timing() const {

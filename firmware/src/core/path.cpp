@@ -2,16 +2,17 @@
 
 #include <math.h>
 
+#include "../hal/hal.h"
+
 namespace utrf {
 namespace path {
+
+const uint16_t kRecip[kEvery + 1] = {0, 65535u, 32768u, 21845u, 16384u, 13107u};
 
 namespace {
 int16_t q15(float duty) {
     return fx::sat16(fx::round_sat(duty * 32768.0f));
 }
-
-// 65536 / n for the steps toward the point n ticks ahead (n <= kEvery).
-const uint16_t kRecip[kEvery + 1] = {0, 65535u, 32768u, 21845u, 16384u, 13107u};
 
 inline uint16_t hi16(uint32_t v) { return (uint16_t)(v >> 16); }
 }  // namespace
@@ -47,72 +48,106 @@ Plan plan(float distance_rad, float duration_s, int16_t end_bu, const config::Mo
     return p;
 }
 
-void Path::start(const Plan& p, int16_t from_bu) {
+void Path::start(const Plan& p, int16_t from_bu, uint8_t first) {
+    // Cheap: this runs under the tick lock. The first segment is loop()'s (plan_next(), at
+    // once after the move's reply): until it comes the setpoint stands, at rest as the path
+    // starts.
     start_ = from_bu;
     end_ = p.end;
     delta_ = (int16_t)(p.end - from_bu);  // both within +-pi: fits
     inc_ = p.inc;
     cv_ = p.cv;
     ca_ = p.ca;
-    acc_ = 0;
     pos8_ = (int32_t)from_bu << 8;
-    step8_ = 0;  // until the finger's first turn (at most kEvery - 1 ticks: still at rest)
+    step8_ = 0;
     ff_ = 0;
     left_ = p.ticks;
+    seg_left_ = 0;
+    next_ready_ = 0;
+    plan_acc_ = 0;
+    plan_left_ = p.ticks;
+    plan_n_ = (first < 1 || first > kEvery) ? kEvery : first;
 }
 
-int16_t Path::tick(int16_t& target, bool turn) {
-    if (UTRF_UNLIKELY(turn)) evaluate();
-    acc_ += inc_;
-    if (--left_ == 0) {  // the end: exactly there, at rest
-        target = end_;
-        ff_ = 0;
-        return 0;
-    }
-    pos8_ += step8_;
-    target = (int16_t)(pos8_ >> 8);
-    return ff_;
-}
-
-void Path::evaluate() {
-    // The point n ticks ahead: the end once the path has no more than kEvery ticks to go.
-    uint8_t n;
-    int16_t goal;
-    if (left_ <= kEvery) {
-        n = (uint8_t)left_;
-        goal = end_;
-        ff_ = 0;
+void Path::next_segment() {
+    // A straight step to the path's point at the segment's end. Without one (loop() late),
+    // the same step goes on for another tick.
+    if (UTRF_LIKELY(next_ready_)) {
+        const uint8_t n = next_len_;
+        step8_ = fx::mul_q16(((int32_t)next_goal_ << 8) - pos8_, kRecip[n]);
+        ff_ = next_ff_;
+        seg_left_ = n;
+        next_ready_ = 0;
     } else {
-        n = kEvery;
-        // tau in Q16; u = 1 - tau (65535 - t: one count short of exact, 1.5e-5).
-        const uint16_t t = hi16(acc_ + (uint32_t)kEvery * inc_);
-        const uint16_t u = (uint16_t)(65535u - t);
-        const uint16_t t2 = hi16(fx::mul_uu(t, t));
-        const uint16_t t3 = hi16(fx::mul_uu(t2, t));
-        // s / 16 = t^3 (10 - 15 t + 6 t^2) / 16: the bracket / 16 lies in [1/16, 10/16], Q16.
-        const uint16_t inner = (uint16_t)(40960u - hi16(fx::mul_uu(t, 61440u)) +
-                                          hi16(fx::mul_uu(t2, 24576u)));
-        const uint16_t s16 = hi16(fx::mul_uu(t3, inner));  // s / 16, Q16: <= 4096
-        const uint16_t s = s16 >= 4096u ? (uint16_t)65535u : (uint16_t)(s16 << 4);
-        goal = (int16_t)(start_ + (int16_t)((fx::mul_su(delta_, s) + 32768L) >> 16));
-        // speed / peak = 16 (t u)^2; acceleration / peak = 10.392 t u (1 - 2t).
-        const uint16_t w = hi16(fx::mul_uu(t, u));  // <= 16384
-        const uint16_t w2 = hi16(fx::mul_uu(w, w));  // <= 4096
-        const uint16_t vn = w2 >= 4096u ? (uint16_t)65535u : (uint16_t)(w2 << 4);
-        const int16_t z = (int16_t)((int16_t)(u >> 1) - (int16_t)(t >> 1));  // 1 - 2t, Q15
-        const int16_t pz = (int16_t)(fx::mul_su(z, w) >> 16);  // t u (1 - 2t), Q15
-        // x 10.392 / 16 (Q16 42566), then x 16 as Q16 magnitude: (|an| << 5)
-        const int16_t an16 = (int16_t)(fx::mul_su(pz, 42566u) >> 16);  // an / 16, Q15
-        const bool neg = an16 < 0;
-        const uint16_t amag16 = (uint16_t)(neg ? -an16 : an16);
-        const uint16_t amag = amag16 >= 2048u ? (uint16_t)65535u : (uint16_t)(amag16 << 5);
-        int32_t ff = fx::mul_su(cv_, vn) >> 16;
-        const int32_t fa = fx::mul_su(ca_, amag) >> 16;
-        ff = neg ? ff - fa : ff + fa;
-        ff_ = fx::sat16(ff);
+        seg_left_ = 1;
     }
-    const int32_t diff8 = ((int32_t)goal << 8) - pos8_;
-    step8_ = fx::mul_q16(diff8, kRecip[n]);
+}
+
+void Path::plan_next() {
+    // Only loop() writes the planning fields and sets next_ready_; the tick clears it and
+    // stop() ends the path: read the flag and the path's state under the lock.
+    hal::tick_lock();
+    const bool todo = left_ != 0 && !next_ready_ && plan_left_ != 0;
+    hal::tick_unlock();
+    if (!todo) return;
+    const uint8_t n = plan_left_ < plan_n_ ? (uint8_t)plan_left_ : plan_n_;
+    const uint32_t acc = plan_acc_ + inc_ * n;
+    const uint16_t after = (uint16_t)(plan_left_ - n);
+    int16_t goal;
+    int16_t ff;
+    evaluate(acc, after, goal, ff);
+    hal::tick_lock();
+    if (left_ != 0) {  // a new move or a stop meanwhile would have reset the planning
+        next_goal_ = goal;
+        next_ff_ = ff;
+        next_len_ = n;
+        next_ready_ = 1;
+        plan_acc_ = acc;
+        plan_left_ = after;
+        plan_n_ = kEvery;
+    }
+    hal::tick_unlock();
+}
+
+// About the middle, x = tau - 1/2 in [-1/2, 1/2], the profile is odd (with its offset) and
+// its derivatives even and odd, which takes the fewest multiplies: nine, each 16 x 16 with
+// the high word of the product kept (a byte move: no shifts by odd amounts, which the AVR
+// does a bit at a time). Magnitudes in Q16, the signs of the odd terms apart.
+//   s        = 1/2 + 15/8 x - 5 x^3 + 6 x^5
+//   s'/1.875 = 16 w^2                 w = tau (1 - tau) = 1/4 - x^2
+//   s''/5.77 = -(120 / 5.7735) x w = -20.785 x w
+void Path::evaluate(uint32_t acc, uint16_t left_after, int16_t& goal, int16_t& ff) const {
+    if (left_after == 0) {  // the path's end, at rest
+        goal = end_;
+        ff = 0;
+    } else {
+        const uint16_t t = hi16(acc);  // tau, Q16
+        const bool first_half = t < 32768u;     // x < 0
+        const uint16_t ax = first_half ? (uint16_t)(32768u - t) : (uint16_t)(t - 32768u);
+        const uint16_t x2 = hi16(fx::mul_uu(ax, ax));  // <= 1/4
+        const uint16_t x3 = hi16(fx::mul_uu(x2, ax));  // <= 1/8
+        const uint16_t x5 = hi16(fx::mul_uu(x3, x2));  // <= 1/32
+        // |s - 1/2| = 15/8 |x| - 5 |x|^3 + 6 |x|^5 <= 1/2
+        const uint16_t g = (uint16_t)(2u * ax - (ax >> 3) - 5u * x3 + 6u * x5);
+        // (g may pass 1/2 by a few counts of rounding at the very ends)
+        uint16_t sv;
+        if (first_half) {
+            sv = g >= 32768u ? (uint16_t)0 : (uint16_t)(32768u - g);
+        } else {
+            sv = g >= 32768u ? (uint16_t)65535u : (uint16_t)(32768u + g);
+        }
+        goal = (int16_t)(start_ + (int16_t)((fx::mul_su(delta_, sv) + 32768L) >> 16));
+        const uint16_t w = (uint16_t)(16384u - x2);  // tau (1 - tau) <= 1/4
+        const uint16_t w2 = hi16(fx::mul_uu(w, w));  // <= 1/16
+        const uint16_t vn = w2 >= 4096u ? (uint16_t)65535u : (uint16_t)(w2 << 4);
+        const uint16_t xw = hi16(fx::mul_uu(ax, w));        // <= 0.0481
+        const uint16_t a32 = hi16(fx::mul_uu(xw, 42566u));  // 20.785 |x| w / 32
+        const uint16_t amag = a32 >= 2048u ? (uint16_t)65535u : (uint16_t)(a32 << 5);
+        int16_t fv = (int16_t)(fx::mul_su(cv_, vn) >> 16);
+        const int16_t fa = (int16_t)(fx::mul_su(ca_, amag) >> 16);
+        // s'' > 0 in the first half (speeding up), < 0 in the second
+        ff = first_half ? fx::sat_add16(fv, fa) : fx::sat_add16(fv, (int16_t)-fa);
+    }
 }
 
 }  // namespace path

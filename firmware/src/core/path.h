@@ -12,14 +12,17 @@
 // requested T below T_min is stretched to T_min (and reported); T = 0 asks for T_min. T is
 // then rounded up to whole ticks.
 //
-// Cost in the tick. Every tick a moving finger advances its phase and steps its setpoint
-// (a few 32-bit adds). The polynomial itself is evaluated on the finger's turn (the turn the
-// hand gives its stall rule: every kStallEvery = 5 ticks, one finger a tick), for the point 5
-// ticks ahead; the setpoint moves there in equal steps, and the feedforward is that point's
-// (a 5 ms lead, about the motor's own lag). The straight line between two points 5 ms apart
-// departs from the curve by at most h^2/8 |x''| = 3e-6 D/T^2 rad: far below a count.
-// Fixed point throughout (no float, no division in the tick): tau in Q16 from a phase
-// accumulator whose increment 2^32/N was worked out when the move was planned.
+// Cost in the tick. The path is cut into segments of kEvery = 5 ticks. loop() works out each
+// segment's end point (the polynomial: nine 16 x 16 multiplies, some 900 cycles on the AVR)
+// one segment ahead and hands it over under the tick lock; every tick a moving finger only
+// steps its setpoint (a 32-bit add), and at a segment's end takes the next one (one
+// multiply). The feedforward is that of the segment's end point (a 5 ms lead, about the
+// motor's own lag). The straight line between two points 5 ms apart departs from the curve
+// by at most h^2/8 |x''| = 3e-6 D/T^2 rad: far below a count. Should loop() be late, the
+// setpoint goes on at the same step (a tick at a time) until the next segment comes; the end
+// is exact whatever happens (the last tick sets it). Fixed point throughout, in loop() too:
+// tau in Q16 from a phase accumulator whose step 2^32/N was worked out when the move was
+// planned.
 #ifndef UTRF_CORE_PATH_H
 #define UTRF_CORE_PATH_H
 
@@ -56,33 +59,68 @@ Plan plan(float distance_rad, float duration_s, int16_t end_bu, const config::Mo
 
 class Path {
    public:
-    Path() : left_(0) {}
+    Path() : left_(0), seg_left_(0), next_ready_(0) {}
     bool active() const { return left_ != 0; }
     uint16_t left() const { return left_; }  // ticks to go
     int16_t feedforward() const { return ff_; }
-    // Start from the setpoint `from_bu` (the finger's present one), at rest.
-    void start(const Plan& p, int16_t from_bu);
+    // loop() context, under the tick lock: start from the setpoint `from_bu` (the finger's
+    // present one), at rest. Cheap: plan_next() works out the first segment.
+    // `first`: the first segment's length, 1..kEvery (the hand staggers its fingers' segment
+    // ends, so their segments are not all taken in the same tick).
+    void start(const Plan& p, int16_t from_bu, uint8_t first);
     void stop() { left_ = 0; }
-    // One tick: the setpoint for it in `target`, the feedforward duty (Q15) as the result.
-    // `turn`: this tick evaluates the path (the finger's turn, every kEvery ticks).
-    // Out of line: the hand's five finger ticks are written out, and this is their rare path.
-    int16_t tick(int16_t& target, bool turn);
+    // loop() context, without the lock (it takes it to hand the segment over): work out the
+    // next segment when the tick has taken the last one. Cheap when there is nothing to do.
+    void plan_next();
+    // The tick: the setpoint for it in `target`, the feedforward duty (Q15) as the result.
+    inline int16_t tick(int16_t& target);
 
    private:
-    void evaluate();  // on the turn: the point kEvery ticks ahead, the step toward it, ff
+    // The tick, at a segment's end: take the one loop() worked out (out of line: once in
+    // kEvery ticks, and the hand's five finger ticks are written out).
+    void next_segment();
+    // The path's point `ahead` ticks after the phase `acc` (the end for the last segment),
+    // and the feedforward there.
+    void evaluate(uint32_t acc, uint16_t left_after, int16_t& goal, int16_t& ff) const;
 
-    uint32_t acc_;    // phase: tau = acc_ / 2^32
-    uint32_t inc_;
+    // ---- the tick's ----
     int32_t pos8_;    // the setpoint, BU in Q8
     int32_t step8_;   // its change a tick, BU in Q8
+    int16_t ff_;
+    int16_t end_;
+    uint16_t left_;      // ticks to the path's end; 0: no path
+    uint8_t seg_left_;   // ticks left in this segment; 0: take the next one
+    // ---- the next segment, from loop(): taken by the tick at the segment's end ----
+    int16_t next_goal_;
+    int16_t next_ff_;
+    uint8_t next_len_;
+    volatile uint8_t next_ready_;
+    // ---- loop()'s: the path's constants and where its planning is ----
+    uint32_t inc_;
+    uint32_t plan_acc_;   // phase at the end of the last segment worked out
+    uint16_t plan_left_;  // ticks of the path after that segment
+    uint8_t plan_n_;      // the next segment's length: kEvery, or the first one's
     int16_t start_;
     int16_t delta_;
-    int16_t end_;
     int16_t cv_;
     int16_t ca_;
-    int16_t ff_;
-    uint16_t left_;
 };
+
+// 65536 / n for the steps toward a point n ticks ahead (n <= kEvery).
+extern const uint16_t kRecip[kEvery + 1];
+
+__attribute__((always_inline)) inline int16_t Path::tick(int16_t& target) {
+    if (--left_ == 0) {  // the end: exactly there, at rest
+        target = end_;
+        ff_ = 0;
+        return 0;
+    }
+    if (UTRF_UNLIKELY(seg_left_ == 0)) next_segment();
+    --seg_left_;
+    pos8_ += step8_;
+    target = (int16_t)(pos8_ >> 8);
+    return ff_;
+}
 
 }  // namespace path
 }  // namespace utrf

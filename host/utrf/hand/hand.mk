@@ -9,3 +9,11 @@ BENCH_TARGETS += bench-client
 # Results into docs/benchmarks.md, between the client markers.
 bench-client: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
 	$(PY) tools/bench_client.py $(BENCH_CLIENT_ARGS)
+
+# Moves on the board's clock: tracking over the whole demo and the tick with paths running.
+BENCH_TARGETS += bench-moves
+
+.PHONY: bench-moves
+
+bench-moves: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
+	$(PY) tools/bench_moves.py $(BENCH_MOVES_ARGS)
