@@ -2,13 +2,15 @@
 firmware (``build/firmware/utrf.elf``, ``make firmware``) running on the emulated board.
 
 Starts the emulated board (simavr, paced to the wall clock so you can watch), connects a Hand
-to it over its socket as to a real MEGA, moves through the poses (minimum-jerk, 1 s each, then
-settling) with a live table on a terminal (a line per pose elsewhere), and writes to
+to it over its socket as to a real MEGA, moves through the poses (one move each: the board
+runs the minimum-jerk paths, the pose's duration; then settling) with a live table on a
+terminal (a line per pose elsewhere), and writes to
 ``--out`` (default ``out/demo``): a picture of each pose (the fingers drawn from the
 kinematics model at the measured angles, with the targets), ``trajectories.png`` (the joint
 angles against their targets) and ``telemetry.csv`` (every sample, SI). Then prints where they
-are. ``make demo`` runs this. Exit codes: 0 every pose settled; 1 one did not; 2 bad input
-(unknown pose, no firmware ELF).
+are, and each finger's tracking over the whole run (Joint 2 against the setpoint its
+controller used: RMS and worst). ``make demo`` runs this. Exit codes: 0 every pose settled;
+1 one did not; 2 bad input (unknown pose, no firmware ELF).
 """
 
 from __future__ import annotations

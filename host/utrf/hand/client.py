@@ -3,7 +3,7 @@
     from utrf import Hand
 
     with Hand.connect("/dev/ttyACM0") as hand:           # or "socket://127.0.0.1:PORT"
-        hand.pose("shaka", duration=1.0)                   # min-jerk, then wait until settled
+        hand.pose("shaka")                                 # one move on the board, then settled
         hand.move({"index": 0.5}, duration=0.5, kind="flexion")
         print(hand.state()["index"].theta2)                # rad
 
@@ -928,16 +928,21 @@ class Hand:
         self, since: float, duration: float, seen: int, idx: Sequence[int]
     ) -> None:
         """Until the board's clock passes ``since + duration`` (the paths' end), watching for
-        faults. Board time comes from telemetry (or get_state without a stream)."""
-        deadline = self.clock.now() + duration + 1.0  # a board that stopped talking
+        faults. Board time comes from telemetry (or get_state without a stream); the wait
+        follows the board's clock, however fast it runs against the host's (an emulated
+        board may run slower), and ends early only if that clock stops for a second."""
         period = 1.0 / self._telemetry_hz if self._telemetry_hz else 0.02
         period = min(max(period, 0.002), 0.02)
         st: HandState | None = None
+        last_time, last_progress = -math.inf, self.clock.now()
         while True:
             self._check_new_faults(seen, idx, "move")
             st = self._fresh_state(st)
+            now = self.clock.now()
+            if st.board_time > last_time:
+                last_time, last_progress = st.board_time, now
             left = since + duration - st.board_time
-            if left <= 0 or self.clock.now() >= deadline:
+            if left <= 0 or now - last_progress > 1.0:
                 return
             self.clock.sleep(min(left, period))  # a fault or reset is seen within a period
 
