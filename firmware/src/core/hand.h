@@ -53,6 +53,16 @@ class Hand {
     void note_frame() { frame_seen_ = 1; }
     void note_loop() { loop_count_ = (uint8_t)(loop_count_ + 1); }
     bool halted() const { return halted_ != 0; }
+    // Stop driving for good (until the watchdog resets the board): every motor off, every
+    // finger in COAST (so the state reports what the motors do), the hang mark left for the
+    // next boot; drive requests are refused from now on (proto::ErrorCode::HALTED). From the
+    // tick (loop-alive rule), or from loop() under the tick lock (tick-alive rule).
+    void halt() {
+        halted_ = 1;
+        hal::motors_all_off();
+        hal::watchdog_mark_hang();
+        for (uint8_t f = 0; f < kFingers; ++f) fingers_[f].halt();
+    }
     uint32_t ticks() const;  // atomic read
 
     // The control tick (interrupt context), and its timing, measured by the caller at its end
@@ -120,8 +130,7 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
     } else if (loop_idle_ticks_ < kLoopHangTicks) {
         ++loop_idle_ticks_;
     } else if (!halted_) {
-        halted_ = 1;
-        hal::watchdog_mark_hang();
+        halt();
     }
     if (UTRF_UNLIKELY(halted_)) {
         hal::motors_all_off();
