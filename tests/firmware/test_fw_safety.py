@@ -402,3 +402,20 @@ def test_reset_cause_is_reported(sim: Sim, cause: m.ResetCause) -> None:
     sim.power_on(reset_cause=int(cause))
     assert sim.take(m.Boot)[0].msg.reset_cause == cause
     assert sim.ok(m.Identify()).reset_cause == cause
+
+
+def test_brake_asked_of_a_faulted_finger_keeps_its_driver_off(sim: Sim) -> None:
+    """BRAKE is not refused on a finger with a stop fault (it drives nothing), but its STBY
+    stays low: no motor is driven, shorted included, once a stop fault latched. (issue 13:
+    letting BRAKE raise STBY there passed every test.)"""
+    sim.set_adc(0, 5)  # unplugged: ENCODER_RANGE latches
+    sim.run(2)
+    sim.set_angle(0, 0.0)  # plugged back: the cause is gone, the fault stays latched
+    sim.run(2)
+    assert sim.finger(0).faults == F.ENCODER_RANGE
+    sim.ok(m.SetMode(mask=0b11, mode=(BRAKE, BRAKE, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
+    sim.run(3)
+    assert sim.finger(0).mode == BRAKE
+    faulted, healthy = sim.motor(0), sim.motor(1)
+    assert not faulted.stby and (faulted.counts_a, faulted.counts_b) == (0, 0)
+    assert (healthy.drive_a, healthy.drive_b, healthy.stby) == (BRAKE, BRAKE, 1)
