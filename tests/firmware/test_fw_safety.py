@@ -365,6 +365,16 @@ def assert_halted_and_says_so(sim: Sim) -> None:
     sim.ok(m.Identify())
 
 
+def test_the_loop_alive_rule_allows_20_ticks(sim: Sim) -> None:
+    """Below the watchdog's 30 ms, so the firmware stops the motors itself first."""
+    set_mode(sim, 0, DUTY, duty=0.5)
+    sim.run(5)
+    sim.lib.fw_tick(20)  # (the first tick after loop() still sees it run)
+    assert not sim.status().halted and sim.motor(0).stby
+    sim.lib.fw_tick(2)
+    assert sim.status().halted and motors_off(sim, 0)
+
+
 def test_a_halted_hand_reports_coast_and_refuses_to_drive(sim: Sim) -> None:
     """issue 13: once halted, state kept reporting the last mode and duties (GRASP, 10 % on
     both motors) while every motor was off, and set_* were accepted."""

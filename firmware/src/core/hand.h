@@ -20,8 +20,9 @@ static const uint8_t kFingers = 5;
 static const uint16_t kTickHz = 1000;
 static const float kDt = 1.0f / kTickHz;
 // loop() must run at least this often, or the tick turns the motors off and the watchdog
-// resets the board.
-static const uint16_t kLoopHangTicks = 50;
+// resets the board. Below the watchdog's 30 ms (hal/avr), so the firmware stops the motors and
+// marks the hang itself first whenever its tick still runs.
+static const uint16_t kLoopHangTicks = 20;
 
 struct TickTiming {
     uint32_t ticks;
