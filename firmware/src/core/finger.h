@@ -38,8 +38,9 @@ enum Fault : uint8_t {
 // time against friction, tests/firmware/test_fw_pid.py.)
 static const uint8_t kStallEvery = 5;
 
-// Faults that turn the finger's motors off. HOST_TIMEOUT instead applies the configured safe
-// action (which may be to hold in closed loop).
+// Faults that stop the finger: COAST, motors off; JOINT_LIMIT alone short-brakes them instead
+// (finger.cpp, latch()). HOST_TIMEOUT instead applies the configured safe action (which may be
+// to hold in closed loop).
 static const uint8_t kStopFaults = ENCODER_RANGE | ENCODER_JUMP | STALL | JOINT_LIMIT | OVERRUN;
 
 // A finger's configuration, ready for the tick (built in loop() context by compile(); the
@@ -98,6 +99,9 @@ class Finger {
     void latch(uint8_t bits);
     // Safe action HOLD: hold the measured angle in closed loop, starting from the present output.
     void hold_here();
+    // The board stops driving (the hand halted: its motors are all off): COAST, duties 0, so
+    // the state reports what the motors do.
+    void halt();
     // One control period: read the encoder, check the safety rules, run the mode, and fill
     // the driver command. Inline (below): the hand's tick runs it for five fingers.
     // `stall_check`: this tick also runs the stall rule (the hand gives each finger its turn

@@ -5,13 +5,14 @@
 //   timer 0            left to the Arduino core (millis)
 //   ADC                interrupt-driven round robin over the five encoder channels
 //   UART0              own interrupt-driven driver: counts lost bytes, never blocks
-//   watchdog           120 ms, reset mode; fed by loop() only while the tick runs
+//   watchdog           30 ms, reset mode; fed by loop() only while the tick runs
 #include "hal_avr.h"
 
 #include <avr/eeprom.h>
 #include <avr/interrupt.h>
 #include <avr/io.h>
 #include <avr/pgmspace.h>
+#include <avr/sleep.h>
 #include <avr/wdt.h>
 #include <util/atomic.h>
 
@@ -534,6 +535,20 @@ void serial_write(const uint8_t* data, uint16_t len) {
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { UCSR0B |= _BV(UDRIE0); }
 }
 
+void idle() {
+    // The check and the sleep are atomic: interrupts stay off from the check until SLEEP (the
+    // instruction after SEI always runs first), so a byte that arrives in between wakes it.
+    set_sleep_mode(SLEEP_MODE_IDLE);
+    cli();
+    if (GPIOR1 == GPIOR2) {
+        sleep_enable();
+        sei();
+        sleep_cpu();
+        sleep_disable();
+    }
+    sei();
+}
+
 uint16_t serial_take_overruns() {
     uint16_t n;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
@@ -547,7 +562,11 @@ uint8_t eeprom_read(uint16_t addr) { return eeprom_read_byte((const uint8_t*)add
 bool eeprom_ready() { return eeprom_is_ready(); }
 void eeprom_write(uint16_t addr, uint8_t value) { eeprom_write_byte((uint8_t*)addr, value); }
 
-void watchdog_start() { wdt_enable(WDTO_120MS); }
+// 30 ms (WDTO_30MS: 4K cycles of the 128 kHz watchdog oscillator, 32 ms nominal): the longest
+// a hang with interrupts off leaves the motors at their last duty (nothing of the firmware
+// runs then). loop() feeds it every pass (a pass takes a few ms at most), and the loop-alive
+// rule (hand.h, 20 ticks) turns the motors off before it fires when the tick still runs.
+void watchdog_start() { wdt_enable(WDTO_30MS); }
 void watchdog_feed() { wdt_reset(); }
 void watchdog_mark_hang() { g_hang_mark = kHangMagic; }
 void watchdog_clear_hang_mark() { g_hang_mark = 0; }
