@@ -5,7 +5,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 APT_PACKAGES=(gcc-avr avr-libc binutils-avr simavr libsimavr-dev libelf-dev arduino-core-avr
-              avrdude doctest-dev)
+              avrdude doctest-dev clang libclang-rt-14-dev)
+# clang + libclang-rt-14-dev: libFuzzer and the sanitizer runtimes for tests/fuzz (Debian bookworm)
 VENV=.venv
 PYTHON=${PYTHON:-python3.11}
 
