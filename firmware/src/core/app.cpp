@@ -145,9 +145,10 @@ bool report_faults(Board& b) {
     return false;
 }
 
-// The state stream's phase: true when a state frame is due. A frame waits (for an idle
-// transmitter) until the next falls due; then it is dropped, counted, and its seq skipped so
-// the host sees the gap.
+// The state stream's phase: true when a state frame is due. A frame waits for an idle
+// transmitter; one more may fall due meanwhile (a long loop() pass: a request's floats and
+// the ticks deferred by its lock), and the two go out back to back. A third due drops the
+// oldest: counted, and its seq skipped so the host sees the gap.
 bool state_due(Board& b) {
     const uint32_t now = b.hand.ticks();
     const uint32_t elapsed = now - b.telemetry_tick;
@@ -155,7 +156,7 @@ bool state_due(Board& b) {
     if (b.telemetry_hz == 0) return false;
     // Phase accumulator: rate per tick, one frame per 1000 (kTickHz).
     uint32_t acc = b.telemetry_acc + elapsed * b.telemetry_hz;
-    while (acc >= 2UL * hand::kTickHz) {
+    while (acc >= 3UL * hand::kTickHz) {
         acc -= hand::kTickHz;
         ++b.link.tx_dropped;
         b.board_seq = proto::next_board_seq(b.board_seq);
