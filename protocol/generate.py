@@ -139,6 +139,12 @@ class MessageDef:
     reply_timeout_s: float | None
     same_fields_as: str | None
     fields: list[FieldDef] = field(default_factory=list)
+    # The u8 field whose bits select fingers: the per-finger arrays are checked (and used)
+    # only for the fingers it selects.
+    masked_by: str | None = None
+
+    def masked(self, f: FieldDef) -> bool:
+        return self.masked_by is not None and f.count is not None and f.name != self.masked_by
 
     @property
     def size(self) -> int:
@@ -224,6 +230,7 @@ _PROTOCOL_KEYS = {
     "heartbeat_period_s": float,
     "max_telemetry_hz": int,
     "board_seq_flag": int,
+    "default_heartbeat_timeout_s": float,
 }
 _MESSAGE_KEYS = {
     "id",
@@ -234,6 +241,7 @@ _MESSAGE_KEYS = {
     "reply",
     "reply_timeout_s",
     "same_fields_as",
+    "masked_by",
     "fields",
 }
 _FIELD_KEYS = {"name", "type", "count", "scale", "min", "max", "enum", "flags", "unit", "doc"}
@@ -446,7 +454,14 @@ def load_spec(path: Path = SPEC_PATH) -> Spec:
             reply_timeout_s=entry.get("reply_timeout_s"),
             same_fields_as=same,
             fields=fields,
+            masked_by=entry.get("masked_by"),
         )
+        if m.masked_by is not None:
+            mask = next((f for f in fields if f.name == m.masked_by), None)
+            if mask is None or mask.type.name != "u8" or mask.count is not None:
+                raise SpecError(f"message {name}: masked_by {m.masked_by!r} is no u8 field")
+            if fields.index(mask) > min(i for i, f in enumerate(fields) if m.masked(f)):
+                raise SpecError(f"message {name}: {m.masked_by} must come before the arrays")
         if m.size > proto["max_payload"]:
             limit = proto["max_payload"]
             raise SpecError(f"message {name}: {m.size} bytes, above max_payload {limit}")
@@ -635,6 +650,8 @@ def render_header(spec: Spec) -> str:
     w(f"static const uint8_t kFingerCount = {p['finger_count']};")
     w(f"static const uint32_t kDefaultBaud = {p['default_baud']}UL;")
     w(f"static const uint16_t kMaxTelemetryHz = {p['max_telemetry_hz']};")
+    hb_ms = round(p["default_heartbeat_timeout_s"] * 1000)
+    w(f"static const uint16_t kDefaultHeartbeatTimeoutMs = {hb_ms};")
     w("// Seq of board-initiated frames (state stream, fault, boot): this bit set, the low bits a")
     w("// running counter. Requests use seqs without it and replies echo them, so a reply and a")
     w("// stream frame can never be confused.")
@@ -778,6 +795,8 @@ def render_header(spec: Spec) -> str:
                     else f"    out.{f.name}[i] = detail::rd_{t}(body + {f.offset} + i);"
                 )
                 conds = _c_checks(f, f"out.{f.name}[i]")
+                if conds and m.masked(f):
+                    conds = [f"((out.{m.masked_by} >> i) & 1u) && ({' || '.join(conds)})"]
                 if conds:
                     w(f"    if ({' || '.join(conds)}) {{")
                     w(f"      bad_field = {f.index};")
@@ -798,6 +817,49 @@ def render_header(spec: Spec) -> str:
                     f"detail::wr_{t}(body + {f.offset}{step}, msg.{f.name}[i]);"
                 )
         w(f"  return {cn}::kSize;")
+        w("}")
+    w("")
+    w("// write: the body's bytes, one at a time, into a byte sink W (put(uint8_t)): the board's")
+    w("// frame writer computes the CRC and the COBS codes as the bytes come, with no body copy.")
+    w("template <typename W>")
+    w("inline void put_u8(W& w, uint8_t v) { w.put(v); }")
+    w("template <typename W>")
+    w("inline void put_i8(W& w, int8_t v) { w.put(static_cast<uint8_t>(v)); }")
+    w("template <typename W>")
+    w("inline void put_u16(W& w, uint16_t v) {")
+    w("  w.put(static_cast<uint8_t>(v));")
+    w("  w.put(static_cast<uint8_t>(v >> 8));")
+    w("}")
+    w("template <typename W>")
+    w("inline void put_i16(W& w, int16_t v) { put_u16(w, static_cast<uint16_t>(v)); }")
+    w("template <typename W>")
+    w("inline void put_u32(W& w, uint32_t v) {")
+    w("  put_u16(w, static_cast<uint16_t>(v));")
+    w("  put_u16(w, static_cast<uint16_t>(v >> 16));")
+    w("}")
+    w("template <typename W>")
+    w("inline void put_i32(W& w, int32_t v) { put_u32(w, static_cast<uint32_t>(v)); }")
+    w("template <typename W>")
+    w("inline void put_f32(W& w, float f) {")
+    w("  uint32_t u;")
+    w("  memcpy(&u, &f, sizeof u);")
+    w("  put_u32(w, u);")
+    w("}")
+    for m in spec.messages:
+        if m.is_request:
+            continue
+        cn = m.class_name
+        w("template <typename W>")
+        w(f"inline void write(W& w, const {cn}& msg) {{")
+        if not m.fields:
+            w("  (void)w;")
+            w("  (void)msg;")
+        for f in m.fields:
+            t = f.type.name
+            if f.count is None:
+                w(f"  put_{t}(w, msg.{f.name});")
+            else:
+                w(f"  for (uint8_t i = 0; i < {f.count}; ++i) put_{t}(w, msg.{f.name}[i]);")
         w("}")
     w("")
     w("// Body size of a message id, or -1 for an id no message has.")
@@ -969,6 +1031,8 @@ def render_messages(spec: Spec) -> str:
     w(f"RETRIES = {p['retries']}")
     w(f"HEARTBEAT_PERIOD_S = {fmt_number(p['heartbeat_period_s'])}")
     w(f"MAX_TELEMETRY_HZ = {p['max_telemetry_hz']}")
+    w("#: The board's heartbeat timeout until the host sets one (set_safety).")
+    w(f"DEFAULT_HEARTBEAT_TIMEOUT_S = {fmt_number(p['default_heartbeat_timeout_s'])}")
     w("#: Set in the seq of board-initiated frames (state stream, fault, boot), clear in requests.")
     w(f"BOARD_SEQ_FLAG = 0x{p['board_seq_flag']:02X}")
     for e in spec.enums:
@@ -998,6 +1062,8 @@ def render_messages(spec: Spec) -> str:
         w(f"    SIZE: ClassVar[int] = {m.size}")
         direction = "HOST_TO_BOARD" if m.is_request else "BOARD_TO_HOST"
         w(f"    DIRECTION: ClassVar[Direction] = Direction.{direction}")
+        if m.masked_by is not None:
+            w(f"    MASKED_BY: ClassVar[str | None] = {py_str(m.masked_by)}")
         if m.is_request:
             w(f"    IDEMPOTENT: ClassVar[bool] = {m.idempotent}")
             w(f"    REPLY_TIMEOUT_S: ClassVar[float] = {fmt_number(spec.timeout_of(m))}")
@@ -1078,6 +1144,11 @@ def render_readme_tables(spec: Spec) -> str:
     period = p["heartbeat_period_s"]
     w(f"| heartbeat period | {period:g} s | host: longest silence before a heartbeat |")
     w(f"| max telemetry rate | {p['max_telemetry_hz']} Hz | fastest state stream |")
+    hb = p["default_heartbeat_timeout_s"]
+    w(
+        f"| default heartbeat timeout | {hb:g} s | board: host silence before HOST_TIMEOUT, "
+        "until set_safety sets another |"
+    )
     flag = p["board_seq_flag"]
     w(f"| board seq flag | `0x{flag:02X}` | set in the seq of board-initiated frames |")
     w("")

@@ -318,8 +318,8 @@ def test_bad_requests_raise_before_anything_is_sent_and_one_at_a_time() -> None:
     engine = Engine()
     with pytest.raises(TypeError, match="Pong is not a request"):
         engine.start_request(M.Pong(1, 0.0))  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match=r"set_telemetry\.rate_hz: 501 is outside"):
-        engine.start_request(M.SetTelemetry(rate_hz=501))
+    with pytest.raises(ValueError, match=r"set_telemetry\.rate_hz: 1001 is outside"):
+        engine.start_request(M.SetTelemetry(rate_hz=1001))
     start(engine, M.Ping(1), 0.0)
     with pytest.raises(RuntimeError, match="one at a time"):
         engine.start_request(M.Ping(2))

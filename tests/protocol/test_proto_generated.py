@@ -72,7 +72,7 @@ def test_check_names_stale_outputs_and_writes_nothing(
     before = HEADER.read_bytes()
     spec = _spec_with(
         tmp_path,
-        'name = "rate_hz", type = "u16", max = 500',
+        'name = "rate_hz", type = "u16", max = 1000',
         'name = "rate_hz", type = "u16", max = 400',
     )
     assert generate.main(["--check", "--spec", str(spec)]) == 1
@@ -98,7 +98,7 @@ def test_schema_hash_is_crc32_of_the_spec_without_docs(tmp_path: Path) -> None:
     # A doc edit keeps the hash; a range edit changes it.
     doc_edit = _spec_with(tmp_path, 'doc = "any value, echoed"', 'doc = "any value at all, echoed"')
     assert generate.load_spec(doc_edit).schema_hash == M.SCHEMA_HASH
-    range_edit = _spec_with(tmp_path, 'type = "u16", max = 500', 'type = "u16", max = 499')
+    range_edit = _spec_with(tmp_path, 'type = "u16", max = 1000', 'type = "u16", max = 999')
     assert generate.load_spec(range_edit).schema_hash != M.SCHEMA_HASH
 
 
@@ -133,8 +133,8 @@ def test_every_side_carries_the_same_version_and_hash(cpp: CppCodec) -> None:
             "",
             "must start with u16 protocol_version",
         ),
-        ('type = "u16", max = 500', 'type = "u16", max = 70000', "outside u16"),
-        ('type = "u16", max = 500', 'type = "u16", max = 500, maxx = 3', "unknown key(s) maxx"),
+        ('type = "u16", max = 1000', 'type = "u16", max = 70000', "outside u16"),
+        ('type = "u16", max = 1000', 'type = "u16", max = 1000, maxx = 3', "unknown key(s) maxx"),
         (
             'crc = "CRC-16/CCITT-FALSE"',
             'crc = "CRC-16/XMODEM"',

@@ -54,7 +54,7 @@ void defaults(Config& cfg) {
         cfg.finger[f].hw.encoder_invert = 0;
         cfg.finger[f].hw.motor_invert = 0;
     }
-    cfg.safety.heartbeat_timeout_ms = 500;
+    cfg.safety.heartbeat_timeout_ms = proto::kDefaultHeartbeatTimeoutMs;
     cfg.safety.safe_action = (uint8_t)proto::SafeAction::HOLD;
 }
 

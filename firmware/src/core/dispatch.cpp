@@ -35,21 +35,26 @@ int16_t q15_from_milli(int32_t milli) {
     return fx::sat16((milli * fx::kOne15 + (milli < 0 ? -500 : 500)) / 1000);
 }
 
-// Q15 to the state message's hundredths, rounded half away from zero (x 200 / 65536: the
-// shift is a byte move on the AVR).
-int8_t hundredths(int16_t q15) {
-    const int32_t v = (int32_t)(q15 < 0 ? -q15 : q15) * 200 + 32768;
-    const int8_t h = (int8_t)(v >> 16);
-    return q15 < 0 ? (int8_t)-h : h;
+// Q15 duty to the state message's 1/128 counts, rounded: the high byte (a byte move on the
+// AVR), +1 when the low byte is half or more, saturated at 127.
+int8_t duty_counts(int16_t q15) {
+    const uint8_t hi = (uint8_t)((uint16_t)q15 >> 8);
+    const uint8_t lo = (uint8_t)q15;
+    if ((lo & 0x80) && hi != 0x7F) return (int8_t)(hi + 1);
+    return (int8_t)hi;
 }
 
 using app::Lock;
 
+// A reply written straight into the reply slot (CRC and COBS as the bytes come).
 template <typename Msg>
 bool reply(app::Board&, uint8_t seq, const Msg& m) {
-    uint8_t body[kMaxPayload];
-    const uint8_t n = encode(m, body);
-    return app::queue_reply(seq, Msg::kId, body, n);
+    uint8_t* slot = app::reply_slot();
+    if (slot == 0) return false;
+    framing::FrameWriter w(slot, seq, Msg::kId);
+    write(w, m);
+    app::reply_written(seq, w.finish());
+    return true;
 }
 
 // Decode or nack: returns true when `out` holds a valid request.
@@ -372,9 +377,16 @@ void clear_faults(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) 
 void get_state(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     GetState m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
-    uint8_t out[kMaxPayload];
-    const uint8_t n = encode_state(b, out);
-    app::queue_reply(seq, State::kId, out, n);
+    uint8_t* slot = app::reply_slot();
+    if (slot != 0) app::reply_written(seq, write_state_frame(b, seq, slot));
+}
+
+void get_status(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
+    GetStatus m;
+    if (!decode_or_nack(b, seq, body, len, m)) return;
+    Status r;
+    fill_status(b, r);
+    reply(b, seq, r);
 }
 
 uint16_t us_from_cycles(uint32_t cycles) {
@@ -401,6 +413,8 @@ void get_stats(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     r.tick_overruns = t.overruns;
     r.tick_worst = us_from_cycles(t.worst_cycles);
     r.tick_mean = us_from_cycles(t.mean_cycles);
+    r.rx_ignored = b.link.rx_ignored;
+    r.rx_repeats = b.link.rx_repeats;
     reply(b, seq, r);
 }
 
@@ -432,43 +446,54 @@ void ack(app::Board& b, uint8_t seq, uint8_t msg_id) {
     reply(b, seq, m);
 }
 
-uint8_t encode_state(app::Board& b, uint8_t* body) {
-    // Copy under the lock (the tick waits meanwhile), convert after it.
-    State s;
+uint8_t write_state_frame(app::Board& b, uint8_t seq, uint8_t* out) {
+    // Copy under the lock (the tick waits meanwhile), write after it. The angles go out in
+    // the board's own units and the duties as their high bytes: no arithmetic per field.
+    int16_t theta[kFingerCount];
+    int16_t target[kFingerCount];
     int16_t duty_a[kFingerCount];
     int16_t duty_b[kFingerCount];
-    uint32_t t;
+    uint8_t mode[kFingerCount];
+    uint8_t faults[kFingerCount];
+    uint16_t t;
     {
         Lock lock;
-        t = b.hand.ticks();
+        t = (uint16_t)b.hand.ticks();
         for (uint8_t f = 0; f < kFingerCount; ++f) {
             const finger::Finger& fg = b.hand.finger(f);
-            s.theta2[f] = fg.theta();
-            s.target[f] = fg.target();
+            theta[f] = fg.theta();
+            target[f] = fg.target();
             duty_a[f] = fg.duty_a();
             duty_b[f] = fg.duty_b();
-            s.mode[f] = fg.mode();
-            s.faults[f] = fg.faults();
+            mode[f] = fg.mode();
+            faults[f] = fg.faults();
         }
     }
-    s.board_time = t * 1000UL;
-    for (uint8_t f = 0; f < kFingerCount; ++f) {
-        s.theta2[f] = fx::au_from_bu(s.theta2[f]);  // BU to the protocol's 1e-4 rad
-        s.target[f] = fx::au_from_bu(s.target[f]);
-        s.duty_a[f] = hundredths(duty_a[f]);
-        s.duty_b[f] = hundredths(duty_b[f]);
-        kin::tip_raw(kin::finger_geometry(f), s.theta2[f], s.tip_x[f], s.tip_y[f]);
-    }
-    return encode(s, body);
+    // The status the sample belongs to: a change seen here is numbered before the frame.
+    app::note_status(b, mode, faults);
+    framing::FrameWriter w(out, seq, State::kId);
+    put_u16(w, t);
+    w.put(b.status_change);
+    for (uint8_t f = 0; f < kFingerCount; ++f) put_i16(w, theta[f]);
+    for (uint8_t f = 0; f < kFingerCount; ++f) put_i16(w, target[f]);
+    for (uint8_t f = 0; f < kFingerCount; ++f) w.put((uint8_t)duty_counts(duty_a[f]));
+    for (uint8_t f = 0; f < kFingerCount; ++f) w.put((uint8_t)duty_counts(duty_b[f]));
+    return w.finish();
 }
 
-uint8_t encode_boot(const app::Board& b, uint8_t* body) {
-    Boot m;
+void fill_status(const app::Board& b, Status& m) {
+    m.change = b.status_change;
+    for (uint8_t f = 0; f < kFingerCount; ++f) {
+        m.mode[f] = b.status_mode[f];
+        m.faults[f] = b.status_faults[f];
+    }
+}
+
+void fill_boot(const app::Board& b, Boot& m) {
     m.protocol_version = kProtocolVersion;
     m.schema_hash = kSchemaHash;
     m.reset_cause = b.reset_cause;
     m.config_status = b.config_status;
-    return encode(m, body);
 }
 
 void handle(app::Board& b, uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len) {
@@ -509,9 +534,10 @@ void handle(app::Board& b, uint8_t seq, uint8_t msg_id, const uint8_t* body, uin
         case MsgId::CLEAR_FAULTS: clear_faults(b, seq, body, len); return;
         case MsgId::GET_STATE: get_state(b, seq, body, len); return;
         case MsgId::GET_STATS: get_stats(b, seq, body, len); return;
+        case MsgId::GET_STATUS: get_status(b, seq, body, len); return;
         case MsgId::RESET_STATS: reset_stats(b, seq, body, len); return;
         default:
-            nack(b, seq, msg_id, (uint8_t)ErrorCode::UNKNOWN_ID, kNoDetail);
+            nack(b, seq, msg_id, (uint8_t)ErrorCode::UNKNOWN_ID, 0);
             return;
     }
 }

@@ -46,8 +46,9 @@ from utrf.protocol.framing import DELIMITER, Frame, FrameDecoder, FrameError, Rx
 
 log = logging.getLogger(__name__)
 
-StreamMessage = m.State | m.Fault | m.Boot
-STREAM_IDS = frozenset({m.State.ID, m.Fault.ID, m.Boot.ID})
+StreamMessage = m.State | m.Status | m.Fault | m.Boot
+#: board-initiated messages: one running seq counts them all (a gap is a loss of any of them)
+STREAM_IDS = frozenset({m.State.ID, m.Status.ID, m.Fault.ID, m.Boot.ID})
 SEQ_MASK = m.BOARD_SEQ_FLAG - 1  # host seqs run 0..127, the board's stream counter likewise
 #: heartbeat seqs remembered so that their acks are not counted as stale
 HEARTBEAT_SEQS_KEPT = 32
