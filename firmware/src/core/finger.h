@@ -32,7 +32,9 @@ enum Fault : uint8_t {
     HOST_TIMEOUT = 1u << 4,
     OVERRUN = 1u << 5,
 };
-// The stall rule runs for each finger every kStallEvery ticks (one finger a tick).
+// The stall rule runs for each finger every kStallEvery ticks (one finger a tick). (Running the
+// integrator so too was tried: Ki's step five times larger every 5 ms doubled the settling
+// time against friction, tests/firmware/test_fw_pid.py.)
 static const uint8_t kStallEvery = 5;
 
 // Faults that turn the finger's motors off. HOST_TIMEOUT instead applies the configured safe
@@ -169,31 +171,9 @@ static_assert(hal::kPwmPeriod == 800, "pwm_counts() is written for 800 counts a 
 // (lo + 512) >> 8 is (lo >> 8) + 2: on the AVR the high byte of the second product, added
 // with the 2, in one sequence (tested against the C in the AVR check).
 UTRF_HOT uint16_t pwm_counts(uint16_t mag) {
-#if defined(__AVR__)
-    uint16_t r;
-    uint8_t k;
-    __asm__(
-        "ldi  %[k], 25\n\t"
-        "mul  %B[m], %[k]\n\t"
-        "movw %A[r], r0\n\t"
-        "mul  %A[m], %[k]\n\t"
-        "add  %A[r], r1\n\t"
-        "clr  r1\n\t"
-        "adc  %B[r], r1\n\t"
-        "subi %A[r], lo8(-2)\n\t"
-        "sbci %B[r], hi8(-2)\n\t"
-        "lsr  %B[r]\n\t"
-        "ror  %A[r]\n\t"
-        "lsr  %B[r]\n\t"
-        "ror  %A[r]"
-        : [r] "=&d"(r), [k] "=&d"(k)
-        : [m] "r"(mag));
-    return r;
-#else
     const uint16_t hi = fx::mul8u((uint8_t)(mag >> 8), 25u);
     const uint16_t lo = fx::mul8u((uint8_t)mag, 25u);
     return (uint16_t)((uint16_t)(hi + (uint16_t)((uint16_t)(lo + 512u) >> 8)) >> 2);
-#endif
 }
 
 UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& out,
