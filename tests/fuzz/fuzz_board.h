@@ -54,6 +54,7 @@ inline int board_msg_size(uint8_t id) {
         case proto::State::kId: return proto::State::kSize;
         case proto::Fault::kId: return proto::Fault::kSize;
         case proto::Boot::kId: return proto::Boot::kSize;
+        case proto::Status::kId: return proto::Status::kSize;
         case proto::Gains::kId: return proto::Gains::kSize;
         case proto::Limits::kId: return proto::Limits::kSize;
         case proto::Safety::kId: return proto::Safety::kSize;

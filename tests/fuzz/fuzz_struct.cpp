@@ -52,6 +52,7 @@ int reply_id(uint8_t req) {
         case proto::GetFingerConfig::kId: return proto::FingerConfig::kId;
         case proto::GetState::kId: return proto::State::kId;
         case proto::GetStats::kId: return proto::Stats::kId;
+        case proto::GetStatus::kId: return proto::Status::kId;
         default: return 0;
     }
 }

@@ -240,3 +240,18 @@ def test_eeprom_image_checks_at_boot(
     assert identity.config_status == status
     assert hand.safety() == M.Safety(heartbeat_timeout=0.5, safe_action=M.SafeAction.HOLD)
     record("safety", f"EEPROM image at boot ({case})", {"status": status.name})
+
+
+def test_brake_with_a_stop_fault_keeps_the_driver_off(board: EmulatedBoard, hand: Hand) -> None:
+    """BRAKE is accepted on a finger with a latched fault (it drives nothing), but STBY stays
+    low: a stop fault's driver stays off whatever the mode (the README's outputs section)."""
+    driving(hand)
+    board.shift_encoder(2, -0.5)  # a jump: latched, and the cause is gone at once
+    hand.clock.sleep(0.01)
+    assert F.ENCODER_JUMP in hand.state()["middle"].faults
+    hand.set_mode("brake", "middle")
+    hand.set_mode("brake", "index")  # no fault: braking raises STBY
+    hand.clock.sleep(0.01)
+    pins = board.pins
+    assert not pins.stby[2] and np.all(pins.duty[2] == 0)
+    assert pins.stby[1] and pins.in1[1].all() and pins.in2[1].all()

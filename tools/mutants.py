@@ -1,0 +1,276 @@
+"""The mutation check (issue 13 §4): each safety rule of the firmware disabled in turn, and the
+safety tests run against it; a test must fail for every mutant.
+
+    python tools/mutants.py                  # make mutants: every mutant
+    python tools/mutants.py --only stall     # some of them
+    python tools/mutants.py --list
+
+Each mutant is a copy of the checkout (its sources, tests and build products, timestamps
+kept, so make rebuilds only what the mutation touched) under build/mutants/<name>/, with one
+exact edit to firmware/src: a rule's condition made false, its action removed. The tests run
+there, on the mutated firmware, both as the host build (tests/firmware/test_fw_safety.py) and
+as the ELF on the emulated board (tests/reliability/test_safety_matrix.py), and stop at the
+first failure: the mutant is caught. An edit whose text is no longer in the source is an
+error (the list must follow the code). The score goes to build/reliability/mutants.json for
+docs/reliability.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+WORK = REPO / "build" / "mutants"
+TESTS = ["tests/firmware/test_fw_safety.py", "tests/reliability/test_safety_matrix.py"]
+COPY = ["Makefile", "pyproject.toml", "firmware", "protocol", "tests", "tools", "host"]
+COPY_BUILD = ["firmware", "emulator"]
+
+
+@dataclass(frozen=True)
+class Mutant:
+    name: str
+    rule: str  # the safety table's row (firmware/README.md)
+    path: str
+    old: str
+    new: str
+
+
+MUTANTS = [
+    Mutant(
+        "host-silence-off",
+        "host silence",
+        "firmware/src/core/hand.h",
+        "if (UTRF_UNLIKELY(!timed_out_ && ticks_ - last_frame_tick_ >= timeout_ticks_)) {",
+        "if (false) {",
+    ),
+    Mutant(
+        "host-silence-always-hold",
+        "host silence (safe action COAST)",
+        "firmware/src/core/hand.h",
+        "if (safe_action_ == 0) {",
+        "if (true) {",
+    ),
+    Mutant(
+        "encoder-band-off",
+        "encoder band (and a stale ADC round)",
+        "firmware/src/core/finger.h",
+        "        encoder_ok_ = false;\n        found = ENCODER_RANGE;",
+        "        encoder_ok_ = false;",
+    ),
+    Mutant(
+        "encoder-jump-off",
+        "encoder jump",
+        "firmware/src/core/finger.h",
+        "            found = ENCODER_JUMP;",
+        "            ;",
+    ),
+    Mutant(
+        "joint-limit-off",
+        "joint limit",
+        "firmware/src/core/finger.h",
+        "found |= JOINT_LIMIT;",
+        ";",
+    ),
+    Mutant(
+        "stall-off",
+        "stall",
+        "firmware/src/core/finger.cpp",
+        "latch(STALL);\n                stop_now(out);\n                return false;",
+        "contact_ = true;",
+    ),
+    Mutant(
+        "overrun-off",
+        "overrun",
+        "firmware/src/core/hand.h",
+        "        overrun_pending_ = true;",
+        "",
+    ),
+    Mutant(
+        "loop-alive-off",
+        "loop alive",
+        "firmware/src/core/hand.h",
+        "    if (UTRF_UNLIKELY(halted_)) {",
+        "    if (false) {",
+    ),
+    Mutant(
+        "tick-alive-off",
+        "tick alive",
+        "firmware/src/core/app.cpp",
+        "if (ms - b.watch_ms > kTickDeadMs) {",
+        "if (false) {",
+    ),
+    Mutant(
+        "watchdog-fed-while-halted",
+        "loop alive (the watchdog resets the board)",
+        "firmware/src/core/app.cpp",
+        "if (!b.hand.halted()) hal::watchdog_feed();",
+        "hal::watchdog_feed();",
+    ),
+    Mutant(
+        "stop-fault-keeps-mode",
+        "every stop fault: motors off",
+        "firmware/src/core/finger.cpp",
+        "if ((bits & kStopFaults) && mode_ != COAST) {",
+        "if (false) {",
+    ),
+    Mutant(
+        "faulted-not-refused",
+        "a latched fault refuses POSITION, DUTY and GRASP",
+        "firmware/src/core/dispatch.cpp",
+        "if (drives && (fg.faults() != 0 || !fg.has_theta())) refused = f;",
+        "if (drives && !fg.has_theta()) refused = f;",
+    ),
+    Mutant(
+        "brake-stby-with-stop-fault",
+        "STBY low with a stop fault (BRAKE)",
+        "firmware/src/core/finger.cpp",
+        "out.stby = mode == BRAKE && (faults_ & kStopFaults) == 0;",
+        "out.stby = mode == BRAKE;",
+    ),
+    Mutant(
+        "targets-beyond-limits",
+        "joint limit (targets outside the limits refused)",
+        "firmware/src/core/dispatch.cpp",
+        "        if (a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1) {",
+        "        if (false) {",
+    ),
+    Mutant(
+        "duty-past-limit",
+        "joint limit (DUTY never drives further past a limit)",
+        "firmware/src/core/finger.cpp",
+        "if ((th >= params_.theta_max && d > 0) || (th <= params_.theta_min && d < 0)) d = 0;",
+        ";",
+    ),
+    Mutant(
+        "eeprom-crc-off",
+        "EEPROM image checks at boot (CRC)",
+        "firmware/src/core/config.cpp",
+        "if (crc != stored || !valid(out)) st = LoadStatus::DEFAULTS_CORRUPT;",
+        "if (!valid(out)) st = LoadStatus::DEFAULTS_CORRUPT;",
+    ),
+    Mutant(
+        "eeprom-range-off",
+        "EEPROM image checks at boot (ranges)",
+        "firmware/src/core/config.cpp",
+        "if (crc != stored || !valid(out)) st = LoadStatus::DEFAULTS_CORRUPT;",
+        "if (crc != stored) st = LoadStatus::DEFAULTS_CORRUPT;",
+    ),
+]
+
+
+def prepare(m: Mutant) -> Path:
+    root = WORK / m.name
+    shutil.rmtree(root, ignore_errors=True)
+    root.mkdir(parents=True)
+    for name in COPY:
+        src = REPO / name
+        if src.is_dir():
+            shutil.copytree(src, root / name, symlinks=True)
+        else:
+            shutil.copy2(src, root / name)
+    for name in COPY_BUILD:
+        src = REPO / "build" / name
+        if src.is_dir():
+            shutil.copytree(src, root / "build" / name, symlinks=True)
+    path = root / m.path
+    text = path.read_text()
+    if text.count(m.old) != 1:
+        raise SystemExit(
+            f"mutant {m.name}: {m.path} has {text.count(m.old)} copies of the text to change "
+            "(the mutant list must follow the code)"
+        )
+    path.write_text(text.replace(m.old, m.new))
+    return root
+
+
+def run(m: Mutant, timeout: float) -> dict:
+    root = prepare(m)
+    t0 = time.monotonic()
+    build = subprocess.run(
+        ["make", "-s", "--no-print-directory", "firmware", "firmware-host", "emulator"],
+        cwd=root,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if build.returncode:
+        return {
+            "name": m.name,
+            "rule": m.rule,
+            "caught": False,
+            "by": "build failed",
+            "detail": (build.stdout + build.stderr)[-2000:],
+        }
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *TESTS],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            check=False,
+        )
+        out = proc.stdout + proc.stderr
+        caught = proc.returncode == 1
+        failed = [ln.split(" ")[1] for ln in out.splitlines() if ln.startswith("FAILED ")]
+        by = failed[0] if failed else ("no test failed" if proc.returncode == 0 else out[-500:])
+    except subprocess.TimeoutExpired:
+        caught, by = True, f"the tests hung (> {timeout:.0f} s)"
+    res = {
+        "name": m.name,
+        "rule": m.rule,
+        "file": m.path,
+        "caught": caught,
+        "by": by,
+        "seconds": round(time.monotonic() - t0, 1),
+    }
+    shutil.rmtree(root, ignore_errors=True)
+    return res
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", action="append", help="a mutant's name (repeatable)")
+    ap.add_argument("--list", action="store_true")
+    ap.add_argument("--timeout", type=float, default=900.0)
+    ap.add_argument("--json", type=Path, default=REPO / "build" / "reliability" / "mutants.json")
+    a = ap.parse_args(argv)
+    chosen = [m for m in MUTANTS if not a.only or m.name in a.only]
+    if a.list:
+        for m in chosen:
+            print(f"{m.name:28} {m.rule}  ({m.path})")
+        return 0
+    results = []
+    for m in chosen:
+        res = run(m, a.timeout)
+        results.append(res)
+        mark = "caught" if res["caught"] else "SURVIVED"
+        print(f"{m.name:28} {mark:8} by {res['by']}  ({res.get('seconds', '?')} s)", flush=True)
+    caught = sum(r["caught"] for r in results)
+    print(f"mutation score: {caught} of {len(results)} rule mutants caught")
+    a.json.parent.mkdir(parents=True, exist_ok=True)
+    a.json.write_text(
+        json.dumps(
+            {
+                "caught": caught,
+                "total": len(results),
+                "tests": TESTS,
+                "mutants": results,
+                "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+            },
+            indent=1,
+        )
+        + "\n"
+    )
+    return 0 if caught == len(results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
