@@ -35,7 +35,26 @@ $(FUZZ_BUILD)/fuzz_%: $(FUZZ_DIR)/fuzz_%.cpp $(FUZZ_DIR)/fuzz_board.h $(FUZZ_LIB
 	@mkdir -p $(@D)
 	$(FUZZ_CXX) $(FUZZ_FLAGS) -fsanitize=fuzzer -MMD -MP -o $@ $< $(FUZZ_LIB_OBJS) -lm
 
--include $(FUZZ_LIB_OBJS:.o=.d) $(FUZZ_BINS:=.d)
+# The same harnesses built with g++ and its sanitizers, without libFuzzer: the corpus replay
+# under g++'s UBSan too (tests/fuzz/replay_main.cpp).
+REPLAY_CXX   ?= g++
+REPLAY_FLAGS := -std=gnu++11 -g -O1 -Wall -Wextra -I$(FW_SRC) -Ifirmware/test \
+                -fsanitize=address,undefined -fno-sanitize-recover=all
+REPLAY_BINS  := $(addprefix $(FUZZ_BUILD)/replay_,$(FUZZ_HARNESSES))
+REPLAY_LIB_OBJS := $(patsubst %.cpp,$(FUZZ_BUILD)/gobj/%.o,$(FUZZ_LIB_SRCS))
+
+$(FUZZ_BUILD)/gobj/%.o: %.cpp
+	@mkdir -p $(@D)
+	$(REPLAY_CXX) -c $(REPLAY_FLAGS) -MMD -MP -o $@ $<
+
+$(FUZZ_BUILD)/replay_%: $(FUZZ_DIR)/fuzz_%.cpp $(FUZZ_DIR)/replay_main.cpp $(FUZZ_DIR)/fuzz_board.h \
+                        $(REPLAY_LIB_OBJS)
+	@mkdir -p $(@D)
+	$(REPLAY_CXX) $(REPLAY_FLAGS) -o $@ $< $(FUZZ_DIR)/replay_main.cpp $(REPLAY_LIB_OBJS) -lm
+
+fuzz-build: $(REPLAY_BINS)
+
+-include $(FUZZ_LIB_OBJS:.o=.d) $(FUZZ_BINS:=.d) $(REPLAY_LIB_OBJS:.o=.d)
 
 fuzz: setup fuzz-build
 	$(PY) $(FUZZ_DIR)/runfuzz.py --seconds $(FUZZ_SECONDS) $(if $(FUZZ_RUNS),--runs $(FUZZ_RUNS))

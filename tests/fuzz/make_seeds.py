@@ -13,6 +13,7 @@ import json
 import struct
 from pathlib import Path
 
+from utrf.protocol import messages as M
 from utrf.protocol.framing import encode_frame
 
 HERE = Path(__file__).resolve().parent
@@ -35,10 +36,31 @@ def scenarios(by_name: dict[str, dict]) -> dict[str, bytes]:
     def r(name: str) -> bytes:
         return req(by_name[name])
 
-    drive = r("set_telemetry") + r("set_targets") + r("set_mode") + bytes([RUN, 100])
+    def msg(x: M.Message) -> bytes:
+        body = x.encode()
+        return bytes([x.ID, len(body)]) + body
+
+    n = M.FINGER_COUNT
+    drive = (
+        msg(M.SetTelemetry(rate_hz=M.MAX_TELEMETRY_HZ))
+        + msg(M.SetTargets(kind=M.TargetKind.JOINT2_ANGLE, mask=31, value=(0.3,) * n))
+        + msg(
+            M.SetMode(
+                mask=31, mode=(M.ControlMode.POSITION,) * n, duty=(0.0,) * n, effort=(1.0,) * n
+            )
+        )
+        + bytes([RUN, 100])
+    )
     return {
         "drive": drive,
         "drive-unplug": drive + bytes([ADC, 1]) + struct.pack("<H", 20) + bytes([RUN, 20]),
+        # the angle falls while in closed loop (the derivative of a decreasing measurement)
+        "drive-sag": drive
+        + bytes([ADC, 0])
+        + struct.pack("<H", 505)
+        + bytes([RUN, 5, ADC, 0])
+        + struct.pack("<H", 498)
+        + bytes([RUN, 5]),
         "drive-jump": drive + bytes([ADC, 2]) + struct.pack("<H", 700) + bytes([RUN, 20]),
         "drive-overrun": drive + bytes([OVERRUN]) + r("clear_faults") + bytes([RUN, 10]),
         "drive-loop-hang": drive + bytes([LOOP_HANG, 80, RUN, 10]),

@@ -73,7 +73,7 @@ def run(name: str, seconds: float | None, runs: int | None, log_dir: Path) -> di
         "-print_final_stats=1",
         "-timeout=20",
         "-rss_limit_mb=2048",
-        f"-artifact_prefix={art}/",
+        f"-artifact_prefix={art.relative_to(REPO)}/",
     ]
     if runs:
         args.append(f"-runs={runs}")
@@ -111,15 +111,22 @@ def _short(a: str) -> str:
 
 
 def replay(name: str) -> tuple[int, str]:
-    """The committed corpus and every past crash, once each: (exit code, output)."""
+    """The committed corpus and every past crash, once each (the firmware harnesses with
+    clang's libFuzzer build and with the g++ build, each under its sanitizers): (exit code,
+    output)."""
     dirs = [HERE / "corpus" / name, HERE / "crashes" / name]
     dirs = [str(d) for d in dirs if d.is_dir() and any(d.iterdir())]
     if name == "python":
-        args = [*command(name), "--replay", *dirs]
+        runs = [[*command(name), "--replay", *dirs]]
     else:
-        args = [*command(name), "-runs=0", *dirs]
-    proc = subprocess.run(args, cwd=REPO, capture_output=True, text=True, check=False)
-    return proc.returncode, proc.stdout + proc.stderr
+        runs = [[*command(name), "-runs=0", *dirs], [str(BUILD / f"replay_{name}"), *dirs]]
+    out = ""
+    for args in runs:
+        proc = subprocess.run(args, cwd=REPO, capture_output=True, text=True, check=False)
+        out += proc.stdout + proc.stderr
+        if proc.returncode:
+            return proc.returncode, out
+    return 0, out
 
 
 def merge(name: str) -> None:
