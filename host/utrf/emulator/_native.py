@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 6
+ABI = 7
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -49,6 +49,11 @@ STAT_FIELDS = (
     "frame_cycles",
     "adc_conversions",
     "late_interrupts",
+    "rx_duplicated",
+    "rx_burst_bytes",
+    "tx_duplicated",
+    "tx_burst_bytes",
+    "stalls",
 )
 PROFILE_FIELDS = (
     "count",
@@ -71,6 +76,18 @@ class HarnessError(RuntimeError):
 
 class _Stats(ctypes.Structure):
     _fields_ = [(name, ctypes.c_uint64) for name in STAT_FIELDS]
+
+
+class _LineFaults(ctypes.Structure):
+    _fields_ = [
+        ("drop", ctypes.c_double),
+        ("corrupt", ctypes.c_double),
+        ("insert", ctypes.c_double),
+        ("duplicate", ctypes.c_double),
+        ("burst", ctypes.c_double),
+        ("burst_min", ctypes.c_uint32),
+        ("burst_max", ctypes.c_uint32),
+    ]
 
 
 class _Profile(ctypes.Structure):
@@ -149,8 +166,15 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_drop_client": (None, [p]),
         "utrf_sim_set_line_faults": (
             ctypes.c_int,
-            [p, ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double],
+            [p, ctypes.c_int, ctypes.POINTER(_LineFaults)],
         ),
+        "utrf_sim_stall_vector": (
+            ctypes.c_int,
+            [p, ctypes.c_int, ctypes.c_uint64, ctypes.c_int64],
+        ),
+        "utrf_sim_stalls_left": (ctypes.c_int64, [p]),
+        "utrf_sim_write_io": (ctypes.c_int, [p, ctypes.c_uint32, ctypes.c_uint8]),
+        "utrf_sim_poke": (ctypes.c_int, [p, ctypes.c_uint32, ctypes.c_uint8]),
         "utrf_sim_inject": (ctypes.c_size_t, [p, ctypes.c_int, ctypes.c_char_p, ctypes.c_size_t]),
         "utrf_sim_reset": (None, [p, ctypes.c_int, ctypes.c_uint64]),
         "utrf_sim_set_auto_reset_hold": (None, [p, ctypes.c_uint64]),
@@ -267,9 +291,37 @@ class NativeBoard:
     def drop_client(self) -> None:
         self._lib.utrf_sim_drop_client(self.handle)
 
-    def set_line_faults(self, direction: int, drop: float, corrupt: float, insert: float) -> None:
-        if self._lib.utrf_sim_set_line_faults(self.handle, direction, drop, corrupt, insert):
-            raise HarnessError("line fault probabilities must lie in [0, 1] (insert < 1)")
+    def set_line_faults(
+        self,
+        direction: int,
+        drop: float,
+        corrupt: float,
+        insert: float,
+        duplicate: float = 0.0,
+        burst: float = 0.0,
+        burst_length: tuple[int, int] = (8, 32),
+    ) -> None:
+        f = _LineFaults(drop, corrupt, insert, duplicate, burst, *burst_length)
+        if self._lib.utrf_sim_set_line_faults(self.handle, direction, ctypes.byref(f)):
+            raise HarnessError(
+                "line fault probabilities must lie in [0, 1] (insert and duplicate < 1), "
+                "a burst's length 1 <= min <= max"
+            )
+
+    def stall_vector(self, vector: int, cycles: int, count: int) -> None:
+        if self._lib.utrf_sim_stall_vector(self.handle, vector, cycles, count):
+            raise HarnessError(f"interrupt vector {vector} does not exist on the atmega2560")
+
+    def stalls_left(self) -> int:
+        return self._lib.utrf_sim_stalls_left(self.handle)
+
+    def write_io(self, address: int, value: int) -> None:
+        if self._lib.utrf_sim_write_io(self.handle, address, value):
+            raise HarnessError(f"{address:#x} is not an I/O register")
+
+    def poke(self, address: int, value: int) -> None:
+        if self._lib.utrf_sim_poke(self.handle, address, value):
+            raise HarnessError(f"{address:#x} is outside the data space")
 
     def inject(self, direction: int, data: bytes) -> int:
         return self._lib.utrf_sim_inject(self.handle, direction, data, len(data))

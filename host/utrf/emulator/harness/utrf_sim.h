@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 6
+#define UTRF_SIM_ABI 7
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -61,6 +61,11 @@ typedef struct {
     uint64_t frame_cycles;      /* UART0 frame time in CPU cycles at its configured baud */
     uint64_t adc_conversions;   /* conversions started */
     uint64_t late_interrupts;   /* interrupts raised when enabled with their flag already set */
+    uint64_t rx_duplicated;     /* line faults: bytes sent twice */
+    uint64_t rx_burst_bytes;    /* line faults: bytes garbled by bursts */
+    uint64_t tx_duplicated;
+    uint64_t tx_burst_bytes;
+    uint64_t stalls;            /* stalled entries of the stalled vector (utrf_sim_stall_vector) */
 } utrf_sim_stats_t;
 
 /* Cycle profile of one interrupt vector or one function. */
@@ -138,8 +143,13 @@ int utrf_sim_clients(const utrf_sim_t *s); /* bit 0: pty open, bit 1: TCP connec
 void utrf_sim_drop_client(utrf_sim_t *s);
 
 /* Line faults per direction, as probabilities per byte: drop it, flip one random bit of it,
- * insert one random byte before it. */
-int utrf_sim_set_line_faults(utrf_sim_t *s, int dir, double drop, double corrupt, double insert);
+ * insert one random byte before it, send it twice, or start a burst of noise there that
+ * replaces it and the bytes after it, burst_min..burst_max bytes in all (uniform). */
+typedef struct {
+    double drop, corrupt, insert, duplicate, burst;
+    uint32_t burst_min, burst_max;
+} utrf_sim_line_faults_t;
+int utrf_sim_set_line_faults(utrf_sim_t *s, int dir, const utrf_sim_line_faults_t *f);
 /* Put raw bytes on the line now (noise bursts); to the board they queue behind host bytes. */
 size_t utrf_sim_inject(utrf_sim_t *s, int dir, const uint8_t *buf, size_t n);
 
@@ -162,6 +172,17 @@ void utrf_sim_stats(const utrf_sim_t *s, utrf_sim_stats_t *out);
 int utrf_sim_profile_vector(utrf_sim_t *s, int vector);
 int utrf_sim_profile_function(utrf_sim_t *s, int64_t addr);
 void utrf_sim_profile_get(const utrf_sim_t *s, int which, utrf_sim_profile_t *out); /* 0 vector, 1 function */
+
+/* Faults of the board (faults.c), for the safety tests. A stalled vector: at each of the
+ * next `count` entries of the interrupt (-1: every entry; 0 or vector 0: none) the clock
+ * jumps `cycles` ahead, as if its handler ran that much longer (the timers run on). */
+int utrf_sim_stall_vector(utrf_sim_t *s, int vector, uint64_t cycles, int64_t count);
+int64_t utrf_sim_stalls_left(const utrf_sim_t *s);
+/* Write an I/O register as the CPU would (simavr's module for it reacts: a timer's clock
+ * select stops the timer); -1 outside the data space. */
+int utrf_sim_write_io(utrf_sim_t *s, uint32_t addr, uint8_t value);
+/* Write a byte of the data space behind every module's back (no module reacts). */
+int utrf_sim_poke(utrf_sim_t *s, uint32_t addr, uint8_t value);
 
 /* The last messages simavr logged for this board (errors and warnings), NUL-terminated. */
 size_t utrf_sim_log(const utrf_sim_t *s, char *buf, size_t n);
