@@ -24,6 +24,8 @@ from utrf.models.geometry import HandGeometry
 
 DEFAULT_ELF = _native.REPO_ROOT / "build" / "firmware" / "utrf.elf"
 EXCHANGE_PERIOD_S = 250e-6
+#: real time: simulated time the board thread runs per hold of the lock (sim_time moves by it)
+SERVE_BATCH_S = 1e-3
 EEPROM_SIZE = 4096
 
 # MCUSR bits, and the order in which the protocol's ResetCause reports them.
@@ -162,6 +164,9 @@ def _shutdown(stop: threading.Event, holder: dict) -> None:
     native = holder.pop("native", None)
     if native is not None:
         native.close()
+    plant = holder.pop("plant", None)  # after the board that steps it
+    if plant is not None:
+        plant.close()
 
 
 class EmulatedBoard:
@@ -217,15 +222,16 @@ class EmulatedBoard:
         self._tick = threading.Condition()
         self._stop = threading.Event()
         self._holder: dict = {}
+        self._holder["plant"] = self.plant
         self._native = NativeBoard(self.elf, self.seed)
         self._holder["native"] = self._native
+        self._native.attach_plant(self.plant.native)
         self._finalizer = weakref.finalize(self, _shutdown, self._stop, self._holder)
         try:
             if self.eeprom_path is not None and self.eeprom_path.exists():
                 self._load_eeprom(self.eeprom_path)
             self._period_cycles = max(1, round(exchange_period * F_CPU_HZ))
             self._cycle = self._native.cycle
-            self._pins_hold = np.zeros_like(self._native.pins)
             self._native.adc_volts[:5] = self.plant.encoder_volts()
             self._status = 0
             self.crash_pc: int | None = None
@@ -309,19 +315,19 @@ class EmulatedBoard:
         """Simulated seconds since power-on (the MCU's cycle count / 16 MHz)."""
         return self._cycle / F_CPU_HZ
 
-    def _exchange(self) -> None:
-        """One lockstep period: the MCU runs with the encoders as they were at its start, then
-        the plant runs with the pins as the MCU had set them at its start."""
-        n = self._native
-        np.copyto(self._pins_hold, n.pins)
-        n.adc_volts[:5] = self.plant.encoder_volts()
-        status = n.run_to(self._cycle + self._period_cycles)
-        cycle = n.cycle
-        self.plant.step((cycle - self._cycle) / F_CPU_HZ, self._pins_hold)
-        self._cycle = cycle
+    def _run_plant(self, target: int) -> None:
+        """Run in lockstep with the plant up to cycle ``target``, all in C: each exchange
+        period the MCU runs with the encoders as the plant had them at its start, then the
+        plant runs the same period with the pins as the MCU had set them at its start."""
+        status = self._native.run_plant(target, self._period_cycles)
+        self._cycle = self._native.cycle
         if status != self._status:
             self._status = status
-            self.crash_pc = n.pc if status == 1 else None
+            self.crash_pc = self._native.pc if status == 1 else None
+
+    def _exchange(self) -> None:
+        """One lockstep period."""
+        self._run_plant(self._cycle + self._period_cycles)
 
     def _run_driven(
         self, seconds: float, until: Callable[[EmulatedBoard], bool] | None = None
@@ -329,9 +335,13 @@ class EmulatedBoard:
         target = self._cycle + round(seconds * F_CPU_HZ)
         t0 = time.perf_counter()
         try:
-            while self._cycle < target:
+            if until is None:
+                while self._cycle < target:  # one call; again only if a crash stopped it
+                    self._run_plant(target)
+                return False
+            while self._cycle < target:  # the predicate is judged between exchanges
                 self._exchange()
-                if until is not None and until(self):
+                if until(self):
                     return True
             return False
         finally:
@@ -398,15 +408,14 @@ class EmulatedBoard:
                 self._tick.notify_all()
 
     def _pace(self) -> None:
-        batch = max(1, round(1e-3 / (self._period_cycles / F_CPU_HZ)))  # ~1 ms per lock hold
+        batch = max(1, round(SERVE_BATCH_S / (self._period_cycles / F_CPU_HZ)))
         wall0, sim0 = time.perf_counter(), self.sim_time
         while not self._stop.is_set():
             t0 = time.perf_counter()
             with self._lock:
                 if not self._finalizer.alive:
                     return
-                for _ in range(batch):
-                    self._exchange()
+                self._run_plant(self._cycle + batch * self._period_cycles)
                 sim = self.sim_time
             t1 = time.perf_counter()
             self._busy += t1 - t0
@@ -960,6 +969,7 @@ class SimSerial:
 
 __all__ = [
     "DEFAULT_ELF",
+    "SERVE_BATCH_S",
     "VECTORS",
     "CycleProfile",
     "EmulatedBoard",

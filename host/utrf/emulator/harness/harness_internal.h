@@ -90,6 +90,8 @@ struct utrf_sim {
     uint32_t jump_to;
     int jump_interrupts;
 
+    utrf_plant_t *plant; /* plant.c; not owned */
+
     /* faults.c: a stalled interrupt vector (0: none) */
     int stall_vector;
     uint64_t stall_cycles;
