@@ -206,8 +206,11 @@ def test_default_timestep_is_stable_and_damps_the_coupling() -> None:
             assert data.ten_length[model.tendon(f"{f.name}_{t}").id] < 1e-7
 
 
-def test_too_little_coupling_damping_is_unstable_at_the_default_step() -> None:
+def test_too_little_coupling_damping_is_unstable_at_the_default_step(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """Why the coupling damping is what it is: a fifth of it blows up at the same step."""
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes its warning to MUJOCO_LOG.TXT here
     model = mjcf.hand_model(drive="force")
     model.tendon_damping[model.tendon_damping > 0] /= 5.0
     data = _kick_and_settle(model)
