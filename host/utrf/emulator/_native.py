@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 8
+ABI = 9
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -165,6 +165,50 @@ class PlantStateC(ctypes.Structure):
     _fields_ = [(name, _arr(_D, *shape) if shape else _D) for name, shape in PLANT_STATE_FIELDS]
 
 
+MJ_LOADS = 16
+
+
+class MjPlantParamsC(ctypes.Structure):
+    """``utrf_mjplant_params_t``: indices into the MuJoCo model and the motors' constants."""
+
+    _fields_ = [
+        ("actuator", _arr(_I32, 5, 2)),
+        ("dof", _arr(_I32, 5, 2)),
+        ("gear", _arr(_D, 5, 2)),
+        ("j2_qpos", _arr(_I32, 5)),
+        ("supply_v", _D),
+        ("force_constant", _D),
+        ("resistance", _D),
+        ("electrical_time_constant", _D),
+        ("stall_force", _D),
+        ("enc_supply", _D),
+        ("enc_offset", _D),
+        ("enc_band", _arr(_D, 2)),
+        ("enc_noise_v", _D),
+        ("enc_unplugged_v", _D),
+        ("enc_invert", _I32),
+        ("enc_bits", _I32),
+    ]
+
+
+MJ_STATE_FIELDS: tuple[tuple[str, tuple[int, ...]], ...] = (
+    ("time", ()),
+    ("current", (5, 2)),
+    ("drive_mode", (5, 2)),
+    ("drive_duty", (5, 2)),
+    ("plugged", (5,)),
+    ("unplugged_v", (5,)),
+    ("encoder_shift", (5,)),
+    ("load_body", (MJ_LOADS,)),
+    ("load_site", (MJ_LOADS,)),
+    ("load_force", (MJ_LOADS, 3)),
+)
+
+
+class MjPlantStateC(ctypes.Structure):
+    _fields_ = [(name, _arr(_D, *shape) if shape else _D) for name, shape in MJ_STATE_FIELDS]
+
+
 class _Profile(ctypes.Structure):
     _fields_ = [(name, ctypes.c_uint64) for name in PROFILE_FIELDS]
 
@@ -275,6 +319,28 @@ def load_library() -> ctypes.CDLL:
         ),
         "utrf_plant_pulses": (ctypes.c_int, [p]),
         "utrf_sim_attach_plant": (None, [p, p]),
+        "utrf_mjplant_new": (
+            p,
+            [
+                ctypes.c_char_p,
+                p,
+                p,
+                ctypes.POINTER(MjPlantParamsC),
+                ctypes.c_uint64,
+                ctypes.c_char_p,
+                ctypes.c_size_t,
+            ],
+        ),
+        "utrf_mjplant_free": (None, [p]),
+        "utrf_mjplant_state": (ctypes.POINTER(MjPlantStateC), [p]),
+        "utrf_mjplant_step": (None, [p, ctypes.c_double, ctypes.POINTER(ctypes.c_double)]),
+        "utrf_mjplant_encoder_volts": (None, [p, ctypes.POINTER(ctypes.c_double)]),
+        "utrf_mjplant_hit": (
+            ctypes.c_int,
+            [p, ctypes.c_int, ctypes.c_int] + [ctypes.c_double] * 4,
+        ),
+        "utrf_mjplant_pulses": (ctypes.c_int, [p]),
+        "utrf_sim_attach_mjplant": (None, [p, p]),
         "utrf_sim_run_plant": (ctypes.c_int, [p, ctypes.c_uint64, ctypes.c_uint64]),
     }
     for name, (restype, argtypes) in sigs.items():
@@ -354,6 +420,67 @@ class NativePlant:
         return self._lib.utrf_plant_pulses(self.handle)
 
 
+class NativeMjPlant:
+    """The MuJoCo plant's stepping in C (``utrf_mjplant_t``) over the caller's model and data."""
+
+    def __init__(
+        self, libmujoco: str, model: int, data: int, params: MjPlantParamsC, seed: int
+    ) -> None:
+        self._lib = load_library()
+        err = ctypes.create_string_buffer(1024)
+        handle = self._lib.utrf_mjplant_new(
+            libmujoco.encode(), model, data, ctypes.byref(params), seed & (2**64 - 1), err, 1024
+        )
+        if not handle:
+            raise HarnessError(err.value.decode(errors="replace"))
+        self._h: int | None = handle
+        self._c = self._lib.utrf_mjplant_state(handle).contents
+        self.state = {
+            name: np.ctypeslib.as_array(getattr(self._c, name))
+            for name, shape in MJ_STATE_FIELDS
+            if shape
+        }
+        self.state["load_body"][:] = -1
+        self._volts = np.zeros(FINGERS)
+
+    @property
+    def handle(self) -> int:
+        if self._h is None:
+            raise HarnessError("the plant is freed")
+        return self._h
+
+    @property
+    def time(self) -> float:
+        return float(self._c.time)
+
+    def close(self) -> None:
+        if self._h is not None:
+            self.state = {k: v.copy() for k, v in self.state.items()}
+            self._lib.utrf_mjplant_free(self._h)
+            self._h = None
+
+    def step(self, dt: float, pins: np.ndarray | None) -> None:
+        if pins is None:
+            self._lib.utrf_mjplant_step(self.handle, dt, None)
+            return
+        block = np.ascontiguousarray(pins, dtype=np.float64)
+        self._lib.utrf_mjplant_step(self.handle, dt, block.ctypes.data_as(_DP))
+
+    def encoder_volts(self) -> np.ndarray:
+        self._lib.utrf_mjplant_encoder_volts(self.handle, self._volts.ctypes.data_as(_DP))
+        return self._volts.copy()
+
+    def hit(self, body: int, site: int, impulse: np.ndarray, duration: float) -> None:
+        rc = self._lib.utrf_mjplant_hit(self.handle, body, site, *map(float, impulse), duration)
+        if rc == -2:
+            raise HarnessError("too many hits under way at once (64)")
+        if rc:
+            raise HarnessError(f"bad hit: body {body}, duration {duration}")
+
+    def pulses(self) -> int:
+        return self._lib.utrf_mjplant_pulses(self.handle)
+
+
 class NativeBoard:
     """One simavr board. ``pins`` and ``adc_volts`` are numpy views of the harness's memory."""
 
@@ -389,8 +516,11 @@ class NativeBoard:
     def run_to(self, cycle: int) -> int:
         return self._run_to(self._h, cycle)
 
-    def attach_plant(self, plant: NativePlant | None) -> None:
-        self._lib.utrf_sim_attach_plant(self.handle, None if plant is None else plant.handle)
+    def attach_plant(self, plant: NativePlant | NativeMjPlant | None) -> None:
+        if isinstance(plant, NativeMjPlant):
+            self._lib.utrf_sim_attach_mjplant(self.handle, plant.handle)
+        else:
+            self._lib.utrf_sim_attach_plant(self.handle, None if plant is None else plant.handle)
 
     def run_plant(self, cycle: int, period: int) -> int:
         return self._lib.utrf_sim_run_plant(self._h, cycle, period)

@@ -14,6 +14,7 @@ import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -196,6 +197,7 @@ class EmulatedBoard:
         auto_reset_hold: float = 0.1,
         capture: bool | None = None,
         exchange_period: float = EXCHANGE_PERIOD_S,
+        plant: str | HandPlant | Any = "analytic",
     ) -> None:
         self.elf = Path(elf) if elf is not None else DEFAULT_ELF
         check_elf(self.elf)
@@ -217,7 +219,18 @@ class EmulatedBoard:
         self.speed = None if speed is None else float(speed)
         self.seed = int(seed)
         self.eeprom_path = Path(eeprom_path) if eeprom_path is not None else None
-        self.plant = HandPlant(hand, plant_params, seed)
+        if plant == "analytic":
+            self.plant = HandPlant(hand, plant_params, seed)
+        elif plant == "mujoco":
+            from utrf.emulator.mujoco_plant import MujocoPlant  # imports MuJoCo only when asked
+
+            self.plant = MujocoPlant(hand, plant_params, seed, timestep=exchange_period)
+        elif isinstance(plant, str):
+            raise EmulatorError(f"plant must be 'analytic', 'mujoco' or a plant, got {plant!r}")
+        else:
+            self.plant = plant
+        if hasattr(self.plant, "set_timestep"):  # MuJoCo steps once per exchange
+            self.plant.set_timestep(round(exchange_period * F_CPU_HZ) / F_CPU_HZ)
         self._lock = threading.RLock()
         self._tick = threading.Condition()
         self._stop = threading.Event()

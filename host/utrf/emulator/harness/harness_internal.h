@@ -90,7 +90,10 @@ struct utrf_sim {
     uint32_t jump_to;
     int jump_interrupts;
 
-    utrf_plant_t *plant; /* plant.c; not owned */
+    /* the plant stepped in lockstep (plant.c, mjplant.c); not owned */
+    void *plant_ctx;
+    void (*plant_step)(void *ctx, double dt, const double *pins);
+    void (*plant_volts)(void *ctx, double *out5);
 
     /* faults.c: a stalled interrupt vector (0: none) */
     int stall_vector;

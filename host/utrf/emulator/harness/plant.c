@@ -432,9 +432,21 @@ void utrf_plant_encoder_volts(utrf_plant_t *pl, double *out)
 
 /* ---- lockstep with the MCU ---------------------------------------------------------------------- */
 
+static void ops_step(void *ctx, double dt, const double *pins)
+{
+    utrf_plant_step(ctx, dt, pins);
+}
+
+static void ops_volts(void *ctx, double *out)
+{
+    utrf_plant_encoder_volts(ctx, out);
+}
+
 void utrf_sim_attach_plant(utrf_sim_t *s, utrf_plant_t *pl)
 {
-    s->plant = pl;
+    s->plant_ctx = pl;
+    s->plant_step = pl ? ops_step : NULL;
+    s->plant_volts = pl ? ops_volts : NULL;
 }
 
 int utrf_sim_run_plant(utrf_sim_t *s, uint64_t target, uint64_t period)
@@ -448,11 +460,11 @@ int utrf_sim_run_plant(utrf_sim_t *s, uint64_t target, uint64_t period)
             end = target;
         double hold[UTRF_SIM_PIN_VALUES];
         memcpy(hold, s->pins, sizeof hold);
-        if (s->plant)
-            utrf_plant_encoder_volts(s->plant, s->adc_volts);
+        if (s->plant_volts)
+            s->plant_volts(s->plant_ctx, s->adc_volts);
         int now = utrf_sim_run_to(s, end);
-        if (s->plant)
-            utrf_plant_step(s->plant, (double)(s->avr->cycle - start) / CPU_HZ, hold);
+        if (s->plant_step)
+            s->plant_step(s->plant_ctx, (double)(s->avr->cycle - start) / CPU_HZ, hold);
         if (now != status)
             return now;
     }

@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 8
+#define UTRF_SIM_ABI 9
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -255,6 +255,49 @@ void utrf_sim_attach_plant(utrf_sim_t *s, utrf_plant_t *pl);
  * same period with the pins as they were at its start. Returns the status; stops early
  * after a period in which it changed. */
 int utrf_sim_run_plant(utrf_sim_t *s, uint64_t target, uint64_t period);
+
+/* ---- The MuJoCo plant (mjplant.c) ----------------------------------------------------------
+ * The MuJoCo hand (utrf.models.mjcf, drive "force") stepped here; its mjModel and mjData
+ * belong to the caller (the mujoco package) and stay live there. Indices are MuJoCo's. */
+#define UTRF_MJPLANT_LOADS 16
+
+typedef struct {
+    int32_t actuator[5][2]; /* actuator id of motor A, B (-1: none, e.g. a rotary finger's B) */
+    int32_t dof[5][2];      /* its joint's qvel index */
+    double gear[5][2];      /* pulling speed (m/s) per unit of that qvel */
+    int32_t j2_qpos[5];     /* Joint 2's qpos index */
+    double supply_v, force_constant, resistance, electrical_time_constant, stall_force;
+    double enc_supply, enc_offset, enc_band[2], enc_noise_v, enc_unplugged_v;
+    int32_t enc_invert, enc_bits;
+} utrf_mjplant_params_t;
+
+typedef struct {
+    double time;
+    double current[5][2], drive_mode[5][2], drive_duty[5][2];
+    double plugged[5], unplugged_v[5], encoder_shift[5];
+    /* steady loads: a world-frame force (N) on a body at a site (-1: at its centre of mass);
+     * body -1: the slot is free */
+    double load_body[UTRF_MJPLANT_LOADS], load_site[UTRF_MJPLANT_LOADS];
+    double load_force[UTRF_MJPLANT_LOADS][3];
+} utrf_mjplant_state_t;
+
+typedef struct utrf_mjplant utrf_mjplant_t;
+
+/* libmujoco: the path of the library the mujoco package loaded; model, data: the addresses of
+ * its MjModel and MjData (kept alive by the caller). NULL with a message in err. */
+utrf_mjplant_t *utrf_mjplant_new(const char *libmujoco, void *model, void *data,
+                                 const utrf_mjplant_params_t *params, uint64_t seed, char *err,
+                                 size_t errlen);
+void utrf_mjplant_free(utrf_mjplant_t *mp);
+utrf_mjplant_state_t *utrf_mjplant_state(utrf_mjplant_t *mp);
+void utrf_mjplant_step(utrf_mjplant_t *mp, double dt, const double *pins);
+void utrf_mjplant_encoder_volts(utrf_mjplant_t *mp, double *out5);
+/* A hammer hit: a world-frame force pulse carrying (jx, jy, jz) N s on a body at a site (-1:
+ * its centre of mass) over duration s from now. -2: too many under way. */
+int utrf_mjplant_hit(utrf_mjplant_t *mp, int body, int site, double jx, double jy, double jz,
+                     double duration);
+int utrf_mjplant_pulses(const utrf_mjplant_t *mp);
+void utrf_sim_attach_mjplant(utrf_sim_t *s, utrf_mjplant_t *mp);
 
 /* The last messages simavr logged for this board (errors and warnings), NUL-terminated. */
 size_t utrf_sim_log(const utrf_sim_t *s, char *buf, size_t n);
