@@ -29,14 +29,15 @@ from utrf.emulator.plant import FINGERS, PlantError, PlantParams, _finger_index,
 from utrf.models import mjcf, objects
 from utrf.models.geometry import HandGeometry
 
-#: where the object sits, in the world frame (m), by name: for the pose library's grasps
-#: (the hand palm-up, fingers along +x: the object rests on the palm and the fingers close
-#: over it). ASSUMED placements.
+#: where the object sits, in the world frame (m), by name: resting on the palm behind the
+#: knuckle line (x < 0; the palm's top face is z = 0), where the curling fingers close over
+#: it; long objects lie across the palm (their axis along y). ASSUMED placements.
+_ACROSS = (0.7071068, 0.7071068, 0.0, 0.0)  # the object's z axis along the world's y
 OBJECT_PLACEMENT = {
-    "bottle": ((0.0, 0.0, 0.0 + 0.036), (0.7071068, 0.0, 0.7071068, 0.0)),
-    "ball": ((0.0, 0.0, 0.034), (1.0, 0.0, 0.0, 0.0)),
-    "box": ((-0.01, 0.0, 0.031), (1.0, 0.0, 0.0, 0.0)),
-    "egg": ((0.0, 0.0, 0.023), (0.7071068, 0.0, 0.7071068, 0.0)),
+    "bottle": ((-0.040, 0.0, 0.0951), (1.0, 0.0, 0.0, 0.0)),  # standing
+    "ball": ((-0.035, 0.0, 0.0326), (1.0, 0.0, 0.0, 0.0)),
+    "box": ((-0.035, 0.0, 0.0301), _ACROSS),
+    "egg": ((-0.030, 0.0, 0.0221), _ACROSS),
 }
 
 
@@ -83,6 +84,13 @@ class MujocoPlant:
                     f"no placement known for object {self.object.name!r}: give object_pose"
                 )
             xml = objects.add_object(xml, self.object, pose[0], pose[1], name="object")
+            # a weld to the world: an operator's hand keeping the object in place while the
+            # fingers close on it (hold_object), off once the grasp has it
+            xml = xml.replace(
+                "</mujoco>",
+                '<equality><weld name="object_held" body1="object" active="false"/></equality>'
+                "\n</mujoco>",
+            )
         self.xml = xml
         self.model = mujoco.MjModel.from_xml_string(xml)
         self.model.opt.timestep = float(timestep)
@@ -321,6 +329,12 @@ class MujocoPlant:
         if jv.shape != (3,) or not np.all(np.isfinite(jv)):
             raise PlantError(f"impulse must be three finite numbers (N s), got {impulse_ns!r}")
         self._native.hit(body, -1, jv, float(duration_s))
+
+    def hold_object(self, held: bool) -> None:
+        """Keep the object at its placement (welded to the world: an operator holding it while
+        the hand closes) or let it go."""
+        self._object_body()
+        self.data.eq_active[self.model.equality("object_held").id] = int(bool(held))
 
     def object_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The object's position (m) and orientation (w, x, y, z), world frame."""
