@@ -21,7 +21,9 @@ typedef struct {
 } tx_byte_t;
 
 typedef struct {
-    double drop, corrupt, insert;
+    double drop, corrupt, insert, duplicate, burst;
+    uint32_t burst_min, burst_max; /* a burst's length in bytes */
+    uint32_t burst_left;           /* bytes of the burst under way still to garble */
 } line_faults_t;
 
 typedef struct {
@@ -87,6 +89,16 @@ struct utrf_sim {
     int64_t jump_at;
     uint32_t jump_to;
     int jump_interrupts;
+
+    /* the plant stepped in lockstep (plant.c, mjplant.c); not owned */
+    void *plant_ctx;
+    void (*plant_step)(void *ctx, double dt, const double *pins);
+    void (*plant_volts)(void *ctx, double *out5);
+
+    /* faults.c: a stalled interrupt vector (0: none) */
+    int stall_vector;
+    uint64_t stall_cycles;
+    int64_t stall_count; /* stalls left; -1: every entry */
 
     utrf_sim_stats_t stats;
     char log[LOG_SIZE];
