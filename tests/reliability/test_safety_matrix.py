@@ -255,3 +255,53 @@ def test_brake_with_a_stop_fault_keeps_the_driver_off(board: EmulatedBoard, hand
     pins = board.pins
     assert not pins.stby[2] and np.all(pins.duty[2] == 0)
     assert pins.stby[1] and pins.in1[1].all() and pins.in2[1].all()
+
+
+def test_overrun(board: EmulatedBoard, hand: Hand) -> None:
+    """A tick that does not end before the next compare (the emulator's slow_tick): OVERRUN on
+    every finger, motors off, in the tick after it."""
+    driving(hand)
+    extra = 1.2e-3
+    board.slow_tick(extra, count=1)
+    t = time_until(hand, board, lambda: all_off(board), 0.1)
+    hand.clock.sleep(0.01)
+    st = hand.state()
+    assert all(F.OVERRUN in f.faults for f in st)
+    # up to a tick until the slow one starts, its own length, and the next tick that latches
+    row("overrun (one tick 1.2 ms late)", t, TICK + (TICK + extra) + TICK + RESOLUTION)
+
+
+def test_tick_alive_then_the_watchdog(board: EmulatedBoard, hand: Hand) -> None:
+    """The tick's timer stops (the emulator's stop_tick_timer): loop() finds no tick for 20 ms,
+    turns every motor off and stops feeding the watchdog, which resets the board."""
+    driving(hand)
+    board.stop_tick_timer()
+    t = run_until(board, lambda: all_off(board), 0.2)
+    # 20 ms from the last tick, which came up to a tick before the timer stopped
+    row("tick alive (motors off)", t, (TICK_DEAD_MS + 1) * TICK + RESOLUTION)
+    t_reset = run_until(board, lambda: board.reset_cause == "watchdog", 0.5)
+    row("tick alive (watchdog reset)", t + t_reset, (TICK_DEAD_MS + 1) * TICK + WATCHDOG_S)
+    hand.clock.sleep(0.2)
+    with pytest.raises(BoardResetError):
+        hand.state()
+    assert hand.reconnect().reset_cause == M.ResetCause.WATCHDOG
+
+
+def test_stale_adc(board: EmulatedBoard, hand: Hand) -> None:
+    """The ADC stops (the emulator's stop_adc): no new round for 3 ticks, ENCODER_RANGE on
+    every finger, motors off; it latches again while the ADC stays stopped."""
+    driving(hand)
+    board.stop_adc()
+    t = time_until(hand, board, lambda: all_off(board), 0.1)
+    hand.clock.sleep(0.01)
+    assert all(F.ENCODER_RANGE in f.faults for f in hand.state())
+    # 3 ticks without a new round, the last round up to a tick old when the ADC stopped
+    row("encoder stale (ADC stopped)", t, 4 * TICK + RESOLUTION)
+    hand.clear_faults()
+    hand.clock.sleep(0.005)
+    assert all(F.ENCODER_RANGE in f.faults for f in hand.state())
+    board.restart_adc()
+    hand.clock.sleep(0.01)
+    hand.clear_faults()
+    hand.clock.sleep(0.005)
+    assert not any(f.faults for f in hand.state())
