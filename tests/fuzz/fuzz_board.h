@@ -83,6 +83,7 @@ class Board {
         drain();  // what the board sent before the power went is checked too
         if (erase_eeprom) memset(hal::host::state().eeprom, 0xFF, hal::host::kEepromBytes);
         fw_power_on(cause);
+        check_config();
         host_ = framing::FrameDecoder();
         last_seen_halted_ = false;
     }
@@ -92,9 +93,13 @@ class Board {
         fw_set_eeprom_stuck(stuck_addr);
     }
 
+    // Simulated milliseconds left for this input (a bound on one execution's time).
+    uint32_t budget_ms = 0xFFFFFFFFu;
+
     // One millisecond of normal running: the tick, then a loop() pass; oracles after each.
     void run(uint32_t ms) {
-        for (uint32_t i = 0; i < ms; ++i) {
+        for (uint32_t i = 0; i < ms && budget_ms > 0; ++i) {
+            --budget_ms;
             tick(1);
             loop(1);
         }
@@ -112,7 +117,6 @@ class Board {
             const bool saving = app::board().writer.busy();
             app::loop();
             check_motors(false);
-            check_config();
             if (saving && !app::board().writer.busy() && !app::board().writer.failed()) {
                 check_saved_image();
             }
@@ -218,10 +222,14 @@ class Board {
         }
     }
 
+  public:
+    // The configuration changes only when a request is handled (or at boot): the harnesses
+    // check it after each request's reply and after each power-on.
     void check_config() {
         FUZZ_CHECK(config::valid(app::board().cfg), "the running configuration is out of range");
     }
 
+  private:
     // A finished save_config reads back as the running configuration, byte for byte.
     void check_saved_image() {
         config::Config back;

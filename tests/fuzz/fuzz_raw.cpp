@@ -39,6 +39,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         g.run(1);
     }
     g.run(20);
+    g.check_config();
     g.forget_replies();
     return 0;
 }

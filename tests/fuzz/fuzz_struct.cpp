@@ -77,11 +77,13 @@ void request(Script& s) {
     fuzz::Reply r[fuzz::Board::kMaxReplies];
     int got = 0;
     for (int ms = 0; ms < 2000 && got == 0; ++ms) {
+        if (g.budget_ms == 0) return;  // out of time for this input: no verdict
         g.run(1);
         got = g.take_replies(r, fuzz::Board::kMaxReplies);
     }
     g.run(2);
     got += g.take_replies(r + got, fuzz::Board::kMaxReplies - got);
+    g.check_config();
     FUZZ_CHECK(got == 1, "request 0x%02X seq %u: %d replies", id, seq, got);
     FUZZ_CHECK(r[0].seq == seq, "request seq %u answered with seq %u", seq, r[0].seq);
     if (r[0].msg_id == proto::Ack::kId || r[0].msg_id == proto::Nack::kId) {
@@ -109,10 +111,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     Script s = {data, size};
     g_seq = 0;
     g.set_eeprom(0, -1);
+    g.budget_ms = 0xFFFFFFFFu;
     g.power_on(0, true);
     g.run(2);
+    // At most 4 s of board time an input (a full save with a busy EEPROM takes 1.3 s).
+    g.budget_ms = 4000;
     int ops = 0;
-    while (s.more() && ops++ < 200) {
+    while (s.more() && ops++ < 200 && g.budget_ms > 0) {
         const uint8_t op = s.u8();
         if (op < 0x80) {
             // The op byte is the first body-length guess's neighbour: re-read as the msg_id.
@@ -197,6 +202,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
                 break;
         }
     }
+    g.budget_ms = 20;
     g.run(20);
     return 0;
 }
