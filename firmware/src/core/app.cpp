@@ -61,8 +61,13 @@ void take_request(Board& b) {
         ++b.link.rx_repeats;  // a resent save_config under way: its ack comes when done
         return;
     }
-    c.len = 0;  // a new request: the old reply is no longer anybody's
-    if (id != proto::Heartbeat::kId) {  // heartbeats are never resent: nothing to keep
+    if (id == proto::Heartbeat::kId) {
+        // Heartbeats go out while a request waits for its resend: they keep its reply. Once
+        // the host's counter is half a round past it, the cached seq could come round again
+        // for a new request: forget it.
+        if (c.len != 0 && ((uint8_t)(seq - c.seq) & 0x7F) >= 64) c.len = 0;
+    } else {
+        c.len = 0;  // a new request: the old reply is no longer anybody's
         b.request_seq = seq;
         b.request_id = id;
         b.request_crc = crc;
