@@ -604,3 +604,29 @@ def test_a_1khz_stream_is_whole_with_five_fingers_moving(sim: Sim) -> None:
     ticks = [round(r.msg.board_time * 1000) for r in states]
     assert all((b - a) % 65536 == 1 for a, b in itertools.pairwise(ticks))
     assert sim.ok(m.GetStats()).tx_dropped == 0
+
+
+# --- entering closed loop: the stored target -----------------------------------------------------
+
+
+@pytest.mark.parametrize("idle", [m.ControlMode.COAST, m.ControlMode.BRAKE])
+@pytest.mark.parametrize("target_sent_while_idle", [True, False])
+def test_entering_position_treats_the_target_alike_from_coast_and_brake(
+    sim: Sim, idle: m.ControlMode, target_sent_while_idle: bool
+) -> None:
+    # protocol/README.md: a target sent since the finger left closed loop is the one
+    # POSITION goes to; with none, POSITION holds the measured angle. COAST and BRAKE alike.
+    def mode(x: m.ControlMode) -> None:
+        sim.ok(m.SetMode(mask=0b1, mode=(x, 0, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
+
+    sim.set_angle(0, 0.2)
+    sim.run(5)
+    sim.ok(m.SetTargets(m.TargetKind.JOINT2_ANGLE, 0b1, (0.6, 0, 0, 0, 0)))
+    mode(m.ControlMode.POSITION)
+    sim.run(5)
+    mode(idle)
+    if target_sent_while_idle:
+        sim.ok(m.SetTargets(m.TargetKind.JOINT2_ANGLE, 0b1, (0.4, 0, 0, 0, 0)))
+    mode(m.ControlMode.POSITION)
+    want = 0.4 if target_sent_while_idle else 0.2
+    assert sim.ok(m.GetState()).target[0] == pytest.approx(want, abs=0.01)
