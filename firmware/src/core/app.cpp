@@ -277,7 +277,7 @@ void apply_finger_config(uint8_t f) {
 void apply_all_config() {
     for (uint8_t f = 0; f < hand::kFingers; ++f) apply_finger_config(f);
     Lock lock;
-    g_board.hand.set_safety(g_board.cfg.safety.heartbeat_timeout_ms, g_board.cfg.safety.safe_action);
+    g_board.hand.set_safety(g_board.cfg.safety.heartbeat_timeout, g_board.cfg.safety.safe_action);
 }
 
 void setup() {

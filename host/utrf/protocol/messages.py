@@ -16,7 +16,7 @@ from utrf.protocol.codec import Direction, Field, Message, Request
 
 PROTOCOL_VERSION = 1
 #: CRC-32 of the canonical spec (doc texts excluded), compared at the handshake.
-SCHEMA_HASH = 0x98D47F9C
+SCHEMA_HASH = 0x10F508D8
 MAX_PAYLOAD = 64
 FINGER_COUNT = 5
 DEFAULT_BAUD = 1000000
