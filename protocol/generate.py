@@ -573,7 +573,9 @@ def _load_config(entry: dict[str, Any], spec: Spec) -> ConfigDef:
         raise SpecError(f"{where}: no message {exc}") from None
     reply = spec.reply_of(get_msg)
     if not set_msg.is_request or reply is None or reply.same_fields_as != set_msg.name:
-        raise SpecError(f"{where}: {get_msg.name}'s reply must have the same fields as {set_msg.name}")
+        raise SpecError(
+            f"{where}: {get_msg.name}'s reply must have the same fields as {set_msg.name}"
+        )
     head = [(f.name, f.type.name) for f in set_msg.fields[:1]]
     if per_finger and head != [("finger", "u8")]:
         raise SpecError(f"{where}: a per-finger {set_msg.name} starts with u8 finger")
@@ -1083,7 +1085,7 @@ def render_config(spec: Spec) -> str:
     sizes = {c.name: sum(f.size for f in c.fields) for c in spec.configs}
     total = sum(sizes[c.name] * (n if c.per_finger else 1) for c in spec.configs)
     w(f"static const uint16_t kConfigBytes = {total};")
-    w("static_assert(sizeof(Config) == kConfigBytes, \"the configuration is packed\");")
+    w('static_assert(sizeof(Config) == kConfigBytes, "the configuration is packed");')
     w("")
     w("// The spec's defaults. A field without one is left as it is (the firmware sets it: e.g.")
     w("// the Joint-2 limits from the finger's geometry).")
@@ -1130,8 +1132,8 @@ def render_config(spec: Spec) -> str:
     w("")
     w("// The get_ request's reply, filled from the configuration.")
     for c in spec.configs:
-        g = c.get.class_name
-        w(f"inline void reply_of(Config& cfg, const proto::{g}& m, proto::{c.reply.class_name}& r) {{")
+        g, r = c.get.class_name, c.reply.class_name
+        w(f"inline void reply_of(Config& cfg, const proto::{g}& m, proto::{r}& r) {{")
         if c.per_finger:
             w("  fill(slot(cfg, m), m.finger, r);")
         else:
@@ -1140,6 +1142,7 @@ def render_config(spec: Spec) -> str:
     w("")
     w("// Every stored value within the spec's ranges (an EEPROM image's body): each set_ request")
     w("// the configuration makes, encoded and decoded back.")
+    ok = "proto::DecodeStatus::OK"
     w("inline bool within_spec_ranges(const Config& cfg) {")
     w("  uint8_t body[proto::kMaxPayload];")
     w("  uint8_t bad;")
@@ -1150,14 +1153,14 @@ def render_config(spec: Spec) -> str:
             w(f"    proto::{cn} m, back;")
             w(f"    fill(cfg.finger[f].{c.name}, f, m);")
             w("    const uint8_t len = proto::encode(m, body);")
-            w("    if (proto::decode(body, len, back, bad) != proto::DecodeStatus::OK) return false;")
+            w(f"    if (proto::decode(body, len, back, bad) != {ok}) return false;")
             w("  }")
         else:
             w("  {")
             w(f"    proto::{cn} m, back;")
             w(f"    fill(cfg.{c.name}, m);")
             w("    const uint8_t len = proto::encode(m, body);")
-            w("    if (proto::decode(body, len, back, bad) != proto::DecodeStatus::OK) return false;")
+            w(f"    if (proto::decode(body, len, back, bad) != {ok}) return false;")
             w("  }")
     w("  return true;")
     w("}")

@@ -306,7 +306,7 @@ def test_config_layout_is_generated_and_checked_for_staleness() -> None:
     [
         ('set = "set_gains"', 'set = "set_limits"', "same fields as set_limits"),
         ('struct = "Gains"', 'struct = "gains"', "CamelCase"),
-        ('per_finger = false', 'per_finger = true', "starts with u8 finger"),
+        ("per_finger = false", "per_finger = true", "starts with u8 finger"),
         ("default = 3.0 }", "default = 3000.0 }", "outside"),
         ('name = "hw"\n', 'name = "hw"\nsize = 3\n', "unknown key(s) size"),
     ],
