@@ -82,6 +82,7 @@ void receive(Board& b) {
     for (uint8_t i = 0; i < kRxBurst && b.reply_len == 0; ++i) {
         uint8_t byte;
         if (hal::serial_read(&byte, 1) == 0) break;
+        if (!b.decoder.in_frame()) b.rx_frame_tick = b.hand.ticks();
         switch (b.decoder.feed(byte)) {
             case framing::RxEvent::FRAME:
                 take_request(b);
@@ -183,7 +184,11 @@ void board_frames(Board& b) {
         b.status_pending = false;
         return;
     }
-    if (due) {
+    // A request is coming in: its reply goes first, onto a free line. The state waits (it
+    // may: one more period falls due before a frame is dropped).
+    const bool request_coming =
+        b.decoder.in_frame() && b.hand.ticks() - b.rx_frame_tick < kRequestHoldTicks;
+    if (due && !request_coming) {
         b.telemetry_acc = (uint16_t)(b.telemetry_acc - hand::kTickHz);
         uint8_t frame[framing::kMaxFrameBytes];
         const uint8_t n = dispatch::write_state_frame(b, b.board_seq, frame);
@@ -286,6 +291,7 @@ void setup() {
     b.board_seq = proto::kBoardSeqFlag;
     b.boot_sent = false;
     b.tx_capacity = hal::serial_tx_room();  // empty: nothing was sent yet
+    b.rx_frame_tick = 0;
     b.cache.len = 0;
     b.request_seq = -1;
     b.status_change = 0;
