@@ -490,8 +490,9 @@ def test_a_resend_right_after_the_request_gets_the_same_reply_and_changes_nothin
     frame = encode_frame(0x21, m.CalibrateZero.ID, m.CalibrateZero(mask=0b100).encode())
     sim.send_raw(frame)
     sim.run(2)
-    sim.set_angle(2, 0.5)
-    sim.run(5)
+    for k in range(1, 4):  # the finger moves on (slowly: no encoder jump)
+        sim.set_angle(2, 0.2 + 0.1 * k)
+        sim.run(2)
     sim.send_raw(frame)  # its ack was lost: the host sends the same frame again
     sim.run(2)
     acks = [r for r in sim.take() if r.seq == 0x21]
@@ -522,19 +523,27 @@ def test_same_seq_different_bytes_is_a_new_request(sim: Sim) -> None:
     assert sim.finger(0).target == round(0.4 * BU_PER_RAD)
 
 
-def test_a_heartbeat_clears_the_reply_cache(sim: Sim) -> None:
-    # Heartbeats take seqs too: 127 of them after a request bring its seq round again, and
-    # the same bytes then are a new request, not a resend.
+@pytest.mark.parametrize("hb_seq,resend_applied", [(0x52, False), (0x10, True)])
+def test_heartbeats_keep_the_reply_cache_until_half_a_round_of_seqs(
+    sim: Sim, hb_seq: int, resend_applied: bool
+) -> None:
+    # Heartbeats go out while a request waits: a resend after them is still a resend. 64 seqs
+    # on, the cached seq could come round for a new request with the same bytes: forgotten.
+    sim.set_angle(2, 0.2)
     sim.run(5)
-    mode = encode_frame(0x50, m.SetMode.ID, VALID[m.SetMode].encode())
-    sim.send_raw(mode)
+    zero = encode_frame(0x50, m.CalibrateZero.ID, m.CalibrateZero(mask=0b100).encode())
+    sim.send_raw(zero)
     sim.run(2)
-    sim.ok(m.SetMode(mask=0b1, mode=(0, 0, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
-    sim.send_raw(encode_frame(0x52, m.Heartbeat.ID, b""))
+    for k in range(1, 4):  # the finger moves on (slowly: no encoder jump)
+        sim.set_angle(2, 0.2 + 0.1 * k)
+        sim.run(2)
+    sim.send_raw(encode_frame(hb_seq, m.Heartbeat.ID, b""))
     sim.run(2)
-    sim.send_raw(mode)
+    sim.send_raw(zero)
     sim.run(2)
-    assert sim.finger(0).mode == m.ControlMode.BRAKE
+    sim.take()
+    theta = sim.ok(m.GetState()).theta2[2]
+    assert theta == pytest.approx(0.0 if resend_applied else 0.3, abs=0.01)
 
 
 # --- status and the stream's seq ----------------------------------------------------------------
@@ -595,3 +604,29 @@ def test_a_1khz_stream_is_whole_with_five_fingers_moving(sim: Sim) -> None:
     ticks = [round(r.msg.board_time * 1000) for r in states]
     assert all((b - a) % 65536 == 1 for a, b in itertools.pairwise(ticks))
     assert sim.ok(m.GetStats()).tx_dropped == 0
+
+
+# --- entering closed loop: the stored target -----------------------------------------------------
+
+
+@pytest.mark.parametrize("idle", [m.ControlMode.COAST, m.ControlMode.BRAKE])
+@pytest.mark.parametrize("target_sent_while_idle", [True, False])
+def test_entering_position_treats_the_target_alike_from_coast_and_brake(
+    sim: Sim, idle: m.ControlMode, target_sent_while_idle: bool
+) -> None:
+    # protocol/README.md: a target sent since the finger left closed loop is the one
+    # POSITION goes to; with none, POSITION holds the measured angle. COAST and BRAKE alike.
+    def mode(x: m.ControlMode) -> None:
+        sim.ok(m.SetMode(mask=0b1, mode=(x, 0, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
+
+    sim.set_angle(0, 0.2)
+    sim.run(5)
+    sim.ok(m.SetTargets(m.TargetKind.JOINT2_ANGLE, 0b1, (0.6, 0, 0, 0, 0)))
+    mode(m.ControlMode.POSITION)
+    sim.run(5)
+    mode(idle)
+    if target_sent_while_idle:
+        sim.ok(m.SetTargets(m.TargetKind.JOINT2_ANGLE, 0b1, (0.4, 0, 0, 0, 0)))
+    mode(m.ControlMode.POSITION)
+    want = 0.4 if target_sent_while_idle else 0.2
+    assert sim.ok(m.GetState()).target[0] == pytest.approx(want, abs=0.01)

@@ -61,8 +61,13 @@ void take_request(Board& b) {
         ++b.link.rx_repeats;  // a resent save_config under way: its ack comes when done
         return;
     }
-    c.len = 0;  // a new request: the old reply is no longer anybody's
-    if (id != proto::Heartbeat::kId) {  // heartbeats are never resent: nothing to keep
+    if (id == proto::Heartbeat::kId) {
+        // Heartbeats go out while a request waits for its resend: they keep its reply. Once
+        // the host's counter is half a round past it, the cached seq could come round again
+        // for a new request: forget it.
+        if (c.len != 0 && ((uint8_t)(seq - c.seq) & 0x7F) >= 64) c.len = 0;
+    } else {
+        c.len = 0;  // a new request: the old reply is no longer anybody's
         b.request_seq = seq;
         b.request_id = id;
         b.request_crc = crc;
@@ -77,6 +82,7 @@ void receive(Board& b) {
     for (uint8_t i = 0; i < kRxBurst && b.reply_len == 0; ++i) {
         uint8_t byte;
         if (hal::serial_read(&byte, 1) == 0) break;
+        if (!b.decoder.in_frame()) b.rx_frame_tick = b.hand.ticks();
         switch (b.decoder.feed(byte)) {
             case framing::RxEvent::FRAME:
                 take_request(b);
@@ -178,7 +184,11 @@ void board_frames(Board& b) {
         b.status_pending = false;
         return;
     }
-    if (due) {
+    // A request is coming in: its reply goes first, onto a free line. The state waits (it
+    // may: one more period falls due before a frame is dropped).
+    const bool request_coming =
+        b.decoder.in_frame() && b.hand.ticks() - b.rx_frame_tick < kRequestHoldTicks;
+    if (due && !request_coming) {
         b.telemetry_acc = (uint16_t)(b.telemetry_acc - hand::kTickHz);
         uint8_t frame[framing::kMaxFrameBytes];
         const uint8_t n = dispatch::write_state_frame(b, b.board_seq, frame);
@@ -272,7 +282,7 @@ void apply_finger_config(uint8_t f) {
 void apply_all_config() {
     for (uint8_t f = 0; f < hand::kFingers; ++f) apply_finger_config(f);
     Lock lock;
-    g_board.hand.set_safety(g_board.cfg.safety.heartbeat_timeout_ms, g_board.cfg.safety.safe_action);
+    g_board.hand.set_safety(g_board.cfg.safety.heartbeat_timeout, g_board.cfg.safety.safe_action);
 }
 
 void setup() {
@@ -281,6 +291,7 @@ void setup() {
     b.board_seq = proto::kBoardSeqFlag;
     b.boot_sent = false;
     b.tx_capacity = hal::serial_tx_room();  // empty: nothing was sent yet
+    b.rx_frame_tick = 0;
     b.cache.len = 0;
     b.request_seq = -1;
     b.status_change = 0;

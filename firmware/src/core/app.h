@@ -21,6 +21,9 @@ static const uint8_t kFwPatch = 0;
 // Longest the tick may stand still before loop() turns the motors off and lets the watchdog
 // reset the board.
 static const uint8_t kTickDeadMs = 20;
+// Longest a request arriving holds the state stream back (ticks); garbage with no 0x00 after
+// it holds it no longer.
+static const uint8_t kRequestHoldTicks = 2;
 
 struct LinkStats {
     uint32_t rx_frames;
@@ -67,6 +70,9 @@ struct Board {
     // Board-initiated frames go to the UART only when its transmit buffer is empty (its room
     // is tx_capacity), so a reply waits behind at most one of them.
     uint16_t tx_capacity;
+    // The tick when the frame now arriving began: while a request comes in, no state frame is
+    // started (for at most kRequestHoldTicks), so its reply finds the line free.
+    uint32_t rx_frame_tick;
 
     // The status (modes, faults) last reported; status_change counts its changes.
     uint8_t status_change;

@@ -46,6 +46,15 @@ int8_t duty_counts(int16_t q15) {
 
 using app::Lock;
 
+template <typename T>
+struct RemoveRef {
+    typedef T Type;
+};
+template <typename T>
+struct RemoveRef<T&> {
+    typedef T Type;
+};
+
 // A reply written straight into the reply slot (CRC and COBS as the bytes come).
 template <typename Msg>
 bool reply(app::Board&, uint8_t seq, const Msg& m) {
@@ -117,19 +126,33 @@ bool target_angle(uint8_t kind, uint8_t f, int32_t raw, float& theta2) {
     return false;
 }
 
+// Micro-radians (set_targets' JOINT2_ANGLE) to BU, to the nearest count, in integers:
+// x 32768 / (2 pi 1e6) as x * M / 2^32. M is within 2e-9 of exact: below 1e-4 count off for
+// any angle the board can hold. A fifth of the float path's cycles on the AVR.
+const int32_t kMaxUrad = 4000000L;  // beyond +-pi: refused before the multiply
+int32_t bu_from_urad(int32_t urad) {
+    static const int64_t kM = 22399067LL;  // round(2^32 * 32768 / (2 pi 1e6))
+    return (int32_t)((urad * kM + 0x80000000LL) >> 32);
+}
+
 void set_targets(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     SetTargets m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
     int16_t bu[kFingerCount];
+    const bool angle = m.kind == (uint8_t)TargetKind::JOINT2_ANGLE;
     for (uint8_t f = 0; f < kFingerCount; ++f) {
         if (!(m.mask & (1u << f))) continue;
-        float th;
         const finger::Params& p = b.hand.finger(f).params();
-        if (!target_angle(m.kind, f, m.value[f], th)) {
+        int32_t a;
+        float th;
+        if (angle && m.value[f] >= -kMaxUrad && m.value[f] <= kMaxUrad) {
+            a = bu_from_urad(m.value[f]);
+        } else if (!angle && target_angle(m.kind, f, m.value[f], th)) {
+            a = fx::round_sat(th * fx::kBuPerRad);
+        } else {
             nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
             return;
         }
-        const int32_t a = fx::round_sat(th * fx::kBuPerRad);
         // The exact limit is allowed: the float round trip may land a count beyond it.
         if (a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1) {
             nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
@@ -191,111 +214,50 @@ void set_telemetry(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len)
     ack(b, seq, m.kId);
 }
 
-void get_gains(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    GetGains m;
+// ---- configuration: one get and one set handler for every [[config]] block of the spec ----
+
+// What a set_ request needs besides its checks (true: go on), and what its change does.
+bool may_set(app::Board&, uint8_t, const SetGains&) { return true; }
+bool may_set(app::Board&, uint8_t, const SetLimits&) { return true; }
+bool may_set(app::Board&, uint8_t, const SetSafety&) { return true; }
+bool may_set(app::Board& b, uint8_t seq, const SetFingerConfig& m) {
+    if (b.hand.finger(m.finger).idle()) return true;
+    nack(b, seq, m.kId, (uint8_t)ErrorCode::BUSY, m.finger);
+    return false;
+}
+
+void applied(app::Board&, const SetGains& m) { app::apply_finger_config(m.finger); }
+void applied(app::Board&, const SetLimits& m) { app::apply_finger_config(m.finger); }
+void applied(app::Board&, const SetFingerConfig& m) { app::apply_finger_config(m.finger); }
+void applied(app::Board& b, const SetSafety&) {
+    Lock lock;
+    b.hand.set_safety(b.cfg.safety.heartbeat_timeout, b.cfg.safety.safe_action);
+}
+
+template <typename Get, typename Reply>
+void get_config(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
+    Get m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
-    Gains r;
-    config::fill_gains(b.cfg.finger[m.finger].gains, m.finger, r);
+    Reply r;
+    config::reply_of(b.cfg, m, r);
     reply(b, seq, r);
 }
 
-void set_gains(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    SetGains m;
+template <typename Set>
+void set_config(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
+    Set m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
     if (config_busy(b, seq, m.kId)) return;
-    config::Gains g;
-    g.kp = m.kp;
-    g.ki = m.ki;
-    g.kd = m.kd;
-    g.d_cutoff_hz = m.d_cutoff_hz;
-    g.deadband_milli = m.deadband_duty;
-    g.slew_per_s = m.slew_per_s;
-    g.max_duty_milli = m.max_duty;
-    g.pretension_milli = m.pretension_duty;
-    const uint8_t bad = config::check_gains(g);
+    if (!may_set(b, seq, m)) return;
+    typename RemoveRef<decltype(config::slot(b.cfg, m))>::Type v = config::slot(b.cfg, m);
+    config::take(m, v);
+    const uint8_t bad = config::check(m, v);
     if (bad != 0xFF) {
         nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, bad);
         return;
     }
-    b.cfg.finger[m.finger].gains = g;
-    app::apply_finger_config(m.finger);
-    ack(b, seq, m.kId);
-}
-
-void get_limits(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    GetLimits m;
-    if (!decode_or_nack(b, seq, body, len, m)) return;
-    Limits r;
-    config::fill_limits(b.cfg.finger[m.finger].limits, m.finger, r);
-    reply(b, seq, r);
-}
-
-void set_limits(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    SetLimits m;
-    if (!decode_or_nack(b, seq, body, len, m)) return;
-    if (config_busy(b, seq, m.kId)) return;
-    config::Limits l;
-    l.theta2_min = m.theta2_min;
-    l.theta2_max = m.theta2_max;
-    l.limit_margin = m.limit_margin;
-    l.stall_error = m.stall_error;
-    l.stall_motion = m.stall_motion;
-    l.stall_time_ms = m.stall_time;
-    l.encoder_jump = m.encoder_jump;
-    const uint8_t bad = config::check_limits(m.finger, l);
-    if (bad != 0xFF) {
-        nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, bad);
-        return;
-    }
-    b.cfg.finger[m.finger].limits = l;
-    app::apply_finger_config(m.finger);
-    ack(b, seq, m.kId);
-}
-
-void get_safety(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    GetSafety m;
-    if (!decode_or_nack(b, seq, body, len, m)) return;
-    Safety r;
-    r.heartbeat_timeout = b.cfg.safety.heartbeat_timeout_ms;
-    r.safe_action = b.cfg.safety.safe_action;
-    reply(b, seq, r);
-}
-
-void set_safety(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    SetSafety m;
-    if (!decode_or_nack(b, seq, body, len, m)) return;
-    if (config_busy(b, seq, m.kId)) return;
-    b.cfg.safety.heartbeat_timeout_ms = m.heartbeat_timeout;
-    b.cfg.safety.safe_action = m.safe_action;
-    {
-        Lock lock;
-        b.hand.set_safety(m.heartbeat_timeout, m.safe_action);
-    }
-    ack(b, seq, m.kId);
-}
-
-void get_finger_config(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    GetFingerConfig m;
-    if (!decode_or_nack(b, seq, body, len, m)) return;
-    FingerConfig r;
-    config::fill_hardware(b.cfg.finger[m.finger].hw, m.finger, r);
-    reply(b, seq, r);
-}
-
-void set_finger_config(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    SetFingerConfig m;
-    if (!decode_or_nack(b, seq, body, len, m)) return;
-    if (config_busy(b, seq, m.kId)) return;
-    if (!b.hand.finger(m.finger).idle()) {
-        nack(b, seq, m.kId, (uint8_t)ErrorCode::BUSY, m.finger);
-        return;
-    }
-    config::Hardware& h = b.cfg.finger[m.finger].hw;
-    h.actuation = m.actuation;
-    h.encoder_offset = m.encoder_offset;
-    h.encoder_invert = m.encoder_invert;
-    h.motor_invert = m.motor_invert;
-    app::apply_finger_config(m.finger);
+    config::slot(b.cfg, m) = v;
+    applied(b, m);
     ack(b, seq, m.kId);
 }
 
@@ -520,14 +482,14 @@ void handle(app::Board& b, uint8_t seq, uint8_t msg_id, const uint8_t* body, uin
         case MsgId::SET_TARGETS: set_targets(b, seq, body, len); return;
         case MsgId::SET_MODE: set_mode(b, seq, body, len); return;
         case MsgId::SET_TELEMETRY: set_telemetry(b, seq, body, len); return;
-        case MsgId::GET_GAINS: get_gains(b, seq, body, len); return;
-        case MsgId::SET_GAINS: set_gains(b, seq, body, len); return;
-        case MsgId::GET_LIMITS: get_limits(b, seq, body, len); return;
-        case MsgId::SET_LIMITS: set_limits(b, seq, body, len); return;
-        case MsgId::GET_SAFETY: get_safety(b, seq, body, len); return;
-        case MsgId::SET_SAFETY: set_safety(b, seq, body, len); return;
-        case MsgId::GET_FINGER_CONFIG: get_finger_config(b, seq, body, len); return;
-        case MsgId::SET_FINGER_CONFIG: set_finger_config(b, seq, body, len); return;
+#define UTRF_SET_CASE(Msg, ID) \
+    case MsgId::ID: set_config<Msg>(b, seq, body, len); return;
+#define UTRF_GET_CASE(Msg, ID, Reply) \
+    case MsgId::ID: get_config<Msg, Reply>(b, seq, body, len); return;
+        UTRF_CONFIG_SETS(UTRF_SET_CASE)
+        UTRF_CONFIG_GETS(UTRF_GET_CASE)
+#undef UTRF_SET_CASE
+#undef UTRF_GET_CASE
         case MsgId::SAVE_CONFIG: save_config(b, seq, body, len); return;
         case MsgId::LOAD_CONFIG: load_config(b, seq, body, len); return;
         case MsgId::CALIBRATE_ZERO: calibrate_zero(b, seq, body, len); return;

@@ -103,6 +103,8 @@ class FrameDecoder {
   }
   // Forget any partial frame (e.g. after the UART reported an overrun).
   void reset();
+  // Bytes of a frame are in, its 0x00 not yet.
+  bool in_frame() const { return len_ != 0 && !discarding_; }
 
   // After FRAME; after CRC_ERROR seq() and msg_id() are the damaged frame's bytes.
   // body() stays valid until the next call to feed().

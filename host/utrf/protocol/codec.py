@@ -196,6 +196,11 @@ class Field:
         return raw
 
 
+class Unread(int):
+    """A finger's wire value that its message's mask leaves unread and that is no valid value
+    of the field (e.g. an enum value out of its table): kept as it came, re-encoded as is."""
+
+
 def _as_int(value: Any, where: str) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise ValueError(f"{where}: {value!r} is not an integer")
@@ -249,7 +254,10 @@ class Message:
             items = list(value)
             if len(items) != f.count:
                 raise ValueError(f"{where}: needs {f.count} values, got {len(items)}")
-            raw[f.name] = tuple(f.to_raw(v, f"{where}[{i}]") for i, v in enumerate(items))
+            raw[f.name] = tuple(
+                int(v) if isinstance(v, Unread) else f.to_raw(v, f"{where}[{i}]")
+                for i, v in enumerate(items)
+            )
         return raw
 
     @classmethod
@@ -314,7 +322,7 @@ class Message:
                 try:
                     f.check_raw(v, cls.NAME, f"{f.name}[{i}]")
                 except DecodeError:
-                    out.append(v)
+                    out.append(Unread(v) if isinstance(v, int) else v)
                     continue
             else:
                 f.check_raw(v, cls.NAME, f"{f.name}[{i}]")

@@ -38,6 +38,7 @@ from utrf.protocol.errors import (
     DecodeError,
     DisconnectedError,
     NackError,
+    Outcome,
     ProtocolError,
     ReplyTimeout,
     SchemaMismatchError,
@@ -148,6 +149,9 @@ class _Pending:
     timeout_s: float
     allowed: int  # attempts in all
     attempt: int = 0
+    #: attempts written out that no BAD_CRC nack naming this request accounts for: each
+    #: may have been applied (its reply lost)
+    maybe_applied: int = 0
     deadline: float | None = None  # None: (re)send now; inf: sent, not yet reported
     inbox: deque[Frame | _Hint | BaseException] = field(default_factory=deque)
 
@@ -293,6 +297,7 @@ class Engine:
             pending = self._pending
             if pending is not None and pending.deadline == math.inf:
                 pending.deadline = now + pending.timeout_s
+                pending.maybe_applied += 1
         elif tx.kind is Kind.HEARTBEAT:
             self._counts["tx_frames"] += 1
             self._counts["heartbeats"] += 1
@@ -317,7 +322,8 @@ class Engine:
         if p.attempt < p.allowed:
             return self._transmit(p)
         self._counts["timeouts"] += 1
-        return self._done(error=ReplyTimeout(p.request, p.timeout_s, p.attempt))
+        outcome = Outcome.UNKNOWN if p.maybe_applied else Outcome.NOT_APPLIED
+        return self._done(error=ReplyTimeout(p.request, p.timeout_s, p.attempt, outcome))
 
     def _transmit(self, p: _Pending) -> Transmit:
         p.attempt += 1
@@ -469,7 +475,10 @@ class Engine:
         if nack.code is m.ErrorCode.BAD_CRC:
             # The board saw a damaged frame, maybe ours. A hint: resend an idempotent request
             # now rather than at its timeout. It ends the request only if it names this very
-            # request (seq and id) and no attempt is left.
+            # request (seq and id) and no attempt is left. Naming it, it also says that one
+            # attempt arrived damaged: that one was not applied.
+            if matches and pending.maybe_applied:
+                pending.maybe_applied -= 1
             if request.IDEMPOTENT:
                 pending.inbox.append(_Hint(error if matches else None))
                 return

@@ -16,12 +16,12 @@ from utrf.protocol.codec import Direction, Field, Message, Request
 
 PROTOCOL_VERSION = 1
 #: CRC-32 of the canonical spec (doc texts excluded), compared at the handshake.
-SCHEMA_HASH = 0x4620D962
+SCHEMA_HASH = 0x10F508D8
 MAX_PAYLOAD = 64
 FINGER_COUNT = 5
 DEFAULT_BAUD = 1000000
 REPLY_TIMEOUT_S = 0.1
-RETRIES = 3
+RETRIES = 8
 HEARTBEAT_PERIOD_S = 0.1
 MAX_TELEMETRY_HZ = 1000
 #: The board's heartbeat timeout until the host sets one (set_safety).
