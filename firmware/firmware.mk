@@ -125,16 +125,20 @@ flash: $(FW_HEX)
 # ---- the core on the host, with the host hardware layer and a C ABI for ctypes ----------------
 FW_HOST_SRCS := $(wildcard $(FW_SRC)/core/*.cpp) $(wildcard firmware/test/*.cpp)
 FW_HOST_OBJS := $(patsubst %.cpp,$(FW_BUILD)/host/obj/%.o,$(FW_HOST_SRCS))
-FW_HOST_FLAGS := -std=gnu++11 -O2 -g -fPIC -fno-exceptions -fno-rtti $(FW_WARN) -I$(FW_SRC)
+# Undefined behaviour is an error in the host build the tests run (the AVR build would have
+# the same bug): UBSan, every finding fatal (-fno-sanitize-recover), so a test fails on it.
+FW_HOST_UBSAN := -fsanitize=undefined -fno-sanitize-recover=all
+FW_HOST_FLAGS := -std=gnu++11 -O2 -g -fPIC -fno-exceptions -fno-rtti $(FW_HOST_UBSAN) $(FW_WARN) \
+                 -I$(FW_SRC)
 
 firmware-host: $(FW_HOST_LIB)
 
-$(FW_BUILD)/host/obj/%.o: %.cpp
+$(FW_BUILD)/host/obj/%.o: %.cpp firmware/firmware.mk
 	@mkdir -p $(@D)
 	$(HOST_CXX) -c $(FW_HOST_FLAGS) -MMD -MP -o $@ $<
 
 $(FW_HOST_LIB): $(FW_HOST_OBJS)
-	$(HOST_CXX) -shared -o $@ $^ -lm
+	$(HOST_CXX) -shared $(FW_HOST_UBSAN) -o $@ $^ -lm
 
 # ---- checks that need the AVR: the core's arithmetic on the chip, the simavr harness ----------
 FW_CHECK_ELF := $(FW_BUILD)/check/core_check.elf

@@ -169,6 +169,11 @@ void Finger::hold_here() {
     mode_ = mode;
 }
 
+void Finger::halt() {
+    set_mode(COAST, 0, 0);
+    duty_a_ = duty_b_ = 0;
+}
+
 void Finger::stop_now(hal::MotorCommand& out) {
     duty_a_ = duty_b_ = 0;
     out.a.on_counts = out.b.on_counts = 0;

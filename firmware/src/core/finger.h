@@ -91,6 +91,9 @@ class Finger {
     void latch(uint8_t bits);
     // Safe action HOLD: hold the measured angle in closed loop, starting from the present output.
     void hold_here();
+    // The board stops driving (the hand halted: its motors are all off): COAST, duties 0, so
+    // the state reports what the motors do.
+    void halt();
     // One control period: read the encoder, check the safety rules, run the mode, and fill
     // the driver command. Inline (below): the hand's tick runs it for five fingers.
     // `stall_check`: this tick also runs the stall rule (the hand gives each finger its turn

@@ -5,7 +5,7 @@
 //   timer 0            left to the Arduino core (millis)
 //   ADC                interrupt-driven round robin over the five encoder channels
 //   UART0              own interrupt-driven driver: counts lost bytes, never blocks
-//   watchdog           120 ms, reset mode; fed by loop() only while the tick runs
+//   watchdog           30 ms, reset mode; fed by loop() only while the tick runs
 #include "hal_avr.h"
 
 #include <avr/eeprom.h>
@@ -547,7 +547,11 @@ uint8_t eeprom_read(uint16_t addr) { return eeprom_read_byte((const uint8_t*)add
 bool eeprom_ready() { return eeprom_is_ready(); }
 void eeprom_write(uint16_t addr, uint8_t value) { eeprom_write_byte((uint8_t*)addr, value); }
 
-void watchdog_start() { wdt_enable(WDTO_120MS); }
+// 30 ms (WDTO_30MS: 4K cycles of the 128 kHz watchdog oscillator, 32 ms nominal): the longest
+// a hang with interrupts off leaves the motors at their last duty (nothing of the firmware
+// runs then). loop() feeds it every pass (a pass takes a few ms at most), and the loop-alive
+// rule (hand.h, 20 ticks) turns the motors off before it fires when the tick still runs.
+void watchdog_start() { wdt_enable(WDTO_30MS); }
 void watchdog_feed() { wdt_reset(); }
 void watchdog_mark_hang() { g_hang_mark = kHangMagic; }
 void watchdog_clear_hang_mark() { g_hang_mark = 0; }
