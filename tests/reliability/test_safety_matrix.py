@@ -9,6 +9,7 @@ Times are simulated: exact to the board's exchange period (250 us), the same on 
 from __future__ import annotations
 
 import math
+import re
 import struct
 from collections.abc import Callable
 from pathlib import Path
@@ -27,9 +28,28 @@ F = M.FaultBits
 TICK = 1e-3
 # firmware/README.md: off in the tick that finds it, the sample at most one tick old
 ENCODER_BOUND = 2 * TICK
-LOOP_HANG_TICKS = 50  # core/hand.h kLoopHangTicks
-TICK_DEAD_MS = 20  # core/app.h kTickDeadMs
-WATCHDOG_S = 0.128  # WDTO_120MS on the ATmega2560: 16K cycles of the 128 kHz oscillator
+FW = Path(__file__).resolve().parents[2] / "firmware" / "src"
+
+
+def _constant(path: str, name: str) -> int:
+    m = re.search(rf"\b{name}\s*=\s*(\d+)", (FW / path).read_text())
+    assert m, f"{name} not found in firmware/src/{path}"
+    return int(m.group(1))
+
+
+def _watchdog_s() -> float:
+    """The period the firmware gives the watchdog: WDTO_<n> is 2K << k cycles of its
+    128 kHz oscillator (the datasheet's table; the names round them)."""
+    m = re.search(r"wdt_enable\((WDTO_\w+)\)", (FW / "hal" / "avr" / "hal_avr.cpp").read_text())
+    assert m, "wdt_enable(WDTO_...) not found in firmware/src/hal/avr/hal_avr.cpp"
+    names = ["15MS", "30MS", "60MS", "120MS", "250MS", "500MS", "1S", "2S", "4S", "8S"]
+    return (2048 << names.index(m.group(1)[5:])) / 128e3
+
+
+# The bounds the firmware documents, from its sources (firmware/README.md quotes them).
+LOOP_HANG_TICKS = _constant("core/hand.h", "kLoopHangTicks")
+TICK_DEAD_MS = _constant("core/app.h", "kTickDeadMs")
+WATCHDOG_S = _watchdog_s()
 RESOLUTION = 0.25e-3  # the driven board's exchange period: what a time is measured to
 
 
@@ -259,16 +279,30 @@ def test_brake_with_a_stop_fault_keeps_the_driver_off(board: EmulatedBoard, hand
 
 def test_overrun(board: EmulatedBoard, hand: Hand) -> None:
     """A tick that does not end before the next compare (the emulator's slow_tick): OVERRUN on
-    every finger, motors off, in the tick after it."""
+    every finger, motors off, in the tick after it.
+
+    A slow entry of the timer interrupt that finds loop() holding the tick lock only defers
+    the tick (late, not an overrun: the tick itself was short), so the slow tick is asked
+    again until one lands on a tick that runs; the time counts from the one that did."""
     driving(hand)
     extra = 1.2e-3
-    board.slow_tick(extra, count=1)
-    t = time_until(hand, board, lambda: all_off(board), 0.1)
+    attempts = 0
+    t = math.inf
+    while t == math.inf and attempts < 10:
+        attempts += 1
+        board.slow_tick(extra, count=1)
+        t = run_until(board, lambda: all_off(board), 0.01)
+    assert t < math.inf, "no slow tick overran in 10 tries"
     hand.clock.sleep(0.01)
     st = hand.state()
     assert all(F.OVERRUN in f.faults for f in st)
     # up to a tick until the slow one starts, its own length, and the next tick that latches
-    row("overrun (one tick 1.2 ms late)", t, TICK + (TICK + extra) + TICK + RESOLUTION)
+    row(
+        "overrun (one tick 1.2 ms late)",
+        t,
+        TICK + (TICK + extra) + TICK + RESOLUTION,
+        f"slow ticks asked: {attempts}",
+    )
 
 
 def test_tick_alive_then_the_watchdog(board: EmulatedBoard, hand: Hand) -> None:
