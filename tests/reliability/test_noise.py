@@ -4,14 +4,13 @@ the link never wedges and recovers once the noise stops. The campaign is noise.p
 
 from __future__ import annotations
 
-import math
-
 import pytest
 from conftest import record
 from noise import run_campaign
 
 from utrf.emulator import EmulatedBoard
 from utrf.hand import Hand
+from utrf.protocol import messages as M
 
 # rate per byte -> commands (1,000 at 1e-2: the issue's goal of no error in 1,000)
 CAMPAIGNS = {1e-3: 300, 1e-2: 1000}
@@ -45,34 +44,55 @@ def test_the_campaign_is_deterministic(firmware_elf) -> None:  # type: ignore[no
     assert sum(a["line_faults"].values()) > 0
 
 
-def test_heartbeats_cannot_all_be_lost_at_1e_2(board: EmulatedBoard, hand: Hand) -> None:
-    """HOST_TIMEOUT needs heartbeat_timeout (0.5 s) with no valid frame reaching the board.
+def test_host_timeout_at_1e_2_is_half_a_second_of_lost_frames(
+    board: EmulatedBoard, hand: Hand
+) -> None:
+    """Why HOST_TIMEOUT was once seen at 1e-2 with heartbeats flowing.
 
-    Measured here: how often the Hand sends (its longest silence, with requests, resends and
-    heartbeats) and the share of its frames the board takes whole. The chance that every
-    frame of a 0.5 s window is lost is then share_lost ** frames_in_window: far too small to
-    be seen, so the HOST_TIMEOUT once seen at 1e-2 was not the line's noise (see
-    docs/reliability.md: a host that stalls for 0.5 s on the wall clock)."""
+    The board latches it when no *valid* frame arrives for heartbeat_timeout (0.5 s); the
+    Hand sends one at least every 100 ms (a heartbeat when nothing else goes out), so it takes
+    every frame of a window lost. Measured here: the share of the Hand's frames the board takes
+    whole at 1e-2, and the longest silence between the Hand's frames. The chance that every
+    frame of a window is lost is loss ** frames_per_window: small but not negligible, and
+    larger for the long frames of a request being resent (each attempt ~25-35 % lost at this
+    rate) than for heartbeats (6 bytes, ~6 %): at the issue's ~200 commands a run, about one
+    run in a few, as seen. Then the mechanism itself, deterministically: the Hand's heartbeats
+    keep flowing while none reaches the board, and every driving finger latches HOST_TIMEOUT
+    after 0.5 s."""
     res = run_campaign(board, hand, 1e-2, 150, seed=21)
     timeout = hand.safety().heartbeat_timeout
     assert res.longest_tx_gap_s <= 0.1 + 1e-3  # a heartbeat at least every 100 ms
-    lost = 1.0 - (res.board_rx_frames - 1) / res.tx_frames  # the get_stats itself: -1
-    assert 0 < lost < 0.2
-    window = math.floor(timeout / res.longest_tx_gap_s)
-    p_all_lost = lost**window
+    got = res.board_rx_frames - 1  # the get_stats that counted them is one of them
+    lost = 1.0 - got / res.tx_frames
+    assert 0.02 < lost < 0.5, (got, res.tx_frames)
+    window = round(timeout / res.longest_tx_gap_s)
     record(
         "noise",
         "host_timeout",
         {
             "rate": 1e-2,
             "tx_frames": res.tx_frames,
-            "board_rx_frames": res.board_rx_frames - 1,
+            "board_rx_frames": got,
             "frame_loss": lost,
             "longest_tx_gap_s": res.longest_tx_gap_s,
             "frames_per_timeout": window,
-            "p_all_lost_per_window": p_all_lost,
+            "p_all_lost_per_window": lost**window,
             "host_timeouts": res.host_timeouts,
+            "host_timeout_events": res.host_timeout_events,
+            "commands": res.commands,
+            "seed": 21,
+            "campaign_seconds": res.sim_seconds,
         },
     )
-    assert res.host_timeouts == 0
-    assert p_all_lost < 1e-4
+    # The mechanism: heartbeats flow, none arrives (every byte to the board dropped).
+    hand.set_targets({0: 0.2, 1: 0.2})
+    hand.clock.sleep(0.05)
+    hand.forget_faults()
+    sent = hand.link_stats().heartbeats
+    board.set_line_faults("to_board", drop=1.0)
+    hand.clock.sleep(timeout + 0.05)
+    board.set_line_faults("both")
+    hand.clock.sleep(0.05)
+    assert hand.link_stats().heartbeats - sent >= 4  # they kept flowing
+    timed_out = {e.finger for e in hand.faults_seen if e.new_faults & M.FaultBits.HOST_TIMEOUT}
+    assert timed_out == set(hand.fingers[:4])  # the driving ones (the little finger is idle)
