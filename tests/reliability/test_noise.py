@@ -16,6 +16,7 @@ from utrf.protocol import messages as M
 CAMPAIGNS = {1e-3: 300, 1e-2: 1000}
 
 
+@pytest.mark.timeout(1200)  # 1,000 commands: ~30 s of one core, far more on a loaded machine
 @pytest.mark.parametrize("rate", sorted(CAMPAIGNS))
 def test_a_noisy_line_applies_nothing_wrong_and_loses_nothing(
     board: EmulatedBoard, hand: Hand, rate: float
