@@ -35,7 +35,13 @@ section is written by its run (tools/reliability_doc.py); the command is given w
 
 
 def _load(path: Path) -> Any:
-    return json.loads(path.read_text()) if path.exists() else None
+    """The results at ``path``; for the fuzzers, also each harness's own file of a run made
+    per harness (``runfuzz.py --harness raw --results build/fuzz/results-raw.json``)."""
+    res = json.loads(path.read_text()) if path.exists() else None
+    if path.name == "results.json":
+        for extra in sorted(path.parent.glob("results-*.json")):
+            res = {**(res or {}), **json.loads(extra.read_text())}
+    return res
 
 
 def _markers(name: str, command: str) -> tuple[str, str]:
