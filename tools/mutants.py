@@ -165,8 +165,9 @@ MUTANTS = [
 ]
 
 
-def prepare(m: Mutant) -> Path:
-    root = WORK / m.name
+def prepare(m: Mutant | None) -> Path:
+    """A copy of the checkout under build/mutants/ with ``m``'s edit (None: the baseline)."""
+    root = WORK / (m.name if m else "baseline")
     shutil.rmtree(root, ignore_errors=True)
     root.mkdir(parents=True)
     for name in COPY:
@@ -179,6 +180,8 @@ def prepare(m: Mutant) -> Path:
         src = REPO / "build" / name
         if src.is_dir():
             shutil.copytree(src, root / "build" / name, symlinks=True)
+    if m is None:
+        return root
     path = root / m.path
     text = path.read_text()
     if text.count(m.old) != 1:
@@ -190,16 +193,47 @@ def prepare(m: Mutant) -> Path:
     return root
 
 
-def run(m: Mutant, timeout: float) -> dict:
-    root = prepare(m)
-    t0 = time.monotonic()
-    build = subprocess.run(
+def _pytest(root: Path, timeout: float, args: list[str]) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *args, *TESTS],
+        cwd=root,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+
+
+def _build(root: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
         ["make", "-s", "--no-print-directory", "firmware", "firmware-host", "emulator"],
         cwd=root,
         capture_output=True,
         text=True,
         check=False,
     )
+
+
+def _failed(out: str) -> list[str]:
+    return [ln.split(" ")[1] for ln in out.splitlines() if ln.startswith("FAILED ")]
+
+
+def baseline(timeout: float) -> list[str]:
+    """The tests that fail without any mutation (none, when the tree is sound): a mutant is
+    only counted caught by a test that passes on the unmutated firmware."""
+    root = prepare(None)
+    build = _build(root)
+    if build.returncode:
+        raise SystemExit(f"the unmutated copy does not build:\n{build.stdout}{build.stderr}")
+    proc = _pytest(root, timeout, [])
+    shutil.rmtree(root, ignore_errors=True)
+    return _failed(proc.stdout + proc.stderr)
+
+
+def run(m: Mutant, timeout: float, broken: list[str]) -> dict:
+    root = prepare(m)
+    t0 = time.monotonic()
+    build = _build(root)
     if build.returncode:
         return {
             "name": m.name,
@@ -208,18 +242,12 @@ def run(m: Mutant, timeout: float) -> dict:
             "by": "build failed",
             "detail": (build.stdout + build.stderr)[-2000:],
         }
+    deselect = [a for t in broken for a in ("--deselect", t)]
     try:
-        proc = subprocess.run(
-            [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *TESTS],
-            cwd=root,
-            capture_output=True,
-            text=True,
-            timeout=timeout,
-            check=False,
-        )
+        proc = _pytest(root, timeout, ["-x", *deselect])
         out = proc.stdout + proc.stderr
         caught = proc.returncode == 1
-        failed = [ln.split(" ")[1] for ln in out.splitlines() if ln.startswith("FAILED ")]
+        failed = _failed(out)
         by = failed[0] if failed else ("no test failed" if proc.returncode == 0 else out[-500:])
     except subprocess.TimeoutExpired:
         caught, by = True, f"the tests hung (> {timeout:.0f} s)"
@@ -247,9 +275,12 @@ def main(argv: list[str] | None = None) -> int:
         for m in chosen:
             print(f"{m.name:28} {m.rule}  ({m.path})")
         return 0
+    broken = baseline(a.timeout)
+    if broken:
+        print(f"failing without any mutation (not counted): {broken}", flush=True)
     results = []
     for m in chosen:
-        res = run(m, a.timeout)
+        res = run(m, a.timeout, broken)
         results.append(res)
         mark = "caught" if res["caught"] else "SURVIVED"
         print(f"{m.name:28} {mark:8} by {res['by']}  ({res.get('seconds', '?')} s)", flush=True)
@@ -263,6 +294,7 @@ def main(argv: list[str] | None = None) -> int:
                 "total": len(results),
                 "tests": TESTS,
                 "mutants": results,
+                "failing_without_mutation": broken,
                 "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
             },
             indent=1,
