@@ -96,8 +96,8 @@ MUTANTS = [
         "loop-alive-off",
         "loop alive",
         "firmware/src/core/hand.h",
-        "    if (UTRF_UNLIKELY(halted_)) {",
-        "    if (false) {",
+        "    } else if (!halted_) {\n        halt();",
+        "    } else if (false) {\n        halt();",
     ),
     Mutant(
         "tick-alive-off",
@@ -284,6 +284,13 @@ def main(argv: list[str] | None = None) -> int:
         results.append(res)
         mark = "caught" if res["caught"] else "SURVIVED"
         print(f"{m.name:28} {mark:8} by {res['by']}  ({res.get('seconds', '?')} s)", flush=True)
+    if a.only and a.json.exists():
+        # a partial run updates those mutants' rows of the last full one
+        done = {r["name"] for r in results}
+        earlier = json.loads(a.json.read_text())["mutants"]
+        results = [r for r in earlier if r["name"] not in done] + results
+        order = [m.name for m in MUTANTS]
+        results.sort(key=lambda r: order.index(r["name"]) if r["name"] in order else len(order))
     caught = sum(r["caught"] for r in results)
     print(f"mutation score: {caught} of {len(results)} rule mutants caught")
     a.json.parent.mkdir(parents=True, exist_ok=True)
