@@ -231,7 +231,8 @@ def _with_crc(image: bytearray) -> bytearray:
     ("case", "change", "status"),
     [
         ("blank", lambda im: bytearray(b"\xff" * len(im)), M.ConfigStatus.DEFAULTS_BLANK),
-        ("crc", lambda im: im.__setitem__(40, im[40] ^ 4) or im, M.ConfigStatus.DEFAULTS_CORRUPT),
+        # finger 0's kp one ulp off: still in range, so only the CRC can tell
+        ("crc", lambda im: im.__setitem__(8, im[8] ^ 1) or im, M.ConfigStatus.DEFAULTS_CORRUPT),
         (
             "version",
             lambda im: _with_crc(im.__setitem__(4, 2) or im),
