@@ -51,12 +51,15 @@ FW_OWN_SRCS := $(FW_SRC)/utrf_main.cpp $(wildcard $(FW_SRC)/core/*.cpp) \
                $(wildcard $(FW_SRC)/hal/avr/*.cpp)
 FW_OWN_OBJS := $(patsubst $(FW_SRC)/%.cpp,$(FW_BUILD)/obj/%.o,$(FW_OWN_SRCS))
 
-# The Arduino core as an archive, objects named <file>.o under their own directory: its
-# main.cpp never meets ours, and only what is referenced is linked (not its Serial, whose
-# UART interrupts would clash with hal/avr's driver).
-ARDUINO_SRCS := $(wildcard $(ARDUINO_CORE)/*.c $(ARDUINO_CORE)/*.cpp $(ARDUINO_CORE)/*.S)
-ARDUINO_OBJS := $(patsubst $(ARDUINO_CORE)/%,$(FW_BUILD)/arduino-core/%.o,$(ARDUINO_SRCS))
+# The Arduino core as an archive, built by a sub-make (firmware/arduino_core.mk) that lists
+# the core's sources when it runs: nothing here may read what tools/setup.sh installs while
+# make parses, since on a fresh machine that is before the set-up has run.
 ARDUINO_LIB  := $(FW_BUILD)/arduino-core/libarduino_core.a
+ARDUINO_CORE_MAKE = $(MAKE) -s --no-print-directory -f firmware/arduino_core.mk \
+  ARDUINO_CORE='$(ARDUINO_CORE)' OUT='$(@D)' AVR_CC='$(AVR_CC)' AVR_CXX='$(AVR_CXX)' \
+  AVR_AR='$(AVR_AR)' CORE_CFLAGS='$(FW_MCU) $(ARDUINO_OPT) -std=gnu11 -w $(FW_INC)' \
+  CORE_CXXFLAGS='$(FW_MCU) $(ARDUINO_OPT) $(FW_CXXSTD) -DDECIMAL_DIG=9 -w $(FW_INC)' \
+  CORE_SFLAGS='$(FW_MCU) -x assembler-with-cpp $(FW_INC)'
 
 # The git commit goes into identify's build_id; rewritten only when it changes.
 FW_BUILD_ID := $(FW_BUILD)/build_id.h
@@ -83,20 +86,12 @@ $(FW_BUILD)/obj/%.o: $(FW_SRC)/%.cpp
 	$(AVR_CXX) -c $(FW_MCU) $(FW_OPT) $(FW_CXXSTD) $(FW_WARN) $(FW_DEFS) $(FW_INC) \
 	  $(FW_EXTRA) -MMD -MP -o $@ $<
 
-$(FW_BUILD)/arduino-core/%.c.o: $(ARDUINO_CORE)/%.c
-	@mkdir -p $(@D)
-	@$(AVR_CC) -c $(FW_MCU) $(ARDUINO_OPT) -std=gnu11 -w $(FW_INC) -o $@ $<
-$(FW_BUILD)/arduino-core/%.cpp.o: $(ARDUINO_CORE)/%.cpp
-	@mkdir -p $(@D)
-	@$(AVR_CXX) -c $(FW_MCU) $(ARDUINO_OPT) $(FW_CXXSTD) -DDECIMAL_DIG=9 -w $(FW_INC) -o $@ $<
-$(FW_BUILD)/arduino-core/%.S.o: $(ARDUINO_CORE)/%.S
-	@mkdir -p $(@D)
-	@$(AVR_CC) -c $(FW_MCU) -x assembler-with-cpp $(FW_INC) -o $@ $<
-
-$(ARDUINO_LIB): $(ARDUINO_OBJS)
-	@rm -f $@
-	@$(AVR_AR) rcs $@ $^
-	@echo "arduino core: $(words $^) objects from $(ARDUINO_CORE)"
+# Always asked (the sub-make knows the core's files); the archive is rewritten only when an
+# object changed, so the ELF is relinked only then.
+$(ARDUINO_LIB): FORCE_ARDUINO_CORE
+	@$(ARDUINO_CORE_MAKE) $@
+.PHONY: FORCE_ARDUINO_CORE
+FORCE_ARDUINO_CORE:
 
 $(FW_ELF): $(FW_OWN_OBJS) $(ARDUINO_LIB)
 	$(AVR_CXX) $(FW_MCU) -Wl,--gc-sections -o $@ $(FW_OWN_OBJS) $(ARDUINO_LIB) -lm

@@ -5,7 +5,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 APT_PACKAGES=(gcc-avr avr-libc binutils-avr simavr libsimavr-dev libelf-dev arduino-core-avr
-              avrdude doctest-dev)
+              avrdude)
 VENV=.venv
 PYTHON=${PYTHON:-python3.11}
 
