@@ -7,7 +7,9 @@
 #   make bench-firmware        tick load and memory, appended to docs/benchmarks.md
 #   UTRF_BAUD=...              serial baud rate (default 1000000, exact at 16 MHz with U2X)
 
-FW_SRC       := firmware/src
+# FW_DIR: where this file lives (an installed utrf builds from its packaged copy into a cache).
+FW_DIR       ?= firmware
+FW_SRC       := $(FW_DIR)/src
 FW_BUILD     := $(BUILD)/firmware
 FW_ELF       := $(FW_BUILD)/utrf.elf
 FW_HEX       := $(FW_BUILD)/utrf.hex
@@ -55,7 +57,7 @@ FW_OWN_OBJS := $(patsubst $(FW_SRC)/%.cpp,$(FW_BUILD)/obj/%.o,$(FW_OWN_SRCS))
 # the core's sources when it runs: nothing here may read what tools/setup.sh installs while
 # make parses, since on a fresh machine that is before the set-up has run.
 ARDUINO_LIB  := $(FW_BUILD)/arduino-core/libarduino_core.a
-ARDUINO_CORE_MAKE = $(MAKE) -s --no-print-directory -f firmware/arduino_core.mk \
+ARDUINO_CORE_MAKE = $(MAKE) -s --no-print-directory -f $(FW_DIR)/arduino_core.mk \
   ARDUINO_CORE='$(ARDUINO_CORE)' OUT='$(@D)' AVR_CC='$(AVR_CC)' AVR_CXX='$(AVR_CXX)' \
   AVR_AR='$(AVR_AR)' CORE_CFLAGS='$(FW_MCU) $(ARDUINO_OPT) -std=gnu11 -w $(FW_INC)' \
   CORE_CXXFLAGS='$(FW_MCU) $(ARDUINO_OPT) $(FW_CXXSTD) -DDECIMAL_DIG=9 -w $(FW_INC)' \
@@ -112,10 +114,13 @@ firmware-size: $(FW_ELF)
 	@grep -h "^// Geometry\|rows, .* bytes; worst" $(FW_SRC)/generated/kinematics_table.h \
 	  | sed 's|^// |kinematics table: |'
 
-flash: $(FW_HEX)
+# utrf flash checks first (the port exists and opens, the bootloader signs on within 2 s) and
+# fails in seconds with one line where avrdude alone would hang or retry for 30 s.
+flash:
 	@if [ -z "$(PORT)" ]; then echo "usage: make flash PORT=/dev/ttyACM0" >&2; exit 2; fi
-	$(AVRDUDE) -p atmega2560 -c $(AVRDUDE_PROGRAMMER) -P $(PORT) -b $(FLASH_BAUD) -D \
-	  -U flash:w:$(FW_HEX):i
+	@$(MAKE) --no-print-directory setup && $(MAKE) -s --no-print-directory $(FW_HEX)
+	$(PY) -m utrf flash --port '$(PORT)' --hex $(FW_HEX) --avrdude $(AVRDUDE) \
+	  --programmer $(AVRDUDE_PROGRAMMER) --baud $(FLASH_BAUD)
 
 # ---- the core on the host, with the host hardware layer and a C ABI for ctypes ----------------
 FW_HOST_SRCS := $(wildcard $(FW_SRC)/core/*.cpp) $(wildcard firmware/test/*.cpp)
