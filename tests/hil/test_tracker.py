@@ -116,7 +116,8 @@ def test_ndi_tracker_without_its_package_says_how_to_install(monkeypatch) -> Non
     with pytest.raises(TrackerError) as info:
         tr.NDIAuroraTracker("/dev/ttyUSB0")
     text = str(info.value)
-    assert "scikit-surgerynditracker" in text and "pip install" in text and "utrf[bench]" in text
+    assert "scikit-surgerynditracker" in text
+    assert "pip install 'utrf[bench]'" in text and "pip install -e '.[bench]'" in text
 
 
 def test_ndi_tracker_reads_through_the_package(monkeypatch) -> None:

@@ -48,7 +48,7 @@ class GraspHoldConfig:
     pose: str = "grasp-bottle"
     duration_s: float = 600.0
     hits: int = 20  # emulated: hammer hits spread over the hold
-    hit_impulse_ns: float = 0.3  # emulated: each hit's impulse (N s)
+    hit_impulse_n_s: float = 0.3  # emulated: each hit's impulse, newton-seconds (N·s)
     hit_duration_s: float = 5e-3
     contact_fraction: float = 0.6  # emulated: the object stops closing fingers there
     tracked_finger: int = 1
@@ -72,8 +72,8 @@ class GraspHoldConfig:
                 f"hits need a hold of at least {2 * self.baseline_s + 1.0:g} s (two baselines "
                 f"and time to recover), got {self.duration_s:g} s"
             )
-        if not (math.isfinite(self.hit_impulse_ns) and 0 <= self.hit_impulse_ns <= 5):
-            raise RunError(f"hit_impulse_ns must lie in [0, 5] N s, got {self.hit_impulse_ns}")
+        if not (math.isfinite(self.hit_impulse_n_s) and 0 <= self.hit_impulse_n_s <= 5):
+            raise RunError(f"hit_impulse_n_s must lie in [0, 5] N s, got {self.hit_impulse_n_s}")
         if not 0.1 <= self.contact_fraction <= 1.0:
             raise RunError(f"contact_fraction must lie in [0.1, 1], got {self.contact_fraction}")
         if not 0 <= self.tracked_finger <= 4:
@@ -100,7 +100,7 @@ class GraspHoldConfig:
             f = int(rng.choice(closing))
             u = opening[f]
             a = math.atan2(u[1], u[0]) + rng.uniform(-math.pi / 4, math.pi / 4)
-            j = self.hit_impulse_ns
+            j = self.hit_impulse_n_s
             out.append((float(t), f, (j * math.cos(a), j * math.sin(a))))
         return out
 

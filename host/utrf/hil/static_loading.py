@@ -263,6 +263,12 @@ def _attempts(out: Path) -> dict[int, int]:
     return seen
 
 
+def check_new_output(out: Path) -> None:
+    """RunError if ``out`` already holds a run (a new run must not mix with it)."""
+    if (out / "meta.json").exists() or (out / "samples.csv").exists():
+        raise RunError(f"{out} already holds a run: continue it with --resume, or give a new --out")
+
+
 def prepare_output(
     out: Path, config: StaticLoadingConfig, *, resume: bool, extra_meta: dict[str, Any]
 ) -> StaticLoadingConfig:
@@ -279,8 +285,7 @@ def prepare_output(
                 f"--resume: {out} was run {'emulated' if stored.emulated else 'on the bench'}"
             )
         return stored
-    if meta_path.exists() or (out / "samples.csv").exists():
-        raise RunError(f"{out} already holds a run: continue it with --resume, or give a new --out")
+    check_new_output(out)
     out.mkdir(parents=True, exist_ok=True)
     _write_json(meta_path, {"config": config.to_json(), **extra_meta})
     return config

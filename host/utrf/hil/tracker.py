@@ -7,7 +7,8 @@ the straight finger, y toward flexion, origin at Joint 1; ``docs/architecture.md
 fitted by :func:`register` from the sensor's positions at known finger poses.
 
 - :class:`NDIAuroraTracker`: an NDI Aurora (or Polaris) through ``scikit-surgerynditracker``,
-  an optional dependency (``pip install 'utrf[bench]'``) imported only when one is opened.
+  an optional dependency (``pip install 'utrf[bench]'``; in a checkout
+  ``pip install -e '.[bench]'``) imported only when one is opened.
 - :class:`SimulatedTracker`: for the emulated board. It reads the plant's true fingertip,
   places it in a tracker frame of its own (a rotation and an offset the run does not know),
   and adds seeded Gaussian noise, so registration and calibration have something to find.
@@ -24,7 +25,10 @@ from typing import Any, Protocol
 import numpy as np
 
 NDI_PACKAGE = "scikit-surgerynditracker"
-NDI_INSTALL = "pip install 'utrf[bench]'  (or: pip install scikit-surgerynditracker)"
+NDI_INSTALL = (
+    "pip install 'utrf[bench]' (an installed utrf), or pip install -e '.[bench]' "
+    "(in a checkout of the repository)"
+)
 
 
 class TrackerError(RuntimeError):
