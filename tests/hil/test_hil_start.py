@@ -56,6 +56,15 @@ def test_an_existing_run_is_refused_before_the_board_is_opened(
     out = tmp_path / "out"
     out.mkdir()
     (out / "meta.json").write_text("{}")
-    argv = ["hil", "static-loading", "--emulated", "--out", str(out), "--quiet"]
+    argv = [
+        "hil",
+        "static-loading",
+        "--emulated",
+        "--out",
+        str(out),
+        "--quiet",
+        "--loads-kg",
+        "0.5",
+    ]
     assert main([*argv, "--elf", str(tmp_path / "no.elf")]) == 2
     assert "already holds a run" in capsys.readouterr().err
