@@ -149,7 +149,9 @@ def _open_link(url: str, baudrate: int, forward: _Forward, reset: bool) -> Link:
     from utrf.protocol.transport import SerialTransport
 
     def opener() -> Link:
-        return Link(SerialTransport(url, baudrate), on_telemetry=forward, telemetry_queue_size=1)
+        # No queue: the Hand takes every frame through its callback (a queue nobody read
+        # counted each frame as "dropped"); real loss is stream_lost.
+        return Link(SerialTransport(url, baudrate), on_telemetry=forward, telemetry_queue_size=0)
 
     return open_line(url, reset, opener)  # type: ignore[return-value]
 
