@@ -151,6 +151,7 @@ def test_ndi_tracker_reads_through_the_package(monkeypatch) -> None:
     assert made["settings"]["serial port"] == "/dev/ttyUSB3"
     s = t.read()
     assert s.visible and s.time_s == 5.0 and s.quality == pytest.approx(0.12)
+    assert s.frame == 7  # the Aurora's own frame number is kept
     np.testing.assert_allclose(s.position_m, [0.010, -0.020, 0.300])
     s2 = t.read()
     assert not s2.visible and np.isnan(s2.position_m).all()

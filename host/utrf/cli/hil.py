@@ -170,6 +170,18 @@ def _open(args: argparse.Namespace, tracked: int, truth: Any = None) -> Any:
         raise
 
 
+def _warn_rate(tracker: Any, hz: float, option: str) -> None:
+    """A sample rate above the tracker's own gives repeated frames, not more samples."""
+    rate = getattr(tracker, "rate_hz", None)
+    if rate is not None and hz > rate:
+        print(
+            f"WARNING: {option} {hz:g} is above the tracker's {rate:g} frames/s: repeated "
+            "frames are not new samples (they are skipped); the run takes no more of them",
+            file=sys.stderr,
+            flush=True,
+        )
+
+
 def _run_guarded(command: str, body: Any) -> int:
     from utrf.emulator import EmulatorError, HarnessError
     from utrf.hand.errors import HandError
@@ -255,6 +267,7 @@ def _static_loading(args: argparse.Namespace) -> int:
         # own retry.
         bench = _open(args, config.finger, truth)
         try:
+            _warn_rate(bench.tracker, config.tracker_hz, "--tracker-hz")
             if not args.resume:
                 meta: dict[str, Any] = {"started": sl.default_time(), "port": args.port}
                 if truth is not None:
@@ -298,6 +311,7 @@ def _grasp_hold(args: argparse.Namespace) -> int:
         # The grasp hold uses the hand's own motors (no bench actuator).
         bench = _open(args, tracked, EmulatedTruth(actuator=None))
         try:
+            _warn_rate(bench.tracker, config.sample_hz, "--sample-hz")
             result = gh.run(
                 bench,
                 config,

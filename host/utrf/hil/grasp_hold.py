@@ -37,7 +37,7 @@ HIT_COLUMNS = ("time_s", "finger", "impulse_x_ns", "impulse_y_ns", "duration_s")
 
 
 def sample_columns(names: list[str]) -> list[str]:
-    cols = ["time_s", "phase", "raw_x_m", "raw_y_m", "raw_z_m", "visible"]
+    cols = ["time_s", "phase", "raw_x_m", "raw_y_m", "raw_z_m", "visible", "tracker_frame"]
     for n in names:
         cols += [f"{n}_{f}" for f in FINGER_FIELDS]
     return cols
@@ -180,6 +180,7 @@ def run(
                 "baseline" if t < config.baseline_s else "hold",
                 *(f"{v:.7f}" for v in s.position_m),
                 int(s.visible),
+                s.frame,
             ]
             for i in range(len(names)):
                 if st is None:
@@ -307,6 +308,11 @@ def analyse(out: Path, hand_geometry: HandGeometry | None = None) -> dict[str, A
             ),
         }
     vis = np.array([int(r["visible"]) for r in rows]) == 1
+    # A row sampled faster than the tracker measures repeats its last frame: not a new sample.
+    tracker_frames = np.array([int(r.get("tracker_frame", -1) or -1) for r in rows])
+    repeated = np.zeros(len(rows), dtype=bool)
+    repeated[1:] = (tracker_frames[1:] >= 0) & (tracker_frames[1:] == tracker_frames[:-1])
+    vis &= ~repeated
     raw = np.array([[float(r[c]) for c in ("raw_x_m", "raw_y_m", "raw_z_m")] for r in rows])
     slip = None
     if (vis & base).any() and (vis & end).any():
@@ -318,6 +324,7 @@ def analyse(out: Path, hand_geometry: HandGeometry | None = None) -> dict[str, A
         "planned_duration_s": config.duration_s,
         "complete": bool(t[-1] >= config.duration_s - 2.0 / config.sample_hz),
         "samples": len(rows),
+        "tracker_repeated_frames": int(repeated.sum()),
         "emulated": config.emulated,
         "hits_applied": [
             {

@@ -47,7 +47,14 @@ from utrf.hand.state import fault_names
 from utrf.hil import joint2
 from utrf.hil.bench import BENCH_GAINS, Bench, ProgressFn, finite_mean
 from utrf.hil.joint2 import Joint2Frames
-from utrf.hil.tracker import Registration, TrackerError, mean_position, register
+from utrf.hil.tracker import (
+    NewFrames,
+    Registration,
+    TrackerError,
+    TrackerSample,
+    mean_position,
+    register,
+)
 from utrf.models import calibration, kinematics, statics
 from utrf.models.geometry import FingerGeometry
 from utrf.models.planning import Target, plan
@@ -78,6 +85,7 @@ SAMPLE_COLUMNS = (
     "faults",
     "current_a_a",
     "current_b_a",
+    "tracker_frame",
 )
 STEP_COLUMNS = (
     "step",
@@ -300,8 +308,13 @@ def _sample_row(
     attempt: int,
     repeat: int,
     load: float,
-) -> dict[str, Any]:
+    new_frames: NewFrames,
+) -> dict[str, Any] | None:
+    """A row of samples.csv, or None when the tracker returned a frame already taken (read
+    faster than it measures: not a new sample)."""
     s = bench.tracker.read()
+    if not new_frames.new(s):
+        return None
     st = bench.hand.latest
     f = st.fingers[finger] if st is not None else None
     theta2, n_frames, frames_sd = frames.take()
@@ -336,6 +349,7 @@ def _sample_row(
         "faults": int(f.faults) if f else 0,
         "current_a_a": f"{cur[0]:.4f}",
         "current_b_a": f"{cur[1]:.4f}",
+        "tracker_frame": s.frame,
     }
 
 
@@ -355,11 +369,14 @@ def _record(
 ) -> list[dict[str, Any]]:
     rows = []
     period = 1.0 / config.tracker_hz
-    for _ in range(n):
+    for _ in range(4 * n):  # a repeated tracker frame is no sample: read again, up to 4n
         bench.sleep(period)
         row = write()  # logged first: the samples around a fault are kept too
-        rows.append(row)
         _check_faults(bench, config.finger, seen, during)
+        if row is not None:
+            rows.append(row)
+            if len(rows) == n:
+                break
     return rows
 
 
@@ -383,11 +400,16 @@ def _registration(
             bench.hand.move({f: th}, duration=0.4, tolerance=config.settle_tolerance_rad)
             bench.sleep(config.settle_s)
             _check_faults(bench, f, seen, "registration")
-            readings = []
+            readings: list[TrackerSample] = []
+            new_frames = NewFrames()
             frames.take()  # from here on
-            for _ in range(n):
+            for _ in range(4 * n):  # n new tracker frames (a repeated one is no sample)
                 bench.sleep(1.0 / config.tracker_hz)
-                readings.append(bench.tracker.read())
+                reading = bench.tracker.read()
+                if new_frames.new(reading):
+                    readings.append(reading)
+                    if len(readings) == n:
+                        break
             raw, visible = mean_position(readings)
             if not visible:
                 raise RunStopped(f"registration: the tracker never saw the sensor at pose {k}")
@@ -488,10 +510,16 @@ def _run_steps(
                 t0 = bench.now()
                 frames.take()  # the step's frames start now
 
+                new_frames = NewFrames()
+
                 def write(step: int = step, attempt: int = attempt, repeat: int = repeat,
-                          load: float = load) -> dict[str, Any]:  # fmt: skip
-                    row = _sample_row(bench, reg, frames, f, step, attempt, repeat, load)
-                    samples.write(row)
+                          load: float = load, new_frames: NewFrames = new_frames,
+                          ) -> dict[str, Any] | None:  # fmt: skip
+                    row = _sample_row(
+                        bench, reg, frames, f, step, attempt, repeat, load, new_frames
+                    )
+                    if row is not None:
+                        samples.write(row)
                     return row
 
                 rows = _record(bench, config, n, write, seen, during)
