@@ -56,7 +56,7 @@ from utrf.hil.tracker import (
     register,
 )
 from utrf.models import calibration, kinematics, statics
-from utrf.models.geometry import FingerGeometry
+from utrf.models.geometry import FingerGeometry, HandGeometry
 from utrf.models.planning import Target, plan
 from utrf.models.statics import Load
 from utrf.models.tendons import Limits
@@ -657,6 +657,7 @@ def analyse(out: Path, *, geometry: FingerGeometry, figure: bool = True) -> dict
     result: dict[str, Any] = {
         "experiment": "static loading (paper Sec. IV-A)",
         "finger": config.finger,
+        "finger_name": HandGeometry.default().fingers[config.finger].name,
         "finger_length_m": length,
         "hold": {
             "boundary_condition": "Joint-2 angle held by the firmware's closed loop",
@@ -727,6 +728,15 @@ def analyse(out: Path, *, geometry: FingerGeometry, figure: bool = True) -> dict
         result["calibration"] = calibrate(steps, geometry, source=str(out / "samples.csv"))
     except calibration.CalibrationError as exc:
         result["calibration"] = {"error": str(exc)}
+    if "modulus_pa" in result["calibration"]:
+        # The calibrated model where the points are: at each step's measured Joint-2 angles
+        # (the fit's own basis), not at the setpoint, which it would miss by the hold's error.
+        gcal = replace(geometry, tendon_youngs_modulus_pa=result["calibration"]["modulus_pa"])
+        pred_cal = _model_deflection(gcal, loads, th, th_ref)
+        for p in per:
+            k = loads == p["load_kg"]
+            p["calibrated_model_deflection_m"] = float(np.hypot(*pred_cal[k].T).mean())
+        result["error"]["calibrated_mean_m"] = float(np.hypot(*(meas - pred_cal).T).mean())
     if config.emulated:
         result["emulated_truth"] = meta.get("emulated_truth")
     _write_json(out / "results.json", result)
@@ -846,17 +856,17 @@ def plot(result: dict[str, Any], path: Path, geometry: FingerGeometry) -> Path:
     nominal = np.hypot(*_model_deflection(geometry, grid, th, th).T) * 1e3
     ax.plot(grid, nominal, "-", label="model, Joint 2 held at the setpoint")
     cal = result.get("calibration", {})
-    if "modulus_pa" in cal:
-        gcal = replace(geometry, tendon_youngs_modulus_pa=cal["modulus_pa"])
-        fitted = np.hypot(*_model_deflection(gcal, grid, th, th).T) * 1e3
-        ax.plot(
-            grid, fitted, ":", label=f"calibrated model (E = {cal['modulus_pa'] / 1e9:.0f} GPa)"
-        )
+    if "modulus_pa" in cal and all("calibrated_model_deflection_m" in p for p in per):
+        fitted = np.array([p["calibrated_model_deflection_m"] for p in per]) * 1e3
+        ax.plot(w, fitted, "d:", mfc="none",
+                label=f"calibrated model (E = {cal['modulus_pa'] / 1e9:.0f} GPa) at the "
+                "measured Joint-2 angles")  # fmt: skip
     ax.set_xlabel("payload at the tip (kg)")
     ax.set_ylabel("tip displacement (mm)")
     e = result.get("error", {})
+    name = result.get("finger_name") or f"finger {result['finger']}"
     ax.set_title(
-        f"Static loading, finger {result['finger']}: mean error "
+        f"Static loading, {name}: mean error "
         f"{e.get('mean_m', math.nan) * 1e3:.3f} mm, "
         f"max {e.get('max_m', math.nan) * 1e3:.3f} mm",
         fontsize=9,
