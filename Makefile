@@ -30,7 +30,7 @@ help:
 	@echo "make demo    set up, build the firmware, run the pose demo on the emulated board"
 	@echo "make test    set up, build, run the whole suite (pytest drives the C++ tests too)"
 	@echo "make bench   benchmarks; results in docs/benchmarks.md"
-	@echo "make firmware | flash PORT=/dev/ttyACM0 | lint | generate | clean"
+	@echo "make firmware | flash PORT=/dev/ttyACM0 | lint | generate | hil-readme | clean"
 
 setup:
 	@tools/setup.sh
@@ -48,6 +48,13 @@ demo-after-setup: $(DEMO_DEPS)
 bench: setup
 	@$(SUBMAKE) bench-after-setup
 bench-after-setup: $(BENCH_TARGETS)
+
+# hil/README.md's seed-0 section, from the run it reports (tests/hil/test_readme_table.py
+# fails when it is stale).
+.PHONY: hil-readme
+hil-readme: setup
+	@$(SUBMAKE) firmware emulator
+	$(PY) -m utrf.hil.readme_table --update hil/README.md
 
 lint: setup
 	$(PY) -m ruff check $(wildcard host tests hil tools protocol)
