@@ -20,9 +20,13 @@ stop the auto-reset altogether is in firmware/README.md.
 from __future__ import annotations
 
 import os
-import termios
 import time
 from collections.abc import Callable
+
+try:
+    import termios
+except ImportError:  # Windows: no termios, no HUPCL; pyserial drives DTR itself
+    termios = None  # type: ignore[assignment]
 
 from utrf.protocol.errors import DisconnectedError
 
@@ -35,8 +39,8 @@ class ResetModeError(ValueError):
 
 
 def is_tty_path(url: str) -> bool:
-    """A device path (``/dev/ttyACM0``, a pty), not a pyserial URL."""
-    return "://" not in url and os.path.exists(url)
+    """A POSIX device path (``/dev/ttyACM0``, a pty), not a pyserial URL."""
+    return termios is not None and "://" not in url and os.path.exists(url)
 
 
 def _set_hupcl(path: str, on: bool) -> None:
