@@ -68,3 +68,17 @@ def test_an_existing_run_is_refused_before_the_board_is_opened(
     ]
     assert main([*argv, "--elf", str(tmp_path / "no.elf")]) == 2
     assert "already holds a run" in capsys.readouterr().err
+
+
+def test_the_hit_impulse_option_names_its_unit(capsys: pytest.CaptureFixture[str]) -> None:
+    from utrf.cli import build_parser
+
+    parser = build_parser()
+    args = parser.parse_args(["hil", "grasp-hold", "--emulated", "--out", "o",
+                              "--hit-impulse", "0.5"])  # fmt: skip
+    assert args.hit_impulse == 0.5
+    with pytest.raises(SystemExit):
+        parser.parse_args(["hil", "grasp-hold", "--emulated", "--out", "o", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--hit-impulse N_S" in text and "newton-seconds (N·s" in text
+    assert "--hit-impulse-ns" not in text
