@@ -43,5 +43,8 @@ def test_commands_over_a_noisy_line_get_a_definite_answer_applied_once(
     assert stats.rx_repeats > 0  # and lost replies were answered from the cache
     assert stats.rx_crc_errors > 0
     # the board holds the last targets sent, at its resolution, and the last safety
-    assert targets == tuple(round(v / RES) * RES for v in sent[-1])
+    on_wire = M.SetTargets.decode(
+        M.SetTargets(M.TargetKind.JOINT2_ANGLE, 0b11111, sent[-1]).encode()
+    ).value  # the µrad the line carried
+    assert targets == tuple(round(v / RES) * RES for v in on_wire)
     assert safety.heartbeat_timeout == 0.5 + 0.01 * (112 % 5)
