@@ -157,21 +157,30 @@ def _torques(
     grasp: np.ndarray,
     gravity: bool,
 ) -> np.ndarray:
-    """``generalised_forces`` with the chain's points (..., 4, 2) already computed."""
+    """``generalised_forces`` with the chain's points (..., 4, 2) already computed.
+
+    Written per joint on (...)-shaped columns rather than as (..., 3, 3) products: the same
+    arithmetic in the same order, fewer passes over memory (the batch's largest cost)."""
     phi3 = th.sum(-1)
-    normal3 = np.stack([-np.sin(phi3), np.cos(phi3)], axis=-1)  # flexion side of Link 3
-    force = tip_force - grasp[..., None] * normal3
-    joints = pts[..., :3, :]
-    tau = _cross(pts[..., 3:4, :] - joints, force[..., None, :])
-    tau = tau + tip_moment[..., None]
+    # The grasp force pushes along Link 3's normal (−sin φ3, cos φ3), against flexion.
+    fx = tip_force[..., 0] - grasp * -np.sin(phi3)
+    fy = tip_force[..., 1] - grasp * np.cos(phi3)
+    x0, x1, x2, x3 = (pts[..., i, 0] for i in range(4))
+    y0, y1, y2, y3 = (pts[..., i, 1] for i in range(4))
+    tau1 = (x3 - x0) * fy - (y3 - y0) * fx + tip_moment
+    tau2 = (x3 - x1) * fy - (y3 - y1) * fx + tip_moment
+    tau3 = (x3 - x2) * fy - (y3 - y2) * fx + tip_moment
     if gravity:
-        m = np.asarray(geom.link_masses_kg)
-        c = np.asarray(geom.link_com_fraction)
         # Moment about Joint k of link j's weight (0, −m_j g), j >= k: (com_j − J_k)_x (−m_j g).
-        com_x = joints[..., 0] + c * (pts[..., 1:, 0] - joints[..., 0])  # (..., 3)
-        dx = com_x[..., None, :] - joints[..., :, None, 0]  # (..., k, j)
-        tau = tau + (dx * (-GRAVITY_MPS2 * m) * _UPPER).sum(-1)
-    return tau
+        w1, w2, w3 = (-GRAVITY_MPS2 * m for m in geom.link_masses_kg)
+        c1, c2, c3 = geom.link_com_fraction
+        com1 = x0 + c1 * (x1 - x0)
+        com2 = x1 + c2 * (x2 - x1)
+        com3 = x2 + c3 * (x3 - x2)
+        tau1 = tau1 + (((com1 - x0) * w1 + (com2 - x0) * w2) + (com3 - x0) * w3)
+        tau2 = tau2 + ((com2 - x1) * w2 + (com3 - x1) * w3)
+        tau3 = tau3 + (com3 - x2) * w3
+    return np.stack(np.broadcast_arrays(tau1, tau2, tau3), axis=-1)
 
 
 def net_tensions(geom: FingerGeometry, tau: ArrayLike) -> np.ndarray:
