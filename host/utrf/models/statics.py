@@ -183,6 +183,26 @@ def _torques(
     return np.stack(np.broadcast_arrays(tau1, tau2, tau3), axis=-1)
 
 
+def _chain(geom: FingerGeometry, th: np.ndarray) -> np.ndarray:
+    """``kinematics.chain_positions`` for (n, 3) angles, column by column: the same sums in
+    the same order, without cumsum's strided passes."""
+    L1, L2, L3 = geom.link_lengths_m
+    phi = np.empty_like(th)
+    phi[:, 0] = th[:, 0]
+    np.add(th[:, 0], th[:, 1], out=phi[:, 1])
+    np.add(phi[:, 1], th[:, 2], out=phi[:, 2])
+    cos, sin = np.cos(phi), np.sin(phi)
+    pts = np.empty((th.shape[0], 4, 2))
+    pts[:, 0, :] = 0.0
+    np.multiply(L1, cos[:, 0], out=pts[:, 1, 0])
+    np.multiply(L1, sin[:, 0], out=pts[:, 1, 1])
+    pts[:, 2, 0] = pts[:, 1, 0] + L2 * cos[:, 1]
+    pts[:, 2, 1] = pts[:, 1, 1] + L2 * sin[:, 1]
+    pts[:, 3, 0] = pts[:, 2, 0] + L3 * cos[:, 2]
+    pts[:, 3, 1] = pts[:, 2, 1] + L3 * sin[:, 2]
+    return pts
+
+
 def net_tensions(geom: FingerGeometry, tau: ArrayLike) -> np.ndarray:
     """N_k (N), shape (..., 3): flexion group positive, extension group negative (Steps 1-3)."""
     per_joint = -np.asarray(tau, dtype=float) / geom.R
@@ -299,7 +319,7 @@ def solve_batch(
 
     compliance = 1.0 / tendons.stiffnesses(geom)
     theta = kinematics.joint_angles(geom, qa)
-    pts = kinematics.chain_positions(geom, theta)
+    pts = _chain(geom, theta)
     tip_unloaded = pts[:, 3, :].copy()
     net = np.zeros((*n, 3))
     stretch = np.zeros((*n, 3))
@@ -320,7 +340,7 @@ def solve_batch(
         )
         stretch_a = net_a * compliance
         plain = configuration(geom, qa[sel], stretch_a, model)  # one pass of Algorithm 1
-        pts_plain = kinematics.chain_positions(geom, plain)
+        pts_plain = _chain(geom, plain)
         change = np.hypot(*(pts_plain[:, 3, :] - pts_a[:, 3, :]).T)
         done = change <= threshold_m
         step = plain - th
@@ -336,11 +356,11 @@ def solve_batch(
             aitken = -om * (step_prev[sel] * diff).sum(-1) / safe
             om = np.where(rel & (denom > 0), np.clip(aitken, *_OMEGA_BOUNDS), om)
         move = rel & ~done
-        nxt = np.where(move[:, None], th + om[:, None] * step, plain)
-        pts_nxt = pts_plain
+        nxt, pts_nxt = plain, pts_plain
         if move.any():
+            nxt = np.where(move[:, None], th + om[:, None] * step, plain)
             pts_nxt = pts_plain.copy()
-            pts_nxt[move] = kinematics.chain_positions(geom, nxt[move])
+            pts_nxt[move] = _chain(geom, nxt[move])
         net[sel], stretch[sel], theta[sel], pts[sel] = net_a, stretch_a, nxt, pts_nxt
         step_prev[sel], omega[sel], change_prev[sel], relaxed[sel] = step, om, change, rel
         iterations[sel] = k
