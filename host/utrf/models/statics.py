@@ -499,6 +499,16 @@ _WRAP_NAMES = (
 )
 
 
+@functools.lru_cache(maxsize=16)
+def _limit_texts(lim: Limits) -> tuple[str, str]:
+    """The limits' parts of the warnings, formatted once per ``Limits``."""
+    return (
+        f" < {lim.min_safety_factor:g} "
+        f"(breaking stress {lim.tendon_breaking_stress_pa / 1e6:.0f} MPa assumed)",
+        f", above its rated {lim.actuator_rated_force_n:g} N",
+    )
+
+
 def _warnings(
     geom: FingerGeometry,
     lim: Limits,
@@ -534,6 +544,7 @@ def _warnings(
             f"statics did not converge to {threshold_m:g} m in {iterations} "
             "iterations: the result is the last iterate"
         )
+    stress_tail, motor_tail = _limit_texts(lim)
     for k, n in enumerate(net):
         t = abs(n)
         sf = breaking / (t / area) if t > 0 else math.inf
@@ -542,15 +553,12 @@ def _warnings(
             what = "would break" if sf < 1 else "is overstressed"
             out.append(
                 f"Tendon {tendon} {what}: {t:.1f} N, {t / area / 1e6:.0f} MPa, "
-                f"safety factor {sf:.2f} < {lim.min_safety_factor:g} "
-                f"(breaking stress {breaking / 1e6:.0f} MPa assumed)"
+                f"safety factor {sf:.2f}{stress_tail}"
             )
-    for motor, force in zip("AB", (max(net[0], 0.0), max(-net[0], 0.0)), strict=True):
-        if force > lim.actuator_rated_force_n:
-            out.append(
-                f"motor {motor} (Tendon {1 if motor == 'A' else 4}) must pull {force:.1f} N, "
-                f"above its rated {lim.actuator_rated_force_n:g} N"
-            )
+    if n1 > lim.actuator_rated_force_n:
+        out.append(f"motor A (Tendon 1) must pull {n1:.1f} N{motor_tail}")
+    if -n1 > lim.actuator_rated_force_n:
+        out.append(f"motor B (Tendon 4) must pull {-n1:.1f} N{motor_tail}")
     if not lo <= th1 <= hi:
         out.append(
             f"theta1 = {math.degrees(th1):.1f} deg is outside theta1_range "
