@@ -564,6 +564,8 @@ def _warnings(
             f"theta1 = {math.degrees(th1):.1f} deg is outside theta1_range "
             f"[{math.degrees(lo):g}, {math.degrees(hi):g}] deg"
         )
+    if abs(th1) <= a2 and abs(th2) <= min(a2, a3) and abs(th3) <= a3:
+        return out  # every strand still wraps its guides
     wraps = ((a2 + th1, a2 - th2, a3 + th2, a3 - th3), (a2 - th1, a2 + th2, a3 - th2, a3 + th3))
     for g, group_wraps in enumerate(wraps):
         for (tendon, guide), w in zip(_WRAP_NAMES, group_wraps, strict=True):
@@ -755,7 +757,10 @@ def solve(
         relaxation,
     )
     values = np.array((*theta, *tips, *net, *stretch))  # one array, five views of it
-    return StaticsResult(
+    # The frozen dataclass's __init__ sets its 14 fields one object.__setattr__ at a time,
+    # an eighth of a solve; filling the instance's dict makes the same object.
+    result = object.__new__(StaticsResult)
+    result.__dict__.update(
         geometry=geom,
         load=load,
         limits=limits,
@@ -773,3 +778,4 @@ def solve(
             _warnings(geom, limits, net, theta, converged, iterations, threshold_m)  # type: ignore[arg-type]
         ),
     )
+    return result
