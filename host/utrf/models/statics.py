@@ -523,8 +523,9 @@ def _warnings(
     th1, th2, th3 = theta
     lo, hi = geom.theta1_range_rad
     a2, a3 = _constants(geom).wraps
-    area = geom.tendon_area_m2
-    breaking = lim.tendon_breaking_stress_pa
+    # Plain floats: a numpy scalar would warn where a tiny tension gives an infinite factor.
+    area = float(geom.tendon_area_m2)
+    breaking = float(lim.tendon_breaking_stress_pa)
     # The common case first: clearly nothing to report (a margin keeps it conservative).
     safe = breaking * area / lim.min_safety_factor * (1.0 - 1e-9)
     t_max = max(abs(n1), abs(n2), abs(n3))
@@ -747,7 +748,7 @@ def solve(
         geom,
         q,
         float(fx),
-        float(fy) - load.payload_kg * GRAVITY_MPS2,
+        float(fy) - float(load.payload_kg) * GRAVITY_MPS2,
         float(load.tip_moment_nm),
         float(load.grasp_force_n),
         load.gravity,
