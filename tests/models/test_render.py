@@ -52,6 +52,10 @@ def test_cli_writes_the_model_and_a_picture(
     assert model.nu == 10
     image = matplotlib.image.imread(png)
     assert image.shape[:2] == (480, 640) and image.std() > 0.03
+    sheet = tmp_path / "sheet.png"
+    argv = ["mjcf", "--render", str(sheet), "--pose", "open", "fist", "--width", "160"]
+    assert main([*argv, "--height", "120"]) == 0
+    assert matplotlib.image.imread(sheet).shape[1] >= 2 * 160  # two pictures side by side
     assert main(["mjcf", "--render", str(png), "--pose", "no-such-pose"]) == 2
     assert "no pose named 'no-such-pose'" in capsys.readouterr().err
     assert main(["mjcf", "--object", "egg"]) == 2
