@@ -121,8 +121,11 @@ void watchdog(Board& b) {
     }
     if (ms - b.watch_ms > kTickDeadMs) {
         // The tick stopped: nothing supervises the motors. Off, and let the watchdog reset.
+        if (!b.hand.halted()) {
+            Lock lock;
+            b.hand.halt();
+        }
         hal::motors_all_off();
-        hal::watchdog_mark_hang();
         return;
     }
     if (!b.hand.halted()) hal::watchdog_feed();
