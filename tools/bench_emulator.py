@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import platform
 import sys
 import time
@@ -111,7 +112,7 @@ def driven(elf: Path, seconds: float, telemetry_hz: int, plant: str = "analytic"
         native.run_plant = in_c
         states[0] = 0
         slept0 = board.stats["sleep_cycles"]
-        sim0, wall0 = board.sim_time, time.perf_counter()
+        sim0, wall0, cpu0 = board.sim_time, time.perf_counter(), time.process_time()
         while board.sim_time - sim0 < seconds:
             link.request(
                 m.SetTargets(
@@ -120,6 +121,7 @@ def driven(elf: Path, seconds: float, telemetry_hz: int, plant: str = "analytic"
             )
             link.sleep(0.05)
         wall = time.perf_counter() - wall0
+        cpu = time.process_time() - cpu0
         sim = board.sim_time - sim0
         slept = board.stats["sleep_cycles"] - slept0
         fw = link.request(m.GetStats())
@@ -131,6 +133,7 @@ def driven(elf: Path, seconds: float, telemetry_hz: int, plant: str = "analytic"
             "wall": wall,
             "rtf": sim / wall,
             "cycles_per_s": sim * 16e6 / wall,
+            "cpu_rtf": sim / cpu,
             "c_share": in_c.seconds / wall,
             "awake": 1.0 - slept / (sim * 16e6),
             "fw": fw,
@@ -143,6 +146,7 @@ def driven(elf: Path, seconds: float, telemetry_hz: int, plant: str = "analytic"
 def grasp_hold_wall(seconds: float) -> dict:
     """``utrf hil grasp-hold --emulated --duration-s SECONDS`` as a user runs it (a fresh
     process: start-up, imports and the figure included): its wall time."""
+    import resource
     import subprocess
     import tempfile
 
@@ -151,9 +155,12 @@ def grasp_hold_wall(seconds: float) -> dict:
         cmd = [sys.executable, "-m", "utrf", "hil", "grasp-hold", "--emulated",
                "--duration-s", f"{seconds:g}", "--out", out, "--quiet"]  # fmt: skip
         t0 = time.perf_counter()
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
         done = subprocess.run(cmd, capture_output=True, text=True, check=False)
         wall = time.perf_counter() - t0
-    return {"seconds": seconds, "wall": wall, "ok": done.returncode == 0,
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+    return {"seconds": seconds, "wall": wall, "cpu": cpu, "ok": done.returncode == 0,
             "error": done.stderr.strip().splitlines()[-1:] if done.returncode else []}  # fmt: skip
 
 
@@ -261,7 +268,8 @@ def driven_rows(runs: list[dict], seconds: float) -> list[str]:
         f"| driven (`realtime=False`, as fast as it goes), {name[best['plant']]}, five fingers "
         f"commanded, {seconds:g} s simulated, best of {len(runs)} | "
         f"**{best['rtf']:.2f}x** real time (runs: {', '.join(f'{x:.2f}' for x in rtfs)}); "
-        f"{best['cycles_per_s'] / 1e6:.1f} M simulated cycles per wall second |",
+        f"{best['cycles_per_s'] / 1e6:.1f} M simulated cycles per wall second; "
+        f"{best['cpu_rtf']:.2f}x per second of the process's CPU time |",
         f"| ... wall time in C (simavr and the plant, `run_plant`) / in Python (the client, "
         f"telemetry) | {100 * best['c_share']:.0f} % / {100 * (1 - best['c_share']):.0f} % |",
         f"| ... CPU cycles the firmware was awake (not in SLEEP; simavr skips slept cycles) | "
@@ -303,7 +311,8 @@ def report(
             [
                 f"| `utrf hil grasp-hold --emulated --duration-s {grasp['seconds']:g}` (a fresh "
                 f"process: start-up and figure included) | **{grasp['wall']:.1f} s** wall "
-                f"({grasp['seconds'] / grasp['wall']:.1f}x real time"
+                f"({grasp['seconds'] / grasp['wall']:.1f}x real time); {grasp['cpu']:.1f} s of "
+                f"CPU time ({grasp['seconds'] / grasp['cpu']:.1f}x"
                 + ("" if grasp["ok"] else f"; FAILED: {' '.join(grasp['error'])}")
                 + ") |"
             ]
@@ -364,9 +373,10 @@ def report(
             "1 kHz (the rows above give the cycles each finger adds and how late the tick starts)."
         ),
         "",
-        "The machine is shared (2 cores, several other jobs while this ran): wall-clock "
-        "figures move with the load; simulated cycles per wall second and the awake share say "
-        "where the time goes. Driven, the plant steps in C inside the harness and Python "
+        f"The machine is shared (2 cores; load average {os.getloadavg()[0]:.1f} when this "
+        "section was written): wall-clock figures move with the load, CPU-time figures much "
+        "less; simulated cycles per wall second and the awake share say where the time goes. "
+        "Driven, the plant steps in C inside the harness and Python "
         "crosses once per millisecond of simulated time (the client's look at the output), "
         "not per 250 µs exchange; what remains is simavr interpreting the firmware's awake "
         "cycles. "
