@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 9
+ABI = 10
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -55,6 +55,7 @@ STAT_FIELDS = (
     "tx_burst_bytes",
     "stalls",
     "sleep_cycles",
+    "quieted_timer_events",
 )
 PROFILE_FIELDS = (
     "count",
@@ -294,6 +295,7 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_stalls_left": (ctypes.c_int64, [p]),
         "utrf_sim_write_io": (ctypes.c_int, [p, ctypes.c_uint32, ctypes.c_uint8]),
         "utrf_sim_poke": (ctypes.c_int, [p, ctypes.c_uint32, ctypes.c_uint8]),
+        "utrf_sim_set_quiet_timers": (None, [p, ctypes.c_int]),
         "utrf_sim_inject": (ctypes.c_size_t, [p, ctypes.c_int, ctypes.c_char_p, ctypes.c_size_t]),
         "utrf_sim_reset": (None, [p, ctypes.c_int, ctypes.c_uint64]),
         "utrf_sim_set_auto_reset_hold": (None, [p, ctypes.c_uint64]),
@@ -613,6 +615,9 @@ class NativeBoard:
     def write_io(self, address: int, value: int) -> None:
         if self._lib.utrf_sim_write_io(self.handle, address, value):
             raise HarnessError(f"{address:#x} is not an I/O register")
+
+    def set_quiet_timers(self, on: bool) -> None:
+        self._lib.utrf_sim_set_quiet_timers(self.handle, int(on))
 
     def poke(self, address: int, value: int) -> None:
         if self._lib.utrf_sim_poke(self.handle, address, value):
