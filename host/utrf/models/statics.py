@@ -183,6 +183,26 @@ def _torques(
     return np.stack(np.broadcast_arrays(tau1, tau2, tau3), axis=-1)
 
 
+def _chain(geom: FingerGeometry, th: np.ndarray) -> np.ndarray:
+    """``kinematics.chain_positions`` for (n, 3) angles, column by column: the same sums in
+    the same order, without cumsum's strided passes."""
+    L1, L2, L3 = geom.link_lengths_m
+    phi = np.empty_like(th)
+    phi[:, 0] = th[:, 0]
+    np.add(th[:, 0], th[:, 1], out=phi[:, 1])
+    np.add(phi[:, 1], th[:, 2], out=phi[:, 2])
+    cos, sin = np.cos(phi), np.sin(phi)
+    pts = np.empty((th.shape[0], 4, 2))
+    pts[:, 0, :] = 0.0
+    np.multiply(L1, cos[:, 0], out=pts[:, 1, 0])
+    np.multiply(L1, sin[:, 0], out=pts[:, 1, 1])
+    pts[:, 2, 0] = pts[:, 1, 0] + L2 * cos[:, 1]
+    pts[:, 2, 1] = pts[:, 1, 1] + L2 * sin[:, 1]
+    pts[:, 3, 0] = pts[:, 2, 0] + L3 * cos[:, 2]
+    pts[:, 3, 1] = pts[:, 2, 1] + L3 * sin[:, 2]
+    return pts
+
+
 def net_tensions(geom: FingerGeometry, tau: ArrayLike) -> np.ndarray:
     """N_k (N), shape (..., 3): flexion group positive, extension group negative (Steps 1-3)."""
     per_joint = -np.asarray(tau, dtype=float) / geom.R
@@ -299,7 +319,7 @@ def solve_batch(
 
     compliance = 1.0 / tendons.stiffnesses(geom)
     theta = kinematics.joint_angles(geom, qa)
-    pts = kinematics.chain_positions(geom, theta)
+    pts = _chain(geom, theta)
     tip_unloaded = pts[:, 3, :].copy()
     net = np.zeros((*n, 3))
     stretch = np.zeros((*n, 3))
@@ -320,7 +340,7 @@ def solve_batch(
         )
         stretch_a = net_a * compliance
         plain = configuration(geom, qa[sel], stretch_a, model)  # one pass of Algorithm 1
-        pts_plain = kinematics.chain_positions(geom, plain)
+        pts_plain = _chain(geom, plain)
         change = np.hypot(*(pts_plain[:, 3, :] - pts_a[:, 3, :]).T)
         done = change <= threshold_m
         step = plain - th
@@ -336,11 +356,11 @@ def solve_batch(
             aitken = -om * (step_prev[sel] * diff).sum(-1) / safe
             om = np.where(rel & (denom > 0), np.clip(aitken, *_OMEGA_BOUNDS), om)
         move = rel & ~done
-        nxt = np.where(move[:, None], th + om[:, None] * step, plain)
-        pts_nxt = pts_plain
+        nxt, pts_nxt = plain, pts_plain
         if move.any():
+            nxt = np.where(move[:, None], th + om[:, None] * step, plain)
             pts_nxt = pts_plain.copy()
-            pts_nxt[move] = kinematics.chain_positions(geom, nxt[move])
+            pts_nxt[move] = _chain(geom, nxt[move])
         net[sel], stretch[sel], theta[sel], pts[sel] = net_a, stretch_a, nxt, pts_nxt
         step_prev[sel], omega[sel], change_prev[sel], relaxed[sel] = step, om, change, rel
         iterations[sel] = k
@@ -479,6 +499,16 @@ _WRAP_NAMES = (
 )
 
 
+@functools.lru_cache(maxsize=16)
+def _limit_texts(lim: Limits) -> tuple[str, str]:
+    """The limits' parts of the warnings, formatted once per ``Limits``."""
+    return (
+        f" < {lim.min_safety_factor:g} "
+        f"(breaking stress {lim.tendon_breaking_stress_pa / 1e6:.0f} MPa assumed)",
+        f", above its rated {lim.actuator_rated_force_n:g} N",
+    )
+
+
 def _warnings(
     geom: FingerGeometry,
     lim: Limits,
@@ -493,8 +523,9 @@ def _warnings(
     th1, th2, th3 = theta
     lo, hi = geom.theta1_range_rad
     a2, a3 = _constants(geom).wraps
-    area = geom.tendon_area_m2
-    breaking = lim.tendon_breaking_stress_pa
+    # Plain floats: a numpy scalar would warn where a tiny tension gives an infinite factor.
+    area = float(geom.tendon_area_m2)
+    breaking = float(lim.tendon_breaking_stress_pa)
     # The common case first: clearly nothing to report (a margin keeps it conservative).
     safe = breaking * area / lim.min_safety_factor * (1.0 - 1e-9)
     t_max = max(abs(n1), abs(n2), abs(n3))
@@ -514,6 +545,7 @@ def _warnings(
             f"statics did not converge to {threshold_m:g} m in {iterations} "
             "iterations: the result is the last iterate"
         )
+    stress_tail, motor_tail = _limit_texts(lim)
     for k, n in enumerate(net):
         t = abs(n)
         sf = breaking / (t / area) if t > 0 else math.inf
@@ -522,20 +554,19 @@ def _warnings(
             what = "would break" if sf < 1 else "is overstressed"
             out.append(
                 f"Tendon {tendon} {what}: {t:.1f} N, {t / area / 1e6:.0f} MPa, "
-                f"safety factor {sf:.2f} < {lim.min_safety_factor:g} "
-                f"(breaking stress {breaking / 1e6:.0f} MPa assumed)"
+                f"safety factor {sf:.2f}{stress_tail}"
             )
-    for motor, force in zip("AB", (max(net[0], 0.0), max(-net[0], 0.0)), strict=True):
-        if force > lim.actuator_rated_force_n:
-            out.append(
-                f"motor {motor} (Tendon {1 if motor == 'A' else 4}) must pull {force:.1f} N, "
-                f"above its rated {lim.actuator_rated_force_n:g} N"
-            )
+    if n1 > lim.actuator_rated_force_n:
+        out.append(f"motor A (Tendon 1) must pull {n1:.1f} N{motor_tail}")
+    if -n1 > lim.actuator_rated_force_n:
+        out.append(f"motor B (Tendon 4) must pull {-n1:.1f} N{motor_tail}")
     if not lo <= th1 <= hi:
         out.append(
             f"theta1 = {math.degrees(th1):.1f} deg is outside theta1_range "
             f"[{math.degrees(lo):g}, {math.degrees(hi):g}] deg"
         )
+    if abs(th1) <= a2 and abs(th2) <= min(a2, a3) and abs(th3) <= a3:
+        return out  # every strand still wraps its guides
     wraps = ((a2 + th1, a2 - th2, a3 + th2, a3 - th3), (a2 - th1, a2 + th2, a3 - th2, a3 + th3))
     for g, group_wraps in enumerate(wraps):
         for (tendon, guide), w in zip(_WRAP_NAMES, group_wraps, strict=True):
@@ -717,7 +748,7 @@ def solve(
         geom,
         q,
         float(fx),
-        float(fy) - load.payload_kg * GRAVITY_MPS2,
+        float(fy) - float(load.payload_kg) * GRAVITY_MPS2,
         float(load.tip_moment_nm),
         float(load.grasp_force_n),
         load.gravity,
@@ -727,7 +758,10 @@ def solve(
         relaxation,
     )
     values = np.array((*theta, *tips, *net, *stretch))  # one array, five views of it
-    return StaticsResult(
+    # The frozen dataclass's __init__ sets its 14 fields one object.__setattr__ at a time,
+    # an eighth of a solve; filling the instance's dict makes the same object.
+    result = object.__new__(StaticsResult)
+    result.__dict__.update(
         geometry=geom,
         load=load,
         limits=limits,
@@ -745,3 +779,4 @@ def solve(
             _warnings(geom, limits, net, theta, converged, iterations, threshold_m)  # type: ignore[arg-type]
         ),
     )
+    return result
