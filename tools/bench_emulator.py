@@ -137,7 +137,7 @@ def driven(elf: Path, seconds: float, telemetry_hz: int, plant: str = "analytic"
             "c_share": in_c.seconds / wall,
             "awake": 1.0 - slept / (sim * 16e6),
             "fw": fw,
-            "faults": state.faults,
+            "faults": link.request(m.GetStatus()).faults,
             "telemetry_rate": states[0] / sim,
             "tracking_error": float(error),
         }
@@ -202,7 +202,7 @@ def tick_load(elf: Path, fingers: int, telemetry_hz: int, seconds: float = 0.2) 
             return total / n if n > 0 else math.nan
 
         fw = link.request(m.GetStats())
-        modes = link.request(m.GetState()).mode[:fingers]
+        modes = link.request(m.GetStatus()).mode[:fingers]
         return {
             "fingers": fingers,
             "telemetry_hz": telemetry_hz,

@@ -71,8 +71,8 @@ def test_pose_without_a_board_is_a_link_error(capsys) -> None:
 
 
 def test_monitor_refuses_a_bad_rate(capsys) -> None:
-    assert main(["monitor", "--port", "socket://127.0.0.1:9", "--rate", "900"]) == 2
-    assert "--rate must lie in 1..500" in capsys.readouterr().err
+    assert main(["monitor", "--port", "socket://127.0.0.1:9", "--rate", "1001"]) == 2
+    assert "--rate must lie in 1..1000" in capsys.readouterr().err
 
 
 # --- flash ------------------------------------------------------------------------------

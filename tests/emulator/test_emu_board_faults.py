@@ -57,8 +57,8 @@ def test_a_slow_tick_latches_overrun_and_stops_the_motors(
     assert board.sim_time - t0 <= 1.5 * TICK_S + 2 * TICK_S + board.exchange_period
     assert board.stats["stalls"] == 1
     assert board.slow_ticks_left == 0
-    state = client.request(m.GetState())
-    assert all(m.FaultBits.OVERRUN in f for f in state.faults)
+    status = client.request(m.GetStatus())
+    assert all(m.FaultBits.OVERRUN in f for f in status.faults)
     assert client.request(m.GetStats()).tick_overruns >= 1
 
 
@@ -70,8 +70,7 @@ def test_a_tick_shorter_than_its_period_is_no_overrun(
     client.run(0.05)
     assert board.slow_ticks_left is None
     assert board.stats["stalls"] >= 45
-    state = client.request(m.GetState())
-    assert not any(state.faults)
+    assert not any(client.request(m.GetStatus()).faults)
     assert motors_on(board)
     board.slow_tick(0.0)
     assert board.slow_ticks_left == 0
@@ -101,8 +100,8 @@ def test_a_stopped_adc_goes_stale_and_restarts(board: EmulatedBoard, client: Lin
     t0 = board.sim_time
     assert board.run_until(lambda b: not motors_on(b), timeout=0.05)
     assert board.sim_time - t0 <= 5 * TICK_S  # stale after 3 ticks, off in that tick
-    state = client.request(m.GetState())
-    assert all(m.FaultBits.ENCODER_RANGE in f for f in state.faults)
+    status = client.request(m.GetStatus())
+    assert all(m.FaultBits.ENCODER_RANGE in f for f in status.faults)
     conversions = board.stats["adc_conversions"]
     client.run(0.02)
     assert board.stats["adc_conversions"] == conversions  # nothing samples any more
@@ -111,7 +110,7 @@ def test_a_stopped_adc_goes_stale_and_restarts(board: EmulatedBoard, client: Lin
     assert board.stats["adc_conversions"] > conversions + 50
     assert isinstance(client.request(m.ClearFaults(mask=ALL)), m.Ack)
     client.run(0.01)
-    assert not any(client.request(m.GetState()).faults)
+    assert not any(client.request(m.GetStatus()).faults)
 
 
 def test_duplicated_and_burst_bytes_are_counted_and_seeded(firmware_elf: Path) -> None:

@@ -52,7 +52,14 @@ from utrf.hand.errors import (
     NotSettledError,
     TargetError,
 )
-from utrf.hand.state import CLOSED_LOOP, BoardClock, FaultEvent, HandState
+from utrf.hand.state import (
+    CLOSED_LOOP,
+    STATE_CLOCK_WRAP_S,
+    BoardClock,
+    FaultEvent,
+    HandState,
+    TipModel,
+)
 from utrf.hand.telemetry_log import TelemetryLog
 from utrf.models import kinematics
 from utrf.models.geometry import HandGeometry
@@ -201,7 +208,10 @@ class Hand:
         # Held while callbacks run, so an unsubscribe returns only once no call is under way
         # (re-entrant: a callback may unsubscribe itself).
         self._dispatch_lock = threading.RLock()
-        self._board_clock = BoardClock()
+        self._board_clock = BoardClock(STATE_CLOCK_WRAP_S)  # the state's ms clock
+        self._fault_clock = BoardClock()  # the fault message's µs clock
+        self._tips = TipModel(self.geometry)
+        self._status: m.Status | None = None  # the latest status (modes, faults)
         self._latest: HandState | None = None
         self._state_callbacks: list[Callable[[HandState], None]] = []
         self._fault_callbacks: list[Callable[[FaultEvent], None]] = []
@@ -338,6 +348,7 @@ class Hand:
             )
         self._identity = identity
         self._request(m.SetTelemetry(rate_hz=self._telemetry_hz))
+        self._take_status(self._request(m.GetStatus()))
         self._read_limits()
         self._goal[:] = np.nan
         self._handshaken = True
@@ -463,14 +474,22 @@ class Hand:
             self._faults_seen.clear()
 
     def state(self) -> HandState:
-        """Ask the board for its state now (``get_state``)."""
+        """Ask the board for its state now (``get_state``; and ``get_status`` when the
+        sample names a status not received yet)."""
         msg = self._request(m.GetState())
+        with self._lock:
+            status = self._status
+        if status is None or status.change != msg.status_seq:
+            self._take_status(self._request(m.GetStatus()))
+        host_time = self.clock.timestamp()
         with self._lock:
             st = HandState.from_message(
                 msg,
                 self.fingers,
-                board_time=self._board_clock.unwrap(msg.board_time),
-                host_time=self.clock.timestamp(),
+                self._status,
+                self._tips,
+                board_time=self._board_clock.unwrap(msg.board_time, host_time),
+                host_time=host_time,
             )
             if self._latest is None or st.board_time >= self._latest.board_time:
                 self._latest = st
@@ -556,15 +575,26 @@ class Hand:
         if old is not None:
             old.close()
 
+    def _take_status(self, msg: m.Status) -> None:
+        """A status (stream or get_status reply): the newest by change count is kept."""
+        with self._lock:
+            old = self._status
+            if old is None or (msg.change - old.change) % 256 < 128:
+                self._status = msg
+
     def _on_telemetry(self, item: Telemetry) -> None:
         msg = item.message
         host_time = self.clock.timestamp()
-        if isinstance(msg, m.State):
+        if isinstance(msg, m.Status):
+            self._take_status(msg)
+        elif isinstance(msg, m.State):
             with self._lock:
                 st = HandState.from_message(
                     msg,
                     self.fingers,
-                    board_time=self._board_clock.unwrap(msg.board_time),
+                    self._status,
+                    self._tips,
+                    board_time=self._board_clock.unwrap(msg.board_time, host_time),
                     host_time=host_time,
                     seq=item.seq,
                 )
@@ -583,7 +613,7 @@ class Hand:
                     index=msg.finger,
                     new_faults=msg.new_faults,
                     faults={n: msg.faults[i] for i, n in enumerate(self.fingers)},
-                    board_time=self._board_clock.unwrap(msg.board_time),
+                    board_time=self._fault_clock.unwrap(msg.board_time, host_time),
                     host_time=host_time,
                 )
                 self._faults_seen.append(event)
@@ -592,6 +622,8 @@ class Hand:
             with self._lock:
                 self._last_boot = msg
                 self._board_clock.restart()
+                self._fault_clock.restart()
+                self._status = None
                 self._reset = BoardResetError(msg)
                 self._latest = None
 
