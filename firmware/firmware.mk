@@ -125,16 +125,20 @@ flash:
 # ---- the core on the host, with the host hardware layer and a C ABI for ctypes ----------------
 FW_HOST_SRCS := $(wildcard $(FW_SRC)/core/*.cpp) $(wildcard firmware/test/*.cpp)
 FW_HOST_OBJS := $(patsubst %.cpp,$(FW_BUILD)/host/obj/%.o,$(FW_HOST_SRCS))
-FW_HOST_FLAGS := -std=gnu++11 -O2 -g -fPIC -fno-exceptions -fno-rtti $(FW_WARN) -I$(FW_SRC)
+# Undefined behaviour is an error in the host build the tests run (the AVR build would have
+# the same bug): UBSan, every finding fatal (-fno-sanitize-recover), so a test fails on it.
+FW_HOST_UBSAN := -fsanitize=undefined -fno-sanitize-recover=all
+FW_HOST_FLAGS := -std=gnu++11 -O2 -g -fPIC -fno-exceptions -fno-rtti $(FW_HOST_UBSAN) $(FW_WARN) \
+                 -I$(FW_SRC)
 
 firmware-host: $(FW_HOST_LIB)
 
-$(FW_BUILD)/host/obj/%.o: %.cpp
+$(FW_BUILD)/host/obj/%.o: %.cpp firmware/firmware.mk
 	@mkdir -p $(@D)
 	$(HOST_CXX) -c $(FW_HOST_FLAGS) -MMD -MP -o $@ $<
 
 $(FW_HOST_LIB): $(FW_HOST_OBJS)
-	$(HOST_CXX) -shared -o $@ $^ -lm
+	$(HOST_CXX) -shared $(FW_HOST_UBSAN) -o $@ $^ -lm
 
 # ---- checks that need the AVR: the core's arithmetic on the chip, the simavr harness ----------
 FW_CHECK_ELF := $(FW_BUILD)/check/core_check.elf
@@ -167,3 +171,52 @@ BENCH_TARGETS += bench-firmware
 
 bench-firmware: firmware firmware-host firmware-check
 	$(PY) tools/bench_firmware.py --update docs/benchmarks.md
+
+# ---- the PlatformIO build, reproduced with Debian's toolchain (make firmware-pio) -------------
+# `pio run` cannot fetch its platform here, so this builds what it would: PlatformIO's atmelavr
+# Arduino builder compiles everything at -Os with -flto (C++ also -fpermissive), defines
+# ARDUINO=10808 and PLATFORMIO, archives the core with avr-gcc-ar/avr-gcc-ranlib, and links
+# with -Os -flto -fuse-linker-plugin; our sources get platformio.ini's build_src_flags after
+# its own (read from the file, so the two cannot drift). The core's sources are listed in the
+# recipe, not when make parses (a fresh machine installs them during the same run).
+# tests/firmware/test_fw_platformio.py builds it, checks it against `make firmware` and boots
+# it on the emulated board.
+FW_PIO_BUILD := $(FW_BUILD)/pio
+FW_PIO_ELF   := $(FW_PIO_BUILD)/utrf.elf
+AVR_GCC_AR     ?= avr-gcc-ar
+AVR_GCC_RANLIB ?= avr-gcc-ranlib
+PIO_DEFS := -mmcu=atmega2560 -DF_CPU=16000000L -DPLATFORMIO=60118 -DARDUINO_AVR_MEGA2560 \
+            -DARDUINO=10808 -DARDUINO_ARCH_AVR
+PIO_CC_FLAGS  := -Os -Wall -ffunction-sections -fdata-sections -flto
+PIO_CXX_FLAGS := -fno-exceptions -fno-threadsafe-statics -fpermissive -std=gnu++11
+# avr-gcc 5.4's float.h defines DECIMAL_DIG only for C99 (PlatformIO's avr-gcc 7.3 does not
+# need this; the core's WString.cpp does).
+PIO_CORE_EXTRA := -DDECIMAL_DIG=9
+PIO_LINK_FLAGS := -Os -mmcu=atmega2560 -Wl,--gc-sections -flto -fuse-linker-plugin
+PIO_SRC_FLAGS = $(shell sed -n '/^build_src_flags *=/,/^[a-z_]* *=/{/^ /p}' platformio.ini)
+
+.PHONY: firmware-pio
+firmware-pio: $(FW_PIO_ELF)
+
+$(FW_PIO_ELF): $(FW_OWN_SRCS) $(wildcard $(FW_SRC)/*.h $(FW_SRC)/*/*.h $(FW_SRC)/*/*/*.h) \
+               platformio.ini
+	@rm -rf $(FW_PIO_BUILD) && mkdir -p $(FW_PIO_BUILD)/core $(FW_PIO_BUILD)/src
+	@set -e; for f in $(ARDUINO_CORE)/*.c $(ARDUINO_CORE)/*.cpp $(ARDUINO_CORE)/*.S; do \
+	  [ -e "$$f" ] || continue; o=$(FW_PIO_BUILD)/core/$$(basename $$f).o; \
+	  case $$f in \
+	    *.c) $(AVR_CC) -c -std=gnu11 -fno-fat-lto-objects $(PIO_CC_FLAGS) $(PIO_DEFS) -w \
+	           $(FW_INC) -o $$o $$f ;; \
+	    *.cpp) $(AVR_CXX) -c $(PIO_CXX_FLAGS) $(PIO_CC_FLAGS) $(PIO_DEFS) $(PIO_CORE_EXTRA) -w \
+	           $(FW_INC) -o $$o $$f ;; \
+	    *.S) $(AVR_CC) -c -x assembler-with-cpp -flto $(PIO_CC_FLAGS) $(PIO_DEFS) $(FW_INC) \
+	           -o $$o $$f ;; \
+	  esac; done
+	@$(AVR_GCC_AR) rc $(FW_PIO_BUILD)/libFrameworkArduino.a $(FW_PIO_BUILD)/core/*.o
+	@$(AVR_GCC_RANLIB) $(FW_PIO_BUILD)/libFrameworkArduino.a
+	@set -e; for f in $(FW_OWN_SRCS); do \
+	  o=$(FW_PIO_BUILD)/src/$$(echo $$f | tr / _).o; \
+	  $(AVR_CXX) -c $(PIO_CXX_FLAGS) $(PIO_CC_FLAGS) $(PIO_DEFS) $(PIO_SRC_FLAGS) $(FW_INC) \
+	    -o $$o $$f; done
+	$(AVR_CXX) $(PIO_LINK_FLAGS) -o $@ $(FW_PIO_BUILD)/src/*.o \
+	  -L$(FW_PIO_BUILD) -Wl,--start-group -lFrameworkArduino -lm -Wl,--end-group
+	@echo "firmware-pio: $@ (PlatformIO's flags, Debian's avr-gcc)"

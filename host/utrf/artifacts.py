@@ -24,6 +24,7 @@ import hashlib
 import os
 import shutil
 import subprocess
+import sys
 from importlib import resources
 from pathlib import Path
 
@@ -111,6 +112,7 @@ def _cached(relative: Path, what: str, tools: dict[str, str], files: dict[Path, 
         cmd = ["make", "-s", "--no-print-directory",
                "-f", str(fw_dir / "firmware.mk"), "-f", str(harness_dir / "harness.mk"),
                f"FW_DIR={fw_dir}", f"EMU_DIR={harness_dir}", f"BUILD={out}", "FW_GIT_ID=",
+               f"PY={sys.executable}",  # harness.mk asks it for MuJoCo's headers
                str(target)]  # fmt: skip
         proc = subprocess.run(cmd, cwd=out, capture_output=True, text=True, check=False)
         if proc.returncode or not target.is_file():

@@ -219,8 +219,11 @@ void watchdog(Board& b) {
     }
     if (ms - b.watch_ms > kTickDeadMs) {
         // The tick stopped: nothing supervises the motors. Off, and let the watchdog reset.
+        if (!b.hand.halted()) {
+            Lock lock;
+            b.hand.halt();
+        }
         hal::motors_all_off();
-        hal::watchdog_mark_hang();
         return;
     }
     if (!b.hand.halted()) hal::watchdog_feed();
@@ -336,6 +339,9 @@ void loop() {
     save_progress(b);
     flush_reply(b);
     board_frames(b);
+    // Nothing left for this pass: sleep until the next interrupt (the tick comes every
+    // millisecond, a received byte at once), so the CPU idles instead of spinning.
+    if (b.reply_len == 0 && !b.writer.busy()) hal::idle();
 }
 
 void tick() {

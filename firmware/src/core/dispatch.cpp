@@ -459,6 +459,12 @@ void fill_boot(const app::Board& b, Boot& m) {
 }
 
 void handle(app::Board& b, uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len) {
+    // A halted board (its loop or tick hung: every motor off, a watchdog reset coming) drives
+    // nothing again: say so rather than accept a command it will not carry out.
+    if (b.hand.halted() && (msg_id == MsgId::SET_TARGETS || msg_id == MsgId::SET_MODE)) {
+        nack(b, seq, msg_id, (uint8_t)ErrorCode::HALTED, 0);
+        return;
+    }
     switch (msg_id) {
         case MsgId::IDENTIFY: {
             Identify m;

@@ -23,7 +23,7 @@ namespace proto {
 
 static const uint16_t kProtocolVersion = 1;
 // CRC-32 of the canonical spec (doc texts excluded); compared at the handshake.
-static const uint32_t kSchemaHash = 0x10F508D8UL;
+static const uint32_t kSchemaHash = 0x94493980UL;
 static const uint8_t kMaxPayload = 64;  // body bytes
 static const uint8_t kFingerCount = 5;
 static const uint32_t kDefaultBaud = 1000000UL;
@@ -100,6 +100,7 @@ enum class ErrorCode : uint8_t {
   OUT_OF_RANGE = 4,  // a field is outside its range; detail = field index, or 0x80 | finger for a per-finger limit
   FAULTED = 5,  // a finger the request needs has a latched fault; detail = finger
   BUSY = 6,  // the board cannot do it now (EEPROM write under way or failed, or the finger must be idle); detail = finger, or 0xFF for the EEPROM
+  HALTED = 7,  // the firmware has stopped driving (loop-alive or tick-alive rule): every motor is off and the watchdog resets the board within 0.12 s; set_mode and set_targets are refused until then; detail = 0
 };
 
 // Latched faults of one finger. A latched fault stays until clear_faults and the finger refuses
@@ -1485,7 +1486,7 @@ inline DecodeStatus decode(const uint8_t* body, uint8_t len, Nack& out,
   if (len != Nack::kSize) return DecodeStatus::BAD_LENGTH;
   out.msg_id = detail::rd_u8(body + 0);
   out.code = detail::rd_u8(body + 1);
-  if (out.code < 1 || out.code > 6) {
+  if (out.code < 1 || out.code > 7) {
     bad_field = 1;
     return DecodeStatus::OUT_OF_RANGE;
   }

@@ -68,7 +68,20 @@ def register(subparsers: Any) -> None:
 
     g = sub.add_parser("grasp-hold", help="hold a grasp pose under hammer hits, record drift")
     _common(g)
-    g.add_argument("--pose", default="grasp-bottle", help="a grasp pose of the library")
+    g.add_argument(
+        "--pose", default=None, help="a grasp pose of the library (default grasp-bottle; with "
+        "--object, the object's)",
+    )  # fmt: skip
+    g.add_argument(
+        "--object",
+        default=None,
+        metavar="NAME",
+        help="emulated: hold a real object on the MuJoCo hand (egg, bottle, ball, box): object "
+        "slip, hits, contact forces, breakage, dropped",
+    )
+    g.add_argument(
+        "--effort", type=float, default=None, help="with --object: GRASP effort (the pose's)"
+    )
     g.add_argument("--duration-s", type=float, default=600.0, help="hold time (paper: 600 s)")
     g.add_argument(
         "--hits", type=int, default=None, help="emulated hammer hits (default one per 30 s)"
@@ -76,9 +89,10 @@ def register(subparsers: Any) -> None:
     g.add_argument(
         "--hit-impulse",
         type=float,
-        default=0.3,
+        default=None,
         metavar="N_S",
-        help="each emulated hammer hit's impulse in newton-seconds (N·s; default 0.3)",
+        help="each emulated hammer hit's impulse in newton-seconds (N·s; default 0.3 on a "
+        "fingertip, 0.02 on an --object)",
     )
     g.add_argument(
         "--tracked-finger", default="index", help="the finger carrying the tracker's sensor"
@@ -287,6 +301,30 @@ def _static_loading(args: argparse.Namespace) -> int:
     return _run_guarded(command, body)
 
 
+def _object_hold(args: argparse.Namespace, progress: Any) -> int:
+    """``grasp-hold --emulated --object NAME``: the object on the MuJoCo hand."""
+    from utrf.hil import object_hold as oh
+
+    if not args.emulated:
+        error("hil grasp-hold", "--object needs --emulated (the MuJoCo hand holds the object)")
+        return EXIT_BAD_INPUT
+    hits = args.hits if args.hits is not None else max(1, int(args.duration_s // 10))
+    config = oh.ObjectHoldConfig(
+        object=args.object,
+        pose=args.pose,
+        effort=args.effort,
+        duration_s=args.duration_s,
+        hits=hits,
+        **({} if args.hit_impulse is None else {"hit_impulse_n_s": args.hit_impulse}),
+        seed=args.seed,
+    )
+    result = oh.run(config, args.out, elf=getattr(args, "elf", None), progress=progress)
+    print(oh.describe(result))
+    picture = f", picture: {result['picture']}" if result["picture"] else ""
+    print(f"results: {args.out / 'results.json'}{picture}")
+    return EXIT_OK if not result["dropped"] and not result["broke"] else EXIT_NOT_DONE
+
+
 def _grasp_hold(args: argparse.Namespace) -> int:
     from utrf.hil import grasp_hold as gh
     from utrf.hil.bench import EmulatedTruth
@@ -296,13 +334,15 @@ def _grasp_hold(args: argparse.Namespace) -> int:
     progress = (lambda _s: None) if args.quiet else (lambda s: print(s, flush=True))
 
     def body() -> int:
+        if args.object is not None:
+            return _object_hold(args, progress)
         tracked = _finger(args.tracked_finger)
         hits = args.hits if args.hits is not None else int(args.duration_s // 30)
         config = gh.GraspHoldConfig(
-            pose=args.pose,
+            pose=args.pose or "grasp-bottle",
             duration_s=args.duration_s,
             hits=hits if args.emulated else 0,
-            hit_impulse_n_s=args.hit_impulse,
+            hit_impulse_n_s=0.3 if args.hit_impulse is None else args.hit_impulse,
             tracked_finger=tracked,
             sample_hz=args.sample_hz,
             emulated=bool(args.emulated),

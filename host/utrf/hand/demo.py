@@ -116,6 +116,11 @@ def run_demo(
             old.unlink(missing_ok=True)  # a fresh run: no picture of a previous one left over
         url = board.url or ""
         with Hand.connect(url, poses=library, log_path=csv) as hand:
+            if speed is None:
+                # Unpaced, the board outruns the wall clock by whatever the machine gives
+                # (5x and more since the plant steps in C): the host's heartbeats, sent on the
+                # wall clock, would miss the default 0.5 s of board time.
+                hand.set_safety(heartbeat_timeout=10.0)
             hand.on_state(recorder)
             if on_connect is not None:
                 on_connect(hand, board)

@@ -16,7 +16,7 @@ from utrf.protocol.codec import Direction, Field, Message, Request
 
 PROTOCOL_VERSION = 1
 #: CRC-32 of the canonical spec (doc texts excluded), compared at the handshake.
-SCHEMA_HASH = 0x10F508D8
+SCHEMA_HASH = 0x94493980
 MAX_PAYLOAD = 64
 FINGER_COUNT = 5
 DEFAULT_BAUD = 1000000
@@ -132,6 +132,10 @@ class ErrorCode(IntEnum):
     #: the board cannot do it now (EEPROM write under way or failed, or the finger must be idle);
     #: detail = finger, or 0xFF for the EEPROM
     BUSY = 6
+    #: the firmware has stopped driving (loop-alive or tick-alive rule): every motor is off and the
+    #: watchdog resets the board within 0.12 s; set_mode and set_targets are refused until then;
+    #: detail = 0
+    HALTED = 7
 
 
 class FaultBits(IntFlag):

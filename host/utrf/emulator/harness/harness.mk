@@ -13,7 +13,13 @@ EMU_HDRS     := $(wildcard $(EMU_DIR)/*.h) $(FW_SRC)/board_pins.h
 EMU_CC       ?= cc
 EMU_CFLAGS   := -std=gnu11 -O2 -g -fPIC -Wall -Wextra -Wshadow \
                 -isystem /usr/include/simavr -idirafter /usr/lib/avr/include -I$(FW_SRC)
-EMU_LDLIBS   := -lsimavr -lelf -lpthread
+EMU_LDLIBS   := -lsimavr -lelf -lpthread -ldl -lm
+# MuJoCo's headers from the mujoco package (the MuJoCo plant, mjplant.c); libmujoco itself is
+# found at run time, the one the package loaded. Without the package the plant says so.
+MUJOCO_INC   := $(shell $(PY) -c "import mujoco, os; print(os.path.join(os.path.dirname(mujoco.__file__), 'include'))" 2>/dev/null)
+ifneq ($(wildcard $(MUJOCO_INC)/mujoco/mujoco.h),)
+EMU_CFLAGS   += -DUTRF_WITH_MUJOCO -isystem $(MUJOCO_INC)
+endif
 
 FIXTURE_CFLAGS := -mmcu=atmega2560 -DF_CPU=16000000UL -Os -std=gnu99 -Wall -Wextra \
                   -Ifirmware/src
