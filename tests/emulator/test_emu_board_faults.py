@@ -7,8 +7,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from emu_helpers import LinkClient
 
-from utrf.emulator import EmulatedBoard, EmulatorError, EncoderParams, PlantParams, SimClient
+from utrf.emulator import EmulatedBoard, EmulatorError, EncoderParams, PlantParams
 from utrf.protocol import messages as m
 
 QUIET = PlantParams(gravity_m_s2=(0.0, 0.0), encoder=EncoderParams(noise_v=0.0))
@@ -23,15 +24,15 @@ def board(firmware_elf: Path):
 
 
 @pytest.fixture
-def client(board: EmulatedBoard) -> SimClient:
-    c = SimClient(board)
+def client(board: EmulatedBoard) -> LinkClient:
+    c = LinkClient(board)
     c.wait_boot()
     board.run_for(0.02)
     assert isinstance(c.request(m.ClearFaults(mask=ALL)), m.Ack)
     return c
 
 
-def drive_all(client: SimClient, duty: float = 0.3) -> None:
+def drive_all(client: LinkClient, duty: float = 0.3) -> None:
     reply = client.request(
         m.SetMode(mask=ALL, mode=(m.ControlMode.DUTY,) * 5, duty=(duty,) * 5, effort=(0.0,) * 5)
     )
@@ -45,7 +46,7 @@ def motors_on(board: EmulatedBoard) -> bool:
 
 
 def test_a_slow_tick_latches_overrun_and_stops_the_motors(
-    board: EmulatedBoard, client: SimClient
+    board: EmulatedBoard, client: LinkClient
 ) -> None:
     drive_all(client)
     assert motors_on(board)
@@ -56,28 +57,27 @@ def test_a_slow_tick_latches_overrun_and_stops_the_motors(
     assert board.sim_time - t0 <= 1.5 * TICK_S + 2 * TICK_S + board.exchange_period
     assert board.stats["stalls"] == 1
     assert board.slow_ticks_left == 0
-    state = client.request(m.GetStatus())
-    assert all(m.FaultBits.OVERRUN in f for f in state.faults)
+    status = client.request(m.GetStatus())
+    assert all(m.FaultBits.OVERRUN in f for f in status.faults)
     assert client.request(m.GetStats()).tick_overruns >= 1
 
 
 def test_a_tick_shorter_than_its_period_is_no_overrun(
-    board: EmulatedBoard, client: SimClient
+    board: EmulatedBoard, client: LinkClient
 ) -> None:
     drive_all(client)
     board.slow_tick(0.3 * TICK_S, count=None)  # every tick, but within its period
     client.run(0.05)
     assert board.slow_ticks_left is None
     assert board.stats["stalls"] >= 45
-    state = client.request(m.GetStatus())
-    assert not any(state.faults)
+    assert not any(client.request(m.GetStatus()).faults)
     assert motors_on(board)
     board.slow_tick(0.0)
     assert board.slow_ticks_left == 0
 
 
 def test_a_stopped_tick_timer_stops_the_motors_and_the_watchdog_resets(
-    board: EmulatedBoard, client: SimClient
+    board: EmulatedBoard, client: LinkClient
 ) -> None:
     drive_all(client)
     resets = board.stats["resets"]
@@ -94,14 +94,14 @@ def test_a_stopped_tick_timer_stops_the_motors_and_the_watchdog_resets(
     assert client.request(m.GetStats()).ticks > 0
 
 
-def test_a_stopped_adc_goes_stale_and_restarts(board: EmulatedBoard, client: SimClient) -> None:
+def test_a_stopped_adc_goes_stale_and_restarts(board: EmulatedBoard, client: LinkClient) -> None:
     drive_all(client)
     board.stop_adc()
     t0 = board.sim_time
     assert board.run_until(lambda b: not motors_on(b), timeout=0.05)
     assert board.sim_time - t0 <= 5 * TICK_S  # stale after 3 ticks, off in that tick
-    state = client.request(m.GetStatus())
-    assert all(m.FaultBits.ENCODER_RANGE in f for f in state.faults)
+    status = client.request(m.GetStatus())
+    assert all(m.FaultBits.ENCODER_RANGE in f for f in status.faults)
     conversions = board.stats["adc_conversions"]
     client.run(0.02)
     assert board.stats["adc_conversions"] == conversions  # nothing samples any more
@@ -116,7 +116,7 @@ def test_a_stopped_adc_goes_stale_and_restarts(board: EmulatedBoard, client: Sim
 def test_duplicated_and_burst_bytes_are_counted_and_seeded(firmware_elf: Path) -> None:
     def run(seed: int) -> tuple[dict[str, int], bytes]:
         with EmulatedBoard(firmware_elf, realtime=False, seed=seed, plant_params=QUIET) as b:
-            c = SimClient(b)
+            c = LinkClient(b)
             c.wait_boot()
             c.request(m.SetTelemetry(rate_hz=500))
             b.set_line_faults("to_host", duplicate=0.01, burst=0.001, burst_length=(8, 32))
@@ -133,7 +133,7 @@ def test_duplicated_and_burst_bytes_are_counted_and_seeded(firmware_elf: Path) -
 
 def test_duplicated_bytes_to_the_board_reach_it_twice(firmware_elf: Path) -> None:
     with EmulatedBoard(firmware_elf, realtime=False, plant_params=QUIET) as b:
-        c = SimClient(b)
+        c = LinkClient(b)
         c.wait_boot()
         before = b.stats
         b.set_line_faults("to_board", duplicate=0.2)

@@ -16,7 +16,7 @@ from utrf.protocol import messages as m
 
 ALL = 0b11111
 QUIET = PlantParams(gravity_m_s2=(0.0, 0.0), encoder=EncoderParams(noise_v=0.0))
-COUNT_RAD = 2 * np.pi * 0.8 / 1024 / 0.8 * 0.8  # one 10-bit ADC count of the 80 % band: 7.7 mrad
+COUNT_RAD = 2 * np.pi / (1024 * 0.8)  # one 10-bit ADC count over the 80 % band: 7.7 mrad
 
 
 def link_for(board: EmulatedBoard) -> SimLink:

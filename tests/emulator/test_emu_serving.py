@@ -108,7 +108,9 @@ def test_twice_real_time_when_asked(fixture_elf: Path) -> None:
     with EmulatedBoard(fixture_elf, pty=False, speed=2.0) as board:
         t0, s0 = time.monotonic(), board.sim_time
         board.run_for(0.4)
-        assert time.monotonic() - t0 >= 0.2 - 2e-3
+        # sim_time moves a batch at a time, and the pacing lets the board run up to 1 ms of
+        # wall time ahead: the wall time may be short by that much
+        assert time.monotonic() - t0 >= 0.2 - 2e-3 - SERVE_BATCH_S / 2 - 1e-3
         assert board.sim_time - s0 >= 0.4
 
 

@@ -630,3 +630,11 @@ def test_entering_position_treats_the_target_alike_from_coast_and_brake(
     mode(m.ControlMode.POSITION)
     want = 0.4 if target_sent_while_idle else 0.2
     assert sim.ok(m.GetState()).target[0] == pytest.approx(want, abs=0.01)
+
+
+def test_the_default_heartbeat_timeout_is_the_specs_and_on_the_protocol_page(sim: Sim) -> None:
+    from pathlib import Path
+
+    assert sim.ok(m.GetSafety()).heartbeat_timeout == m.DEFAULT_HEARTBEAT_TIMEOUT_S == 0.5
+    readme = Path(__file__).resolve().parents[2] / "protocol" / "README.md"
+    assert "| default heartbeat timeout | 0.5 s |" in readme.read_text(encoding="utf-8")

@@ -201,6 +201,14 @@ def test_joint_limit_latches_beyond_the_margin(sim: Sim) -> None:
     sim.set_angle(0, 1.13)
     sim.run(1)
     assert sim.finger(0).faults == F.JOINT_LIMIT
+    # Short brake, not coast (test_fw_limit_brake.py measures why): nothing driven, the
+    # motors' terminals shorted.
+    mo = sim.motor(0)
+    assert sim.finger(0).mode == m.ControlMode.BRAKE
+    assert (mo.drive_a, mo.drive_b, mo.counts_a, mo.counts_b, mo.stby) == (BRAKE, BRAKE, 0, 0, 1)
+    # Another stop fault on top: nothing of the finger is trusted, the driver goes off.
+    sim.set_adc(0, 5)
+    sim.run(1)
     assert motors_off(sim, 0)
 
 

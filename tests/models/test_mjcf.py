@@ -226,6 +226,11 @@ def test_bad_layout_names_the_field(tmp_path: Path) -> None:
     bad.write_text(text.replace("stall_force_n = 100.0", "stall_force_n = -1"))
     with pytest.raises(mjcf.MjcfError, match=r"\[motor\]: stall_force_n must be > 0"):
         mjcf.load_layout(bad)
+    bad.write_text(text.replace("coulomb_friction_n = 1.5", "coulomb_friction_n = -0.1"))
+    with pytest.raises(mjcf.MjcfError, match=r"\[motor\]: coulomb_friction_n must be >= 0"):
+        mjcf.load_layout(bad)
+    bad.write_text(text.replace("coulomb_friction_n = 1.5", "coulomb_friction_n = 0"))
+    assert mjcf.load_layout(bad).motor.coulomb_friction_n == 0.0
     bad.write_text(text.replace("[fingers.ring]", "[fingers.ringg]"))
     with pytest.raises(mjcf.MjcfError, match=r"no \[fingers.NAME\] placement for \['ring'\]"):
         mjcf.hand_xml(layout=mjcf.load_layout(bad))

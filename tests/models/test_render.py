@@ -52,6 +52,10 @@ def test_cli_writes_the_model_and_a_picture(
     assert model.nu == 10
     image = matplotlib.image.imread(png)
     assert image.shape[:2] == (480, 640) and image.std() > 0.03
+    sheet = tmp_path / "sheet.png"
+    argv = ["mjcf", "--render", str(sheet), "--pose", "open", "fist", "--width", "160"]
+    assert main([*argv, "--height", "120"]) == 0
+    assert matplotlib.image.imread(sheet).shape[1] >= 2 * 160  # two pictures side by side
     assert main(["mjcf", "--render", str(png), "--pose", "no-such-pose"]) == 2
     assert "no pose named 'no-such-pose'" in capsys.readouterr().err
     assert main(["mjcf", "--object", "egg"]) == 2
@@ -62,3 +66,19 @@ def test_cli_prints_the_xml_with_an_object(capsys: pytest.CaptureFixture[str]) -
     assert main(["mjcf", "--object", "egg", "--object-pos-mm", "60", "0", "70"]) == 0
     model = mujoco.MjModel.from_xml_string(capsys.readouterr().out)
     assert model.body("egg").mass[0] == pytest.approx(0.06)
+
+
+def test_cli_force_drive_and_bad_layout(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "force.xml"
+    assert main(["mjcf", "--drive", "force", "--out", str(out)]) == 0
+    model = mujoco.MjModel.from_xml_path(str(out))
+    a = model.actuator("index_motor_a").id
+    assert model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_NONE
+    np.testing.assert_allclose(model.actuator_ctrlrange[a], [-100.0, 100.0])
+    layout = tmp_path / "layout.toml"
+    text = (Path(mjcf.__file__).parent.parent / "data" / "mjcf.toml").read_text()
+    layout.write_text(text.replace("size_m = [0.095, 0.090, 0.025]", "size_m = [0.1, 0.1]"))
+    assert main(["mjcf", "--layout", str(layout)]) == 2
+    assert "[palm]: size_m must be a list of 3 finite numbers" in capsys.readouterr().err
+    assert main(["mjcf", "--layout", str(tmp_path / "missing.toml")]) == 2
+    assert "no such MJCF layout file" in capsys.readouterr().err

@@ -149,7 +149,10 @@ void Finger::latch(uint8_t bits) {
     new_faults_ |= bits & (uint8_t)~faults_;
     faults_ |= bits;
     if ((bits & kStopFaults) && mode_ != COAST) {
-        mode_ = COAST;
+        // Beyond a joint limit (and nothing else wrong) the motors short-brake: passive, no
+        // energy in, and it resists an outside force carrying the finger further (measured on
+        // the emulated board, test_fw_limit_brake.py). Any other stop fault coasts.
+        mode_ = (faults_ & kStopFaults) == JOINT_LIMIT ? BRAKE : COAST;
         target_valid_ = false;
         contact_ = false;
         limit_ = limit_for(COAST);
@@ -186,7 +189,9 @@ void Finger::idle_outputs(uint8_t mode, hal::MotorCommand& out) {
     out.a.on_counts = out.b.on_counts = 0;
     out.a.drive = mode == BRAKE ? hal::Drive::BRAKE : hal::Drive::COAST;
     out.b.drive = (mode == BRAKE && !params_.rotary) ? hal::Drive::BRAKE : hal::Drive::COAST;
-    out.stby = mode == BRAKE && (faults_ & kStopFaults) == 0;
+    // Short brake needs the driver enabled: refused to a finger with a stop fault other than
+    // JOINT_LIMIT (an encoder or stall fault, an overrun: nothing of it is trusted).
+    out.stby = mode == BRAKE && (faults_ & (kStopFaults & ~JOINT_LIMIT)) == 0;
 }
 
 int16_t Finger::duty_step(int16_t th) {

@@ -37,8 +37,9 @@ enum Fault : uint8_t {
 // time against friction, tests/firmware/test_fw_pid.py.)
 static const uint8_t kStallEvery = 5;
 
-// Faults that turn the finger's motors off. HOST_TIMEOUT instead applies the configured safe
-// action (which may be to hold in closed loop).
+// Faults that stop the finger: COAST, motors off; JOINT_LIMIT alone short-brakes them instead
+// (finger.cpp, latch()). HOST_TIMEOUT instead applies the configured safe action (which may be
+// to hold in closed loop).
 static const uint8_t kStopFaults = ENCODER_RANGE | ENCODER_JUMP | STALL | JOINT_LIMIT | OVERRUN;
 
 // A finger's configuration, ready for the tick (built in loop() context by compile(); the

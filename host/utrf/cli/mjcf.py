@@ -3,6 +3,7 @@
     utrf mjcf --out hand.xml                   # then: python -m mujoco.viewer --mjcf hand.xml
     utrf mjcf --render hand.png --pose fist    # a picture of a pose (off-screen, OSMesa)
     utrf mjcf --out scene.xml --object egg --object-pos-mm 60 0 70
+    utrf mjcf --render poses.png --pose open fist point grasp-ball
 
 Without ``--out`` or ``--render`` the XML goes to standard output. Exit codes: 0 done,
 2 bad input (the message names it), 1 rendering impossible here.
@@ -46,6 +47,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _render(args: argparse.Namespace, hand: HandGeometry, xml: str) -> int:
+    import matplotlib.image
     import mujoco
 
     from utrf.models import kinematics, mjcf, render
@@ -53,22 +55,30 @@ def _render(args: argparse.Namespace, hand: HandGeometry, xml: str) -> int:
 
     model = mujoco.MjModel.from_xml_string(xml)
     data = mujoco.MjData(model)
+    shots: list[tuple[str, list[float]]] = []
     if args.pose:
         library = PoseLibrary.load(args.poses or (), hand)
-        q = library[args.pose].q(hand)
-        title = f"pose {args.pose}"
+        shots = [(name, [float(v) for v in library[name].q(hand)]) for name in args.pose]
     else:
         q = [float(kinematics.q_from_flexion(f.geometry, args.flexion)) for f in hand.fingers]
-        title = f"flexion {args.flexion:g}"
-    mjcf.set_coupled_pose(
-        model, data, {f.name: float(v) for f, v in zip(hand.fingers, q, strict=True)}, hand
-    )
+        shots = [(f"flexion {args.flexion:g}", q)]
+    images = []
     try:
-        path = render.render_png(model, data, args.render, height=args.height, width=args.width)
+        for _, q in shots:
+            mjcf.set_coupled_pose(
+                model, data, {f.name: v for f, v in zip(hand.fingers, q, strict=True)}, hand
+            )
+            images.append(render.render(model, data, height=args.height, width=args.width))
     except render.RenderError as exc:
         print(f"utrf mjcf: error: {exc}", file=sys.stderr)
         return EXIT_NO_RENDER
-    print(f"wrote {path}: {title}", file=sys.stderr)
+    path = Path(args.render)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if len(images) == 1:
+        matplotlib.image.imsave(path, images[0])
+    else:
+        render.sheet(images, [name for name, _ in shots], path)
+    print(f"wrote {path}: {', '.join(name for name, _ in shots)}", file=sys.stderr)
     return 0
 
 
@@ -105,7 +115,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--objects", metavar="FILE", help="object library TOML (default: built-in)")
     p.add_argument("--render", metavar="PNG", help="render the hand to this PNG (off-screen)")
     pose = p.add_mutually_exclusive_group()
-    pose.add_argument("--pose", metavar="NAME", help="pose of the pose library to render")
+    pose.add_argument(
+        "--pose",
+        metavar="NAME",
+        nargs="+",
+        help="pose(s) of the pose library to render (several: one sheet, a picture each)",
+    )
     pose.add_argument(
         "--flexion", type=float, default=0.0, metavar="F", help="every finger at this flexion"
     )

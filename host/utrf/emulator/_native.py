@@ -1,7 +1,8 @@
 """ctypes binding of the C harness (``harness/utrf_sim.h``); one :class:`NativeBoard` per board.
 
-The library is ``build/emulator/libutrf_sim.so`` in the repository (``make emulator`` builds
-it), or the file named by ``UTRF_SIM_LIB``. Nothing here is thread-safe: the caller
+The library is found by :func:`utrf.artifacts.harness_library`: ``UTRF_SIM_LIB``, a checkout's
+``build/emulator/libutrf_sim.so`` (``make emulator``), or built on first use into the user's
+cache from the harness sources the package ships. Nothing here is thread-safe: the caller
 serialises calls on one board (``EmulatedBoard`` holds a lock).
 """
 
@@ -13,15 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 9
+from utrf import artifacts
+
+ABI = 10
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
 ADC_CHANNELS = 8
 
-HARNESS_DIR = Path(__file__).resolve().parent / "harness"
-REPO_ROOT = Path(__file__).resolve().parents[3]
-DEFAULT_LIBRARY = REPO_ROOT / "build" / "emulator" / "libutrf_sim.so"
 
 STATUS_NAMES = {0: "running", 1: "crashed", 2: "done"}
 RESET_POWER_ON, RESET_PIN = 0, 1
@@ -55,6 +55,7 @@ STAT_FIELDS = (
     "tx_burst_bytes",
     "stalls",
     "sleep_cycles",
+    "quieted_timer_events",
 )
 PROFILE_FIELDS = (
     "count",
@@ -217,8 +218,10 @@ _lib: ctypes.CDLL | None = None
 
 
 def library_path() -> Path:
-    env = os.environ.get("UTRF_SIM_LIB")
-    return Path(env) if env else DEFAULT_LIBRARY
+    try:
+        return artifacts.harness_library()
+    except artifacts.ArtifactError as exc:
+        raise HarnessError(str(exc)) from None
 
 
 def _check_fresh(path: Path) -> None:
@@ -227,10 +230,12 @@ def _check_fresh(path: Path) -> None:
             f"the emulator's harness library {path} is missing: run `make emulator` "
             "(or `make test`) in the repository"
         )
-    if os.environ.get("UTRF_SIM_LIB"):
-        return
-    sources = [*HARNESS_DIR.glob("*.c"), *HARNESS_DIR.glob("*.h")]
-    pins = REPO_ROOT / "firmware" / "src" / "board_pins.h"
+    root = artifacts.checkout_root()
+    if os.environ.get("UTRF_SIM_LIB") or root is None or not path.is_relative_to(root):
+        return  # the cache is keyed by its sources' hash: never stale
+    harness = root / "host" / "utrf" / "emulator" / "harness"
+    sources = [*harness.glob("*.c"), *harness.glob("*.h")]
+    pins = root / "firmware" / "src" / "board_pins.h"
     if pins.is_file():
         sources.append(pins)
     newest = max((p.stat().st_mtime for p in sources), default=0.0)
@@ -294,6 +299,7 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_stalls_left": (ctypes.c_int64, [p]),
         "utrf_sim_write_io": (ctypes.c_int, [p, ctypes.c_uint32, ctypes.c_uint8]),
         "utrf_sim_poke": (ctypes.c_int, [p, ctypes.c_uint32, ctypes.c_uint8]),
+        "utrf_sim_set_quiet_timers": (None, [p, ctypes.c_int]),
         "utrf_sim_inject": (ctypes.c_size_t, [p, ctypes.c_int, ctypes.c_char_p, ctypes.c_size_t]),
         "utrf_sim_reset": (None, [p, ctypes.c_int, ctypes.c_uint64]),
         "utrf_sim_set_auto_reset_hold": (None, [p, ctypes.c_uint64]),
@@ -613,6 +619,9 @@ class NativeBoard:
     def write_io(self, address: int, value: int) -> None:
         if self._lib.utrf_sim_write_io(self.handle, address, value):
             raise HarnessError(f"{address:#x} is not an I/O register")
+
+    def set_quiet_timers(self, on: bool) -> None:
+        self._lib.utrf_sim_set_quiet_timers(self.handle, int(on))
 
     def poke(self, address: int, value: int) -> None:
         if self._lib.utrf_sim_poke(self.handle, address, value):

@@ -18,13 +18,17 @@ from typing import Any
 
 import numpy as np
 
+from utrf import artifacts
 from utrf.emulator import _native
 from utrf.emulator._native import F_CPU_HZ, HarnessError, NativeBoard
 from utrf.emulator.plant import DRIVE_NAMES, HandPlant, PlantParams
 from utrf.models.geometry import HandGeometry
 
-DEFAULT_ELF = _native.REPO_ROOT / "build" / "firmware" / "utrf.elf"
+# A checkout's `make firmware` output (relative: found from the working directory); with no
+# ELF given, the board takes utrf.artifacts.firmware_elf() (this, or a cached build).
+DEFAULT_ELF = artifacts.CHECKOUT_ELF
 EXCHANGE_PERIOD_S = 250e-6
+MUJOCO_EXCHANGE_PERIOD_S = 1e-3  # the MJCF's own timestep: one mj_step per exchange
 #: real time: simulated time the board thread runs per hold of the lock (sim_time moves by it)
 SERVE_BATCH_S = 1e-3
 EEPROM_SIZE = 4096
@@ -196,14 +200,25 @@ class EmulatedBoard:
         auto_reset: bool = True,
         auto_reset_hold: float = 0.1,
         capture: bool | None = None,
-        exchange_period: float = EXCHANGE_PERIOD_S,
+        exchange_period: float | None = None,
         plant: str | HandPlant | Any = "analytic",
     ) -> None:
-        self.elf = Path(elf) if elf is not None else DEFAULT_ELF
+        if elf is None:
+            try:
+                elf = artifacts.firmware_elf()
+            except artifacts.ArtifactError as exc:
+                raise EmulatorError(str(exc)) from None
+        self.elf = Path(elf)
         check_elf(self.elf)
         if speed is not None and not (isinstance(speed, int | float) and speed > 0):
             raise EmulatorError(
                 f"speed must be a factor > 0 or None (as fast as possible), got {speed!r}"
+            )
+        if exchange_period is None:  # MuJoCo steps once per exchange: its own 1 ms step
+            exchange_period = (
+                MUJOCO_EXCHANGE_PERIOD_S
+                if plant == "mujoco" or hasattr(plant, "set_timestep")
+                else EXCHANGE_PERIOD_S
             )
         if not (isinstance(exchange_period, int | float) and 1e-5 <= exchange_period <= 1e-2):
             raise EmulatorError(

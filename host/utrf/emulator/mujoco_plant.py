@@ -35,7 +35,7 @@ from utrf.models.geometry import HandGeometry
 _ACROSS = (0.7071068, 0.7071068, 0.0, 0.0)  # the object's z axis along the world's y
 OBJECT_PLACEMENT = {
     "bottle": ((-0.040, 0.0, 0.0951), (1.0, 0.0, 0.0, 0.0)),  # standing
-    "ball": ((-0.035, 0.0, 0.0326), (1.0, 0.0, 0.0, 0.0)),
+    "ball": ((-0.040, 0.0, 0.0326), (1.0, 0.0, 0.0, 0.0)),
     "box": ((-0.035, 0.0, 0.0301), _ACROSS),
     "egg": ((-0.030, 0.0, 0.0221), _ACROSS),
 }

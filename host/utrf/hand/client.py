@@ -150,6 +150,19 @@ class _Forward:
             target(item)
 
 
+def _open_link(url: str, baudrate: int, forward: _Forward, reset: bool) -> Link:
+    """A Link on ``url``; the board reset by the open or not (``serial_port.open_line``)."""
+    from utrf.hand.serial_port import open_line
+    from utrf.protocol.transport import SerialTransport
+
+    def opener() -> Link:
+        # No queue: the Hand takes every frame through its callback (a queue nobody read
+        # counted each frame as "dropped"); real loss is stream_lost.
+        return Link(SerialTransport(url, baudrate), on_telemetry=forward, telemetry_queue_size=0)
+
+    return open_line(url, reset, opener)  # type: ignore[return-value]
+
+
 def _mode(value: m.ControlMode | str) -> m.ControlMode:
     if isinstance(value, m.ControlMode):
         return value
@@ -226,6 +239,7 @@ class Hand:
         ]
         self._goal = np.full(m.FINGER_COUNT, np.nan)  # the last Joint-2 targets commanded
         self._identity: m.Identity | None = None
+        self._reset_on_open = True  # how reconnect() reopens the line
         self._forward = forward or _Forward()
         if forward is None:
             link.add_telemetry_callback(self._forward)
@@ -246,15 +260,21 @@ class Hand:
         boot_wait_s: float = 2.5,
         handshake_timeout_s: float = 5.0,
         log_path: str | Path | None = None,
+        reset: bool = True,
     ) -> Hand:
         """Open ``url`` (``/dev/ttyACM0``, ``COM3``, ``socket://127.0.0.1:PORT``...), wait up to
         ``boot_wait_s`` for the board's ``boot`` (the auto-reset), handshake, start telemetry.
 
         ``boot_wait_s=0`` skips the wait (a board that does not reset when the port opens);
         a boot that comes during the handshake is ridden out all the same.
+
+        ``reset=False`` opens the port without pulsing DTR (``utrf.hand.serial_port``), skips
+        the boot wait and takes over the board as it runs: identify, read its modes, targets
+        and faults, resume heartbeats; nothing moves. ``socket://`` cannot (no DTR line: a
+        ResetModeError says so); the emulated board's pty and serial ports can.
         """
         forward = _Forward()
-        link = Link.open(url, baudrate, on_telemetry=forward, telemetry_queue_size=1)
+        link = _open_link(url, baudrate, forward, reset)
         try:
             hand = cls(
                 link,
@@ -267,7 +287,10 @@ class Hand:
                 url=url,
                 baudrate=baudrate,
             )
-            hand._start(boot_wait_s, handshake_timeout_s)
+            hand._reset_on_open = reset
+            hand._start(boot_wait_s if reset else 0.0, handshake_timeout_s)
+            if not reset:
+                hand._take_over()
             if log_path is not None:
                 hand.start_log(log_path)
         except BaseException:
@@ -320,6 +343,13 @@ class Hand:
         if log_path is not None:
             hand.start_log(log_path)
         return hand
+
+    def _take_over(self) -> None:
+        """A board found running: its own targets become the ones commanded (so a wait or a
+        move starts from what it holds); its modes and latched faults are in ``latest``."""
+        st = self.state()
+        for i, f in enumerate(st.fingers):
+            self._goal[i] = f.target if f.closed_loop else np.nan
 
     def _start(self, boot_wait_s: float, handshake_timeout_s: float) -> None:
         deadline = self.clock.now() + boot_wait_s
@@ -422,9 +452,7 @@ class Hand:
         while True:
             try:
                 forward = _Forward()
-                link = Link.open(
-                    self.url, self.baudrate, on_telemetry=forward, telemetry_queue_size=1
-                )
+                link = _open_link(self.url, self.baudrate, forward, self._reset_on_open)
                 break
             except DisconnectedError as exc:
                 last = exc

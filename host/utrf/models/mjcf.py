@@ -138,16 +138,16 @@ class Layout:
     source: str = "<layout>"
 
 
-def _num(table: Mapping[str, Any], key: str, where: str, *, minimum: float = 0.0) -> float:
+def _num(table: Mapping[str, Any], key: str, where: str, *, bound: str = "positive") -> float:
+    """A finite number; ``bound``: "positive" (> 0), "nonnegative" (>= 0) or "any"."""
     v = table.get(key)
     if not isinstance(v, int | float) or isinstance(v, bool) or not math.isfinite(v):
         raise MjcfError(f"{where}: {key} must be a finite number, got {v!r}")
-    if v < minimum or (minimum == 0.0 and v <= 0.0 and key not in _MAY_BE_ZERO):
-        raise MjcfError(f"{where}: {key} must be > {minimum:g}, got {v!r}")
+    if bound == "positive" and v <= 0:
+        raise MjcfError(f"{where}: {key} must be > 0, got {v!r}")
+    if bound == "nonnegative" and v < 0:
+        raise MjcfError(f"{where}: {key} must be >= 0, got {v!r}")
     return float(v)
-
-
-_MAY_BE_ZERO = {"coulomb_friction_n", "viscous_friction_n_s_m", "joint_damping_n_m_s"}
 
 
 def _vec(table: Mapping[str, Any], key: str, where: str, n: int) -> tuple[float, ...]:
@@ -192,8 +192,8 @@ def load_layout(path: str | Path | None = None) -> Layout:
             raise MjcfError(f"{where}: must be a table")
         placements[name] = FingerPlacement(
             position_m=_vec(t, "position_m", where, 3),  # type: ignore[arg-type]
-            yaw_rad=math.radians(_num(t, "yaw_deg", where, minimum=-360.0)),
-            roll_rad=math.radians(_num(t, "roll_deg", where, minimum=-360.0)),
+            yaw_rad=math.radians(_num(t, "yaw_deg", where, bound="any")),
+            roll_rad=math.radians(_num(t, "roll_deg", where, bound="any")),
         )
     size = _vec(palm, "size_m", f"{src} [palm]", 3)
     if min(size) <= 0:
@@ -221,8 +221,8 @@ def load_layout(path: str | Path | None = None) -> Layout:
             stall_force_n=_num(motor, "stall_force_n", w),
             no_load_speed_m_s=_num(motor, "no_load_speed_m_s", w),
             moving_mass_kg=_num(motor, "moving_mass_kg", w),
-            coulomb_friction_n=_num(motor, "coulomb_friction_n", w),
-            viscous_friction_n_s_m=_num(motor, "viscous_friction_n_s_m", w),
+            coulomb_friction_n=_num(motor, "coulomb_friction_n", w, bound="nonnegative"),
+            viscous_friction_n_s_m=_num(motor, "viscous_friction_n_s_m", w, bound="nonnegative"),
             stroke_m=stroke,  # type: ignore[arg-type]
         ),
         pulley_radius_m=_num(rotary, "pulley_radius_m", f"{src} [rotary]"),
@@ -230,7 +230,7 @@ def load_layout(path: str | Path | None = None) -> Layout:
             timestep_s=_num(dyn, "timestep_s", d),
             integrator=str(integrator),
             gravity_m_s2=_num(dyn, "gravity_m_s2", d),
-            joint_damping_n_m_s=_num(dyn, "joint_damping_n_m_s", d),
+            joint_damping_n_m_s=_num(dyn, "joint_damping_n_m_s", d, bound="nonnegative"),
             coupling_damping_n_s_m=_num(dyn, "coupling_damping_n_s_m", d),
         ),
         source=src,

@@ -56,7 +56,7 @@ def _context_class() -> Any:
 
 def hand_camera(
     lookat: tuple[float, float, float] = (0.03, 0.0, 0.04),
-    distance_m: float = 0.48,
+    distance_m: float = 0.40,
     azimuth_deg: float = 140.0,
     elevation_deg: float = -32.0,
 ) -> mujoco.MjvCamera:
@@ -128,4 +128,28 @@ def render_png(
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     matplotlib.image.imsave(path, render(model, data, **kwargs))
+    return path
+
+
+def sheet(images: list[np.ndarray], titles: list[str], path: str | Path, columns: int = 2) -> Path:
+    """Pictures side by side with their titles, as one PNG (matplotlib)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if len(images) != len(titles) or not images:
+        raise ValueError("sheet needs one title per picture, and at least one picture")
+    rows = -(-len(images) // columns)
+    h, w = images[0].shape[:2]
+    fig, axes = plt.subplots(rows, columns, figsize=(columns * w / 100, rows * (h + 30) / 100))
+    for ax in np.ravel(axes):
+        ax.axis("off")
+    for ax, image, title in zip(np.ravel(axes), images, titles, strict=False):
+        ax.imshow(image)
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
     return path

@@ -136,6 +136,7 @@ int utrf_sim_run_to(utrf_sim_t *s, uint64_t target)
         /* held in reset: time passes, nothing runs */
         avr->cycle = target < s->hold_until ? target : s->hold_until;
     }
+    timers_quiet(s);
     if (target > avr->cycle) {
         s->target = target;
         s->stop = 0;
@@ -475,6 +476,8 @@ utrf_sim_t *utrf_sim_open(const char *elf_path, uint64_t seed, char *err, size_t
     s->jump_at = -1;
     board_io_init(s);
     interrupts_init(s);
+    timers_init(s);
+    s->quiet_timers = 1;
     avr_register_io_write(s->avr, board_io_eecr(), eecr_write, s);
     s->stats.last_reset_flags = board_io_mcusr(s->avr); /* PORF, set by avr_init */
     board_io_read_pins(s);

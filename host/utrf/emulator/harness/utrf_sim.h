@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 9
+#define UTRF_SIM_ABI 10
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -67,6 +67,7 @@ typedef struct {
     uint64_t tx_burst_bytes;
     uint64_t stalls;            /* stalled entries of the stalled vector (utrf_sim_stall_vector) */
     uint64_t sleep_cycles;      /* cycles the CPU slept (SLEEP; simavr skips them) */
+    uint64_t quieted_timer_events; /* PWM timer events left out (timers.c) */
 } utrf_sim_stats_t;
 
 /* Cycle profile of one interrupt vector or one function. */
@@ -173,6 +174,11 @@ void utrf_sim_stats(const utrf_sim_t *s, utrf_sim_stats_t *out);
 int utrf_sim_profile_vector(utrf_sim_t *s, int vector);
 int utrf_sim_profile_function(utrf_sim_t *s, int64_t addr);
 void utrf_sim_profile_get(const utrf_sim_t *s, int which, utrf_sim_profile_t *out); /* 0 vector, 1 function */
+
+/* Quiet PWM timers (timers.c, on by default): the events of a 16-bit timer whose interrupts
+ * are all off and whose TCNT the firmware never read are cancelled before each run (its
+ * flags stay clear; its registers, and the duty, are untouched). */
+void utrf_sim_set_quiet_timers(utrf_sim_t *s, int on);
 
 /* Faults of the board (faults.c), for the safety tests. A stalled vector: at each of the
  * next `count` entries of the interrupt (-1: every entry; 0 or vector 0: none) the clock
