@@ -55,7 +55,8 @@ def fuzz_section(res: dict) -> str:
         if r is None:
             continue
         rows.append(
-            f"| {name} | {r.get('number_of_executed_units', 0):,} | "
+            f"| {name} | {r.get('number_of_executed_units', 0):,}"
+            f"{' (stopped by hand)' if r.get('interrupted') else ''} | "
             f"{r.get('average_exec_per_sec', '?')} | {r.get('coverage_edges', '?')} / "
             f"{r.get('features', '?')} | {r.get('corpus_units', '?')} | "
             f"{', '.join(r['findings']) or 'none'} | `{r['command']}` | {r.get('date', '')} |"

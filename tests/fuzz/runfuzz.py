@@ -95,7 +95,9 @@ def run(name: str, seconds: float | None, runs: int | None, log_dir: Path) -> di
         "findings": [str(p.relative_to(REPO)) for p in new],
         **parse(text),
     }
-    if proc.returncode != 0 and not new:
+    if "libFuzzer: run interrupted" in text:
+        res["interrupted"] = True  # stopped by hand (SIGINT): the figures so far, no finding
+    elif proc.returncode != 0 and not new:
         res["findings"].append(f"exit {proc.returncode}: see {log.relative_to(REPO)}")
     oracle = re.findall(r"(ORACLE .*|runtime error: .*|AssertionError: .*)", text)
     if oracle:
