@@ -131,7 +131,7 @@ MUTANTS = [
         "brake-stby-with-stop-fault",
         "STBY low with a stop fault (BRAKE)",
         "firmware/src/core/finger.cpp",
-        "out.stby = mode == BRAKE && (faults_ & kStopFaults) == 0;",
+        "out.stby = mode == BRAKE && (faults_ & (kStopFaults & ~JOINT_LIMIT)) == 0;",
         "out.stby = mode == BRAKE;",
     ),
     Mutant(

@@ -203,7 +203,13 @@ class Board {
                                m.on_counts, p.max_duty);
                 }
             }
-            if ((fg.faults() & finger::kStopFaults) || halted) {
+            // STBY high with a stop fault only to short-brake after JOINT_LIMIT alone (both
+            // channels BRAKE, nothing driven); never on a halted hand.
+            const uint8_t stop = (uint8_t)(fg.faults() & finger::kStopFaults);
+            const bool braking = s.motor[f][0].drive == hal::Drive::BRAKE &&
+                                 (s.motor[f][1].drive == hal::Drive::BRAKE ||
+                                  fg.params().rotary);
+            if (halted || (stop && !(stop == finger::JOINT_LIMIT && braking))) {
                 FUZZ_CHECK(!s.stby[f], "finger %u: STBY high with faults 0x%02X (halted %d)", f,
                            fg.faults(), (int)halted);
             }

@@ -4,11 +4,9 @@ tools/reliability_doc.py turns into docs/reliability.md)."""
 
 from __future__ import annotations
 
-import json
 import sys
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -17,16 +15,6 @@ from utrf.hand import Hand
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-RESULTS = HERE.parents[1] / "build" / "reliability"
-
-
-def record(name: str, key: str, value: Any) -> None:
-    """Keep a measured figure: build/reliability/<name>.json, one entry per key."""
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    path = RESULTS / f"{name}.json"
-    data = json.loads(path.read_text()) if path.exists() else {}
-    data[key] = value
-    path.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
 
 
 @pytest.fixture

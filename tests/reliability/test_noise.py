@@ -1,12 +1,12 @@
 """A noisy line in the suite (issue 13 §3): the Hand drives the emulated board through seeded
 line faults at 1e-3 and 1e-2 per byte; nothing wrong is applied, nothing is lost silently,
-the link never wedges and recovers once the noise stops. The campaign is noise.py."""
+the link never wedges and recovers once the noise stops. The campaign is rel_noise.py."""
 
 from __future__ import annotations
 
 import pytest
-from conftest import record
-from noise import run_campaign
+from rel_noise import run_campaign
+from rel_record import record
 
 from utrf.emulator import EmulatedBoard
 from utrf.hand import Hand
