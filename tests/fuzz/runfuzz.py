@@ -184,6 +184,14 @@ def main(argv: list[str] | None = None) -> int:
         res = run(n, a.seconds, a.runs, log_dir)
         res["cpu_load"] = os.getloadavg()[0]
         res["date"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+        git = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        res["commit"] = git.stdout.strip() or None
         print(
             f"  {res.get('number_of_executed_units', '?')} executions in {res['wall_s']} s "
             f"({res.get('average_exec_per_sec', '?')}/s), coverage {res.get('coverage_edges')} "
