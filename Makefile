@@ -21,6 +21,7 @@ BENCH_TARGETS :=
 -include host/utrf/emulator/harness/harness.mk
 -include host/utrf/models/models.mk
 -include host/utrf/hand/hand.mk
+-include tests/fuzz/fuzz.mk
 
 .PHONY: help setup test demo bench lint clean test-after-setup demo-after-setup \
         bench-after-setup

@@ -6,7 +6,8 @@ cd "$(dirname "$0")/.."
 
 APT_PACKAGES=(gcc-avr avr-libc binutils-avr simavr libsimavr-dev libelf-dev arduino-core-avr
               avrdude
-              libosmesa6)  # libosmesa6: MuJoCo's off-screen rendering (MUJOCO_GL=osmesa)
+              libosmesa6  # MuJoCo's off-screen rendering (MUJOCO_GL=osmesa)
+              clang libclang-rt-14-dev)  # libFuzzer and the sanitizer runtimes (tests/fuzz)
 VENV=.venv
 PYTHON=${PYTHON:-python3.11}
 
