@@ -124,7 +124,7 @@ def driven(elf: Path, seconds: float, telemetry_hz: int) -> dict:
             "mcu_share": mcu.seconds / wall,
             "plant_share": plant.seconds / wall,
             "fw": fw,
-            "faults": state.faults,
+            "faults": client.request(m.GetStatus()).faults,
             "telemetry_rate": states / sim,
             "tracking_error": float(error),
         }
@@ -168,7 +168,7 @@ def tick_load(elf: Path, fingers: int, telemetry_hz: int, seconds: float = 0.2) 
             return total / n if n > 0 else math.nan
 
         fw = client.request(m.GetStats())
-        modes = client.request(m.GetState()).mode[:fingers]
+        modes = client.request(m.GetStatus()).mode[:fingers]
         return {
             "fingers": fingers,
             "telemetry_hz": telemetry_hz,

@@ -5,7 +5,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 APT_PACKAGES=(gcc-avr avr-libc binutils-avr simavr libsimavr-dev libelf-dev arduino-core-avr
-              avrdude doctest-dev)
+              avrdude
+              libosmesa6)  # libosmesa6: MuJoCo's off-screen rendering (MUJOCO_GL=osmesa)
 VENV=.venv
 PYTHON=${PYTHON:-python3.11}
 

@@ -78,7 +78,7 @@ def test_pins_are_what_the_firmware_drives(board: EmulatedBoard, client: SimClie
     client.run(0.2)
     state = client.request(m.GetState())
     pins = board.pins
-    assert state.mode[1] == m.ControlMode.DUTY
+    assert client.request(m.GetStatus()).mode[1] == m.ControlMode.DUTY
     assert state.duty_a[1] > 0.4
     assert pins.duty[1, 0] == pytest.approx(abs(state.duty_a[1]), abs=0.011)
     assert (pins.in1[1, 0], pins.in2[1, 0]) == (True, False)  # forward: pulls Tendon 1
@@ -101,7 +101,7 @@ def test_position_control_closes_the_loop_through_the_plant(
         set_mode(client, 2, m.ControlMode.POSITION)
         client.run(1.0)
         assert board.theta2[2] == pytest.approx(0.8, abs=0.05)
-        assert client.request(m.GetState()).faults[2] == m.FaultBits(0)
+        assert client.request(m.GetStatus()).faults[2] == m.FaultBits(0)
 
 
 class TestFaultInjection:
@@ -149,7 +149,7 @@ class TestFaultInjection:
         boot = client.wait_boot()
         assert boot.reset_cause == m.ResetCause.RESET_PIN
         assert not board.pins.stby.any()  # all off after the reset
-        assert client.request(m.GetState()).mode == COAST5
+        assert client.request(m.GetStatus()).mode == COAST5
 
     def test_a_reset_that_cuts_a_frame_still_delivers_boot(
         self, board: EmulatedBoard, client: SimClient

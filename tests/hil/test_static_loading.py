@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -260,3 +261,37 @@ def test_resume_needs_a_run_and_a_new_run_needs_a_new_directory(tmp_path: Path) 
     sl.prepare_output(tmp_path / "r", cfg, resume=False, extra_meta={})
     with pytest.raises(sl.RunError, match="--resume"):
         sl.prepare_output(tmp_path / "r", cfg, resume=False, extra_meta={})
+
+
+def test_the_figure_draws_the_calibrated_model_where_its_points_are(
+    finished, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The calibrated model is drawn at the measured Joint-2 angles (the fit's basis): it
+    meets the measured deflections to about the calibrated error, where the same model at
+    the setpoint misses them by the hold's error; the title names the finger as people do."""
+    out, result, _, _ = finished
+    per = result["per_payload"]
+    measured = np.array([p["deflection_m"] for p in per])
+    drawn = np.array([p["calibrated_model_deflection_m"] for p in per])
+    assert np.abs(drawn - measured).max() < 2 * result["error"]["calibrated_mean_m"] + 2e-5
+    geometry = replace(GEOM, tendon_youngs_modulus_pa=result["calibration"]["modulus_pa"])
+    loads = np.array([p["load_kg"] for p in per])
+    th = np.full(len(per), result["hold"]["theta2_setpoint_rad"])
+    at_setpoint = np.hypot(*sl._model_deflection(geometry, loads, th, th).T)
+    assert np.abs(at_setpoint - measured).mean() > 2 * np.abs(drawn - measured).mean()
+    assert result["finger_name"] == "index"
+    import matplotlib.pyplot as plt
+
+    seen: dict[str, str] = {}
+    real_savefig = plt.Figure.savefig
+
+    def capture(fig, path, **kw):  # type: ignore[no-untyped-def]
+        seen["title"] = fig.axes[0].get_title()
+        seen["labels"] = " | ".join(line.get_label() for line in fig.axes[0].get_lines())
+        return real_savefig(fig, path, **kw)
+
+    monkeypatch.setattr(plt.Figure, "savefig", capture)
+    sl.plot(result, out / "again.png", GEOM)
+    assert seen["title"].startswith("Static loading, index:")
+    assert "calibrated model (E = " in seen["labels"]
+    assert "measured Joint-2 angles" in seen["labels"]

@@ -1,7 +1,8 @@
 """ctypes binding of the C harness (``harness/utrf_sim.h``); one :class:`NativeBoard` per board.
 
-The library is ``build/emulator/libutrf_sim.so`` in the repository (``make emulator`` builds
-it), or the file named by ``UTRF_SIM_LIB``. Nothing here is thread-safe: the caller
+The library is found by :func:`utrf.artifacts.harness_library`: ``UTRF_SIM_LIB``, a checkout's
+``build/emulator/libutrf_sim.so`` (``make emulator``), or built on first use into the user's
+cache from the harness sources the package ships. Nothing here is thread-safe: the caller
 serialises calls on one board (``EmulatedBoard`` holds a lock).
 """
 
@@ -13,15 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
+from utrf import artifacts
+
 ABI = 6
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
 ADC_CHANNELS = 8
 
-HARNESS_DIR = Path(__file__).resolve().parent / "harness"
-REPO_ROOT = Path(__file__).resolve().parents[3]
-DEFAULT_LIBRARY = REPO_ROOT / "build" / "emulator" / "libutrf_sim.so"
 
 STATUS_NAMES = {0: "running", 1: "crashed", 2: "done"}
 RESET_POWER_ON, RESET_PIN = 0, 1
@@ -81,8 +81,10 @@ _lib: ctypes.CDLL | None = None
 
 
 def library_path() -> Path:
-    env = os.environ.get("UTRF_SIM_LIB")
-    return Path(env) if env else DEFAULT_LIBRARY
+    try:
+        return artifacts.harness_library()
+    except artifacts.ArtifactError as exc:
+        raise HarnessError(str(exc)) from None
 
 
 def _check_fresh(path: Path) -> None:
@@ -91,10 +93,12 @@ def _check_fresh(path: Path) -> None:
             f"the emulator's harness library {path} is missing: run `make emulator` "
             "(or `make test`) in the repository"
         )
-    if os.environ.get("UTRF_SIM_LIB"):
-        return
-    sources = [*HARNESS_DIR.glob("*.c"), *HARNESS_DIR.glob("*.h")]
-    pins = REPO_ROOT / "firmware" / "src" / "board_pins.h"
+    root = artifacts.checkout_root()
+    if os.environ.get("UTRF_SIM_LIB") or root is None or not path.is_relative_to(root):
+        return  # the cache is keyed by its sources' hash: never stale
+    harness = root / "host" / "utrf" / "emulator" / "harness"
+    sources = [*harness.glob("*.c"), *harness.glob("*.h")]
+    pins = root / "firmware" / "src" / "board_pins.h"
     if pins.is_file():
         sources.append(pins)
     newest = max((p.stat().st_mtime for p in sources), default=0.0)

@@ -17,12 +17,15 @@ from pathlib import Path
 
 import numpy as np
 
+from utrf import artifacts
 from utrf.emulator import _native
 from utrf.emulator._native import F_CPU_HZ, HarnessError, NativeBoard
 from utrf.emulator.plant import DRIVE_NAMES, HandPlant, PlantParams
 from utrf.models.geometry import HandGeometry
 
-DEFAULT_ELF = _native.REPO_ROOT / "build" / "firmware" / "utrf.elf"
+# A checkout's `make firmware` output (relative: found from the working directory); with no
+# ELF given, the board takes utrf.artifacts.firmware_elf() (this, or a cached build).
+DEFAULT_ELF = artifacts.CHECKOUT_ELF
 EXCHANGE_PERIOD_S = 250e-6
 EEPROM_SIZE = 4096
 
@@ -188,7 +191,12 @@ class EmulatedBoard:
         capture: bool | None = None,
         exchange_period: float = EXCHANGE_PERIOD_S,
     ) -> None:
-        self.elf = Path(elf) if elf is not None else DEFAULT_ELF
+        if elf is None:
+            try:
+                elf = artifacts.firmware_elf()
+            except artifacts.ArtifactError as exc:
+                raise EmulatorError(str(exc)) from None
+        self.elf = Path(elf)
         check_elf(self.elf)
         if speed is not None and not (isinstance(speed, int | float) and speed > 0):
             raise EmulatorError(

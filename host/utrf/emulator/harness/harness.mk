@@ -2,16 +2,17 @@
 # ctypes) and its own test fixture (a small AVR program). Included by the top-level Makefile.
 
 EMU_DIR      := host/utrf/emulator/harness
+FW_SRC       ?= firmware/src
 EMU_BUILD    := $(BUILD)/emulator
 EMU_LIB      := $(EMU_BUILD)/libutrf_sim.so
 EMU_FIXTURE  := $(EMU_BUILD)/fixture.elf
 EMU_SRCS     := $(wildcard $(EMU_DIR)/*.c)
-EMU_HDRS     := $(wildcard $(EMU_DIR)/*.h) firmware/src/board_pins.h
+EMU_HDRS     := $(wildcard $(EMU_DIR)/*.h) $(FW_SRC)/board_pins.h
 
 # simavr's and avr-libc's headers are -isystem/-idirafter: -Wall -Wextra judge our code only.
 EMU_CC       ?= cc
 EMU_CFLAGS   := -std=gnu11 -O2 -g -fPIC -Wall -Wextra -Wshadow \
-                -isystem /usr/include/simavr -idirafter /usr/lib/avr/include -Ifirmware/src
+                -isystem /usr/include/simavr -idirafter /usr/lib/avr/include -I$(FW_SRC)
 EMU_LDLIBS   := -lsimavr -lelf -lpthread
 
 FIXTURE_CFLAGS := -mmcu=atmega2560 -DF_CPU=16000000UL -Os -std=gnu99 -Wall -Wextra \

@@ -67,6 +67,7 @@ struct utrf_sim {
     int pty_fd;
     char pty_path[128];
     int pty_open;
+    int pty_dtr; /* the modelled DTR line of the pty (see serve.c) */
     int listen_fd;
     int client_fd;
     int auto_reset;
