@@ -185,7 +185,6 @@ struct FwStatus {
     uint8_t config_status;
     uint8_t reset_cause;
     uint8_t saving;
-    uint32_t idle_sleeps;
 };
 
 void fw_status(FwStatus* out) {
@@ -200,7 +199,6 @@ void fw_status(FwStatus* out) {
     out->config_status = app::board().config_status;
     out->reset_cause = app::board().reset_cause;
     out->saving = app::board().writer.busy() ? 1 : 0;
-    out->idle_sleeps = s.idle_sleeps;
 }
 
 // ---- the PID alone ---------------------------------------------------------------------------

@@ -339,9 +339,6 @@ void loop() {
     save_progress(b);
     flush_reply(b);
     board_frames(b);
-    // Nothing left for this pass: sleep until the next interrupt (the tick comes every
-    // millisecond, a received byte at once), so the CPU idles instead of spinning.
-    if (b.reply_len == 0 && !b.writer.busy()) hal::idle();
 }
 
 void tick() {
