@@ -7,7 +7,9 @@
 #   make bench-firmware        tick load and memory, appended to docs/benchmarks.md
 #   UTRF_BAUD=...              serial baud rate (default 1000000, exact at 16 MHz with U2X)
 
-FW_SRC       := firmware/src
+# FW_DIR: where this file lives (an installed utrf builds from its packaged copy into a cache).
+FW_DIR       ?= firmware
+FW_SRC       := $(FW_DIR)/src
 FW_BUILD     := $(BUILD)/firmware
 FW_ELF       := $(FW_BUILD)/utrf.elf
 FW_HEX       := $(FW_BUILD)/utrf.hex
@@ -51,12 +53,15 @@ FW_OWN_SRCS := $(FW_SRC)/utrf_main.cpp $(wildcard $(FW_SRC)/core/*.cpp) \
                $(wildcard $(FW_SRC)/hal/avr/*.cpp)
 FW_OWN_OBJS := $(patsubst $(FW_SRC)/%.cpp,$(FW_BUILD)/obj/%.o,$(FW_OWN_SRCS))
 
-# The Arduino core as an archive, objects named <file>.o under their own directory: its
-# main.cpp never meets ours, and only what is referenced is linked (not its Serial, whose
-# UART interrupts would clash with hal/avr's driver).
-ARDUINO_SRCS := $(wildcard $(ARDUINO_CORE)/*.c $(ARDUINO_CORE)/*.cpp $(ARDUINO_CORE)/*.S)
-ARDUINO_OBJS := $(patsubst $(ARDUINO_CORE)/%,$(FW_BUILD)/arduino-core/%.o,$(ARDUINO_SRCS))
+# The Arduino core as an archive, built by a sub-make (firmware/arduino_core.mk) that lists
+# the core's sources when it runs: nothing here may read what tools/setup.sh installs while
+# make parses, since on a fresh machine that is before the set-up has run.
 ARDUINO_LIB  := $(FW_BUILD)/arduino-core/libarduino_core.a
+ARDUINO_CORE_MAKE = $(MAKE) -s --no-print-directory -f $(FW_DIR)/arduino_core.mk \
+  ARDUINO_CORE='$(ARDUINO_CORE)' OUT='$(@D)' AVR_CC='$(AVR_CC)' AVR_CXX='$(AVR_CXX)' \
+  AVR_AR='$(AVR_AR)' CORE_CFLAGS='$(FW_MCU) $(ARDUINO_OPT) -std=gnu11 -w $(FW_INC)' \
+  CORE_CXXFLAGS='$(FW_MCU) $(ARDUINO_OPT) $(FW_CXXSTD) -DDECIMAL_DIG=9 -w $(FW_INC)' \
+  CORE_SFLAGS='$(FW_MCU) -x assembler-with-cpp $(FW_INC)'
 
 # The git commit goes into identify's build_id; rewritten only when it changes.
 FW_BUILD_ID := $(FW_BUILD)/build_id.h
@@ -83,20 +88,12 @@ $(FW_BUILD)/obj/%.o: $(FW_SRC)/%.cpp
 	$(AVR_CXX) -c $(FW_MCU) $(FW_OPT) $(FW_CXXSTD) $(FW_WARN) $(FW_DEFS) $(FW_INC) \
 	  $(FW_EXTRA) -MMD -MP -o $@ $<
 
-$(FW_BUILD)/arduino-core/%.c.o: $(ARDUINO_CORE)/%.c
-	@mkdir -p $(@D)
-	@$(AVR_CC) -c $(FW_MCU) $(ARDUINO_OPT) -std=gnu11 -w $(FW_INC) -o $@ $<
-$(FW_BUILD)/arduino-core/%.cpp.o: $(ARDUINO_CORE)/%.cpp
-	@mkdir -p $(@D)
-	@$(AVR_CXX) -c $(FW_MCU) $(ARDUINO_OPT) $(FW_CXXSTD) -DDECIMAL_DIG=9 -w $(FW_INC) -o $@ $<
-$(FW_BUILD)/arduino-core/%.S.o: $(ARDUINO_CORE)/%.S
-	@mkdir -p $(@D)
-	@$(AVR_CC) -c $(FW_MCU) -x assembler-with-cpp $(FW_INC) -o $@ $<
-
-$(ARDUINO_LIB): $(ARDUINO_OBJS)
-	@rm -f $@
-	@$(AVR_AR) rcs $@ $^
-	@echo "arduino core: $(words $^) objects from $(ARDUINO_CORE)"
+# Always asked (the sub-make knows the core's files); the archive is rewritten only when an
+# object changed, so the ELF is relinked only then.
+$(ARDUINO_LIB): FORCE_ARDUINO_CORE
+	@$(ARDUINO_CORE_MAKE) $@
+.PHONY: FORCE_ARDUINO_CORE
+FORCE_ARDUINO_CORE:
 
 $(FW_ELF): $(FW_OWN_OBJS) $(ARDUINO_LIB)
 	$(AVR_CXX) $(FW_MCU) -Wl,--gc-sections -o $@ $(FW_OWN_OBJS) $(ARDUINO_LIB) -lm
@@ -117,10 +114,13 @@ firmware-size: $(FW_ELF)
 	@grep -h "^// Geometry\|rows, .* bytes; worst" $(FW_SRC)/generated/kinematics_table.h \
 	  | sed 's|^// |kinematics table: |'
 
-flash: $(FW_HEX)
+# utrf flash checks first (the port exists and opens, the bootloader signs on within 2 s) and
+# fails in seconds with one line where avrdude alone would hang or retry for 30 s.
+flash:
 	@if [ -z "$(PORT)" ]; then echo "usage: make flash PORT=/dev/ttyACM0" >&2; exit 2; fi
-	$(AVRDUDE) -p atmega2560 -c $(AVRDUDE_PROGRAMMER) -P $(PORT) -b $(FLASH_BAUD) -D \
-	  -U flash:w:$(FW_HEX):i
+	@$(MAKE) --no-print-directory setup && $(MAKE) -s --no-print-directory $(FW_HEX)
+	$(PY) -m utrf flash --port '$(PORT)' --hex $(FW_HEX) --avrdude $(AVRDUDE) \
+	  --programmer $(AVRDUDE_PROGRAMMER) --baud $(FLASH_BAUD)
 
 # ---- the core on the host, with the host hardware layer and a C ABI for ctypes ----------------
 FW_HOST_SRCS := $(wildcard $(FW_SRC)/core/*.cpp) $(wildcard firmware/test/*.cpp)

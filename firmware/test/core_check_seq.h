@@ -1,7 +1,7 @@
 // A fixed workload over the core's fixed-point arithmetic, folded into one checksum. The AVR
 // build (firmware/test/avr/core_check.cpp, run on simavr) and the host build (capi.cpp) run
-// the same sequence: equal checksums show the AVR's inline-assembly multiplies and its 16-bit
-// int give exactly the host-tested results.
+// the same sequence: equal checksums show the AVR (its 16-bit int, avr-gcc's multiplies) gives
+// exactly the host-tested results.
 #ifndef UTRF_TEST_CORE_CHECK_SEQ_H
 #define UTRF_TEST_CORE_CHECK_SEQ_H
 

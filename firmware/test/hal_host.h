@@ -51,8 +51,6 @@ struct State {
     uint32_t wdt_feeds;
     bool hang_mark;
     uint8_t reset_cause;
-    // idle(): the times loop() would have slept (no received byte waiting)
-    uint32_t idle_sleeps;
 };
 
 State& state();

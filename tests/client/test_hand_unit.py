@@ -110,7 +110,7 @@ def test_lost_replies_are_retried_then_reported(board: HandBoard, hand: Hand) ->
     assert len(sent) == 3 and sent[0] == sent[2]  # resent with the same bytes
     assert hand.link_stats().retries == 2
     board.on(M.SetTargets.ID, lambda f: None)
-    with pytest.raises(ReplyTimeout, match="set_targets after 4 attempt"):
+    with pytest.raises(ReplyTimeout, match="set_targets after 9 attempt"):
         hand.set_targets({"index": 0.6}, enable=False)
 
 

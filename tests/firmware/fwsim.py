@@ -81,7 +81,6 @@ class FwStatus(ctypes.Structure):
         ("config_status", ctypes.c_uint8),
         ("reset_cause", ctypes.c_uint8),
         ("saving", ctypes.c_uint8),
-        ("idle_sleeps", ctypes.c_uint32),
     ]
 
 

@@ -358,8 +358,8 @@ def assert_halted_and_says_so(sim: Sim) -> None:
         assert (sim.finger(f).duty_a, sim.finger(f).duty_b) == (0, 0)
         assert motors_off(sim, f)
     st = sim.ok(m.GetState())
-    assert all(mode == m.ControlMode.COAST for mode in st.mode)
     assert all(d == 0 for d in st.duty_a + st.duty_b)
+    assert all(mode == m.ControlMode.COAST for mode in sim.ok(m.GetStatus()).mode)
     zeros = (0,) * 5
     drive = [
         m.SetMode(mask=1, mode=(m.ControlMode.POSITION, 0, 0, 0, 0), duty=zeros, effort=zeros),

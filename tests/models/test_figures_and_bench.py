@@ -46,6 +46,7 @@ def test_bench_updates_only_its_section(tmp_path: Path, capsys: pytest.CaptureFi
     text = md.read_text()
     assert "keep me" in text and "me too" in text and "stale-marker" not in text
     assert text.count("## Models") == 1 and "solves per second" in text
+    assert "one step of the whole hand" in text and "equilibrium in MuJoCo" in text
     assert text.index("## Firmware") < text.index("## Models") < text.index("## Protocol")
     fresh = tmp_path / "new.md"
     bench.update_section(fresh, "## Models\n\nx\n")

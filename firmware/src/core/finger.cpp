@@ -21,11 +21,11 @@ Params compile(const config::Finger& cfg, float dt_s, pid::Coeffs& coeffs) {
     g.ki = cfg.gains.ki;
     g.kd = cfg.gains.kd;
     g.d_cutoff_hz = cfg.gains.d_cutoff_hz;
-    g.deadband = cfg.gains.deadband_milli * 1e-3f;
+    g.deadband = cfg.gains.deadband_duty * 1e-3f;
     g.slew_per_s = cfg.gains.slew_per_s;
     coeffs = pid::compile(g, dt_s);
-    p.max_duty = q15_milli(cfg.gains.max_duty_milli);
-    p.pretension = q15_milli(cfg.gains.pretension_milli);
+    p.max_duty = q15_milli(cfg.gains.max_duty);
+    p.pretension = q15_milli(cfg.gains.pretension_duty);
     p.theta_min = fx::bu(cfg.limits.theta2_min);
     p.theta_max = fx::bu(cfg.limits.theta2_max);
     const int16_t margin = fx::bu(cfg.limits.limit_margin);
@@ -34,7 +34,7 @@ Params compile(const config::Finger& cfg, float dt_s, pid::Coeffs& coeffs) {
     p.stall_error = fx::bu(cfg.limits.stall_error);
     p.stall_motion = fx::bu(cfg.limits.stall_motion);
     const uint32_t checks =
-        (uint32_t)((float)cfg.limits.stall_time_ms * 1e-3f / (dt_s * kStallEvery) + 0.5f);
+        (uint32_t)((float)cfg.limits.stall_time * 1e-3f / (dt_s * kStallEvery) + 0.5f);
     p.stall_checks = (uint16_t)(checks < 1 ? 1 : (checks > 65535u ? 65535u : checks));
     p.jump = fx::bu(cfg.limits.encoder_jump);
     p.zero_turn = encoder::turn_from_rad(cfg.hw.encoder_offset);

@@ -12,7 +12,6 @@
 #include <avr/interrupt.h>
 #include <avr/io.h>
 #include <avr/pgmspace.h>
-#include <avr/sleep.h>
 #include <avr/wdt.h>
 #include <util/atomic.h>
 
@@ -533,20 +532,6 @@ void serial_write(const uint8_t* data, uint16_t len) {
     for (uint16_t i = 0; i < len; ++i) g_tx_buf[head++] = data[i];
     g_tx_head = head;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { UCSR0B |= _BV(UDRIE0); }
-}
-
-void idle() {
-    // The check and the sleep are atomic: interrupts stay off from the check until SLEEP (the
-    // instruction after SEI always runs first), so a byte that arrives in between wakes it.
-    set_sleep_mode(SLEEP_MODE_IDLE);
-    cli();
-    if (GPIOR1 == GPIOR2) {
-        sleep_enable();
-        sei();
-        sleep_cpu();
-        sleep_disable();
-    }
-    sei();
 }
 
 uint16_t serial_take_overruns() {
