@@ -34,6 +34,7 @@ void defaults(Config& cfg) {
         cfg.finger[f].gains = default_gains();
         cfg.finger[f].limits = default_limits(f);
         spec_defaults(cfg.finger[f].hw);
+        spec_defaults(cfg.finger[f].motion);
     }
     spec_defaults(cfg.safety);
 }
