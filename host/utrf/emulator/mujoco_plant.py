@@ -29,16 +29,7 @@ from utrf.emulator.plant import FINGERS, PlantError, PlantParams, _finger_index,
 from utrf.models import mjcf, objects
 from utrf.models.geometry import HandGeometry
 
-#: where the object sits, in the world frame (m), by name: resting on the palm behind the
-#: knuckle line (x < 0; the palm's top face is z = 0), where the curling fingers close over
-#: it; long objects lie across the palm (their axis along y). ASSUMED placements.
-_ACROSS = (0.7071068, 0.7071068, 0.0, 0.0)  # the object's z axis along the world's y
-OBJECT_PLACEMENT = {
-    "bottle": ((-0.040, 0.0, 0.0951), (1.0, 0.0, 0.0, 0.0)),  # standing
-    "ball": ((-0.040, 0.0, 0.0326), (1.0, 0.0, 0.0, 0.0)),
-    "box": ((-0.035, 0.0, 0.0301), _ACROSS),
-    "egg": ((-0.030, 0.0, 0.0221), _ACROSS),
-}
+IMPRATIO = 10.0
 
 
 def libmujoco_path() -> str:
@@ -78,10 +69,13 @@ class MujocoPlant:
         self.object: objects.GraspObject | None = None
         if obj is not None:
             self.object = objects.get_object(obj) if isinstance(obj, str) else obj
-            pose = object_pose or OBJECT_PLACEMENT.get(self.object.name)
+            pose = object_pose
+            if pose is None and self.object.rest_position_m is not None:
+                # where it rests on the palm, as data (objects.toml)
+                pose = (self.object.rest_position_m, self.object.rest_quat)
             if pose is None:
                 raise PlantError(
-                    f"no placement known for object {self.object.name!r}: give object_pose"
+                    f"object {self.object.name!r} has no rest_position_m: give object_pose"
                 )
             xml = objects.add_object(xml, self.object, pose[0], pose[1], name="object")
             # a weld to the world: an operator's hand keeping the object in place while the
@@ -94,6 +88,11 @@ class MujocoPlant:
         self.xml = xml
         self.model = mujoco.MjModel.from_xml_string(xml)
         self.model.opt.timestep = float(timestep)
+        if self.object is not None:
+            # a grasp's friction: elliptic cones and a high impratio keep the contacts from
+            # creeping under a steady load (MuJoCo's own advice for grasping)
+            self.model.opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+            self.model.opt.impratio = IMPRATIO
         if tuple(self.params.gravity_m_s2) == (0.0, 0.0):
             self.model.opt.gravity[:] = 0.0
         self.data = mujoco.MjData(self.model)
