@@ -19,10 +19,10 @@ import numpy as np
 from utrf.datalog import read_log
 from utrf.hand.client import DEFAULT_TOLERANCE, Hand
 from utrf.hand.errors import FingerFaultError, NotControlledError, NotSettledError
-from utrf.hand.figures import Segment, draw_pose, plot_trajectories
 from utrf.hand.state import HandState
 from utrf.hand.telemetry_log import log_columns
 from utrf.hand.tracking import Tracking, tracking_from_log
+from utrf.models.geometry import HandGeometry
 from utrf.poses import PoseLibrary
 
 DEFAULT_SEQUENCE = ("open", "rock-and-roll", "shaka", "fist", "open")
@@ -81,6 +81,21 @@ class _Recorder:
     def since(self, board_time: float) -> list[HandState]:
         with self.lock:
             return [s for s in self.samples if s.board_time >= board_time]
+
+
+def _rendered(geometry: HandGeometry, theta2: np.ndarray) -> np.ndarray | None:
+    """The MuJoCo hand at these angles, rendered off-screen; None where this machine cannot
+    render (the picture then draws the hand) or an angle was never measured."""
+    if not np.all(np.isfinite(theta2)):
+        return None
+    try:
+        from utrf.models.render import RenderError, hand_at
+    except ImportError:  # no mujoco
+        return None
+    try:
+        return hand_at(list(theta2), geometry)
+    except RenderError:
+        return None
 
 
 def run_demo(
@@ -152,6 +167,8 @@ def run_demo(
                 if on_step is not None:
                     on_step(step)
         factor = board.realtime_factor
+    from utrf.hand.figures import Segment, draw_pose, plot_trajectories  # matplotlib: when drawn
+
     result = DemoResult(out, steps, csv, url=url, realtime_factor=factor, stretched=stretched)
     geometry = hand.geometry
     for step in steps:
@@ -163,6 +180,7 @@ def run_demo(
             title=f"pose {step.index} of {len(steps)}: {step.name}"
             + ("" if step.settled else "  (NOT SETTLED)"),
             note=library[step.name].description,
+            rendered=_rendered(geometry, step.measured),
         )
     data = read_log(csv, log_columns(hand.fingers))
     result.tracking = tracking_from_log(data, hand.fingers)

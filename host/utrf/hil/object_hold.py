@@ -147,6 +147,9 @@ def run(
         CsvLog(out / "object_samples.csv", SAMPLE_COLUMNS) as log,
         CsvLog(out / "object_hits.csv", hit_columns) as hit_log,
     ):
+        # the board's output is read once a sample, not every millisecond (the samples' rate
+        # is all this run needs; the telemetry still arrives whole)
+        hand.link.pump_interval_s = 1.0 / config.sample_hz
         s = _Sampler(hand, board, plant, config, log)
         closed_forces, effort = _close(hand, s, config, progress)
         picture = _picture(plant, out / "object_hold.png") if config.picture else None
