@@ -129,7 +129,9 @@ def run_demo(
     steps = [Step(i + 1, name) for i, name in enumerate(sequence)]
     recorder = _Recorder()
     stretched: dict[str, tuple[str, ...]] = {}
-    with EmulatedBoard(elf, realtime=True, speed=speed, pty=False, seed=seed) as board:
+    with EmulatedBoard(
+        elf, realtime=True, speed=speed, pty=False, seed=seed, plant="mujoco"
+    ) as board:
         # The board is up (firmware and harness found): only now is the previous run replaced,
         # so a demo that cannot start leaves the last one's files as they were.
         out.mkdir(parents=True, exist_ok=True)

@@ -218,9 +218,18 @@ static void apply_loads(utrf_mjplant_t *mp, double dt)
             memset(mp->d->xfrc_applied + 6 * (int)st->load_body[i], 0, 6 * sizeof(double));
     for (int i = 0; i < mp->n_pulses; i++)
         memset(mp->d->xfrc_applied + 6 * mp->pulses[i].body, 0, 6 * sizeof(double));
-    for (int i = 0; i < UTRF_MJPLANT_LOADS; i++)
-        if (st->load_body[i] >= 0)
-            apply_at(mp, (int)st->load_body[i], (int)st->load_site[i], st->load_force[i], 1.0);
+    for (int i = 0; i < UTRF_MJPLANT_LOADS; i++) {
+        if (st->load_body[i] < 0)
+            continue;
+        double f[3], a = 1.0, span = st->load_t1[i] - st->load_t0[i];
+        if (span > 0.0) {
+            a = (st->time - st->load_t0[i]) / span;
+            a = a < 0.0 ? 0.0 : a > 1.0 ? 1.0 : a;
+        }
+        for (int k = 0; k < 3; k++)
+            f[k] = st->load_from[i][k] + a * (st->load_force[i][k] - st->load_from[i][k]);
+        apply_at(mp, (int)st->load_body[i], (int)st->load_site[i], f, 1.0);
+    }
     double t0 = st->time, t1 = st->time + dt;
     int keep = 0;
     for (int i = 0; i < mp->n_pulses; i++) {
