@@ -16,6 +16,7 @@ from utrf.hil.bench import EmulatedTruth, open_emulated
 from utrf.hil.static_loading import RunError
 
 
+@pytest.mark.slow
 def test_hits_are_found_and_the_grasp_recovers(firmware_elf: Path, tmp_path: Path) -> None:
     out = tmp_path / "grasp"
     config = gh.GraspHoldConfig(duration_s=5.0, hits=2, seed=4, sample_hz=100.0)
