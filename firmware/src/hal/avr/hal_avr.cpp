@@ -238,10 +238,11 @@ __attribute__((always_inline)) inline uint16_t cycles_from(const Stamp& start) {
 }
 
 // Runs ticks while any is due. Called with interrupts disabled; returns with them disabled.
-// The UART transmitter's interrupt waits during the tick (the byte in the shift register and
-// the one in UDR0 still go out), and so does timer 0's overflow (millis(); its flag keeps one
-// overflow, and the tick lasts far less than its 1.024 ms): the control tick comes first, and
-// its measured time is its own. Receiving stays on, or bytes would be lost.
+// Timer 0's overflow (millis()) waits during the tick: its flag keeps one overflow, and the
+// tick lasts far less than its 1.024 ms. The UART's interrupts stay on: receiving, or bytes
+// would be lost; transmitting, or the line would stand idle for the tick's 250-370 us and the
+// 1 kHz state stream (39 bytes, 0.39 ms of line a frame) would lose frames behind replies.
+// The tick's measured time includes those nested interrupts.
 // One tick, timed. Out of line, so that its timing arithmetic is not hoisted into registers
 // the loop below would keep (and save) across the tick's call; the start is in memory for the
 // same reason.
@@ -249,7 +250,6 @@ Stamp g_tick_start;
 __attribute__((noinline)) void run_one_tick() {
     g_tick_deferred = 0;
     g_tick_running = 1;
-    UCSR0B &= (uint8_t)~_BV(UDRIE0);
     TIMSK0 &= (uint8_t)~_BV(TOIE0);
     g_tick_start = read_stamp();
     sei();
@@ -259,7 +259,6 @@ __attribute__((noinline)) void run_one_tick() {
     app::tick_done(cycles, overran);
     cli();
     TIMSK0 |= _BV(TOIE0);
-    if (g_tx_head != g_tx_tail) UCSR0B |= _BV(UDRIE0);
     g_tick_running = 0;
 }
 
