@@ -7,7 +7,9 @@
 #   make bench-firmware        tick load and memory, appended to docs/benchmarks.md
 #   UTRF_BAUD=...              serial baud rate (default 1000000, exact at 16 MHz with U2X)
 
-FW_SRC       := firmware/src
+# FW_DIR: where this file lives (an installed utrf builds from its packaged copy into a cache).
+FW_DIR       ?= firmware
+FW_SRC       := $(FW_DIR)/src
 FW_BUILD     := $(BUILD)/firmware
 FW_ELF       := $(FW_BUILD)/utrf.elf
 FW_HEX       := $(FW_BUILD)/utrf.hex
@@ -51,12 +53,15 @@ FW_OWN_SRCS := $(FW_SRC)/utrf_main.cpp $(wildcard $(FW_SRC)/core/*.cpp) \
                $(wildcard $(FW_SRC)/hal/avr/*.cpp)
 FW_OWN_OBJS := $(patsubst $(FW_SRC)/%.cpp,$(FW_BUILD)/obj/%.o,$(FW_OWN_SRCS))
 
-# The Arduino core as an archive, objects named <file>.o under their own directory: its
-# main.cpp never meets ours, and only what is referenced is linked (not its Serial, whose
-# UART interrupts would clash with hal/avr's driver).
-ARDUINO_SRCS := $(wildcard $(ARDUINO_CORE)/*.c $(ARDUINO_CORE)/*.cpp $(ARDUINO_CORE)/*.S)
-ARDUINO_OBJS := $(patsubst $(ARDUINO_CORE)/%,$(FW_BUILD)/arduino-core/%.o,$(ARDUINO_SRCS))
+# The Arduino core as an archive, built by a sub-make (firmware/arduino_core.mk) that lists
+# the core's sources when it runs: nothing here may read what tools/setup.sh installs while
+# make parses, since on a fresh machine that is before the set-up has run.
 ARDUINO_LIB  := $(FW_BUILD)/arduino-core/libarduino_core.a
+ARDUINO_CORE_MAKE = $(MAKE) -s --no-print-directory -f $(FW_DIR)/arduino_core.mk \
+  ARDUINO_CORE='$(ARDUINO_CORE)' OUT='$(@D)' AVR_CC='$(AVR_CC)' AVR_CXX='$(AVR_CXX)' \
+  AVR_AR='$(AVR_AR)' CORE_CFLAGS='$(FW_MCU) $(ARDUINO_OPT) -std=gnu11 -w $(FW_INC)' \
+  CORE_CXXFLAGS='$(FW_MCU) $(ARDUINO_OPT) $(FW_CXXSTD) -DDECIMAL_DIG=9 -w $(FW_INC)' \
+  CORE_SFLAGS='$(FW_MCU) -x assembler-with-cpp $(FW_INC)'
 
 # The git commit goes into identify's build_id; rewritten only when it changes.
 FW_BUILD_ID := $(FW_BUILD)/build_id.h
@@ -83,20 +88,12 @@ $(FW_BUILD)/obj/%.o: $(FW_SRC)/%.cpp
 	$(AVR_CXX) -c $(FW_MCU) $(FW_OPT) $(FW_CXXSTD) $(FW_WARN) $(FW_DEFS) $(FW_INC) \
 	  $(FW_EXTRA) -MMD -MP -o $@ $<
 
-$(FW_BUILD)/arduino-core/%.c.o: $(ARDUINO_CORE)/%.c
-	@mkdir -p $(@D)
-	@$(AVR_CC) -c $(FW_MCU) $(ARDUINO_OPT) -std=gnu11 -w $(FW_INC) -o $@ $<
-$(FW_BUILD)/arduino-core/%.cpp.o: $(ARDUINO_CORE)/%.cpp
-	@mkdir -p $(@D)
-	@$(AVR_CXX) -c $(FW_MCU) $(ARDUINO_OPT) $(FW_CXXSTD) -DDECIMAL_DIG=9 -w $(FW_INC) -o $@ $<
-$(FW_BUILD)/arduino-core/%.S.o: $(ARDUINO_CORE)/%.S
-	@mkdir -p $(@D)
-	@$(AVR_CC) -c $(FW_MCU) -x assembler-with-cpp $(FW_INC) -o $@ $<
-
-$(ARDUINO_LIB): $(ARDUINO_OBJS)
-	@rm -f $@
-	@$(AVR_AR) rcs $@ $^
-	@echo "arduino core: $(words $^) objects from $(ARDUINO_CORE)"
+# Always asked (the sub-make knows the core's files); the archive is rewritten only when an
+# object changed, so the ELF is relinked only then.
+$(ARDUINO_LIB): FORCE_ARDUINO_CORE
+	@$(ARDUINO_CORE_MAKE) $@
+.PHONY: FORCE_ARDUINO_CORE
+FORCE_ARDUINO_CORE:
 
 $(FW_ELF): $(FW_OWN_OBJS) $(ARDUINO_LIB)
 	$(AVR_CXX) $(FW_MCU) -Wl,--gc-sections -o $@ $(FW_OWN_OBJS) $(ARDUINO_LIB) -lm
@@ -117,24 +114,31 @@ firmware-size: $(FW_ELF)
 	@grep -h "^// Geometry\|rows, .* bytes; worst" $(FW_SRC)/generated/kinematics_table.h \
 	  | sed 's|^// |kinematics table: |'
 
-flash: $(FW_HEX)
+# utrf flash checks first (the port exists and opens, the bootloader signs on within 2 s) and
+# fails in seconds with one line where avrdude alone would hang or retry for 30 s.
+flash:
 	@if [ -z "$(PORT)" ]; then echo "usage: make flash PORT=/dev/ttyACM0" >&2; exit 2; fi
-	$(AVRDUDE) -p atmega2560 -c $(AVRDUDE_PROGRAMMER) -P $(PORT) -b $(FLASH_BAUD) -D \
-	  -U flash:w:$(FW_HEX):i
+	@$(MAKE) --no-print-directory setup && $(MAKE) -s --no-print-directory $(FW_HEX)
+	$(PY) -m utrf flash --port '$(PORT)' --hex $(FW_HEX) --avrdude $(AVRDUDE) \
+	  --programmer $(AVRDUDE_PROGRAMMER) --baud $(FLASH_BAUD)
 
 # ---- the core on the host, with the host hardware layer and a C ABI for ctypes ----------------
 FW_HOST_SRCS := $(wildcard $(FW_SRC)/core/*.cpp) $(wildcard firmware/test/*.cpp)
 FW_HOST_OBJS := $(patsubst %.cpp,$(FW_BUILD)/host/obj/%.o,$(FW_HOST_SRCS))
-FW_HOST_FLAGS := -std=gnu++11 -O2 -g -fPIC -fno-exceptions -fno-rtti $(FW_WARN) -I$(FW_SRC)
+# Undefined behaviour is an error in the host build the tests run (the AVR build would have
+# the same bug): UBSan, every finding fatal (-fno-sanitize-recover), so a test fails on it.
+FW_HOST_UBSAN := -fsanitize=undefined -fno-sanitize-recover=all
+FW_HOST_FLAGS := -std=gnu++11 -O2 -g -fPIC -fno-exceptions -fno-rtti $(FW_HOST_UBSAN) $(FW_WARN) \
+                 -I$(FW_SRC)
 
 firmware-host: $(FW_HOST_LIB)
 
-$(FW_BUILD)/host/obj/%.o: %.cpp
+$(FW_BUILD)/host/obj/%.o: %.cpp firmware/firmware.mk
 	@mkdir -p $(@D)
 	$(HOST_CXX) -c $(FW_HOST_FLAGS) -MMD -MP -o $@ $<
 
 $(FW_HOST_LIB): $(FW_HOST_OBJS)
-	$(HOST_CXX) -shared -o $@ $^ -lm
+	$(HOST_CXX) -shared $(FW_HOST_UBSAN) -o $@ $^ -lm
 
 # ---- checks that need the AVR: the core's arithmetic on the chip, the simavr harness ----------
 FW_CHECK_ELF := $(FW_BUILD)/check/core_check.elf
@@ -167,3 +171,52 @@ BENCH_TARGETS += bench-firmware
 
 bench-firmware: firmware firmware-host firmware-check
 	$(PY) tools/bench_firmware.py --update docs/benchmarks.md
+
+# ---- the PlatformIO build, reproduced with Debian's toolchain (make firmware-pio) -------------
+# `pio run` cannot fetch its platform here, so this builds what it would: PlatformIO's atmelavr
+# Arduino builder compiles everything at -Os with -flto (C++ also -fpermissive), defines
+# ARDUINO=10808 and PLATFORMIO, archives the core with avr-gcc-ar/avr-gcc-ranlib, and links
+# with -Os -flto -fuse-linker-plugin; our sources get platformio.ini's build_src_flags after
+# its own (read from the file, so the two cannot drift). The core's sources are listed in the
+# recipe, not when make parses (a fresh machine installs them during the same run).
+# tests/firmware/test_fw_platformio.py builds it, checks it against `make firmware` and boots
+# it on the emulated board.
+FW_PIO_BUILD := $(FW_BUILD)/pio
+FW_PIO_ELF   := $(FW_PIO_BUILD)/utrf.elf
+AVR_GCC_AR     ?= avr-gcc-ar
+AVR_GCC_RANLIB ?= avr-gcc-ranlib
+PIO_DEFS := -mmcu=atmega2560 -DF_CPU=16000000L -DPLATFORMIO=60118 -DARDUINO_AVR_MEGA2560 \
+            -DARDUINO=10808 -DARDUINO_ARCH_AVR
+PIO_CC_FLAGS  := -Os -Wall -ffunction-sections -fdata-sections -flto
+PIO_CXX_FLAGS := -fno-exceptions -fno-threadsafe-statics -fpermissive -std=gnu++11
+# avr-gcc 5.4's float.h defines DECIMAL_DIG only for C99 (PlatformIO's avr-gcc 7.3 does not
+# need this; the core's WString.cpp does).
+PIO_CORE_EXTRA := -DDECIMAL_DIG=9
+PIO_LINK_FLAGS := -Os -mmcu=atmega2560 -Wl,--gc-sections -flto -fuse-linker-plugin
+PIO_SRC_FLAGS = $(shell sed -n '/^build_src_flags *=/,/^[a-z_]* *=/{/^ /p}' platformio.ini)
+
+.PHONY: firmware-pio
+firmware-pio: $(FW_PIO_ELF)
+
+$(FW_PIO_ELF): $(FW_OWN_SRCS) $(wildcard $(FW_SRC)/*.h $(FW_SRC)/*/*.h $(FW_SRC)/*/*/*.h) \
+               platformio.ini
+	@rm -rf $(FW_PIO_BUILD) && mkdir -p $(FW_PIO_BUILD)/core $(FW_PIO_BUILD)/src
+	@set -e; for f in $(ARDUINO_CORE)/*.c $(ARDUINO_CORE)/*.cpp $(ARDUINO_CORE)/*.S; do \
+	  [ -e "$$f" ] || continue; o=$(FW_PIO_BUILD)/core/$$(basename $$f).o; \
+	  case $$f in \
+	    *.c) $(AVR_CC) -c -std=gnu11 -fno-fat-lto-objects $(PIO_CC_FLAGS) $(PIO_DEFS) -w \
+	           $(FW_INC) -o $$o $$f ;; \
+	    *.cpp) $(AVR_CXX) -c $(PIO_CXX_FLAGS) $(PIO_CC_FLAGS) $(PIO_DEFS) $(PIO_CORE_EXTRA) -w \
+	           $(FW_INC) -o $$o $$f ;; \
+	    *.S) $(AVR_CC) -c -x assembler-with-cpp -flto $(PIO_CC_FLAGS) $(PIO_DEFS) $(FW_INC) \
+	           -o $$o $$f ;; \
+	  esac; done
+	@$(AVR_GCC_AR) rc $(FW_PIO_BUILD)/libFrameworkArduino.a $(FW_PIO_BUILD)/core/*.o
+	@$(AVR_GCC_RANLIB) $(FW_PIO_BUILD)/libFrameworkArduino.a
+	@set -e; for f in $(FW_OWN_SRCS); do \
+	  o=$(FW_PIO_BUILD)/src/$$(echo $$f | tr / _).o; \
+	  $(AVR_CXX) -c $(PIO_CXX_FLAGS) $(PIO_CC_FLAGS) $(PIO_DEFS) $(PIO_SRC_FLAGS) $(FW_INC) \
+	    -o $$o $$f; done
+	$(AVR_CXX) $(PIO_LINK_FLAGS) -o $@ $(FW_PIO_BUILD)/src/*.o \
+	  -L$(FW_PIO_BUILD) -Wl,--start-group -lFrameworkArduino -lm -Wl,--end-group
+	@echo "firmware-pio: $@ (PlatformIO's flags, Debian's avr-gcc)"

@@ -14,6 +14,7 @@ Standard library only, so it runs before the Python package is installed.
 from __future__ import annotations
 
 import argparse
+import binascii
 import json
 import math
 import re
@@ -29,6 +30,7 @@ from typing import Any
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SPEC_PATH = REPO_ROOT / "protocol" / "spec.toml"
 HEADER_PATH = REPO_ROOT / "firmware" / "src" / "generated" / "protocol_messages.h"
+CONFIG_PATH = REPO_ROOT / "firmware" / "src" / "generated" / "config_layout.h"
 MESSAGES_PATH = REPO_ROOT / "host" / "utrf" / "protocol" / "messages.py"
 README_PATH = REPO_ROOT / "protocol" / "README.md"
 README_BEGIN = "<!-- BEGIN GENERATED: message tables (python protocol/generate.py) -->"
@@ -118,6 +120,7 @@ class FieldDef:
     # type's own limit, so no check is generated.
     raw_min: int | float | None = None
     raw_max: int | float | None = None
+    default: float | None = None  # a configuration value's default (SI)
 
     @property
     def n(self) -> int:
@@ -139,6 +142,12 @@ class MessageDef:
     reply_timeout_s: float | None
     same_fields_as: str | None
     fields: list[FieldDef] = field(default_factory=list)
+    # The u8 field whose bits select fingers: the per-finger arrays are checked (and used)
+    # only for the fingers it selects.
+    masked_by: str | None = None
+
+    def masked(self, f: FieldDef) -> bool:
+        return self.masked_by is not None and f.count is not None and f.name != self.masked_by
 
     @property
     def size(self) -> int:
@@ -158,11 +167,34 @@ class MessageDef:
 
 
 @dataclass
+class ConfigDef:
+    """One part of the board's configuration: the values of a set_ request (less `finger`)."""
+
+    name: str  # member of config::Finger (per finger) or config::Config
+    struct: str  # its C++ struct
+    per_finger: bool
+    set: MessageDef
+    get: MessageDef
+    reply: MessageDef
+
+    @property
+    def fields(self) -> list[FieldDef]:
+        return [f for f in self.set.fields if not (self.per_finger and f.name == "finger")]
+
+
+@dataclass
 class Spec:
     protocol: dict[str, Any]
     enums: list[EnumDef]
     messages: list[MessageDef]
     schema_hash: int
+    configs: list[ConfigDef] = field(default_factory=list)
+
+    def field_default(self, message: str, name: str) -> float:
+        for f in self.message(message).fields:
+            if f.name == name and f.default is not None:
+                return f.default
+        raise SpecError(f"the protocol needs a default for {message}.{name}")
 
     def message(self, name: str) -> MessageDef:
         for m in self.messages:
@@ -234,9 +266,23 @@ _MESSAGE_KEYS = {
     "reply",
     "reply_timeout_s",
     "same_fields_as",
+    "masked_by",
     "fields",
 }
-_FIELD_KEYS = {"name", "type", "count", "scale", "min", "max", "enum", "flags", "unit", "doc"}
+_FIELD_KEYS = {
+    "name",
+    "type",
+    "count",
+    "scale",
+    "min",
+    "max",
+    "enum",
+    "flags",
+    "unit",
+    "doc",
+    "default",
+}
+_CONFIG_KEYS = {"name", "struct", "per_finger", "set", "get", "doc"}
 
 
 def _raw_bound(value: float, scale: float, up: bool) -> int:
@@ -337,6 +383,14 @@ def _load_field(
             raise SpecError(f"{where}: {key} must be a number")
     if lo is not None and hi is not None and lo > hi:
         raise SpecError(f"{where}: min {lo} is above max {hi}")
+    default = entry.get("default")
+    if default is not None:
+        if not isinstance(default, int | float) or isinstance(default, bool) or count:
+            raise SpecError(f"{where}: default must be a number, on a field that is no array")
+        if (lo is not None and default < lo) or (hi is not None and default > hi):
+            raise SpecError(f"{where}: default {default} is outside [{lo}, {hi}]")
+        if enum is not None and default not in {v.value for v in enum.values}:
+            raise SpecError(f"{where}: default {default} is not a {enum.name}")
     f = FieldDef(
         name=name,
         type=wire,
@@ -350,6 +404,7 @@ def _load_field(
         flags=flags,
         unit=str(entry.get("unit", "")),
         doc=str(entry.get("doc", "")),
+        default=None if default is None else float(default),
     )
     if wire.is_float:
         f.raw_min = None if lo is None else _f32(float(lo))
@@ -376,7 +431,7 @@ def load_spec(path: Path = SPEC_PATH) -> Spec:
             raw = tomllib.load(fh)
         except tomllib.TOMLDecodeError as exc:
             raise SpecError(f"{path}: {exc}") from exc
-    _check_keys("spec", raw, {"protocol", "enum", "flags", "message"})
+    _check_keys("spec", raw, {"protocol", "enum", "flags", "message", "config"})
     proto = raw.get("protocol", {})
     for key, kind in _PROTOCOL_KEYS.items():
         value = proto.get(key)
@@ -446,7 +501,14 @@ def load_spec(path: Path = SPEC_PATH) -> Spec:
             reply_timeout_s=entry.get("reply_timeout_s"),
             same_fields_as=same,
             fields=fields,
+            masked_by=entry.get("masked_by"),
         )
+        if m.masked_by is not None:
+            mask = next((f for f in fields if f.name == m.masked_by), None)
+            if mask is None or mask.type.name != "u8" or mask.count is not None:
+                raise SpecError(f"message {name}: masked_by {m.masked_by!r} is no u8 field")
+            if fields.index(mask) > min(i for i, f in enumerate(fields) if m.masked(f)):
+                raise SpecError(f"message {name}: {m.masked_by} must come before the arrays")
         if m.size > proto["max_payload"]:
             limit = proto["max_payload"]
             raise SpecError(f"message {name}: {m.size} bytes, above max_payload {limit}")
@@ -484,7 +546,47 @@ def load_spec(path: Path = SPEC_PATH) -> Spec:
             )
     if "ErrorCode" not in enums:
         raise SpecError("the protocol needs an ErrorCode enum")
-    return Spec(proto, list(enums.values()), messages, schema_hash(raw))
+    spec = Spec(proto, list(enums.values()), messages, schema_hash(raw))
+    spec.configs = [_load_config(entry, spec) for entry in raw.get("config", [])]
+    if len({c.name for c in spec.configs}) != len(spec.configs):
+        raise SpecError("two config blocks share a name")
+    spec.field_default("set_safety", "heartbeat_timeout")
+    return spec
+
+
+def _load_config(entry: dict[str, Any], spec: Spec) -> ConfigDef:
+    name = entry.get("name")
+    where = f"config {name}"
+    if not isinstance(name, str) or not _NAME_RE.match(name):
+        raise SpecError(f"config name {name!r} must be snake_case")
+    _check_keys(where, entry, _CONFIG_KEYS)
+    struct = entry.get("struct")
+    if not isinstance(struct, str) or not _CAMEL_RE.match(struct):
+        raise SpecError(f"{where}: struct {struct!r} must be CamelCase")
+    per_finger = entry.get("per_finger")
+    if not isinstance(per_finger, bool):
+        raise SpecError(f"{where}: per_finger must be true or false")
+    try:
+        set_msg = spec.message(str(entry.get("set")))
+        get_msg = spec.message(str(entry.get("get")))
+    except KeyError as exc:
+        raise SpecError(f"{where}: no message {exc}") from None
+    reply = spec.reply_of(get_msg)
+    if not set_msg.is_request or reply is None or reply.same_fields_as != set_msg.name:
+        raise SpecError(
+            f"{where}: {get_msg.name}'s reply must have the same fields as {set_msg.name}"
+        )
+    head = [(f.name, f.type.name) for f in set_msg.fields[:1]]
+    if per_finger and head != [("finger", "u8")]:
+        raise SpecError(f"{where}: a per-finger {set_msg.name} starts with u8 finger")
+    get_head = [(f.name, f.type.name) for f in get_msg.fields]
+    if get_head != (head if per_finger else []):
+        raise SpecError(f"{where}: {get_msg.name} takes {'finger' if per_finger else 'nothing'}")
+    c = ConfigDef(name, struct, per_finger, set_msg, get_msg, reply)
+    for f in c.fields:
+        if f.count is not None:
+            raise SpecError(f"{where}: {set_msg.name}.{f.name}: no arrays in the configuration")
+    return c
 
 
 # --------------------------------------------------------------------------------------------
@@ -635,6 +737,8 @@ def render_header(spec: Spec) -> str:
     w(f"static const uint8_t kFingerCount = {p['finger_count']};")
     w(f"static const uint32_t kDefaultBaud = {p['default_baud']}UL;")
     w(f"static const uint16_t kMaxTelemetryHz = {p['max_telemetry_hz']};")
+    hb_ms = round(spec.field_default("set_safety", "heartbeat_timeout") * 1000)
+    w(f"static const uint16_t kDefaultHeartbeatTimeoutMs = {hb_ms};")
     w("// Seq of board-initiated frames (state stream, fault, boot): this bit set, the low bits a")
     w("// running counter. Requests use seqs without it and replies echo them, so a reply and a")
     w("// stream frame can never be confused.")
@@ -778,6 +882,8 @@ def render_header(spec: Spec) -> str:
                     else f"    out.{f.name}[i] = detail::rd_{t}(body + {f.offset} + i);"
                 )
                 conds = _c_checks(f, f"out.{f.name}[i]")
+                if conds and m.masked(f):
+                    conds = [f"((out.{m.masked_by} >> i) & 1u) && ({' || '.join(conds)})"]
                 if conds:
                     w(f"    if ({' || '.join(conds)}) {{")
                     w(f"      bad_field = {f.index};")
@@ -798,6 +904,49 @@ def render_header(spec: Spec) -> str:
                     f"detail::wr_{t}(body + {f.offset}{step}, msg.{f.name}[i]);"
                 )
         w(f"  return {cn}::kSize;")
+        w("}")
+    w("")
+    w("// write: the body's bytes, one at a time, into a byte sink W (put(uint8_t)): the board's")
+    w("// frame writer computes the CRC and the COBS codes as the bytes come, with no body copy.")
+    w("template <typename W>")
+    w("inline void put_u8(W& w, uint8_t v) { w.put(v); }")
+    w("template <typename W>")
+    w("inline void put_i8(W& w, int8_t v) { w.put(static_cast<uint8_t>(v)); }")
+    w("template <typename W>")
+    w("inline void put_u16(W& w, uint16_t v) {")
+    w("  w.put(static_cast<uint8_t>(v));")
+    w("  w.put(static_cast<uint8_t>(v >> 8));")
+    w("}")
+    w("template <typename W>")
+    w("inline void put_i16(W& w, int16_t v) { put_u16(w, static_cast<uint16_t>(v)); }")
+    w("template <typename W>")
+    w("inline void put_u32(W& w, uint32_t v) {")
+    w("  put_u16(w, static_cast<uint16_t>(v));")
+    w("  put_u16(w, static_cast<uint16_t>(v >> 16));")
+    w("}")
+    w("template <typename W>")
+    w("inline void put_i32(W& w, int32_t v) { put_u32(w, static_cast<uint32_t>(v)); }")
+    w("template <typename W>")
+    w("inline void put_f32(W& w, float f) {")
+    w("  uint32_t u;")
+    w("  memcpy(&u, &f, sizeof u);")
+    w("  put_u32(w, u);")
+    w("}")
+    for m in spec.messages:
+        if m.is_request:
+            continue
+        cn = m.class_name
+        w("template <typename W>")
+        w(f"inline void write(W& w, const {cn}& msg) {{")
+        if not m.fields:
+            w("  (void)w;")
+            w("  (void)msg;")
+        for f in m.fields:
+            t = f.type.name
+            if f.count is None:
+                w(f"  put_{t}(w, msg.{f.name});")
+            else:
+                w(f"  for (uint8_t i = 0; i < {f.count}; ++i) put_{t}(w, msg.{f.name}[i]);")
         w("}")
     w("")
     w("// Body size of a message id, or -1 for an id no message has.")
@@ -858,6 +1007,180 @@ def render_header(spec: Spec) -> str:
     if clashes:
         w("")
     w("#endif  // UTRF_PROTOCOL_MESSAGES_H")
+    return "\n".join(out) + "\n"
+
+
+# --------------------------------------------------------------------------------------------
+# C++ configuration: structs, EEPROM layout, defaults, message <-> struct, handler table
+# --------------------------------------------------------------------------------------------
+
+
+def layout_version(spec: Spec) -> int:
+    """The EEPROM layout's version: a CRC-16 of every stored field's place and type, so that a
+    change of the layout (a new gain) is another version and an old image loads the defaults."""
+    text = ";".join(
+        f"{c.name}:{c.per_finger}:" + ",".join(f"{f.name}/{f.type.name}" for f in c.fields)
+        for c in spec.configs
+    )
+    v = binascii.crc_hqx(text.encode("utf-8"), 0xFFFF)
+    return v if v not in (0x0000, 0xFFFF) else 0x0001  # never an erased or a zeroed cell
+
+
+def _c_default(f: FieldDef) -> str:
+    assert f.default is not None
+    if f.type.is_float:
+        return c_float(f.default)
+    raw = round(f.default / (f.scale or 1.0))
+    return c_int(raw, f.type)
+
+
+def render_config(spec: Spec) -> str:
+    n = spec.protocol["finger_count"]
+    out: list[str] = []
+    w = out.append
+    w("// Generated by protocol/generate.py from protocol/spec.toml: do not edit.")
+    w("// Regenerate with `python protocol/generate.py`; a test fails when this file is stale.")
+    w("//")
+    w("// The board's configuration as the spec's [[config]] blocks name it: one packed struct per")
+    w("// set_ request (its fields but `finger`, as the wire carries them: f32 as float, scaled")
+    w("// fields as their raw integers), the EEPROM layout and its version, the defaults, and the")
+    w("// copies between the structs and the messages that the get/set handlers use. The checks")
+    w("// beyond the spec's ranges and what a change does are core/config.* and core/dispatch.*.")
+    w("#ifndef UTRF_CONFIG_LAYOUT_H")
+    w("#define UTRF_CONFIG_LAYOUT_H")
+    w("")
+    w("#include <stdint.h>")
+    w("")
+    w('#include "protocol_messages.h"')
+    w("")
+    w("namespace utrf {")
+    w("namespace config {")
+    w("")
+    w("#pragma pack(push, 1)")
+    for c in spec.configs:
+        w(f"// {c.set.name}'s values" + (", per finger" if c.per_finger else ", board-wide"))
+        w(f"struct {c.struct} {{")
+        for f in c.fields:
+            comment = c_comment(f)
+            w(f"  {f.type.ctype} {f.name};" + (f"  // {comment}" if comment else ""))
+        w("};")
+        w("")
+    w("struct Finger {")
+    for c in spec.configs:
+        if c.per_finger:
+            w(f"  {c.struct} {c.name};")
+    w("};")
+    w("")
+    w("struct Config {")
+    w(f"  Finger finger[{n}];")
+    for c in spec.configs:
+        if not c.per_finger:
+            w(f"  {c.struct} {c.name};")
+    w("};")
+    w("#pragma pack(pop)")
+    w("")
+    w("// The layout's version in the EEPROM image: a CRC-16 of every stored field's place and")
+    w("// type. Another layout (a new gain) is another version: an old image loads the defaults.")
+    w(f"static const uint16_t kLayoutVersion = 0x{layout_version(spec):04X};")
+    sizes = {c.name: sum(f.size for f in c.fields) for c in spec.configs}
+    total = sum(sizes[c.name] * (n if c.per_finger else 1) for c in spec.configs)
+    w(f"static const uint16_t kConfigBytes = {total};")
+    w('static_assert(sizeof(Config) == kConfigBytes, "the configuration is packed");')
+    w("")
+    w("// The spec's defaults. A field without one is left as it is (the firmware sets it: e.g.")
+    w("// the Joint-2 limits from the finger's geometry).")
+    for c in spec.configs:
+        w(f"inline void spec_defaults({c.struct}& c) {{")
+        missing = [f.name for f in c.fields if f.default is None]
+        for f in c.fields:
+            if f.default is not None:
+                w(f"  c.{f.name} = {_c_default(f)};")
+        if missing:
+            w(f"  // no default in the spec: {', '.join(missing)}")
+        if all(f.default is None for f in c.fields):
+            w("  (void)c;")
+        w("}")
+    w("")
+    w("// Stored values into the message that carries them (the get_ reply, or the set_ request")
+    w("// itself), and a set_ request's values into the struct.")
+    for c in spec.configs:
+        w("template <typename Msg>")
+        if c.per_finger:
+            w(f"inline void fill(const {c.struct}& c, uint8_t finger, Msg& m) {{")
+            w("  m.finger = finger;")
+        else:
+            w(f"inline void fill(const {c.struct}& c, Msg& m) {{")
+        for f in c.fields:
+            w(f"  m.{f.name} = c.{f.name};")
+        w("}")
+        w(f"inline void take(const proto::{c.set.class_name}& m, {c.struct}& c) {{")
+        for f in c.fields:
+            w(f"  c.{f.name} = m.{f.name};")
+        w("}")
+    w("")
+    w("// Where a request's values live in the configuration.")
+    for c in spec.configs:
+        for msg in (c.set, c.get):
+            cn = msg.class_name
+            if c.per_finger:
+                w(f"inline {c.struct}& slot(Config& cfg, const proto::{cn}& m) {{")
+                w(f"  return cfg.finger[m.finger].{c.name};")
+            else:
+                w(f"inline {c.struct}& slot(Config& cfg, const proto::{cn}&) {{")
+                w(f"  return cfg.{c.name};")
+            w("}")
+    w("")
+    w("// The get_ request's reply, filled from the configuration.")
+    for c in spec.configs:
+        g, r = c.get.class_name, c.reply.class_name
+        w(f"inline void reply_of(Config& cfg, const proto::{g}& m, proto::{r}& r) {{")
+        if c.per_finger:
+            w("  fill(slot(cfg, m), m.finger, r);")
+        else:
+            w("  fill(slot(cfg, m), r);")
+        w("}")
+    w("")
+    w("// Every stored value within the spec's ranges (an EEPROM image's body): each set_ request")
+    w("// the configuration makes, encoded and decoded back.")
+    ok = "proto::DecodeStatus::OK"
+    w("inline bool within_spec_ranges(const Config& cfg) {")
+    w("  uint8_t body[proto::kMaxPayload];")
+    w("  uint8_t bad;")
+    for c in spec.configs:
+        cn = c.set.class_name
+        if c.per_finger:
+            w(f"  for (uint8_t f = 0; f < {n}; ++f) {{")
+            w(f"    proto::{cn} m, back;")
+            w(f"    fill(cfg.finger[f].{c.name}, f, m);")
+            w("    const uint8_t len = proto::encode(m, body);")
+            w(f"    if (proto::decode(body, len, back, bad) != {ok}) return false;")
+            w("  }")
+        else:
+            w("  {")
+            w(f"    proto::{cn} m, back;")
+            w(f"    fill(cfg.{c.name}, m);")
+            w("    const uint8_t len = proto::encode(m, body);")
+            w(f"    if (proto::decode(body, len, back, bad) != {ok}) return false;")
+            w("  }")
+    w("  return true;")
+    w("}")
+    w("")
+    w("}  // namespace config")
+    w("}  // namespace utrf")
+    w("")
+    w("// X-macros over the configuration's requests, X(Struct, MSG_ID_NAME) and for the gets")
+    w("// X(Struct, MSG_ID_NAME, ReplyStruct): the dispatch table.")
+    w("#define UTRF_CONFIG_SETS(X) \\")
+    for i, c in enumerate(spec.configs):
+        tail = " \\" if i < len(spec.configs) - 1 else ""
+        w(f"  X({c.set.class_name}, {c.set.upper}){tail}")
+    w("")
+    w("#define UTRF_CONFIG_GETS(X) \\")
+    for i, c in enumerate(spec.configs):
+        tail = " \\" if i < len(spec.configs) - 1 else ""
+        w(f"  X({c.get.class_name}, {c.get.upper}, {c.reply.class_name}){tail}")
+    w("")
+    w("#endif  // UTRF_CONFIG_LAYOUT_H")
     return "\n".join(out) + "\n"
 
 
@@ -969,6 +1292,9 @@ def render_messages(spec: Spec) -> str:
     w(f"RETRIES = {p['retries']}")
     w(f"HEARTBEAT_PERIOD_S = {fmt_number(p['heartbeat_period_s'])}")
     w(f"MAX_TELEMETRY_HZ = {p['max_telemetry_hz']}")
+    w("#: The board's heartbeat timeout until the host sets one (set_safety).")
+    hb = spec.field_default("set_safety", "heartbeat_timeout")
+    w(f"DEFAULT_HEARTBEAT_TIMEOUT_S = {fmt_number(hb)}")
     w("#: Set in the seq of board-initiated frames (state stream, fault, boot), clear in requests.")
     w(f"BOARD_SEQ_FLAG = 0x{p['board_seq_flag']:02X}")
     for e in spec.enums:
@@ -998,6 +1324,8 @@ def render_messages(spec: Spec) -> str:
         w(f"    SIZE: ClassVar[int] = {m.size}")
         direction = "HOST_TO_BOARD" if m.is_request else "BOARD_TO_HOST"
         w(f"    DIRECTION: ClassVar[Direction] = Direction.{direction}")
+        if m.masked_by is not None:
+            w(f"    MASKED_BY: ClassVar[str | None] = {py_str(m.masked_by)}")
         if m.is_request:
             w(f"    IDEMPOTENT: ClassVar[bool] = {m.idempotent}")
             w(f"    REPLY_TIMEOUT_S: ClassVar[float] = {fmt_number(spec.timeout_of(m))}")
@@ -1078,6 +1406,11 @@ def render_readme_tables(spec: Spec) -> str:
     period = p["heartbeat_period_s"]
     w(f"| heartbeat period | {period:g} s | host: longest silence before a heartbeat |")
     w(f"| max telemetry rate | {p['max_telemetry_hz']} Hz | fastest state stream |")
+    hb = spec.field_default("set_safety", "heartbeat_timeout")
+    w(
+        f"| default heartbeat timeout | {hb:g} s | board: host silence before HOST_TIMEOUT, "
+        "until set_safety sets another |"
+    )
     flag = p["board_seq_flag"]
     w(f"| board seq flag | `0x{flag:02X}` | set in the seq of board-initiated frames |")
     w("")
@@ -1168,6 +1501,7 @@ def outputs(spec: Spec) -> dict[Path, str]:
     readme = README_PATH.read_text(encoding="utf-8") if README_PATH.exists() else None
     return {
         HEADER_PATH: render_header(spec),
+        CONFIG_PATH: render_config(spec),
         MESSAGES_PATH: render_messages(spec),
         README_PATH: splice_readme(readme, render_readme_tables(spec)),
     }

@@ -34,6 +34,7 @@ BEGIN = "<!-- BEGIN firmware (make bench-firmware) -->"
 END = "<!-- END firmware -->"
 CPU_HZ = 16_000_000
 TICK_CYCLES = CPU_HZ // 1000
+TARGET = 0.15  # issue 11 goal 4: the tick at most 15 % of the CPU at its worst
 
 sys.path.insert(0, str(REPO / "tests" / "firmware"))
 
@@ -125,7 +126,8 @@ def verdict(loads: list[dict]) -> list[str]:
     fw_worst = max(d["tick_worst_us"] * 16 for d in normal)
     sim_worst = max(d["sim_tick_worst_cycles"] for d in normal)
     mean = max(d["sim_tick_mean_cycles"] for d in normal)
-    met = max(fw_worst, sim_worst) <= 0.3 * TICK_CYCLES
+    met = max(fw_worst, sim_worst) <= TARGET * TICK_CYCLES
+    own_met = max(d["sim_own_worst_cycles"] for d in normal) <= TARGET * TICK_CYCLES
     typical = next(d for d in loads if d["scenario"] == "typical")
     nested = typical["sim_nested_mean_cycles"] * typical["sim_ticks"]
     per_byte = nested / max(1, typical["sim_nested_interrupts"])
@@ -136,7 +138,10 @@ def verdict(loads: list[dict]) -> list[str]:
     return [
         f"With normal traffic the tick's worst is {pct(max(fw_worst, sim_worst))} of the CPU "
         f"(firmware {pct(fw_worst)}, simavr {pct(sim_worst)}), its mean at most {pct(mean)}: "
-        + ("the 30 % target is **met**." if met else "the 30 % target is **not met**.")
+        + ("the 15 % target is **met**." if met else "the 15 % target is **not met**.")
+        + " The tick's own work alone (nested interrupts left out) is at worst "
+        + f"{pct(max(d['sim_own_worst_cycles'] for d in normal))}"
+        + (", within 15 %." if own_met else ", above 15 % too.")
         + f" Its worst case is the tick at its own worst ({own_worst:,} cycles) while a frame "
         f"arrives: each byte's receive interrupt nests in it ({per_byte:.0f} cycles a byte here, "
         f"entry to reti). Bound for a whole set_targets frame ({frame} bytes) arriving as the "
@@ -144,7 +149,7 @@ def verdict(loads: list[dict]) -> list[str]:
         f"(about {overhead:,.0f} cycles more: register saves, the tick's timing and "
         f"bookkeeping) {pct(bound + overhead)}. The saturated line is a stress case: the tick "
         "stays on time, the board drops what it cannot parse (counted). See firmware/README.md, "
-        "Timing, for what the tick does and what its time went down from.",
+        "Timing, for what the tick does.",
     ]
 
 
@@ -194,10 +199,10 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         "interrupt, nested UART/ADC interrupts included). *simavr*: cycles from app::tick()'s "
         "entry to its return, counted by the simulator; *own* is that less the interrupts "
         "served while it ran (*nested*: the UART's receive interrupt, one a byte; the "
-        "transmitter's and timer 0's wait for the tick's end), each counted from the step that "
+        "transmitter's too; timer 0's waits for the tick's end), each counted from the step that "
         "accepts it to its reti. *whole interrupt*: the timer interrupt that runs the tick, "
         "from its vector to its reti (register saves, the tick's timing and bookkeeping "
-        "included). Target: at most 30 % (4,800 cycles).",
+        "included). Target: at most 15 % (2,400 cycles). The tick is plain C++ (no assembly).",
         "",
         "| host traffic | ticks | overruns | firmware mean | firmware worst | simavr mean | "
         "simavr worst | own mean / worst | nested mean / worst | whole interrupt mean / worst |",

@@ -5,8 +5,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 APT_PACKAGES=(gcc-avr avr-libc binutils-avr simavr libsimavr-dev libelf-dev arduino-core-avr
-              avrdude doctest-dev
-              libosmesa6)  # libosmesa6: MuJoCo's off-screen rendering (MUJOCO_GL=osmesa)
+              avrdude
+              libosmesa6  # MuJoCo's off-screen rendering (MUJOCO_GL=osmesa)
+              clang libclang-rt-14-dev)  # libFuzzer and the sanitizer runtimes (tests/fuzz)
 VENV=.venv
 PYTHON=${PYTHON:-python3.11}
 

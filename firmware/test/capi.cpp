@@ -16,12 +16,32 @@
 using namespace utrf;
 using hal::host::state;
 
+namespace {
+// The line: what the UART sent, moved out of its transmit buffer after every loop() pass of
+// fw_run/fw_loop (a real line drains it within a millisecond), until fw_tx reads it.
+const uint32_t kLineBytes = 1u << 16;
+uint8_t g_line[kLineBytes];
+uint32_t g_line_len = 0;
+
+void drain_to_line() {
+    hal::host::State& s = state();
+    if (s.tx_room_limit != 0xFFFF) return;  // a test holds the buffer full: leave it
+    uint16_t n = s.tx_len;
+    if (n > kLineBytes - g_line_len) n = (uint16_t)(kLineBytes - g_line_len);
+    for (uint16_t i = 0; i < n; ++i) g_line[g_line_len + i] = s.tx[i];
+    g_line_len += n;
+    for (uint16_t i = n; i < s.tx_len; ++i) s.tx[i - n] = s.tx[i];
+    s.tx_len = (uint16_t)(s.tx_len - n);
+}
+}  // namespace
+
 extern "C" {
 
 // ---- the board -------------------------------------------------------------------------------
 
 void fw_power_on(uint8_t reset_cause) {
     hal::host::power_on();
+    g_line_len = 0;
     state().reset_cause = reset_cause;
     app::Board* b = &app::board();
     b->~Board();
@@ -41,14 +61,23 @@ void fw_tick(uint32_t n) {
 }
 
 void fw_loop(uint32_t n) {
-    for (uint32_t i = 0; i < n; ++i) app::loop();
+    for (uint32_t i = 0; i < n; ++i) {
+        app::loop();
+        drain_to_line();
+    }
 }
 
-// `ms` milliseconds of normal running: a tick, then a loop() pass, each millisecond.
+// `ms` milliseconds of normal running: a tick, then kLoopsPerMs loop() passes, each millisecond.
+static const uint8_t kLoopsPerMs = 4;
 void fw_run(uint32_t ms) {
     for (uint32_t i = 0; i < ms; ++i) {
         fw_tick(1);
-        app::loop();
+        // A few loop() passes a millisecond (the MEGA makes dozens), the line draining
+        // between them: each sends at most one board-initiated frame.
+        for (uint8_t k = 0; k < kLoopsPerMs; ++k) {
+            app::loop();
+            drain_to_line();
+        }
     }
 }
 
@@ -75,6 +104,13 @@ uint16_t fw_rx(const uint8_t* data, uint16_t n) {
 void fw_add_rx_lost(uint16_t n) { state().rx_lost = (uint16_t)(state().rx_lost + n); }
 
 uint16_t fw_tx(uint8_t* out, uint16_t max) {
+    if (g_line_len != 0) {  // the line first: it holds the older bytes
+        const uint16_t n = (uint16_t)(g_line_len < max ? g_line_len : max);
+        for (uint16_t i = 0; i < n; ++i) out[i] = g_line[i];
+        for (uint32_t i = n; i < g_line_len; ++i) g_line[i - n] = g_line[i];
+        g_line_len -= n;
+        return n;
+    }
     hal::host::State& s = state();
     const uint16_t n = s.tx_len < max ? s.tx_len : max;
     for (uint16_t i = 0; i < n; ++i) out[i] = s.tx[i];

@@ -1,7 +1,7 @@
 // A fixed workload over the core's fixed-point arithmetic, folded into one checksum. The AVR
 // build (firmware/test/avr/core_check.cpp, run on simavr) and the host build (capi.cpp) run
-// the same sequence: equal checksums show the AVR's inline-assembly multiplies and its 16-bit
-// int give exactly the host-tested results.
+// the same sequence: equal checksums show the AVR (its 16-bit int, avr-gcc's multiplies) gives
+// exactly the host-tested results.
 #ifndef UTRF_TEST_CORE_CHECK_SEQ_H
 #define UTRF_TEST_CORE_CHECK_SEQ_H
 
@@ -55,17 +55,17 @@ inline uint32_t core_check_run() {
     // Gains over the protocol's range, applied with their saturation.
     const float values[] = {0.0f, 1e-3f, 0.37f, 2.5f, 838.9f, 12345.0f, 1.6e6f, 8.4e7f};
     for (uint8_t k = 0; k < sizeof values / sizeof values[0]; ++k) {
-        const fx::Gain g = fx::make_gain(values[k], pid::kPMax23);
+        const fx::Gain g = fx::make_gain(values[k], pid::kTermMax14);
         f.add(g.m);
         f.add((uint32_t)(int32_t)g.shift);
         f.add((uint32_t)(int32_t)g.xlim);
-        for (uint8_t i = 0; i < 50; ++i) f.add((uint32_t)fx::apply(g, (int16_t)r.next(), pid::kPMax23));
+        for (uint8_t i = 0; i < 50; ++i) f.add((uint32_t)fx::apply16(g, (int16_t)r.next(), pid::kTermMax14));
     }
     // The PID on a random walk of target and measurement, coefficients given as integers.
     pid::Coeffs c;
-    c.kp = fx::make_gain(1677.7f, pid::kPMax23);
+    c.kp = fx::make_gain(1677.7f, pid::kTermMax14);
     c.ki = fx::make_gain(429.5f, pid::kIStepMax31);
-    c.kd = fx::make_gain(6283.2f, pid::kDMax23);
+    c.kd = fx::make_gain(6283.2f, pid::kTermMax14);
     c.alpha = 11000;
     c.slew = 655;
     c.deadband = 1311;
@@ -101,9 +101,9 @@ inline uint32_t core_check_run() {
     const int16_t limits[] = {22937, 32767, 0, 3000};
     for (uint8_t k = 0; k < 6; ++k) {
         pid::Coeffs ck;
-        ck.kp = fx::make_gain(sets[k][0], pid::kPMax23);
+        ck.kp = fx::make_gain(sets[k][0], pid::kTermMax14);
         ck.ki = fx::make_gain(sets[k][1], pid::kIStepMax31);
-        ck.kd = fx::make_gain(sets[k][2], pid::kDMax23);
+        ck.kd = fx::make_gain(sets[k][2], pid::kTermMax14);
         ck.alpha = alphas[k];
         ck.slew = slews[k];
         ck.deadband = deadbands[k];
@@ -146,9 +146,9 @@ inline uint32_t core_check_run() {
         const int16_t db = edge_db[k % 3];
         const int16_t limit = k < 3 ? 200 : 32767;
         pid::Coeffs ce;
-        ce.kp = fx::make_gain(256.0f, pid::kPMax23);
+        ce.kp = fx::make_gain(256.0f, pid::kTermMax14);
         ce.ki = fx::make_gain(0.0f, pid::kIStepMax31);
-        ce.kd = fx::make_gain(6283.2f, pid::kDMax23);
+        ce.kd = fx::make_gain(6283.2f, pid::kTermMax14);
         ce.alpha = 11000;
         ce.slew = (k & 1) ? 32767 : 150;
         ce.deadband = db;
@@ -167,9 +167,9 @@ inline uint32_t core_check_run() {
         }
         // ki = 4 (shift -8): step = 4 e. From a count inside the bound, +-8001 then
         // +-(8300..8500) end within 2^8 either side of it (its low bytes decide).
-        ce.kp = fx::make_gain(0.0f, pid::kPMax23);
+        ce.kp = fx::make_gain(0.0f, pid::kTermMax14);
         ce.ki = fx::make_gain(4.0f, pid::kIStepMax31);
-        ce.kd = fx::make_gain(0.0f, pid::kDMax23);
+        ce.kd = fx::make_gain(0.0f, pid::kTermMax14);
         ce.slew = 32767;
         q.load(ce);
         for (int16_t e = 8300; e <= 8500; ++e) {
@@ -187,9 +187,9 @@ inline uint32_t core_check_run() {
     // one leaves its remainder in the output. (alpha < 1: v8 has low bits.)
     {
         pid::Coeffs cd;
-        cd.kp = fx::make_gain(3001.0f, pid::kPMax23);
+        cd.kp = fx::make_gain(3001.0f, pid::kTermMax14);
         cd.ki = fx::make_gain(0.0f, pid::kIStepMax31);
-        cd.kd = fx::make_gain(3001.0f, pid::kDMax23);  // xlim 11181
+        cd.kd = fx::make_gain(3001.0f, pid::kTermMax14);  // xlim 11181
         cd.alpha = 65000;
         cd.slew = 32767;
         cd.deadband = 0;

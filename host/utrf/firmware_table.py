@@ -19,11 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
+from utrf import artifacts
 from utrf.models import kinematics
 from utrf.models.geometry import FingerGeometry, HandGeometry
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
-DEFAULT_OUT = REPO_ROOT / "firmware" / "src" / "generated" / "kinematics_table.h"
+# Run in a checkout (`make kinematics-table`): relative to the working directory.
+DEFAULT_OUT = Path("firmware/src/generated/kinematics_table.h")
 COLUMNS = ("q", "theta1", "theta3", "tip_x", "tip_y")
 Q_SCALE = 1e-6  # m per LSB
 ANGLE_SCALE = 1e-4  # rad per LSB
@@ -124,7 +125,7 @@ def build_tables(
 
 def _relative(path: str) -> str:
     try:
-        return str(Path(path).resolve().relative_to(REPO_ROOT))
+        return str(Path(path).resolve().relative_to(artifacts.checkout_root() or Path.cwd()))
     except ValueError:
         return Path(path).name
 

@@ -38,6 +38,8 @@ class HandBoard(FakeBoard):
         self.safety = M.Safety(heartbeat_timeout=0.5, safe_action=M.SafeAction.HOLD)
         self.rate_hz = 0
         self.board_time = 0.0
+        self.change = 0  # the status's change count, as the firmware keeps it
+        self._status_sent: tuple = ()
         self.identity = identity()
         self.booted = not boot_on_connect
         self.unheard = 0  # requests sent while the "bootloader" ran: lost
@@ -50,6 +52,7 @@ class HandBoard(FakeBoard):
             (M.SetTargets, self._set_targets),
             (M.SetMode, self._set_mode),
             (M.GetState, self._get_state),
+            (M.GetStatus, lambda f: [(f.seq, self.status())]),
             (M.ClearFaults, self._clear_faults),
             (M.GetSafety, lambda f: [(f.seq, self.safety)]),
         ):
@@ -161,19 +164,25 @@ class HandBoard(FakeBoard):
             if self.mode[i] in (M.ControlMode.POSITION, M.ControlMode.GRASP):
                 self.theta2[i] = self.stuck.get(i, self.target[i])
 
+    def status(self) -> M.Status:
+        """The modes and faults now; a change since the last counts (as on the board)."""
+        with self.lock:
+            now = (tuple(self.mode), tuple(self.faults))
+            if now != self._status_sent:
+                self._status_sent = now
+                self.change = (self.change + 1) % 256
+            return M.Status(change=self.change, mode=now[0], faults=now[1])
+
     def state(self) -> M.State:
         with self.lock:
             self._settle()
             return M.State(
-                board_time=self.board_time,
+                board_time=round(self.board_time * 1000) % 65536 / 1000,
+                status_seq=self.status().change,
                 theta2=tuple(self.theta2),
                 target=tuple(self.target),
                 duty_a=(0.0,) * N,
                 duty_b=(0.0,) * N,
-                mode=tuple(self.mode),
-                faults=tuple(self.faults),
-                tip_x=(0.1,) * N,
-                tip_y=(0.0,) * N,
             )
 
     def _get_state(self, f: Frame) -> Reply:
@@ -188,6 +197,12 @@ class HandBoard(FakeBoard):
                 self.board_time = (self.board_time + period) % 4294.967296
             if rate and self._connected.is_set():
                 try:
-                    self.emit(self.state())
+                    with self.lock:
+                        before = self.change
+                        st = self.state()
+                        status = self.status() if st.status_seq != before else None
+                    if status is not None:
+                        self.emit(status)
+                    self.emit(st)
                 except (OSError, AssertionError):
                     return

@@ -111,7 +111,7 @@ def test_lost_replies_are_retried_then_reported(board: HandBoard, hand: Hand) ->
     assert len(sent) == 3 and sent[0] == sent[2]  # resent with the same bytes
     assert hand.link_stats().retries == 2
     board.on(M.SetTargets.ID, lambda f: None)
-    with pytest.raises(ReplyTimeout, match="set_targets after 4 attempt"):
+    with pytest.raises(ReplyTimeout, match="set_targets after 9 attempt"):
         hand.set_targets({"index": 0.6}, enable=False)
 
 
@@ -197,7 +197,7 @@ def test_move_streams_a_minimum_jerk_path(board: HandBoard, hand: Hand) -> None:
     assert all(f.mask == 0b00101 and f.kind == M.TargetKind.JOINT2_ANGLE for f in frames)
     thumb = np.array([f.value[0] for f in frames])
     # the first frame holds the start, the last the end; about rate x duration in between
-    assert thumb[0] == pytest.approx(0.2, abs=1e-5) and thumb[-1] == pytest.approx(1.0, abs=1e-5)
+    assert thumb[0] == pytest.approx(0.2, abs=1e-4) and thumb[-1] == pytest.approx(1.0, abs=1e-5)
     assert 10 <= len(frames) <= 22  # about rate x duration; a late host skips, never bunches
     assert np.all(np.diff(thumb) >= -1e-9)  # monotonic: no overshoot in the targets
     # each streamed value is the minimum-jerk path at some time in [0, T]
@@ -205,7 +205,8 @@ def test_move_streams_a_minimum_jerk_path(board: HandBoard, hand: Hand) -> None:
     path = min_jerk(0.2, 1.0, 0.5, t)
     assert max(np.min(np.abs(path - v)) for v in thumb) < 1e-3
     middle = np.array([f.value[2] for f in frames])
-    assert middle[0] == pytest.approx(-0.3, abs=1e-5) and middle[-1] == pytest.approx(0.5)
+    # the start is the measured angle, at the state's resolution (2 pi / 32768 rad)
+    assert middle[0] == pytest.approx(-0.3, abs=1e-4) and middle[-1] == pytest.approx(0.5)
 
 
 def test_wait_settled_names_the_finger_and_how_far(board: HandBoard, hand: Hand) -> None:

@@ -172,14 +172,14 @@ def test_a_reading_beyond_the_joint_limit_latches(board: EmulatedBoard, hand: Ha
 def test_a_hung_loop_stops_the_motors_then_the_watchdog_resets(
     board: EmulatedBoard, hand: Hand
 ) -> None:
-    # The timer interrupt still runs: the firmware's tick sees loop() stop (50 ticks), turns
-    # every motor off, and the watchdog (120 ms, fed only by loop()) resets the board.
+    # The timer interrupt still runs: the firmware's tick sees loop() stop (20 ticks), turns
+    # every motor off, and the watchdog (30 ms, fed only by loop()) resets the board.
     hand.pose("fist", duration=0.3)
     assert not all(motors_off(board, f) for f in range(5))
     board.hang_firmware(interrupts=True)
     hung_at = board.sim_time
     assert board.run_until(lambda b: all(motors_off(b, f) for f in range(5)), timeout=0.1)
-    assert board.sim_time - hung_at < 0.06  # 50 ticks, before the watchdog
+    assert board.sim_time - hung_at < 0.025  # 20 ticks, before the watchdog
     hand.clock.sleep(0.3)
     with pytest.raises(BoardResetError):
         hand.state()
@@ -193,12 +193,12 @@ def test_a_hang_with_interrupts_off_is_reset_by_the_watchdog(
     board: EmulatedBoard, hand: Hand
 ) -> None:
     # Nothing of the firmware runs (the PWM hardware keeps its last duty): only the watchdog
-    # gets the board back, within its 120 ms period.
+    # gets the board back, within its 30 ms period.
     hand.pose("fist", duration=0.3)
     board.hang_firmware(interrupts=False)
     hung_at = board.sim_time
     assert board.run_until(lambda b: b.reset_cause == "watchdog", timeout=0.3)
-    assert board.sim_time - hung_at < 0.13  # WDTO_120MS: 16K cycles of 128 kHz = 0.128 s
+    assert board.sim_time - hung_at < 0.034  # WDTO_30MS: 4K cycles of 128 kHz = 0.032 s
     hand.clock.sleep(0.05)
     with pytest.raises(BoardResetError):
         hand.state()

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 from utrf.emulator import EmulatedBoard, SimSerial
+from utrf.protocol import messages as m
+from utrf.protocol.codec import Message, Request
+from utrf.protocol.errors import NackError
 
 
 class Console:
@@ -23,3 +26,68 @@ class Console:
     def command(self, text: str, timeout: float = 0.05) -> str:
         self.port.write(text.encode() + b"\n")
         return self.line(timeout)
+
+
+class _Tap:
+    """The board as SimLink sees it, keeping the last byte read (to catch the line mid-frame)."""
+
+    def __init__(self, board: EmulatedBoard) -> None:
+        self._board = board
+        self.last_byte: int | None = None
+
+    def read(self, size: int = -1) -> bytes:
+        data = self._board.read(size)
+        if data:
+            self.last_byte = data[-1]
+        return data
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._board, name)
+
+
+class LinkClient:
+    """The protocol's one client rule set (the engine, through SimLink) as the emulator's
+    tests use it: ``request`` returns the reply or the board's Nack, board-initiated frames
+    collect in ``stream``, ``errors`` counts damaged frames from the board."""
+
+    def __init__(self, board: EmulatedBoard) -> None:
+        from utrf.hand.simlink import SimLink
+
+        self.board = board
+        self.tap = _Tap(board)
+        self.stream: list[Message] = []
+        self.link = SimLink(
+            self.tap,  # type: ignore[arg-type]
+            on_telemetry=lambda t: self.stream.append(t.message),
+        )
+
+    @property
+    def errors(self) -> int:
+        s = self.link.stats()
+        return s.crc_errors + s.framing_errors + s.oversize
+
+    def request(self, req: Request, timeout: float | None = None) -> Message:
+        try:
+            return self.link.request(req, timeout_s=timeout)
+        except NackError as exc:
+            return m.Nack(msg_id=req.ID, code=exc.code, detail=exc.detail)
+
+    def run(self, seconds: float) -> None:
+        """Let ``seconds`` of simulated time pass, with heartbeats."""
+        self.link.sleep(seconds)
+
+    def step(self) -> None:
+        """One exchange period, the board's output handed to the link."""
+        self.link.sleep(self.board.exchange_period)
+
+    def wait_boot(self, timeout: float = 0.2) -> m.Boot:
+        """The next boot frame, then the handshake the link wants after a reset."""
+        seen = len(self.stream)
+        end = self.board.sim_time + timeout
+        while self.board.sim_time < end:
+            self.step()
+            boots = [s for s in self.stream[seen:] if isinstance(s, m.Boot)]
+            if boots:
+                self.link.handshake()
+                return boots[-1]
+        raise TimeoutError(f"no boot frame within {timeout} s (simulated)")

@@ -1,7 +1,7 @@
 """The firmware as built for the MEGA 2560: the build itself, and the ELF on simavr.
 
 - the build is warning-free and within its flash and RAM targets;
-- the core's arithmetic gives the same results on the AVR (inline-assembly multiplies, 16-bit
+- the core's arithmetic gives the same results on the AVR (its multiplies, 16-bit
   int) as in the host build the other tests use;
 - the pins and timers follow board_pins.h through every mode (the emulator's contract);
 - the tick runs on time under protocol traffic, and the firmware's own timing agrees with the

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import importlib.util
 import struct
+import sys
+from pathlib import Path
 
 import pytest
 from fwsim import Sim, m
@@ -11,6 +14,19 @@ from utrf.protocol.framing import crc16_ccitt
 
 MAGIC = 0x46525455
 HEADER = struct.Struct("<IHH")
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+def layout_version() -> int:
+    """The EEPROM layout version protocol/generate.py derives from the spec's [[config]]."""
+    spec = importlib.util.spec_from_file_location(
+        "utrf_generate", REPO_ROOT / "protocol" / "generate.py"
+    )
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module.layout_version(module.load_spec())
 
 
 def image(sim: Sim) -> bytes:
@@ -98,7 +114,7 @@ def test_image_layout_magic_version_length_crc(sim: Sim) -> None:
     assert isinstance(save(sim), m.Ack)
     data = image(sim)
     magic, version, length = HEADER.unpack_from(data)
-    assert (magic, version) == (MAGIC, 1)
+    assert (magic, version) == (MAGIC, layout_version())
     assert length == sim.lib.fw_config_body_bytes() == len(data) - HEADER.size - 2
     assert int.from_bytes(data[-2:], "little") == crc16_ccitt(data[:-2])
 
@@ -134,7 +150,7 @@ def test_any_damaged_byte_loads_defaults(sim: Sim, offset: int) -> None:
 def test_another_layout_version_loads_defaults(sim: Sim) -> None:
     assert isinstance(save(sim), m.Ack)
     data = bytearray(image(sim))
-    struct.pack_into("<H", data, 4, 2)
+    struct.pack_into("<H", data, 4, layout_version() ^ 1)
     write_image(sim, reseal(bytes(data)))
     sim.power_on()
     assert sim.status().config_status == m.ConfigStatus.DEFAULTS_VERSION

@@ -66,6 +66,7 @@ VALID: dict[type[m.Message], m.Message] = {
     m.ClearFaults: m.ClearFaults(mask=0b11111),
     m.GetState: m.GetState(),
     m.GetStats: m.GetStats(),
+    m.GetStatus: m.GetStatus(),
     m.ResetStats: m.ResetStats(),
 }
 
@@ -113,6 +114,10 @@ def out_of_range_cases():
                 raw = [list(v) if isinstance(v, tuple) else v for v in valid]
                 if field.count is None:
                     raw[field.index] = bad
+                elif cls.MASKED_BY is not None:
+                    # only a finger in the mask is checked: the lowest one
+                    mask = VALID[cls].to_raw()[cls.MASKED_BY]
+                    raw[field.index][(mask & -mask).bit_length() - 1] = bad
                 else:
                     raw[field.index][field.count - 1] = bad
                 flat = []
@@ -172,11 +177,12 @@ def test_out_of_range_field_is_refused_and_changes_nothing(sim: Sim, cls, index,
     assert snapshot(sim) == before
 
 
-@pytest.mark.parametrize("msg_id", [0x00, 0x04, 0x13, 0x37, 0x81, 0x90, 0xF0, 0xFF])
+@pytest.mark.parametrize("msg_id", [0x00, 0x04, 0x13, 0x3F, 0x81, 0x90, 0xF0, 0xFF])
 def test_unknown_ids_are_refused(sim: Sim, msg_id: int) -> None:
     before = snapshot(sim)
     nack = sim.nack(msg_id, b"\x01\x02")
     assert (nack.msg_id, nack.code) == (msg_id, m.ErrorCode.UNKNOWN_ID)
+    assert nack.detail == 0  # as spec.toml's ErrorCode says
     assert snapshot(sim) == before
 
 
@@ -189,7 +195,7 @@ def test_bad_crc_is_refused_with_the_frames_seq(sim: Sim) -> None:
     sim.send_raw(bytes(frame))
     sim.run(2)
     nack = next(r for r in sim.frames if r.seq == 0x42).msg
-    assert (nack.msg_id, nack.code) == (m.SetMode.ID, m.ErrorCode.BAD_CRC)
+    assert (nack.msg_id, nack.code, nack.detail) == (m.SetMode.ID, m.ErrorCode.BAD_CRC, 0)
     assert snapshot(sim) == before
     assert sim.ok(m.GetStats()).rx_crc_errors == 1
 
@@ -222,7 +228,7 @@ def test_identity(sim: Sim) -> None:
     assert (ident.protocol_version, ident.schema_hash) == (m.PROTOCOL_VERSION, m.SCHEMA_HASH)
     assert ident.finger_count == 5
     assert ident.loop_rate_hz == 1000
-    assert ident.max_telemetry_hz == 500
+    assert ident.max_telemetry_hz == m.MAX_TELEMETRY_HZ == 1000
 
 
 def test_set_targets_in_every_unit(sim: Sim) -> None:
@@ -312,7 +318,7 @@ def test_calibrate_zero_takes_the_present_reading(sim: Sim) -> None:
     assert (nack.code, nack.detail) == (m.ErrorCode.FAULTED, 3)
 
 
-@pytest.mark.parametrize("rate", [500, 200, 50])
+@pytest.mark.parametrize("rate", [1000, 500, 200, 50])
 def test_telemetry_stream_rate_and_seq(sim: Sim, rate: int) -> None:
     sim.ok(m.SetTelemetry(rate_hz=rate))
     sim.take()
@@ -346,21 +352,33 @@ def test_a_full_transmit_buffer_drops_stream_frames_and_counts_them(sim: Sim) ->
     assert gap == dropped
 
 
-def test_state_reports_angles_targets_and_the_tip(sim: Sim) -> None:
+def test_state_reports_angles_targets_and_the_host_derives_the_tip(sim: Sim) -> None:
+    from utrf.hand.state import TipModel
     from utrf.models import kinematics
     from utrf.models.geometry import HandGeometry
 
-    geom = HandGeometry.default().fingers[4].geometry
+    hand = HandGeometry.default()
+    geom = hand.fingers[4].geometry
     for k in range(1, 7):
         sim.set_angle(4, 0.1 * k)
         sim.run(1)
     sim.ok(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=0b10000, value=(0, 0, 0, 0, 0.9)))
     st = sim.ok(m.GetState())
     assert st.theta2[4] == pytest.approx(0.6, abs=0.01)  # the ADC's resolution
-    assert st.target[4] == pytest.approx(0.9, abs=2e-4)
     tip = kinematics.tip_position(geom, kinematics.q_from_theta2(geom, st.theta2[4]))
-    assert st.tip_x[4] == pytest.approx(tip[0], abs=1e-4)
-    assert st.tip_y[4] == pytest.approx(tip[1], abs=1e-4)
+    x, y = TipModel(hand).tip(4, st.theta2[4])
+    assert (x, y) == pytest.approx((tip[0], tip[1]), abs=1e-5)
+
+
+@pytest.mark.parametrize("sent", [0.9, 0.3, -0.2, 1.0001, 0.12345])
+def test_state_target_reads_back_what_was_sent_at_the_boards_resolution(
+    sim: Sim, sent: float
+) -> None:
+    # The board keeps a target in counts of 2 pi / 32768 rad and the state carries those
+    # counts: what comes back is the value sent, rounded once to that resolution.
+    sim.ok(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=0b1000, value=(0, 0, 0, sent, 0)))
+    res = m.State.FIELDS[3].scale
+    assert sim.ok(m.GetState()).target[3] == round(sent / res) * res
 
 
 def test_a_new_fault_is_reported_once(sim: Sim) -> None:
@@ -409,7 +427,214 @@ def test_repeated_set_mode_is_harmless(sim: Sim) -> None:
     assert sim.finger(0).integrator31 == i_before
 
 
-def test_request_with_the_board_seq_flag_is_still_answered(sim: Sim) -> None:
+def test_a_request_with_the_board_seq_flag_is_ignored_and_counted(sim: Sim) -> None:
+    # Its reply would carry a board seq, which the host reads as a board-initiated frame.
+    sim.take()
     sim.send_raw(encode_frame(0x85, m.Ping.ID, struct.pack("<I", 9)))
+    sim.send_raw(encode_frame(0xC0, m.SetMode.ID, VALID[m.SetMode].encode()))
     sim.run(2)
-    assert next(r for r in sim.frames if isinstance(r.msg, m.Pong)).seq == 0x85
+    assert [r for r in sim.frames if r.seq in (0x85, 0xC0) or isinstance(r.msg, m.Pong)] == []
+    assert sim.finger(0).mode == m.ControlMode.COAST  # the set_mode was not applied
+    assert sim.ok(m.GetStats()).rx_ignored == 2
+
+
+# --- ranges only where the mask reads ---------------------------------------------------------
+
+
+def test_set_mode_checks_ranges_only_on_the_fingers_in_its_mask(sim: Sim) -> None:
+    # Finger 4 is not in the mask: its duty (out of range) and mode (no ControlMode) are not
+    # read, so they cannot refuse the request.
+    body = raw_body(m.SetMode, 0b1, 2, 0, 0, 0, 99, 0, 0, 0, 0, 5000, 0, 0, 0, 0, 4000)
+    sim.run(5)
+    assert isinstance(sim.request_body(m.SetMode.ID, body).msg, m.Ack)
+    assert sim.finger(0).mode == m.ControlMode.POSITION
+    assert sim.finger(4).mode == m.ControlMode.COAST
+    # In the mask, the same value is refused, naming the field.
+    body = raw_body(m.SetMode, 0b10001, 2, 0, 0, 0, 2, 0, 0, 0, 0, 5000, 0, 0, 0, 0, 0)
+    nack = sim.nack(m.SetMode.ID, body)
+    assert (nack.code, nack.detail) == (m.ErrorCode.OUT_OF_RANGE, 2)
+
+
+# --- safe resend ------------------------------------------------------------------------------
+
+
+def test_a_resent_request_is_answered_from_the_cache_not_done_twice(sim: Sim) -> None:
+    sim.run(5)
+    frame = encode_frame(0x11, m.SetMode.ID, VALID[m.SetMode].encode())
+    sim.send_raw(frame)
+    sim.run(2)
+    first = [r for r in sim.take() if r.seq == 0x11]
+    # The ack was lost on the way; meanwhile the finger changed mode by another request.
+    sim.ok(m.SetMode(mask=0b1, mode=(0, 0, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
+    assert sim.finger(0).mode == m.ControlMode.COAST
+    sim.take()
+    sim.send_raw(frame)  # the resend of seq 0x11: the same bytes
+    sim.run(2)
+    again = [r for r in sim.take() if r.seq == 0x11]
+    assert len(first) == 1  # that ack was answered once, ...
+    # ... and the resend after another request is a new request (the cache held one reply)
+    assert [r.body for r in again] == [first[0].body]
+    assert sim.finger(0).mode == m.ControlMode.BRAKE
+
+
+BU_PER_RAD = 32768 / (2 * math.pi)  # the board's angle counts
+
+
+def test_a_resend_right_after_the_request_gets_the_same_reply_and_changes_nothing(
+    sim: Sim,
+) -> None:
+    # calibrate_zero is the request that would do harm twice: the encoder moved in between.
+    sim.set_angle(2, 0.2)
+    sim.run(5)
+    before = sim.ok(m.GetStats()).rx_repeats
+    frame = encode_frame(0x21, m.CalibrateZero.ID, m.CalibrateZero(mask=0b100).encode())
+    sim.send_raw(frame)
+    sim.run(2)
+    for k in range(1, 4):  # the finger moves on (slowly: no encoder jump)
+        sim.set_angle(2, 0.2 + 0.1 * k)
+        sim.run(2)
+    sim.send_raw(frame)  # its ack was lost: the host sends the same frame again
+    sim.run(2)
+    acks = [r for r in sim.take() if r.seq == 0x21]
+    assert len(acks) == 2 and acks[0].body == acks[1].body  # the cached reply, as it was
+    assert sim.ok(m.GetStats()).rx_repeats == before + 1
+    # Zero was taken once, at 0.2 rad: the finger now reads 0.3 rad, not 0.
+    assert sim.ok(m.GetState()).theta2[2] == pytest.approx(0.3, abs=0.01)
+
+
+def test_a_resent_save_config_under_way_is_not_refused_busy(sim: Sim) -> None:
+    frame = encode_frame(0x33, m.SaveConfig.ID, b"")
+    sim.send_raw(frame)
+    sim.run(5)
+    sim.send_raw(frame)  # the host's resend while the EEPROM is being written
+    sim.run(3000)
+    replies = [r for r in sim.take() if r.seq == 0x33]
+    assert [type(r.msg) for r in replies] == [m.Ack]
+
+
+def test_same_seq_different_bytes_is_a_new_request(sim: Sim) -> None:
+    sim.run(5)
+    a = m.SetTargets(m.TargetKind.JOINT2_ANGLE, 0b1, (0.3, 0, 0, 0, 0))
+    b = m.SetTargets(m.TargetKind.JOINT2_ANGLE, 0b1, (0.4, 0, 0, 0, 0))
+    sim.send_raw(encode_frame(0x44, a.ID, a.encode()))
+    sim.run(2)
+    sim.send_raw(encode_frame(0x44, b.ID, b.encode()))
+    sim.run(2)
+    assert sim.finger(0).target == round(0.4 * BU_PER_RAD)
+
+
+@pytest.mark.parametrize("hb_seq,resend_applied", [(0x52, False), (0x10, True)])
+def test_heartbeats_keep_the_reply_cache_until_half_a_round_of_seqs(
+    sim: Sim, hb_seq: int, resend_applied: bool
+) -> None:
+    # Heartbeats go out while a request waits: a resend after them is still a resend. 64 seqs
+    # on, the cached seq could come round for a new request with the same bytes: forgotten.
+    sim.set_angle(2, 0.2)
+    sim.run(5)
+    zero = encode_frame(0x50, m.CalibrateZero.ID, m.CalibrateZero(mask=0b100).encode())
+    sim.send_raw(zero)
+    sim.run(2)
+    for k in range(1, 4):  # the finger moves on (slowly: no encoder jump)
+        sim.set_angle(2, 0.2 + 0.1 * k)
+        sim.run(2)
+    sim.send_raw(encode_frame(hb_seq, m.Heartbeat.ID, b""))
+    sim.run(2)
+    sim.send_raw(zero)
+    sim.run(2)
+    sim.take()
+    theta = sim.ok(m.GetState()).theta2[2]
+    assert theta == pytest.approx(0.0 if resend_applied else 0.3, abs=0.01)
+
+
+# --- status and the stream's seq ----------------------------------------------------------------
+
+
+def test_a_mode_change_sends_a_status_and_the_state_names_it(sim: Sim) -> None:
+    sim.ok(m.SetTelemetry(rate_hz=1000))
+    sim.run(5)
+    st0 = sim.take(m.State)[-1].msg
+    status0 = sim.ok(m.GetStatus())
+    assert st0.status_seq == status0.change
+    sim.ok(m.SetMode(mask=0b110, mode=(0, 1, 1, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
+    sim.run(5)
+    (status,) = [r for r in sim.take(m.Status)]
+    assert status.seq & m.BOARD_SEQ_FLAG
+    assert status.msg.change == (status0.change + 1) % 256
+    assert status.msg.mode[1:3] == (m.ControlMode.BRAKE, m.ControlMode.BRAKE)
+    assert sim.take(m.State)[-1].msg.status_seq == status.msg.change
+    sim.ok(m.SetMode(mask=0b110, mode=(0, 1, 1, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
+    sim.run(5)
+    assert sim.take(m.Status) == []  # nothing changed: no status
+
+
+def test_fault_and_status_frames_share_the_streams_seq_with_no_gap(sim: Sim) -> None:
+    from utrf.protocol.engine import Engine
+
+    sim.ok(m.SetTelemetry(rate_hz=1000))
+    sim.run(10)
+    sim.take()
+    sim.set_adc(0, 5)  # encoder unplugged: ENCODER_RANGE latches, a fault and a status go out
+    sim.run(50)
+    frames = [r for r in sim.take() if r.seq & m.BOARD_SEQ_FLAG]
+    kinds = {type(r.msg) for r in frames}
+    assert {m.State, m.Fault, m.Status} <= kinds
+    seqs = [r.seq for r in frames]
+    assert all(b == (m.BOARD_SEQ_FLAG | ((a + 1) & 0x7F)) for a, b in itertools.pairwise(seqs))
+    # The host's loss rule counts over every board-initiated frame: nothing lost.
+    engine = Engine()
+    for r in frames:
+        engine.receive(encode_frame(r.seq, r.msg_id, r.body), 0.0)
+    assert engine.stats().stream_lost == 0
+    assert engine.stats().stream_frames == len(frames)
+
+
+def test_a_1khz_stream_is_whole_with_five_fingers_moving(sim: Sim) -> None:
+    sim.run(5)
+    sim.ok(m.SetTargets(m.TargetKind.JOINT2_ANGLE, 0b11111, (0.0,) * 5))
+    sim.ok(m.SetMode(mask=0b11111, mode=(2,) * 5, duty=(0,) * 5, effort=(0,) * 5))
+    sim.ok(m.SetTelemetry(rate_hz=1000))
+    sim.take()
+    for k in range(200):
+        sim.set_angles([0.2 * math.sin(0.05 * k + f) for f in range(5)])
+        sim.run(5)
+        if k % 10 == 0:
+            sim.ok(m.SetTargets(m.TargetKind.JOINT2_ANGLE, 0b11111, (0.1 * (k % 3),) * 5))
+    states = [r for r in sim.frames if isinstance(r.msg, m.State) and r.seq & 0x80]
+    assert len(states) >= 990
+    ticks = [round(r.msg.board_time * 1000) for r in states]
+    assert all((b - a) % 65536 == 1 for a, b in itertools.pairwise(ticks))
+    assert sim.ok(m.GetStats()).tx_dropped == 0
+
+
+# --- entering closed loop: the stored target -----------------------------------------------------
+
+
+@pytest.mark.parametrize("idle", [m.ControlMode.COAST, m.ControlMode.BRAKE])
+@pytest.mark.parametrize("target_sent_while_idle", [True, False])
+def test_entering_position_treats_the_target_alike_from_coast_and_brake(
+    sim: Sim, idle: m.ControlMode, target_sent_while_idle: bool
+) -> None:
+    # protocol/README.md: a target sent since the finger left closed loop is the one
+    # POSITION goes to; with none, POSITION holds the measured angle. COAST and BRAKE alike.
+    def mode(x: m.ControlMode) -> None:
+        sim.ok(m.SetMode(mask=0b1, mode=(x, 0, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
+
+    sim.set_angle(0, 0.2)
+    sim.run(5)
+    sim.ok(m.SetTargets(m.TargetKind.JOINT2_ANGLE, 0b1, (0.6, 0, 0, 0, 0)))
+    mode(m.ControlMode.POSITION)
+    sim.run(5)
+    mode(idle)
+    if target_sent_while_idle:
+        sim.ok(m.SetTargets(m.TargetKind.JOINT2_ANGLE, 0b1, (0.4, 0, 0, 0, 0)))
+    mode(m.ControlMode.POSITION)
+    want = 0.4 if target_sent_while_idle else 0.2
+    assert sim.ok(m.GetState()).target[0] == pytest.approx(want, abs=0.01)
+
+
+def test_the_default_heartbeat_timeout_is_the_specs_and_on_the_protocol_page(sim: Sim) -> None:
+    from pathlib import Path
+
+    assert sim.ok(m.GetSafety()).heartbeat_timeout == m.DEFAULT_HEARTBEAT_TIMEOUT_S == 0.5
+    readme = Path(__file__).resolve().parents[2] / "protocol" / "README.md"
+    assert "| default heartbeat timeout | 0.5 s |" in readme.read_text(encoding="utf-8")

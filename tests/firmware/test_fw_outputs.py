@@ -106,4 +106,4 @@ def test_state_reports_the_motor_duties(sim: Sim) -> None:
     st = sim.ok(m.GetState())
     assert st.duty_a[0] == pytest.approx(0.4, abs=0.011)
     assert st.duty_b[0] == pytest.approx(0.1, abs=0.011)
-    assert st.mode[0] == m.ControlMode.DUTY
+    assert sim.ok(m.GetStatus()).mode[0] == m.ControlMode.DUTY  # modes: the status message

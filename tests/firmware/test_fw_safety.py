@@ -201,6 +201,14 @@ def test_joint_limit_latches_beyond_the_margin(sim: Sim) -> None:
     sim.set_angle(0, 1.13)
     sim.run(1)
     assert sim.finger(0).faults == F.JOINT_LIMIT
+    # Short brake, not coast (test_fw_limit_brake.py measures why): nothing driven, the
+    # motors' terminals shorted.
+    mo = sim.motor(0)
+    assert sim.finger(0).mode == m.ControlMode.BRAKE
+    assert (mo.drive_a, mo.drive_b, mo.counts_a, mo.counts_b, mo.stby) == (BRAKE, BRAKE, 0, 0, 1)
+    # Another stop fault on top: nothing of the finger is trusted, the driver goes off.
+    sim.set_adc(0, 5)
+    sim.run(1)
     assert motors_off(sim, 0)
 
 
@@ -342,6 +350,60 @@ def test_a_hung_loop_stops_the_motors_and_is_reported_after_the_reset(sim: Sim) 
     assert not sim.status().hang_mark
 
 
+def assert_halted_and_says_so(sim: Sim) -> None:
+    """Halted: the state says what the motors do (every finger COAST, no duty) and drive
+    requests are refused as HALTED; the rest is still answered."""
+    for f in range(5):
+        assert sim.finger(f).mode == m.ControlMode.COAST
+        assert (sim.finger(f).duty_a, sim.finger(f).duty_b) == (0, 0)
+        assert motors_off(sim, f)
+    st = sim.ok(m.GetState())
+    assert all(d == 0 for d in st.duty_a + st.duty_b)
+    assert all(mode == m.ControlMode.COAST for mode in sim.ok(m.GetStatus()).mode)
+    zeros = (0,) * 5
+    drive = [
+        m.SetMode(mask=1, mode=(m.ControlMode.POSITION, 0, 0, 0, 0), duty=zeros, effort=zeros),
+        m.SetMode(mask=1, mode=(m.ControlMode.BRAKE, 0, 0, 0, 0), duty=zeros, effort=zeros),
+        m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=1, value=(0.3, 0, 0, 0, 0)),
+    ]
+    for req in drive:
+        nack = sim.nack(req.ID, req.encode())
+        assert (nack.code, nack.detail) == (m.ErrorCode.HALTED, 0)
+    assert sim.finger(0).mode == m.ControlMode.COAST and motors_off(sim, 0)
+    sim.ok(m.Identify())
+
+
+def test_the_loop_alive_rule_allows_20_ticks(sim: Sim) -> None:
+    """Below the watchdog's 30 ms, so the firmware stops the motors itself first."""
+    set_mode(sim, 0, DUTY, duty=0.5)
+    sim.run(5)
+    sim.lib.fw_tick(20)  # (the first tick after loop() still sees it run)
+    assert not sim.status().halted and sim.motor(0).stby
+    sim.lib.fw_tick(2)
+    assert sim.status().halted and motors_off(sim, 0)
+
+
+def test_a_halted_hand_reports_coast_and_refuses_to_drive(sim: Sim) -> None:
+    """issue 13: once halted, state kept reporting the last mode and duties (GRASP, 10 % on
+    both motors) while every motor was off, and set_* were accepted."""
+    set_mode(sim, 0, m.ControlMode.GRASP, effort=0.6)
+    set_mode(sim, 1, DUTY, duty=0.5)
+    sim.run(5)
+    assert sim.finger(0).duty_a != 0
+    sim.lib.fw_tick(60)  # the tick runs, loop() does not: the loop-alive rule halts the hand
+    assert sim.status().halted
+    assert_halted_and_says_so(sim)
+
+
+def test_a_stopped_tick_halts_the_hand_too(sim: Sim) -> None:
+    set_mode(sim, 0, DUTY, duty=0.5)
+    sim.run(5)
+    sim.lib.fw_advance_ms(30)  # time passes, no tick comes
+    sim.loop(1)
+    assert sim.status().halted
+    assert_halted_and_says_so(sim)
+
+
 def test_a_stopped_tick_stops_the_motors(sim: Sim) -> None:
     set_mode(sim, 0, DUTY, duty=0.5)
     sim.run(5)
@@ -358,3 +420,20 @@ def test_reset_cause_is_reported(sim: Sim, cause: m.ResetCause) -> None:
     sim.power_on(reset_cause=int(cause))
     assert sim.take(m.Boot)[0].msg.reset_cause == cause
     assert sim.ok(m.Identify()).reset_cause == cause
+
+
+def test_brake_asked_of_a_faulted_finger_keeps_its_driver_off(sim: Sim) -> None:
+    """BRAKE is not refused on a finger with a stop fault (it drives nothing), but its STBY
+    stays low: no motor is driven, shorted included, once a stop fault latched. (issue 13:
+    letting BRAKE raise STBY there passed every test.)"""
+    sim.set_adc(0, 5)  # unplugged: ENCODER_RANGE latches
+    sim.run(2)
+    sim.set_angle(0, 0.0)  # plugged back: the cause is gone, the fault stays latched
+    sim.run(2)
+    assert sim.finger(0).faults == F.ENCODER_RANGE
+    sim.ok(m.SetMode(mask=0b11, mode=(BRAKE, BRAKE, 0, 0, 0), duty=(0,) * 5, effort=(0,) * 5))
+    sim.run(3)
+    assert sim.finger(0).mode == BRAKE
+    faulted, healthy = sim.motor(0), sim.motor(1)
+    assert not faulted.stby and (faulted.counts_a, faulted.counts_b) == (0, 0)
+    assert (healthy.drive_a, healthy.drive_b, healthy.stby) == (BRAKE, BRAKE, 1)

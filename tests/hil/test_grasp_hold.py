@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,9 @@ from utrf.hil.static_loading import RunError
 
 
 @pytest.mark.slow
-def test_hits_are_found_and_the_grasp_recovers(firmware_elf: Path, tmp_path: Path) -> None:
+def test_hits_are_found_and_the_grasp_recovers(
+    firmware_elf: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     out = tmp_path / "grasp"
     config = gh.GraspHoldConfig(duration_s=5.0, hits=2, seed=4, sample_hz=100.0)
     bench = open_emulated(seed=4, tracked_finger=1, truth=EmulatedTruth(actuator=None))
@@ -51,6 +54,30 @@ def test_hits_are_found_and_the_grasp_recovers(firmware_elf: Path, tmp_path: Pat
     cur = np.array([float(r["middle_current_a_a"]) for r in rows])
     assert result["fingers"]["middle"]["current_a_a"]["max"] == pytest.approx(cur.max())
     assert (out / "grasp_hold.png").exists()
+    # The figure shows what the run concludes: each finger's drift, each disturbance's
+    # deviation and recovery, the tracked tip.
+    import matplotlib.pyplot as plt
+
+    drawn: dict[str, object] = {}
+    monkeypatch.setattr(plt.Figure, "savefig", lambda fig, *_a, **_k: drawn.update(fig=fig))
+    gh.plot(result, rows, list(result["fingers"]), tmp_path / "again.png")
+    drift_ax, dist_ax, tip_ax = drawn["fig"].axes  # type: ignore[attr-defined]
+    labels = [line.get_label() for line in drift_ax.get_lines()]
+    for name, p in result["fingers"].items():
+        assert f"{name}: drift {math.degrees(p['drift_rad']):+.2f} deg" in labels
+    peaks = sorted(
+        float(line.get_ydata()[0]) for line in dist_ax.get_lines() if line.get_marker() == "o"
+    )
+    expected = sorted(
+        math.degrees(e["largest_deviation_rad"])
+        for p in result["fingers"].values()
+        for e in p["disturbances"]
+    )
+    assert peaks == pytest.approx(expected) and len(peaks) >= 2
+    texts = [a.get_text() for a in dist_ax.texts]
+    assert all(t.endswith(" s") for t in texts) and len(texts) == len(expected)
+    assert "1 s mean" in [line.get_label() for line in tip_ax.get_lines()]
+    assert "moved" in tip_ax.get_title()
     # the results come from the logs alone: `utrf hil analyse` rebuilds them
     before = json.loads((out / "results.json").read_text())
     (out / "results.json").unlink()

@@ -116,7 +116,8 @@ def test_ndi_tracker_without_its_package_says_how_to_install(monkeypatch) -> Non
     with pytest.raises(TrackerError) as info:
         tr.NDIAuroraTracker("/dev/ttyUSB0")
     text = str(info.value)
-    assert "scikit-surgerynditracker" in text and "pip install" in text and "utrf[bench]" in text
+    assert "scikit-surgerynditracker" in text
+    assert "pip install 'utrf[bench]'" in text and "pip install -e '.[bench]'" in text
 
 
 def test_ndi_tracker_reads_through_the_package(monkeypatch) -> None:
@@ -150,6 +151,7 @@ def test_ndi_tracker_reads_through_the_package(monkeypatch) -> None:
     assert made["settings"]["serial port"] == "/dev/ttyUSB3"
     s = t.read()
     assert s.visible and s.time_s == 5.0 and s.quality == pytest.approx(0.12)
+    assert s.frame == 7  # the Aurora's own frame number is kept
     np.testing.assert_allclose(s.position_m, [0.010, -0.020, 0.300])
     s2 = t.read()
     assert not s2.visible and np.isnan(s2.position_m).all()

@@ -22,16 +22,16 @@ Handler = Callable[[Frame], Reply]
 
 
 def state_sample(t: float = 1.0) -> M.State:
+    # angles the wire carries exactly (2 pi / 32768 rad a count), so the sample round-trips
+    res = M.State.FIELDS[2].scale or 1.0
+    angles = tuple(round(x / res) * res for x in (0.1, 0.2, 0.3, 0.4, 0.5))
     return M.State(
         board_time=t,
-        theta2=(0.1, 0.2, 0.3, 0.4, 0.5),
-        target=(0.1, 0.2, 0.3, 0.4, 0.5),
+        theta2=angles,
+        target=angles,
         duty_a=(0.0,) * 5,
         duty_b=(0.0,) * 5,
-        mode=(M.ControlMode.POSITION,) * 5,
-        faults=(M.FaultBits(0),) * 5,
-        tip_x=(0.09,) * 5,
-        tip_y=(0.01,) * 5,
+        status_seq=0,
     )
 
 

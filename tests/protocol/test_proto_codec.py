@@ -163,7 +163,7 @@ def _set_mode(**changes: Any) -> M.SetMode:
         (_set_mode(duty=(0, 0, math.nan, 0, 0)), "set_mode.duty[2]", "finite"),
         (_set_mode(duty=(0, 0, "a", 0, 0)), "set_mode.duty[2]", "not a number"),
         (_set_mode(mask=3.0), "set_mode.mask", "not an integer"),
-        (M.SetTelemetry(rate_hz=501), "set_telemetry.rate_hz", "outside [0, 500] Hz"),
+        (M.SetTelemetry(rate_hz=1001), "set_telemetry.rate_hz", "outside [0, 1000] Hz"),
         (
             M.SetGains(0, math.nan, 0, 0, 10, 0, 1, 1, 0),
             "set_gains.kp",

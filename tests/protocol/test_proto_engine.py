@@ -13,6 +13,7 @@ from utrf.protocol.errors import (
     BoardResetError,
     DisconnectedError,
     NackError,
+    Outcome,
     ProtocolError,
     ReplyTimeout,
     SchemaMismatchError,
@@ -318,8 +319,8 @@ def test_bad_requests_raise_before_anything_is_sent_and_one_at_a_time() -> None:
     engine = Engine()
     with pytest.raises(TypeError, match="Pong is not a request"):
         engine.start_request(M.Pong(1, 0.0))  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match=r"set_telemetry\.rate_hz: 501 is outside"):
-        engine.start_request(M.SetTelemetry(rate_hz=501))
+    with pytest.raises(ValueError, match=r"set_telemetry\.rate_hz: 1001 is outside"):
+        engine.start_request(M.SetTelemetry(rate_hz=1001))
     start(engine, M.Ping(1), 0.0)
     with pytest.raises(RuntimeError, match="one at a time"):
         engine.start_request(M.Ping(2))
@@ -330,3 +331,56 @@ def test_bad_requests_raise_before_anything_is_sent_and_one_at_a_time() -> None:
         Engine(retries=-1)
     with pytest.raises(ValueError, match="heartbeat_period_s must be positive"):
         Engine(heartbeat_period_s=0.0)
+
+
+# --- resends and what a timeout says --------------------------------------------------------
+
+
+def test_a_timeout_after_silence_says_the_outcome_is_unknown() -> None:
+    engine = Engine(retries=1)
+    start(engine, TARGETS, 0.0)
+    send(engine, T)
+    done = engine.poll(2 * T)
+    assert isinstance(done, Done) and isinstance(done.error, ReplyTimeout)
+    assert done.error.outcome is Outcome.UNKNOWN
+    assert "(unknown)" in str(done.error)
+
+
+def test_attempts_refused_damaged_are_known_not_applied() -> None:
+    # Each attempt came back as BAD_CRC naming it: none was applied. With its last attempt
+    # the request ends as a NackError; a timeout before that hint counts what is known.
+    engine = Engine(retries=1)
+    seq = start(engine, TARGETS, 0.0)
+    engine.receive(frame(seq, bad_crc(TARGETS.ID)), 0.01)
+    assert send(engine, 0.01).data == frame(seq, TARGETS)  # resent at once, same bytes
+    done = engine.poll(0.01 + T)
+    assert isinstance(done.error, ReplyTimeout)  # type: ignore[union-attr]
+    assert done.error.outcome is Outcome.UNKNOWN  # type: ignore[union-attr]  # the 2nd: silence
+    engine = Engine(retries=0)
+    seq = start(engine, TARGETS, 0.0)
+    pending = engine._pending
+    assert pending is not None and pending.maybe_applied == 1
+    engine.receive(frame(seq, bad_crc(TARGETS.ID)), 0.01)
+    assert pending.maybe_applied == 0
+    done = engine.poll(0.01)
+    assert isinstance(done.error, NackError) and done.error.code is M.ErrorCode.BAD_CRC  # type: ignore[union-attr]
+    # a hint naming another frame says nothing about ours
+    engine = Engine(retries=0)
+    seq = start(engine, TARGETS, 0.0)
+    engine.receive(frame(seq, bad_crc(M.SetMode.ID)), 0.01)
+    assert engine._pending is not None and engine._pending.maybe_applied == 1
+    done = engine.poll(T)
+    assert done.error.outcome is Outcome.UNKNOWN  # type: ignore[union-attr]
+
+
+def test_a_timeout_with_no_attempt_written_is_known_not_applied() -> None:
+    engine = Engine(retries=0)
+    engine.start_request(TARGETS)
+    action = engine.poll(0.0)
+    assert isinstance(action, Transmit)  # never reported written: the driver was stopped
+    pending = engine._pending
+    assert pending is not None
+    pending.deadline = 0.0  # as if its time had run out
+    done = engine.poll(1.0)
+    assert isinstance(done.error, ReplyTimeout)  # type: ignore[union-attr]
+    assert done.error.outcome is Outcome.NOT_APPLIED  # type: ignore[union-attr]

@@ -72,7 +72,7 @@ def test_check_names_stale_outputs_and_writes_nothing(
     before = HEADER.read_bytes()
     spec = _spec_with(
         tmp_path,
-        'name = "rate_hz", type = "u16", max = 500',
+        'name = "rate_hz", type = "u16", max = 1000',
         'name = "rate_hz", type = "u16", max = 400',
     )
     assert generate.main(["--check", "--spec", str(spec)]) == 1
@@ -98,7 +98,7 @@ def test_schema_hash_is_crc32_of_the_spec_without_docs(tmp_path: Path) -> None:
     # A doc edit keeps the hash; a range edit changes it.
     doc_edit = _spec_with(tmp_path, 'doc = "any value, echoed"', 'doc = "any value at all, echoed"')
     assert generate.load_spec(doc_edit).schema_hash == M.SCHEMA_HASH
-    range_edit = _spec_with(tmp_path, 'type = "u16", max = 500', 'type = "u16", max = 499')
+    range_edit = _spec_with(tmp_path, 'type = "u16", max = 1000', 'type = "u16", max = 999')
     assert generate.load_spec(range_edit).schema_hash != M.SCHEMA_HASH
 
 
@@ -133,8 +133,8 @@ def test_every_side_carries_the_same_version_and_hash(cpp: CppCodec) -> None:
             "",
             "must start with u16 protocol_version",
         ),
-        ('type = "u16", max = 500', 'type = "u16", max = 70000', "outside u16"),
-        ('type = "u16", max = 500', 'type = "u16", max = 500, maxx = 3', "unknown key(s) maxx"),
+        ('type = "u16", max = 1000', 'type = "u16", max = 70000', "outside u16"),
+        ('type = "u16", max = 1000', 'type = "u16", max = 1000, maxx = 3', "unknown key(s) maxx"),
         (
             'crc = "CRC-16/CCITT-FALSE"',
             'crc = "CRC-16/XMODEM"',
@@ -269,3 +269,54 @@ def test_header_lives_with_the_avr_and_arduino_macros(tmp_path: Path) -> None:
     )
     assert result.returncode == 0, result.stderr
     assert result.stderr == ""
+
+
+# --- the configuration from the spec ----------------------------------------------------------
+
+
+def test_a_new_gain_is_one_spec_line_for_struct_layout_defaults_and_handlers(
+    tmp_path: Path,
+) -> None:
+    line = '  { name = "pretension_duty", type = "u16", scale = 1e-3, max = 0.5'
+    text = SPEC.read_text(encoding="utf-8")
+    assert line in text
+    new = '  { name = "kff", type = "f32", min = 0.0, max = 10.0, unit = "s", default = 0.5 },\n'
+    spec_path = tmp_path / "spec.toml"
+    spec_path.write_text(text.replace(line, new + line), encoding="utf-8")
+    old, edited = generate.load_spec(SPEC), generate.load_spec(spec_path)
+    header = generate.render_config(edited)
+    assert "  float kff;  // s; [0.0, 10.0]" in header  # the stored field, in the struct
+    assert "  c.kff = 0.5f;" in header  # its default
+    assert "  m.kff = c.kff;" in header and "  c.kff = m.kff;" in header  # get and set
+    # another layout: an image saved before loads the defaults (DEFAULTS_VERSION)
+    assert generate.layout_version(edited) != generate.layout_version(old)
+    assert "kConfigBytes = 318;" in header  # 5 x 4 bytes more than today's 298
+    # the gets and sets are one table, whatever the fields
+    assert "X(SetGains, SET_GAINS)" in header and "X(GetGains, GET_GAINS, Gains)" in header
+
+
+def test_config_layout_is_generated_and_checked_for_staleness() -> None:
+    committed = (REPO_ROOT / "firmware/src/generated/config_layout.h").read_text("utf-8")
+    assert committed == generate.render_config(generate.load_spec(SPEC))
+    assert generate.CONFIG_PATH in generate.outputs(generate.load_spec(SPEC))
+
+
+@pytest.mark.parametrize(
+    "old,new,words",
+    [
+        ('set = "set_gains"', 'set = "set_limits"', "same fields as set_limits"),
+        ('struct = "Gains"', 'struct = "gains"', "CamelCase"),
+        ("per_finger = false", "per_finger = true", "starts with u8 finger"),
+        ("default = 3.0 }", "default = 3000.0 }", "outside"),
+        ('name = "hw"\n', 'name = "hw"\nsize = 3\n', "unknown key(s) size"),
+    ],
+)
+def test_inconsistent_config_blocks_are_refused_by_name(
+    tmp_path: Path, old: str, new: str, words: str
+) -> None:
+    text = SPEC.read_text(encoding="utf-8")
+    assert old in text
+    path = tmp_path / "spec.toml"
+    path.write_text(text.replace(old, new, 1), encoding="utf-8")
+    with pytest.raises(generate.SpecError, match=re.escape(words)):
+        generate.load_spec(path)

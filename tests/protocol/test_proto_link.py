@@ -284,8 +284,8 @@ def test_requests_from_many_threads_each_get_their_own_reply(link: Link) -> None
 
 
 def test_invalid_request_raises_before_anything_is_sent(board: FakeBoard, link: Link) -> None:
-    with pytest.raises(ValueError, match=r"set_telemetry\.rate_hz: 501 is outside"):
-        link.request(M.SetTelemetry(rate_hz=501))
+    with pytest.raises(ValueError, match=r"set_telemetry\.rate_hz: 1001 is outside"):
+        link.request(M.SetTelemetry(rate_hz=1001))
     with pytest.raises(TypeError, match="Pong is not a request"):
         link.request(M.Pong(1, 0.0))  # type: ignore[arg-type]
     link.request(M.Ping(1))

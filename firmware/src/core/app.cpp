@@ -14,13 +14,66 @@ Board g_board;
 // Bytes taken from the UART per loop() pass: bounds the pass, the rest waits in the buffer.
 const uint8_t kRxBurst = 64;
 
-bool send_board_frame(Board& b, uint8_t msg_id, const uint8_t* body, uint8_t len) {
-    uint8_t frame[framing::kMaxFrameBytes];
-    const uint8_t n = framing::encode_frame(b.board_seq, msg_id, body, len, frame);
-    if (hal::serial_tx_room() < n) return false;
+// Room in the transmit buffer when it is empty: a board-initiated frame goes out only then,
+// so a reply never queues behind more than the one frame on the line.
+bool tx_idle(const Board& b) { return b.reply_len == 0 && hal::serial_tx_room() >= b.tx_capacity; }
+
+void send_board_frame(Board& b, const uint8_t* frame, uint8_t n) {
     hal::serial_write(frame, n);
     b.board_seq = proto::next_board_seq(b.board_seq);
-    return true;
+}
+
+template <typename Msg>
+void send_board_message(Board& b, const Msg& m) {
+    uint8_t frame[framing::kMaxFrameBytes];
+    framing::FrameWriter w(frame, b.board_seq, Msg::kId);
+    proto::write(w, m);
+    send_board_frame(b, frame, w.finish());
+}
+
+void flush_reply(Board& b) {
+    if (b.reply_len != 0 && hal::serial_tx_room() >= b.reply_len) {
+        hal::serial_write(b.reply, b.reply_len);
+        b.reply_len = 0;
+    }
+}
+
+// One valid frame from the host: the seq rules and the reply cache, then dispatch.
+void take_request(Board& b) {
+    const uint8_t seq = b.decoder.seq();
+    const uint8_t id = b.decoder.msg_id();
+    if (seq & proto::kBoardSeqFlag) {
+        // A request's seq never has the board's flag: its reply would read as a board frame.
+        ++b.link.rx_ignored;
+        return;
+    }
+    ++b.link.rx_frames;
+    b.hand.note_frame();
+    const uint16_t crc = b.decoder.crc();
+    ReplyCache& c = b.cache;
+    if (c.len != 0 && seq == c.seq && id == c.msg_id && crc == c.crc) {
+        ++b.link.rx_repeats;  // a resend: the reply again, the request not done twice
+        for (uint8_t i = 0; i < c.len; ++i) b.reply[i] = c.frame[i];
+        b.reply_len = c.len;
+        return;
+    }
+    if (b.writer.busy() && b.save_seq == seq && id == proto::SaveConfig::kId) {
+        ++b.link.rx_repeats;  // a resent save_config under way: its ack comes when done
+        return;
+    }
+    if (id == proto::Heartbeat::kId) {
+        // Heartbeats go out while a request waits for its resend: they keep its reply. Once
+        // the host's counter is half a round past it, the cached seq could come round again
+        // for a new request: forget it.
+        if (c.len != 0 && ((uint8_t)(seq - c.seq) & 0x7F) >= 64) c.len = 0;
+    } else {
+        c.len = 0;  // a new request: the old reply is no longer anybody's
+        b.request_seq = seq;
+        b.request_id = id;
+        b.request_crc = crc;
+    }
+    dispatch::handle(b, seq, id, b.decoder.body(), b.decoder.body_len());
+    b.request_seq = -1;
 }
 
 void receive(Board& b) {
@@ -29,17 +82,15 @@ void receive(Board& b) {
     for (uint8_t i = 0; i < kRxBurst && b.reply_len == 0; ++i) {
         uint8_t byte;
         if (hal::serial_read(&byte, 1) == 0) break;
+        if (!b.decoder.in_frame()) b.rx_frame_tick = b.hand.ticks();
         switch (b.decoder.feed(byte)) {
             case framing::RxEvent::FRAME:
-                ++b.link.rx_frames;
-                b.hand.note_frame();
-                dispatch::handle(b, b.decoder.seq(), b.decoder.msg_id(), b.decoder.body(),
-                                 b.decoder.body_len());
+                take_request(b);
                 break;
             case framing::RxEvent::CRC_ERROR:
                 ++b.link.rx_crc_errors;
                 dispatch::nack(b, b.decoder.seq(), b.decoder.msg_id(),
-                               (uint8_t)proto::ErrorCode::BAD_CRC, 0xFF);
+                               (uint8_t)proto::ErrorCode::BAD_CRC, 0);
                 break;
             case framing::RxEvent::FRAMING_ERROR:
             case framing::RxEvent::OVERSIZE:
@@ -52,10 +103,40 @@ void receive(Board& b) {
     }
 }
 
-void report_faults(Board& b) {
+}  // namespace
+
+void note_status(Board& b, const uint8_t* mode, const uint8_t* faults) {
+    bool same = true;
+    for (uint8_t f = 0; f < hand::kFingers; ++f) {
+        same = same && mode[f] == b.status_mode[f] && faults[f] == b.status_faults[f];
+    }
+    if (same) return;
+    for (uint8_t f = 0; f < hand::kFingers; ++f) {
+        b.status_mode[f] = mode[f];
+        b.status_faults[f] = faults[f];
+    }
+    ++b.status_change;
+    b.status_pending = true;
+}
+
+namespace {
+
+void poll_status(Board& b) {
+    uint8_t mode[hand::kFingers];
+    uint8_t faults[hand::kFingers];
+    {
+        Lock lock;
+        for (uint8_t f = 0; f < hand::kFingers; ++f) {
+            mode[f] = b.hand.finger(f).mode();
+            faults[f] = b.hand.finger(f).faults();
+        }
+    }
+    note_status(b, mode, faults);
+}
+
+bool report_faults(Board& b) {
     for (uint8_t f = 0; f < hand::kFingers; ++f) {
         if (b.hand.finger(f).pending_new_faults() == 0) continue;
-        if (hal::serial_tx_room() < framing::kMaxFrameBytes) return;  // next pass
         proto::Fault m;
         {
             Lock lock;
@@ -64,38 +145,55 @@ void report_faults(Board& b) {
             m.new_faults = b.hand.finger(f).take_new_faults();
             for (uint8_t k = 0; k < hand::kFingers; ++k) m.faults[k] = b.hand.finger(k).faults();
         }
-        uint8_t body[proto::kMaxPayload];
-        send_board_frame(b, m.kId, body, proto::encode(m, body));
+        send_board_message(b, m);
+        return true;
     }
+    return false;
 }
 
-void stream(Board& b) {
+// The state stream's phase: true when a state frame is due. A frame waits for an idle
+// transmitter; one more may fall due meanwhile (a long loop() pass: a request's floats and
+// the ticks deferred by its lock), and the two go out back to back. A third due drops the
+// oldest: counted, and its seq skipped so the host sees the gap.
+bool state_due(Board& b) {
     const uint32_t now = b.hand.ticks();
     const uint32_t elapsed = now - b.telemetry_tick;
     b.telemetry_tick = now;
-    if (b.telemetry_hz == 0) return;
+    if (b.telemetry_hz == 0) return false;
     // Phase accumulator: rate per tick, one frame per 1000 (kTickHz).
     uint32_t acc = b.telemetry_acc + elapsed * b.telemetry_hz;
-    if (acc < hand::kTickHz) {
-        b.telemetry_acc = (uint16_t)acc;
-        return;
-    }
-    acc -= hand::kTickHz;
-    // Frames that fell due while loop() was elsewhere are lost: count them, keep the seq gap.
-    while (acc >= hand::kTickHz) {
+    while (acc >= 3UL * hand::kTickHz) {
         acc -= hand::kTickHz;
         ++b.link.tx_dropped;
         b.board_seq = proto::next_board_seq(b.board_seq);
     }
     b.telemetry_acc = (uint16_t)acc;
-    if (hal::serial_tx_room() < framing::kMaxFrameBytes) {
-        ++b.link.tx_dropped;
-        b.board_seq = proto::next_board_seq(b.board_seq);  // the host sees the gap
+    return acc >= hand::kTickHz;
+}
+
+// The board's own frames, one per pass and only into an idle transmitter, in priority order.
+void board_frames(Board& b) {
+    const bool due = state_due(b);
+    poll_status(b);
+    if (!tx_idle(b)) return;
+    if (report_faults(b)) return;
+    if (b.status_pending) {
+        proto::Status m;
+        dispatch::fill_status(b, m);
+        send_board_message(b, m);
+        b.status_pending = false;
         return;
     }
-    uint8_t body[proto::kMaxPayload];
-    const uint8_t n = dispatch::encode_state(b, body);
-    send_board_frame(b, proto::State::kId, body, n);
+    // A request is coming in: its reply goes first, onto a free line. The state waits (it
+    // may: one more period falls due before a frame is dropped).
+    const bool request_coming =
+        b.decoder.in_frame() && b.hand.ticks() - b.rx_frame_tick < kRequestHoldTicks;
+    if (due && !request_coming) {
+        b.telemetry_acc = (uint16_t)(b.telemetry_acc - hand::kTickHz);
+        uint8_t frame[framing::kMaxFrameBytes];
+        const uint8_t n = dispatch::write_state_frame(b, b.board_seq, frame);
+        send_board_frame(b, frame, n);
+    }
 }
 
 void save_progress(Board& b) {
@@ -121,8 +219,11 @@ void watchdog(Board& b) {
     }
     if (ms - b.watch_ms > kTickDeadMs) {
         // The tick stopped: nothing supervises the motors. Off, and let the watchdog reset.
+        if (!b.hand.halted()) {
+            Lock lock;
+            b.hand.halt();
+        }
         hal::motors_all_off();
-        hal::watchdog_mark_hang();
         return;
     }
     if (!b.hand.halted()) hal::watchdog_feed();
@@ -144,11 +245,27 @@ uint32_t board_time_us() {
     return (t + (wrapped ? 1 : 0)) * 1000UL + (uint32_t)s.coarse * 4u;
 }
 
-bool queue_reply(uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len) {
+uint8_t* reply_slot() { return g_board.reply_len == 0 ? g_board.reply : 0; }
+
+void reply_written(uint8_t seq, uint8_t len) {
     Board& b = g_board;
-    if (b.reply_len != 0) return false;
-    b.reply_len = framing::encode_frame(seq, msg_id, body, len, b.reply);
-    return b.reply_len != 0;
+    b.reply_len = len;
+    if (b.request_seq != (int16_t)seq || len == 0) return;
+    // The reply to the request being dispatched: kept for a resend of that request.
+    ReplyCache& c = b.cache;
+    for (uint8_t i = 0; i < len; ++i) c.frame[i] = b.reply[i];
+    c.len = len;
+    c.seq = seq;
+    c.msg_id = b.request_id;
+    c.crc = b.request_crc;
+}
+
+bool queue_reply(uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len) {
+    uint8_t* slot = reply_slot();
+    if (slot == 0) return false;
+    const uint8_t n = framing::encode_frame(seq, msg_id, body, len, slot);
+    reply_written(seq, n);
+    return n != 0;
 }
 
 void apply_finger_config(uint8_t f) {
@@ -168,7 +285,7 @@ void apply_finger_config(uint8_t f) {
 void apply_all_config() {
     for (uint8_t f = 0; f < hand::kFingers; ++f) apply_finger_config(f);
     Lock lock;
-    g_board.hand.set_safety(g_board.cfg.safety.heartbeat_timeout_ms, g_board.cfg.safety.safe_action);
+    g_board.hand.set_safety(g_board.cfg.safety.heartbeat_timeout, g_board.cfg.safety.safe_action);
 }
 
 void setup() {
@@ -176,6 +293,12 @@ void setup() {
     b.save_seq = -1;
     b.board_seq = proto::kBoardSeqFlag;
     b.boot_sent = false;
+    b.tx_capacity = hal::serial_tx_room();  // empty: nothing was sent yet
+    b.rx_frame_tick = 0;
+    b.cache.len = 0;
+    b.request_seq = -1;
+    b.status_change = 0;
+    b.status_pending = false;
     // A lone 0x00 ahead of boot ends whatever frame the reset cut off on the host's side, so
     // boot arrives whole (protocol/README.md, Receiving). The transmit buffer is empty here.
     static const uint8_t kDelimiter = 0;
@@ -189,6 +312,10 @@ void setup() {
     kin::init();
     b.config_status = (uint8_t)config::load(b.cfg);
     apply_all_config();
+    for (uint8_t f = 0; f < hand::kFingers; ++f) {
+        b.status_mode[f] = b.hand.finger(f).mode();
+        b.status_faults[f] = b.hand.finger(f).faults();
+    }
     b.watch_ticks = 0;
     b.watch_ms = hal::millis();
     hal::watchdog_clear_hang_mark();
@@ -199,23 +326,19 @@ void setup() {
 void loop() {
     Board& b = g_board;
     watchdog(b);
-    if (!b.boot_sent) {
-        uint8_t body[proto::kMaxPayload];
-        const uint8_t n = dispatch::encode_boot(b, body);
-        b.boot_sent = send_board_frame(b, proto::Boot::kId, body, n);
+    if (!b.boot_sent && hal::serial_tx_room() >= framing::kMaxFrameBytes) {
+        // Before any reply: the host learns of the reset first.
+        proto::Boot m;
+        dispatch::fill_boot(b, m);
+        send_board_message(b, m);
+        b.boot_sent = true;
     }
-    if (b.reply_len != 0 && hal::serial_tx_room() >= b.reply_len) {
-        hal::serial_write(b.reply, b.reply_len);
-        b.reply_len = 0;
-    }
+    flush_reply(b);
     receive(b);
-    if (b.reply_len != 0 && hal::serial_tx_room() >= b.reply_len) {
-        hal::serial_write(b.reply, b.reply_len);
-        b.reply_len = 0;
-    }
+    flush_reply(b);
     save_progress(b);
-    report_faults(b);
-    stream(b);
+    flush_reply(b);
+    board_frames(b);
 }
 
 void tick() {

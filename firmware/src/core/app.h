@@ -21,6 +21,9 @@ static const uint8_t kFwPatch = 0;
 // Longest the tick may stand still before loop() turns the motors off and lets the watchdog
 // reset the board.
 static const uint8_t kTickDeadMs = 20;
+// Longest a request arriving holds the state stream back (ticks); garbage with no 0x00 after
+// it holds it no longer.
+static const uint8_t kRequestHoldTicks = 2;
 
 struct LinkStats {
     uint32_t rx_frames;
@@ -29,6 +32,18 @@ struct LinkStats {
     uint32_t rx_overruns;
     uint32_t nacks;
     uint32_t tx_dropped;
+    uint32_t rx_ignored;  // requests with the board's seq flag: never answered
+    uint32_t rx_repeats;  // resent requests answered from the reply cache
+};
+
+// The last request answered and its reply frame. A request with the same seq, id and CRC is
+// a resend (the host lost the reply): the board sends this frame again and does nothing.
+struct ReplyCache {
+    uint8_t frame[framing::kMaxFrameBytes];
+    uint8_t len;  // 0: empty
+    uint8_t seq;
+    uint8_t msg_id;
+    uint16_t crc;
 };
 
 struct Board {
@@ -47,6 +62,23 @@ struct Board {
     // One reply waits here until the transmit buffer has room; meanwhile no input is read.
     uint8_t reply[framing::kMaxFrameBytes];
     uint8_t reply_len;
+    ReplyCache cache;
+    int16_t request_seq;  // the request being dispatched (its reply is cached), -1 when none
+    uint8_t request_id;
+    uint16_t request_crc;
+
+    // Board-initiated frames go to the UART only when its transmit buffer is empty (its room
+    // is tx_capacity), so a reply waits behind at most one of them.
+    uint16_t tx_capacity;
+    // The tick when the frame now arriving began: while a request comes in, no state frame is
+    // started (for at most kRequestHoldTicks), so its reply finds the line free.
+    uint32_t rx_frame_tick;
+
+    // The status (modes, faults) last reported; status_change counts its changes.
+    uint8_t status_change;
+    uint8_t status_mode[hand::kFingers];
+    uint8_t status_faults[hand::kFingers];
+    bool status_pending;  // changed, the status frame not yet sent
 
     uint16_t telemetry_hz;
     uint16_t telemetry_acc;  // frames due, in 1/1000: += rate per tick, a frame per 1000
@@ -77,6 +109,12 @@ void apply_all_config();
 
 // Queue one frame for the host (the reply slot). False when the slot is taken.
 bool queue_reply(uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len);
+// The reply slot, for a reply written in place with a framing::FrameWriter; then
+// reply_written(seq, length). Null when the slot is taken.
+uint8_t* reply_slot();
+// A sample's modes and faults against the status last reported: a change is a new status.
+void note_status(Board& b, const uint8_t* mode, const uint8_t* faults);
+void reply_written(uint8_t seq, uint8_t len);
 // Board time in microseconds (the tick count, refined by the tick timer).
 uint32_t board_time_us();
 

@@ -1,8 +1,10 @@
 // The board's configuration: per-finger gains, limits and hardware, and the board-wide safety
 // settings; its defaults, its checks, and its EEPROM image.
 //
-// Values are kept as the protocol carries them (SI floats; durations and duties as the wire's
-// scaled integers), so get_* replies give back exactly what set_* stored.
+// The structs, the layout's version, the spec's defaults and the copies to and from the
+// messages are generated from protocol/spec.toml (generated/config_layout.h). Values are kept
+// as the protocol carries them (SI floats; durations and duties as the wire's scaled
+// integers), so get_* replies give back exactly what set_* stored.
 //
 // EEPROM image (little-endian, at address 0):
 //   offset 0  u32 magic 'UTRF' (0x46525455)
@@ -17,54 +19,12 @@
 
 #include <stdint.h>
 
+#include "../generated/config_layout.h"
+
 namespace utrf {
 namespace config {
 
 #pragma pack(push, 1)
-struct Gains {
-    float kp;                   // duty / rad
-    float ki;                   // duty / (rad s)
-    float kd;                   // duty s / rad
-    float d_cutoff_hz;          // Hz
-    uint16_t deadband_milli;    // duty * 1000
-    float slew_per_s;           // duty / s
-    uint16_t max_duty_milli;    // duty * 1000
-    uint16_t pretension_milli;  // duty * 1000
-};
-
-struct Limits {
-    float theta2_min;        // rad
-    float theta2_max;        // rad
-    float limit_margin;      // rad
-    float stall_error;       // rad
-    float stall_motion;      // rad
-    uint16_t stall_time_ms;  // ms
-    float encoder_jump;      // rad per tick
-};
-
-struct Hardware {
-    uint8_t actuation;  // proto::Actuation
-    float encoder_offset;  // rad: the encoder's reading at Joint-2 angle 0
-    uint8_t encoder_invert;
-    uint8_t motor_invert;
-};
-
-struct Finger {
-    Gains gains;
-    Limits limits;
-    Hardware hw;
-};
-
-struct Safety {
-    uint16_t heartbeat_timeout_ms;
-    uint8_t safe_action;  // proto::SafeAction
-};
-
-struct Config {
-    Finger finger[5];
-    Safety safety;
-};
-
 struct Header {
     uint32_t magic;
     uint16_t version;
@@ -73,7 +33,6 @@ struct Header {
 #pragma pack(pop)
 
 static const uint32_t kMagic = 0x46525455UL;  // "UTRF" in little-endian bytes
-static const uint16_t kLayoutVersion = 1;
 static const uint16_t kImageBytes = sizeof(Header) + sizeof(Config) + 2;
 
 void defaults(Config& cfg);
@@ -89,41 +48,12 @@ uint8_t check_limits(uint8_t finger, const Limits& l);
 // Every value within the protocol's ranges and the checks above (an EEPROM image's body).
 bool valid(const Config& cfg);
 
-// A finger's settings into the protocol message that carries them: the get_* reply or the
-// set_* request (the two have the same fields).
-template <typename Msg>
-void fill_gains(const Gains& g, uint8_t f, Msg& m) {
-    m.finger = f;
-    m.kp = g.kp;
-    m.ki = g.ki;
-    m.kd = g.kd;
-    m.d_cutoff_hz = g.d_cutoff_hz;
-    m.deadband_duty = g.deadband_milli;
-    m.slew_per_s = g.slew_per_s;
-    m.max_duty = g.max_duty_milli;
-    m.pretension_duty = g.pretension_milli;
-}
-
-template <typename Msg>
-void fill_limits(const Limits& l, uint8_t f, Msg& m) {
-    m.finger = f;
-    m.theta2_min = l.theta2_min;
-    m.theta2_max = l.theta2_max;
-    m.limit_margin = l.limit_margin;
-    m.stall_error = l.stall_error;
-    m.stall_motion = l.stall_motion;
-    m.stall_time = l.stall_time_ms;
-    m.encoder_jump = l.encoder_jump;
-}
-
-template <typename Msg>
-void fill_hardware(const Hardware& h, uint8_t f, Msg& m) {
-    m.finger = f;
-    m.actuation = h.actuation;
-    m.encoder_offset = h.encoder_offset;
-    m.encoder_invert = h.encoder_invert;
-    m.motor_invert = h.motor_invert;
-}
+// The checks of a set_ request beyond the spec's ranges, by message (the generic handler in
+// dispatch.cpp calls the one its request has): 0xFF, or the nack detail.
+inline uint8_t check(const proto::SetGains&, const Gains& g) { return check_gains(g); }
+inline uint8_t check(const proto::SetLimits& m, const Limits& l) { return check_limits(m.finger, l); }
+inline uint8_t check(const proto::SetFingerConfig&, const Hardware&) { return 0xFF; }
+inline uint8_t check(const proto::SetSafety&, const Safety&) { return 0xFF; }
 
 // ---- EEPROM ------------------------------------------------------------------------------------
 enum class LoadStatus : uint8_t {  // values match proto::ConfigStatus

@@ -35,21 +35,35 @@ int16_t q15_from_milli(int32_t milli) {
     return fx::sat16((milli * fx::kOne15 + (milli < 0 ? -500 : 500)) / 1000);
 }
 
-// Q15 to the state message's hundredths, rounded half away from zero (x 200 / 65536: the
-// shift is a byte move on the AVR).
-int8_t hundredths(int16_t q15) {
-    const int32_t v = (int32_t)(q15 < 0 ? -q15 : q15) * 200 + 32768;
-    const int8_t h = (int8_t)(v >> 16);
-    return q15 < 0 ? (int8_t)-h : h;
+// Q15 duty to the state message's 1/128 counts, rounded: the high byte (a byte move on the
+// AVR), +1 when the low byte is half or more, saturated at 127.
+int8_t duty_counts(int16_t q15) {
+    const uint8_t hi = (uint8_t)((uint16_t)q15 >> 8);
+    const uint8_t lo = (uint8_t)q15;
+    if ((lo & 0x80) && hi != 0x7F) return (int8_t)(hi + 1);
+    return (int8_t)hi;
 }
 
 using app::Lock;
 
+template <typename T>
+struct RemoveRef {
+    typedef T Type;
+};
+template <typename T>
+struct RemoveRef<T&> {
+    typedef T Type;
+};
+
+// A reply written straight into the reply slot (CRC and COBS as the bytes come).
 template <typename Msg>
 bool reply(app::Board&, uint8_t seq, const Msg& m) {
-    uint8_t body[kMaxPayload];
-    const uint8_t n = encode(m, body);
-    return app::queue_reply(seq, Msg::kId, body, n);
+    uint8_t* slot = app::reply_slot();
+    if (slot == 0) return false;
+    framing::FrameWriter w(slot, seq, Msg::kId);
+    write(w, m);
+    app::reply_written(seq, w.finish());
+    return true;
 }
 
 // Decode or nack: returns true when `out` holds a valid request.
@@ -112,19 +126,33 @@ bool target_angle(uint8_t kind, uint8_t f, int32_t raw, float& theta2) {
     return false;
 }
 
+// Micro-radians (set_targets' JOINT2_ANGLE) to BU, to the nearest count, in integers:
+// x 32768 / (2 pi 1e6) as x * M / 2^32. M is within 2e-9 of exact: below 1e-4 count off for
+// any angle the board can hold. A fifth of the float path's cycles on the AVR.
+const int32_t kMaxUrad = 4000000L;  // beyond +-pi: refused before the multiply
+int32_t bu_from_urad(int32_t urad) {
+    static const int64_t kM = 22399067LL;  // round(2^32 * 32768 / (2 pi 1e6))
+    return (int32_t)((urad * kM + 0x80000000LL) >> 32);
+}
+
 void set_targets(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     SetTargets m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
     int16_t bu[kFingerCount];
+    const bool angle = m.kind == (uint8_t)TargetKind::JOINT2_ANGLE;
     for (uint8_t f = 0; f < kFingerCount; ++f) {
         if (!(m.mask & (1u << f))) continue;
-        float th;
         const finger::Params& p = b.hand.finger(f).params();
-        if (!target_angle(m.kind, f, m.value[f], th)) {
+        int32_t a;
+        float th;
+        if (angle && m.value[f] >= -kMaxUrad && m.value[f] <= kMaxUrad) {
+            a = bu_from_urad(m.value[f]);
+        } else if (!angle && target_angle(m.kind, f, m.value[f], th)) {
+            a = fx::round_sat(th * fx::kBuPerRad);
+        } else {
             nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
             return;
         }
-        const int32_t a = fx::round_sat(th * fx::kBuPerRad);
         // The exact limit is allowed: the float round trip may land a count beyond it.
         if (a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1) {
             nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
@@ -186,111 +214,50 @@ void set_telemetry(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len)
     ack(b, seq, m.kId);
 }
 
-void get_gains(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    GetGains m;
+// ---- configuration: one get and one set handler for every [[config]] block of the spec ----
+
+// What a set_ request needs besides its checks (true: go on), and what its change does.
+bool may_set(app::Board&, uint8_t, const SetGains&) { return true; }
+bool may_set(app::Board&, uint8_t, const SetLimits&) { return true; }
+bool may_set(app::Board&, uint8_t, const SetSafety&) { return true; }
+bool may_set(app::Board& b, uint8_t seq, const SetFingerConfig& m) {
+    if (b.hand.finger(m.finger).idle()) return true;
+    nack(b, seq, m.kId, (uint8_t)ErrorCode::BUSY, m.finger);
+    return false;
+}
+
+void applied(app::Board&, const SetGains& m) { app::apply_finger_config(m.finger); }
+void applied(app::Board&, const SetLimits& m) { app::apply_finger_config(m.finger); }
+void applied(app::Board&, const SetFingerConfig& m) { app::apply_finger_config(m.finger); }
+void applied(app::Board& b, const SetSafety&) {
+    Lock lock;
+    b.hand.set_safety(b.cfg.safety.heartbeat_timeout, b.cfg.safety.safe_action);
+}
+
+template <typename Get, typename Reply>
+void get_config(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
+    Get m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
-    Gains r;
-    config::fill_gains(b.cfg.finger[m.finger].gains, m.finger, r);
+    Reply r;
+    config::reply_of(b.cfg, m, r);
     reply(b, seq, r);
 }
 
-void set_gains(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    SetGains m;
+template <typename Set>
+void set_config(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
+    Set m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
     if (config_busy(b, seq, m.kId)) return;
-    config::Gains g;
-    g.kp = m.kp;
-    g.ki = m.ki;
-    g.kd = m.kd;
-    g.d_cutoff_hz = m.d_cutoff_hz;
-    g.deadband_milli = m.deadband_duty;
-    g.slew_per_s = m.slew_per_s;
-    g.max_duty_milli = m.max_duty;
-    g.pretension_milli = m.pretension_duty;
-    const uint8_t bad = config::check_gains(g);
+    if (!may_set(b, seq, m)) return;
+    typename RemoveRef<decltype(config::slot(b.cfg, m))>::Type v = config::slot(b.cfg, m);
+    config::take(m, v);
+    const uint8_t bad = config::check(m, v);
     if (bad != 0xFF) {
         nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, bad);
         return;
     }
-    b.cfg.finger[m.finger].gains = g;
-    app::apply_finger_config(m.finger);
-    ack(b, seq, m.kId);
-}
-
-void get_limits(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    GetLimits m;
-    if (!decode_or_nack(b, seq, body, len, m)) return;
-    Limits r;
-    config::fill_limits(b.cfg.finger[m.finger].limits, m.finger, r);
-    reply(b, seq, r);
-}
-
-void set_limits(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    SetLimits m;
-    if (!decode_or_nack(b, seq, body, len, m)) return;
-    if (config_busy(b, seq, m.kId)) return;
-    config::Limits l;
-    l.theta2_min = m.theta2_min;
-    l.theta2_max = m.theta2_max;
-    l.limit_margin = m.limit_margin;
-    l.stall_error = m.stall_error;
-    l.stall_motion = m.stall_motion;
-    l.stall_time_ms = m.stall_time;
-    l.encoder_jump = m.encoder_jump;
-    const uint8_t bad = config::check_limits(m.finger, l);
-    if (bad != 0xFF) {
-        nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, bad);
-        return;
-    }
-    b.cfg.finger[m.finger].limits = l;
-    app::apply_finger_config(m.finger);
-    ack(b, seq, m.kId);
-}
-
-void get_safety(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    GetSafety m;
-    if (!decode_or_nack(b, seq, body, len, m)) return;
-    Safety r;
-    r.heartbeat_timeout = b.cfg.safety.heartbeat_timeout_ms;
-    r.safe_action = b.cfg.safety.safe_action;
-    reply(b, seq, r);
-}
-
-void set_safety(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    SetSafety m;
-    if (!decode_or_nack(b, seq, body, len, m)) return;
-    if (config_busy(b, seq, m.kId)) return;
-    b.cfg.safety.heartbeat_timeout_ms = m.heartbeat_timeout;
-    b.cfg.safety.safe_action = m.safe_action;
-    {
-        Lock lock;
-        b.hand.set_safety(m.heartbeat_timeout, m.safe_action);
-    }
-    ack(b, seq, m.kId);
-}
-
-void get_finger_config(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    GetFingerConfig m;
-    if (!decode_or_nack(b, seq, body, len, m)) return;
-    FingerConfig r;
-    config::fill_hardware(b.cfg.finger[m.finger].hw, m.finger, r);
-    reply(b, seq, r);
-}
-
-void set_finger_config(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
-    SetFingerConfig m;
-    if (!decode_or_nack(b, seq, body, len, m)) return;
-    if (config_busy(b, seq, m.kId)) return;
-    if (!b.hand.finger(m.finger).idle()) {
-        nack(b, seq, m.kId, (uint8_t)ErrorCode::BUSY, m.finger);
-        return;
-    }
-    config::Hardware& h = b.cfg.finger[m.finger].hw;
-    h.actuation = m.actuation;
-    h.encoder_offset = m.encoder_offset;
-    h.encoder_invert = m.encoder_invert;
-    h.motor_invert = m.motor_invert;
-    app::apply_finger_config(m.finger);
+    config::slot(b.cfg, m) = v;
+    applied(b, m);
     ack(b, seq, m.kId);
 }
 
@@ -372,9 +339,16 @@ void clear_faults(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) 
 void get_state(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     GetState m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
-    uint8_t out[kMaxPayload];
-    const uint8_t n = encode_state(b, out);
-    app::queue_reply(seq, State::kId, out, n);
+    uint8_t* slot = app::reply_slot();
+    if (slot != 0) app::reply_written(seq, write_state_frame(b, seq, slot));
+}
+
+void get_status(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
+    GetStatus m;
+    if (!decode_or_nack(b, seq, body, len, m)) return;
+    Status r;
+    fill_status(b, r);
+    reply(b, seq, r);
 }
 
 uint16_t us_from_cycles(uint32_t cycles) {
@@ -401,6 +375,8 @@ void get_stats(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     r.tick_overruns = t.overruns;
     r.tick_worst = us_from_cycles(t.worst_cycles);
     r.tick_mean = us_from_cycles(t.mean_cycles);
+    r.rx_ignored = b.link.rx_ignored;
+    r.rx_repeats = b.link.rx_repeats;
     reply(b, seq, r);
 }
 
@@ -432,46 +408,63 @@ void ack(app::Board& b, uint8_t seq, uint8_t msg_id) {
     reply(b, seq, m);
 }
 
-uint8_t encode_state(app::Board& b, uint8_t* body) {
-    // Copy under the lock (the tick waits meanwhile), convert after it.
-    State s;
+uint8_t write_state_frame(app::Board& b, uint8_t seq, uint8_t* out) {
+    // Copy under the lock (the tick waits meanwhile), write after it. The angles go out in
+    // the board's own units and the duties as their high bytes: no arithmetic per field.
+    int16_t theta[kFingerCount];
+    int16_t target[kFingerCount];
     int16_t duty_a[kFingerCount];
     int16_t duty_b[kFingerCount];
-    uint32_t t;
+    uint8_t mode[kFingerCount];
+    uint8_t faults[kFingerCount];
+    uint16_t t;
     {
         Lock lock;
-        t = b.hand.ticks();
+        t = (uint16_t)b.hand.ticks();
         for (uint8_t f = 0; f < kFingerCount; ++f) {
             const finger::Finger& fg = b.hand.finger(f);
-            s.theta2[f] = fg.theta();
-            s.target[f] = fg.target();
+            theta[f] = fg.theta();
+            target[f] = fg.target();
             duty_a[f] = fg.duty_a();
             duty_b[f] = fg.duty_b();
-            s.mode[f] = fg.mode();
-            s.faults[f] = fg.faults();
+            mode[f] = fg.mode();
+            faults[f] = fg.faults();
         }
     }
-    s.board_time = t * 1000UL;
-    for (uint8_t f = 0; f < kFingerCount; ++f) {
-        s.theta2[f] = fx::au_from_bu(s.theta2[f]);  // BU to the protocol's 1e-4 rad
-        s.target[f] = fx::au_from_bu(s.target[f]);
-        s.duty_a[f] = hundredths(duty_a[f]);
-        s.duty_b[f] = hundredths(duty_b[f]);
-        kin::tip_raw(kin::finger_geometry(f), s.theta2[f], s.tip_x[f], s.tip_y[f]);
-    }
-    return encode(s, body);
+    // The status the sample belongs to: a change seen here is numbered before the frame.
+    app::note_status(b, mode, faults);
+    framing::FrameWriter w(out, seq, State::kId);
+    put_u16(w, t);
+    w.put(b.status_change);
+    for (uint8_t f = 0; f < kFingerCount; ++f) put_i16(w, theta[f]);
+    for (uint8_t f = 0; f < kFingerCount; ++f) put_i16(w, target[f]);
+    for (uint8_t f = 0; f < kFingerCount; ++f) w.put((uint8_t)duty_counts(duty_a[f]));
+    for (uint8_t f = 0; f < kFingerCount; ++f) w.put((uint8_t)duty_counts(duty_b[f]));
+    return w.finish();
 }
 
-uint8_t encode_boot(const app::Board& b, uint8_t* body) {
-    Boot m;
+void fill_status(const app::Board& b, Status& m) {
+    m.change = b.status_change;
+    for (uint8_t f = 0; f < kFingerCount; ++f) {
+        m.mode[f] = b.status_mode[f];
+        m.faults[f] = b.status_faults[f];
+    }
+}
+
+void fill_boot(const app::Board& b, Boot& m) {
     m.protocol_version = kProtocolVersion;
     m.schema_hash = kSchemaHash;
     m.reset_cause = b.reset_cause;
     m.config_status = b.config_status;
-    return encode(m, body);
 }
 
 void handle(app::Board& b, uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len) {
+    // A halted board (its loop or tick hung: every motor off, a watchdog reset coming) drives
+    // nothing again: say so rather than accept a command it will not carry out.
+    if (b.hand.halted() && (msg_id == MsgId::SET_TARGETS || msg_id == MsgId::SET_MODE)) {
+        nack(b, seq, msg_id, (uint8_t)ErrorCode::HALTED, 0);
+        return;
+    }
     switch (msg_id) {
         case MsgId::IDENTIFY: {
             Identify m;
@@ -495,23 +488,24 @@ void handle(app::Board& b, uint8_t seq, uint8_t msg_id, const uint8_t* body, uin
         case MsgId::SET_TARGETS: set_targets(b, seq, body, len); return;
         case MsgId::SET_MODE: set_mode(b, seq, body, len); return;
         case MsgId::SET_TELEMETRY: set_telemetry(b, seq, body, len); return;
-        case MsgId::GET_GAINS: get_gains(b, seq, body, len); return;
-        case MsgId::SET_GAINS: set_gains(b, seq, body, len); return;
-        case MsgId::GET_LIMITS: get_limits(b, seq, body, len); return;
-        case MsgId::SET_LIMITS: set_limits(b, seq, body, len); return;
-        case MsgId::GET_SAFETY: get_safety(b, seq, body, len); return;
-        case MsgId::SET_SAFETY: set_safety(b, seq, body, len); return;
-        case MsgId::GET_FINGER_CONFIG: get_finger_config(b, seq, body, len); return;
-        case MsgId::SET_FINGER_CONFIG: set_finger_config(b, seq, body, len); return;
+#define UTRF_SET_CASE(Msg, ID) \
+    case MsgId::ID: set_config<Msg>(b, seq, body, len); return;
+#define UTRF_GET_CASE(Msg, ID, Reply) \
+    case MsgId::ID: get_config<Msg, Reply>(b, seq, body, len); return;
+        UTRF_CONFIG_SETS(UTRF_SET_CASE)
+        UTRF_CONFIG_GETS(UTRF_GET_CASE)
+#undef UTRF_SET_CASE
+#undef UTRF_GET_CASE
         case MsgId::SAVE_CONFIG: save_config(b, seq, body, len); return;
         case MsgId::LOAD_CONFIG: load_config(b, seq, body, len); return;
         case MsgId::CALIBRATE_ZERO: calibrate_zero(b, seq, body, len); return;
         case MsgId::CLEAR_FAULTS: clear_faults(b, seq, body, len); return;
         case MsgId::GET_STATE: get_state(b, seq, body, len); return;
         case MsgId::GET_STATS: get_stats(b, seq, body, len); return;
+        case MsgId::GET_STATUS: get_status(b, seq, body, len); return;
         case MsgId::RESET_STATS: reset_stats(b, seq, body, len); return;
         default:
-            nack(b, seq, msg_id, (uint8_t)ErrorCode::UNKNOWN_ID, kNoDetail);
+            nack(b, seq, msg_id, (uint8_t)ErrorCode::UNKNOWN_ID, 0);
             return;
     }
 }

@@ -7,6 +7,7 @@
 
 #include <stdint.h>
 
+#include "../generated/protocol_messages.h"
 #include "app.h"
 
 namespace utrf {
@@ -16,9 +17,11 @@ void handle(app::Board& b, uint8_t seq, uint8_t msg_id, const uint8_t* body, uin
 void nack(app::Board& b, uint8_t seq, uint8_t msg_id, uint8_t code, uint8_t detail);
 void ack(app::Board& b, uint8_t seq, uint8_t msg_id);
 
-// Encoders for board-initiated messages (used by app for the stream and reports).
-uint8_t encode_state(app::Board& b, uint8_t* body);
-uint8_t encode_boot(const app::Board& b, uint8_t* body);
+// Board-initiated messages (used by app for the stream and reports).
+// The state frame with this seq, sampled now, written into `out` (kMaxFrameBytes); its length.
+uint8_t write_state_frame(app::Board& b, uint8_t seq, uint8_t* out);
+void fill_status(const app::Board& b, proto::Status& m);
+void fill_boot(const app::Board& b, proto::Boot& m);
 
 }  // namespace dispatch
 }  // namespace utrf

@@ -21,11 +21,11 @@ Params compile(const config::Finger& cfg, float dt_s, pid::Coeffs& coeffs) {
     g.ki = cfg.gains.ki;
     g.kd = cfg.gains.kd;
     g.d_cutoff_hz = cfg.gains.d_cutoff_hz;
-    g.deadband = cfg.gains.deadband_milli * 1e-3f;
+    g.deadband = cfg.gains.deadband_duty * 1e-3f;
     g.slew_per_s = cfg.gains.slew_per_s;
     coeffs = pid::compile(g, dt_s);
-    p.max_duty = q15_milli(cfg.gains.max_duty_milli);
-    p.pretension = q15_milli(cfg.gains.pretension_milli);
+    p.max_duty = q15_milli(cfg.gains.max_duty);
+    p.pretension = q15_milli(cfg.gains.pretension_duty);
     p.theta_min = fx::bu(cfg.limits.theta2_min);
     p.theta_max = fx::bu(cfg.limits.theta2_max);
     const int16_t margin = fx::bu(cfg.limits.limit_margin);
@@ -34,7 +34,7 @@ Params compile(const config::Finger& cfg, float dt_s, pid::Coeffs& coeffs) {
     p.stall_error = fx::bu(cfg.limits.stall_error);
     p.stall_motion = fx::bu(cfg.limits.stall_motion);
     const uint32_t checks =
-        (uint32_t)((float)cfg.limits.stall_time_ms * 1e-3f / (dt_s * kStallEvery) + 0.5f);
+        (uint32_t)((float)cfg.limits.stall_time * 1e-3f / (dt_s * kStallEvery) + 0.5f);
     p.stall_checks = (uint16_t)(checks < 1 ? 1 : (checks > 65535u ? 65535u : checks));
     p.jump = fx::bu(cfg.limits.encoder_jump);
     p.zero_turn = encoder::turn_from_rad(cfg.hw.encoder_offset);
@@ -149,7 +149,10 @@ void Finger::latch(uint8_t bits) {
     new_faults_ |= bits & (uint8_t)~faults_;
     faults_ |= bits;
     if ((bits & kStopFaults) && mode_ != COAST) {
-        mode_ = COAST;
+        // Beyond a joint limit (and nothing else wrong) the motors short-brake: passive, no
+        // energy in, and it resists an outside force carrying the finger further (measured on
+        // the emulated board, test_fw_limit_brake.py). Any other stop fault coasts.
+        mode_ = (faults_ & kStopFaults) == JOINT_LIMIT ? BRAKE : COAST;
         target_valid_ = false;
         contact_ = false;
         limit_ = limit_for(COAST);
@@ -169,6 +172,11 @@ void Finger::hold_here() {
     mode_ = mode;
 }
 
+void Finger::halt() {
+    set_mode(COAST, 0, 0);
+    duty_a_ = duty_b_ = 0;
+}
+
 void Finger::stop_now(hal::MotorCommand& out) {
     duty_a_ = duty_b_ = 0;
     out.a.on_counts = out.b.on_counts = 0;
@@ -181,7 +189,9 @@ void Finger::idle_outputs(uint8_t mode, hal::MotorCommand& out) {
     out.a.on_counts = out.b.on_counts = 0;
     out.a.drive = mode == BRAKE ? hal::Drive::BRAKE : hal::Drive::COAST;
     out.b.drive = (mode == BRAKE && !params_.rotary) ? hal::Drive::BRAKE : hal::Drive::COAST;
-    out.stby = mode == BRAKE && (faults_ & kStopFaults) == 0;
+    // Short brake needs the driver enabled: refused to a finger with a stop fault other than
+    // JOINT_LIMIT (an encoder or stall fault, an overrun: nothing of it is trusted).
+    out.stby = mode == BRAKE && (faults_ & (kStopFaults & ~JOINT_LIMIT)) == 0;
 }
 
 int16_t Finger::duty_step(int16_t th) {

@@ -32,11 +32,14 @@ enum Fault : uint8_t {
     HOST_TIMEOUT = 1u << 4,
     OVERRUN = 1u << 5,
 };
-// The stall rule runs for each finger every kStallEvery ticks (one finger a tick).
+// The stall rule runs for each finger every kStallEvery ticks (one finger a tick). (Running the
+// integrator so too was tried: Ki's step five times larger every 5 ms doubled the settling
+// time against friction, tests/firmware/test_fw_pid.py.)
 static const uint8_t kStallEvery = 5;
 
-// Faults that turn the finger's motors off. HOST_TIMEOUT instead applies the configured safe
-// action (which may be to hold in closed loop).
+// Faults that stop the finger: COAST, motors off; JOINT_LIMIT alone short-brakes them instead
+// (finger.cpp, latch()). HOST_TIMEOUT instead applies the configured safe action (which may be
+// to hold in closed loop).
 static const uint8_t kStopFaults = ENCODER_RANGE | ENCODER_JUMP | STALL | JOINT_LIMIT | OVERRUN;
 
 // A finger's configuration, ready for the tick (built in loop() context by compile(); the
@@ -89,6 +92,9 @@ class Finger {
     void latch(uint8_t bits);
     // Safe action HOLD: hold the measured angle in closed loop, starting from the present output.
     void hold_here();
+    // The board stops driving (the hand halted: its motors are all off): COAST, duties 0, so
+    // the state reports what the motors do.
+    void halt();
     // One control period: read the encoder, check the safety rules, run the mode, and fill
     // the driver command. Inline (below): the hand's tick runs it for five fingers.
     // `stall_check`: this tick also runs the stall rule (the hand gives each finger its turn
@@ -169,31 +175,9 @@ static_assert(hal::kPwmPeriod == 800, "pwm_counts() is written for 800 counts a 
 // (lo + 512) >> 8 is (lo >> 8) + 2: on the AVR the high byte of the second product, added
 // with the 2, in one sequence (tested against the C in the AVR check).
 UTRF_HOT uint16_t pwm_counts(uint16_t mag) {
-#if defined(__AVR__)
-    uint16_t r;
-    uint8_t k;
-    __asm__(
-        "ldi  %[k], 25\n\t"
-        "mul  %B[m], %[k]\n\t"
-        "movw %A[r], r0\n\t"
-        "mul  %A[m], %[k]\n\t"
-        "add  %A[r], r1\n\t"
-        "clr  r1\n\t"
-        "adc  %B[r], r1\n\t"
-        "subi %A[r], lo8(-2)\n\t"
-        "sbci %B[r], hi8(-2)\n\t"
-        "lsr  %B[r]\n\t"
-        "ror  %A[r]\n\t"
-        "lsr  %B[r]\n\t"
-        "ror  %A[r]"
-        : [r] "=&d"(r), [k] "=&d"(k)
-        : [m] "r"(mag));
-    return r;
-#else
     const uint16_t hi = fx::mul8u((uint8_t)(mag >> 8), 25u);
     const uint16_t lo = fx::mul8u((uint8_t)mag, 25u);
     return (uint16_t)((uint16_t)(hi + (uint16_t)((uint16_t)(lo + 512u) >> 8)) >> 2);
-#endif
 }
 
 UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& out,

@@ -37,87 +37,22 @@ inline int16_t sat16(int32_t v) {
     return v > 32767 ? (int16_t)32767 : (v < -32767 ? (int16_t)-32767 : (int16_t)v);
 }
 inline int16_t abs16(int16_t v) { return v < 0 ? (int16_t)-v : v; }
+// a + b saturated to +-32767, in 16 bits (an add and a branch on overflow).
+inline int16_t sat_add16(int16_t a, int16_t b) {
+    int16_t r;
+    if (__builtin_add_overflow(a, b, &r)) return a < 0 ? (int16_t)-32767 : (int16_t)32767;
+    return r == -32768 ? (int16_t)-32767 : r;
+}
 
 // Branch hints for the tick's usual paths (they change no result).
 #define UTRF_LIKELY(x) __builtin_expect(!!(x), 1)
 #define UTRF_UNLIKELY(x) __builtin_expect(!!(x), 0)
 
-// 16 x 16 -> 32-bit multiplies. On the AVR these are inline MUL sequences: libgcc's helpers
-// cost a call, register shuffles and, for signed operands, a wrapper: a third of the time of
-// the tick's 30 multiplies. Elsewhere, plain C++. (Tested on the simulated AVR against the C
-// expressions: tests/firmware/test_fw_avr.py.)
-__attribute__((always_inline)) inline int32_t mul_su(int16_t a, uint16_t b) {
-#if defined(__AVR__)
-    int32_t r;
-    uint8_t z;
-    // a = ah:al (ah signed), b = bh:bl: ah*bh << 16 + (ah*bl + al*bh) << 8 + al*bl, with the
-    // signed middle product sign-extended through the carry MULSU leaves (its bit 15).
-    __asm__(
-        "clr %[z]\n\t"
-        "mulsu %B[a], %B[b]\n\t"
-        "movw %C[r], r0\n\t"
-        "mul %A[a], %A[b]\n\t"
-        "movw %A[r], r0\n\t"
-        "mulsu %B[a], %A[b]\n\t"
-        "sbc %D[r], %[z]\n\t"
-        "add %B[r], r0\n\t"
-        "adc %C[r], r1\n\t"
-        "adc %D[r], %[z]\n\t"
-        "mul %B[b], %A[a]\n\t"
-        "add %B[r], r0\n\t"
-        "adc %C[r], r1\n\t"
-        "adc %D[r], %[z]\n\t"
-        "clr r1"
-        : [r] "=&r"(r), [z] "=&r"(z)
-        : [a] "a"(a), [b] "a"(b));
-    return r;
-#else
-    return (int32_t)a * (int32_t)b;
-#endif
-}
-
-__attribute__((always_inline)) inline uint32_t mul_uu(uint16_t a, uint16_t b) {
-#if defined(__AVR__)
-    uint32_t r;
-    uint8_t z;
-    __asm__(
-        "clr %[z]\n\t"
-        "mul %B[a], %B[b]\n\t"
-        "movw %C[r], r0\n\t"
-        "mul %A[a], %A[b]\n\t"
-        "movw %A[r], r0\n\t"
-        "mul %B[a], %A[b]\n\t"
-        "add %B[r], r0\n\t"
-        "adc %C[r], r1\n\t"
-        "adc %D[r], %[z]\n\t"
-        "mul %A[a], %B[b]\n\t"
-        "add %B[r], r0\n\t"
-        "adc %C[r], r1\n\t"
-        "adc %D[r], %[z]\n\t"
-        "clr r1"
-        : [r] "=&r"(r), [z] "=&r"(z)
-        : [a] "r"(a), [b] "r"(b));
-    return r;
-#else
-    return (uint32_t)a * (uint32_t)b;
-#endif
-}
-
-// 8 x 8 -> 16-bit unsigned multiply: one MUL on the AVR, where avr-gcc widens a product of
-// two bytes it cannot prove small into a 16 x 16 one.
-__attribute__((always_inline)) inline uint16_t mul8u(uint8_t a, uint8_t b) {
-#if defined(__AVR__)
-    uint16_t r;
-    __asm__("mul %[a], %[b]\n\t"
-            "movw %[r], r0\n\t"
-            "clr r1"
-            : [r] "=r"(r)
-            : [a] "r"(a), [b] "r"(b));
-    return r;
-#else
-    return (uint16_t)((uint16_t)a * b);
-#endif
-}
+// 16 x 16 -> 32-bit multiplies, written so that avr-gcc sees a widening multiply (its MUL
+// sequences, no 32 x 32 product).
+inline int32_t mul_su(int16_t a, uint16_t b) { return (int32_t)a * (int32_t)b; }
+inline uint32_t mul_uu(uint16_t a, uint16_t b) { return (uint32_t)a * (uint32_t)b; }
+inline uint16_t mul8u(uint8_t a, uint8_t b) { return (uint16_t)((uint16_t)a * b); }
 
 // A gain as a 16-bit mantissa and a byte-multiple exponent: y = x * m * 2^shift with shift
 // one of 16, 8, 0, -8, -16, so the tick needs one 16 x 16 multiply and byte moves. make()
@@ -150,6 +85,18 @@ __attribute__((always_inline)) inline int32_t apply(const Gain& g, int16_t x, in
         default:
             return p >> 16;
     }
+}
+
+// The same for a term kept in 16 bits (ymax <= 32767): for gains of shift -16, -8 or 0 the
+// result is a byte-aligned slice of the product; a larger gain saturates every x but 0
+// (its xlim is 0).
+__attribute__((always_inline)) inline int16_t apply16(const Gain& g, int16_t x, int16_t ymax) {
+    if (x > g.xlim) return ymax;
+    if (x < -g.xlim) return (int16_t)-ymax;
+    const int32_t p = mul_su(x, g.m);  // |p >> -shift| <= ymax
+    if (g.shift == -16) return (int16_t)(p >> 16);
+    if (g.shift == -8) return (int16_t)(p >> 8);
+    return (int16_t)p;
 }
 
 // x * c / 65536 for any int32 x (the result must fit), c an unsigned Q16 fraction: two

@@ -28,28 +28,9 @@ uint16_t crc16_ccitt(const uint8_t* data, uint16_t len, uint16_t crc) {
 
 uint8_t encode_frame(uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len, uint8_t* out) {
   if (len > kMaxBodyBytes) return 0;
-  // Lay the frame out one byte in, then COBS-encode it in place: a frame (at most 68 bytes)
-  // is shorter than one 254-byte block, so every 0x00 simply becomes the code byte of the
-  // block after it, and out[0] the code of the first block.
-  uint8_t* raw = out + 1;
-  raw[0] = seq;
-  raw[1] = msg_id;
-  for (uint8_t i = 0; i < len; ++i) raw[kHeaderBytes + i] = body[i];
-  const uint8_t payload = static_cast<uint8_t>(kHeaderBytes + len);
-  const uint16_t crc = crc16_ccitt(raw, payload);
-  raw[payload] = static_cast<uint8_t>(crc);
-  raw[payload + 1] = static_cast<uint8_t>(crc >> 8);
-  const uint8_t end = static_cast<uint8_t>(payload + kCrcBytes + 1);  // index after the data
-  uint8_t code_at = 0;
-  for (uint8_t i = 1; i < end; ++i) {
-    if (out[i] == 0) {
-      out[code_at] = static_cast<uint8_t>(i - code_at);
-      code_at = i;
-    }
-  }
-  out[code_at] = static_cast<uint8_t>(end - code_at);
-  out[end] = 0x00;
-  return static_cast<uint8_t>(end + 1);
+  FrameWriter w(out, seq, msg_id);
+  for (uint8_t i = 0; i < len; ++i) w.put(body[i]);
+  return w.finish();
 }
 
 FrameDecoder::FrameDecoder() : len_(0), body_len_(0), discarding_(false) {}

@@ -30,6 +30,54 @@ uint16_t crc16_ccitt(const uint8_t* data, uint16_t len, uint16_t crc = 0xFFFF);
 // kMaxFrameBytes, and returns its length; returns 0 (writing nothing) when len > kMaxBodyBytes.
 uint8_t encode_frame(uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len, uint8_t* out);
 
+// Builds a frame as its bytes come: the CRC and the COBS codes are computed per byte, so a
+// message is written straight into the frame (no body buffer, no second pass). put() the
+// body's bytes (proto::write does, field by field), then finish() for the frame's length.
+// `out` must hold kMaxFrameBytes; the body must fit kMaxBodyBytes (the spec's sizes do).
+class FrameWriter {
+ public:
+  FrameWriter(uint8_t* out, uint8_t seq, uint8_t msg_id)
+      : out_(out), pos_(1), code_at_(0), hi_(0xFF), lo_(0xFF) {
+    put(seq);
+    put(msg_id);
+  }
+  void put(uint8_t byte) {
+    // The table-free CRC step of crc16_ccitt(), kept in two bytes.
+    uint8_t w = static_cast<uint8_t>(hi_ ^ byte);
+    w = static_cast<uint8_t>(w ^ (w >> 4));
+    hi_ = static_cast<uint8_t>(lo_ ^ static_cast<uint8_t>(w << 4) ^ static_cast<uint8_t>(w >> 3));
+    lo_ = static_cast<uint8_t>(static_cast<uint8_t>(w << 5) ^ w);
+    stuff(byte);
+  }
+  // Appends the CRC (low byte first), the last code and the 0x00; returns the frame's length.
+  uint8_t finish() {
+    const uint8_t hi = hi_;
+    stuff(lo_);
+    stuff(hi);
+    out_[code_at_] = static_cast<uint8_t>(pos_ - code_at_);
+    out_[pos_] = 0x00;
+    return static_cast<uint8_t>(pos_ + 1);
+  }
+
+ private:
+  // COBS, one block (a frame is shorter than 254 bytes): a 0x00 becomes the code slot of
+  // the block after it, and the slot before it gets that block's length.
+  void stuff(uint8_t byte) {
+    if (byte == 0) {
+      out_[code_at_] = static_cast<uint8_t>(pos_ - code_at_);
+      code_at_ = pos_;
+    } else {
+      out_[pos_] = byte;
+    }
+    ++pos_;
+  }
+  uint8_t* out_;
+  uint8_t pos_;
+  uint8_t code_at_;
+  uint8_t hi_;
+  uint8_t lo_;
+};
+
 enum class RxEvent : uint8_t {
   NONE = 0,       // byte taken; nothing to report yet
   FRAME,          // a valid frame: seq(), msg_id(), body(), body_len()
@@ -55,6 +103,8 @@ class FrameDecoder {
   }
   // Forget any partial frame (e.g. after the UART reported an overrun).
   void reset();
+  // Bytes of a frame are in, its 0x00 not yet.
+  bool in_frame() const { return len_ != 0 && !discarding_; }
 
   // After FRAME; after CRC_ERROR seq() and msg_id() are the damaged frame's bytes.
   // body() stays valid until the next call to feed().
@@ -62,6 +112,11 @@ class FrameDecoder {
   uint8_t msg_id() const { return buf_[1]; }
   const uint8_t* body() const { return buf_ + kHeaderBytes; }
   uint8_t body_len() const { return body_len_; }
+  // After FRAME: the frame's CRC as received (with seq and msg_id, it names one request).
+  uint16_t crc() const {
+    return static_cast<uint16_t>(buf_[kHeaderBytes + body_len_] |
+                                 (buf_[kHeaderBytes + body_len_ + 1] << 8));
+  }
 
  private:
   RxEvent feed_rest(uint8_t byte);

@@ -20,8 +20,9 @@ static const uint8_t kFingers = 5;
 static const uint16_t kTickHz = 1000;
 static const float kDt = 1.0f / kTickHz;
 // loop() must run at least this often, or the tick turns the motors off and the watchdog
-// resets the board.
-static const uint16_t kLoopHangTicks = 50;
+// resets the board. Below the watchdog's 30 ms (hal/avr), so the firmware stops the motors and
+// marks the hang itself first whenever its tick still runs.
+static const uint16_t kLoopHangTicks = 20;
 
 struct TickTiming {
     uint32_t ticks;
@@ -53,6 +54,16 @@ class Hand {
     void note_frame() { frame_seen_ = 1; }
     void note_loop() { loop_count_ = (uint8_t)(loop_count_ + 1); }
     bool halted() const { return halted_ != 0; }
+    // Stop driving for good (until the watchdog resets the board): every motor off, every
+    // finger in COAST (so the state reports what the motors do), the hang mark left for the
+    // next boot; drive requests are refused from now on (proto::ErrorCode::HALTED). From the
+    // tick (loop-alive rule), or from loop() under the tick lock (tick-alive rule).
+    void halt() {
+        halted_ = 1;
+        hal::motors_all_off();
+        hal::watchdog_mark_hang();
+        for (uint8_t f = 0; f < kFingers; ++f) fingers_[f].halt();
+    }
     uint32_t ticks() const;  // atomic read
 
     // The control tick (interrupt context), and its timing, measured by the caller at its end
@@ -120,8 +131,7 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
     } else if (loop_idle_ticks_ < kLoopHangTicks) {
         ++loop_idle_ticks_;
     } else if (!halted_) {
-        halted_ = 1;
-        hal::watchdog_mark_hang();
+        halt();
     }
     if (UTRF_UNLIKELY(halted_)) {
         hal::motors_all_off();
@@ -131,7 +141,14 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
     hal::MotorCommand out[kFingers];
     const uint8_t turn = stall_turn_;
     stall_turn_ = (uint8_t)(turn + 1 == finger::kStallEvery ? 0 : turn + 1);
-    for (uint8_t f = 0; f < kFingers; ++f) fingers_[f].tick(enc[f], out[f], f == turn);
+    // Unrolled: each finger's fields are then at fixed addresses (the Hand is a static object),
+    // reached with direct loads and stores instead of through a pointer kept in registers.
+    static_assert(kFingers == 5, "the finger ticks below are written out for five fingers");
+    fingers_[0].tick(enc[0], out[0], turn == 0);
+    fingers_[1].tick(enc[1], out[1], turn == 1);
+    fingers_[2].tick(enc[2], out[2], turn == 2);
+    fingers_[3].tick(enc[3], out[3], turn == 3);
+    fingers_[4].tick(enc[4], out[4], turn == 4);
     hal::motors_write(out);
 }
 

@@ -13,10 +13,10 @@ int16_t q15(float duty) { return fx::sat16(fx::round_sat(duty * 32768.0f)); }
 
 Coeffs compile(const Gains& g, float dt_s) {
     Coeffs c;
-    c.kp = fx::make_gain(g.kp * kRadPerBu * (float)fx::kOne23, kPMax23);
+    c.kp = fx::make_gain(g.kp * kRadPerBu * 16384.0f, kTermMax14);
     c.ki = fx::make_gain(g.ki * dt_s * kRadPerBu * 2147483648.0f, kIStepMax31);
     // v is Q8 BU per tick: rad/s = v / 256 * kRadPerBu / dt.
-    c.kd = fx::make_gain(g.kd * kRadPerBu / (256.0f * dt_s) * (float)fx::kOne23, kDMax23);
+    c.kd = fx::make_gain(g.kd * kRadPerBu / (256.0f * dt_s) * 16384.0f, kTermMax14);
     // Matched pole of a first-order low-pass: alpha = 1 - exp(-2 pi fc dt).
     const float a = 1.0f - expf(-2.0f * 3.14159265f * g.d_cutoff_hz * dt_s);
     c.alpha = (uint16_t)fx::clamp32(fx::round_sat(a * 65536.0f), 1, 65535);
@@ -49,15 +49,17 @@ void Pid::reset(int16_t limit, int16_t u, int16_t measured) {
     saturated_ = false;
 }
 
+// The Q15 output the P and D terms give (the step's sum, before the deadband and the limit).
+static int32_t pd_sum15(const Coeffs& c, int16_t e, int16_t v8) {
+    return 2 * ((int32_t)fx::apply16(c.kp, e, kTermMax14) - fx::apply16(c.kd, v8, kTermMax14));
+}
+
 void Pid::set_coeffs(const Coeffs& c, int16_t new_limit) {
-    // The Q23 sum before the change, less the new P and D terms, is the new integrator.
-    const int32_t before = fx::apply(c_.kp, e_last_, kPMax23) + (i31_ >> 8) -
-                           fx::apply(c_.kd, v8_, kDMax23);
+    // The output before the change, less the new P and D terms, is the new integrator.
+    const int32_t before = pd_sum15(c_, e_last_, v8_) + (int16_t)(i31_ >> 16);
     c_ = c;
-    const int32_t after_pd = fx::apply(c.kp, e_last_, kPMax23) - fx::apply(c.kd, v8_, kDMax23);
-    const int32_t lim23 = (int32_t)new_limit << 8;
-    const int32_t i23 = fx::clamp32(before - after_pd, -lim23, lim23);
-    i31_ = (int32_t)((uint32_t)i23 << 8);
+    const int32_t i15 = fx::clamp32(before - pd_sum15(c, e_last_, v8_), -new_limit, new_limit);
+    i31_ = (int32_t)((uint32_t)i15 << 16);
     u_ = fx::clamp16(u_, (int16_t)-new_limit, new_limit);
 }
 

@@ -1,21 +1,26 @@
-// PID position controller on the Joint-2 angle, in fixed point (core/fixed.h).
+// PID position controller on the Joint-2 angle, in fixed point (core/fixed.h). One
+// implementation, plain C++: the AVR and the host tests run this same code.
 //
 //   e = target - measured
-//   u = Kp e + I - Kd v
+//   u = Kp e + I - Kd v + ff
 //   I += Ki e dt    only while the output is not held back (by its limit or the slew
 //                   limiter) in the direction e pushes it: conditional integration; and
 //                   |I| <= the output limit
 //   v = d(measured)/dt through a first-order low-pass (cut-off d_cutoff_hz): the derivative
 //       acts on the measurement, so a target step gives no derivative kick
+//   ff              a feedforward duty from whoever generates the setpoint (0 when none)
 //   u += deadband * clamp(u / ramp, -1, 1)   static-friction compensation, continuous at 0
 //   u = clamp(u, -limit, limit), then slew-limited to slew_per_s * dt per tick
 //
 // Bumpless starts: reset() makes the integrator carry the present output, and the slew limiter
 // starts from it, so the output is continuous when a mode or the gains change.
 //
-// Fixed point: angles BU (int16), e and d(measured) int16 with no overflow (angles stay within
-// +-pi); v in Q8 BU per tick (int16; d(measured) is clamped to +-63 BU per tick, 12 rad/s,
-// beyond any finger's speed); P and D in Q23 duty, I in Q31 (|I| < 1 duty fits), u in Q15.
+// Fixed point, chosen so the tick is integer multiplies, byte moves and 16-bit arithmetic (no
+// float, no division): angles BU (int16), e and d(measured) int16 with no overflow (angles stay
+// within +-pi); v in Q8 BU per tick (int16; d(measured) is clamped to +-63 BU per tick, 12
+// rad/s, beyond any finger's speed); the P and D terms int16 in Q14 duty, saturated at +-2
+// duty (one 16 x 16 multiply each, the result a byte-aligned slice of the product); I in Q31
+// (|I| < 1 duty fits; its high word is the Q15 duty); u in Q15.
 #ifndef UTRF_CORE_PID_H
 #define UTRF_CORE_PID_H
 
@@ -38,19 +43,18 @@ struct Gains {
 
 // The same, ready for the tick. Built by compile() in loop() context (floats live here only).
 struct Coeffs {
-    fx::Gain kp;          // e [BU] -> Q23 duty
+    fx::Gain kp;          // e [BU] -> Q14 duty
     fx::Gain ki;          // e [BU] -> Q31 duty per tick
-    fx::Gain kd;          // v [Q8 BU per tick] -> Q23 duty
+    fx::Gain kd;          // v [Q8 BU per tick] -> Q14 duty
     uint16_t alpha;       // velocity low-pass, Q16: v += alpha (x - v)
     int16_t slew;         // Q15 duty per tick
     int16_t deadband;     // Q15 duty
     uint16_t db_inverse;  // Q16: ramp / (ramp + deadband), to undo the compensation
 };
 
-// Saturation levels of the terms, chosen so no sum can overflow int32.
-static const int32_t kPMax23 = 8L * fx::kOne23;  // proportional term: +-8 duty
-static const int32_t kDMax23 = 4L * fx::kOne23;  // derivative term: +-4 duty
-static const int32_t kIStepMax31 = 1L << 29;    // integrator step: +-0.25 duty per tick
+// Saturation levels of the terms, chosen so no sum can overflow.
+static const int16_t kTermMax14 = 32767;       // P and D terms: +-2 duty, Q14
+static const int32_t kIStepMax31 = 1L << 29;  // integrator step: +-0.25 duty per tick
 static const int16_t kMaxDm = 63;                // d(measured) clamp, BU per tick
 static const int16_t kDeadbandRamp15 = 256;      // 1/128 duty: the compensation ramps in
 
@@ -67,8 +71,10 @@ class Pid {
     const Coeffs& coeffs() const { return c_; }
     // Start from the present output u (Q15) at measurement m: no bump.
     void reset(int16_t limit, int16_t u, int16_t measured);
-    // One tick: returns the output, Q15, within +-limit (0 <= limit <= 32767).
-    inline int16_t step(int16_t limit, int16_t target, int16_t measured);
+    // One tick: returns the output, Q15, within +-limit (0 <= limit <= 32767). `ff`: a
+    // feedforward duty (Q15) added ahead of the deadband, limit and slew limiter; the
+    // integrator then only corrects what the feedforward misses.
+    inline int16_t step(int16_t limit, int16_t target, int16_t measured, int16_t ff = 0);
     // Open loop (DUTY mode): the commanded duty through the same limit and slew limiter, so a
     // later switch to closed loop is bumpless.
     inline int16_t step_open(int16_t limit, int16_t duty, int16_t measured);
@@ -80,14 +86,6 @@ class Pid {
     bool saturated() const { return saturated_; }
 
    private:
-    // step() in portable C++: the control law as written above. The host runs it; the AVR runs
-    // the same steps in assembly (pid_step_avr.h), checked against it by
-    // tests/firmware/test_fw_avr.py (the AVR's checksum over thousands of steps).
-    inline int16_t step_c(int16_t limit, int16_t target, int16_t measured);
-#if defined(__AVR__)
-    inline int16_t step_avr(int16_t limit, int16_t target, int16_t measured);
-#endif
-
     // The state, then the coefficients: one object, every field within a displacement of its
     // address (the AVR's ldd/std reach 63 bytes).
     int32_t i31_;     // integrator, Q31 duty
@@ -97,8 +95,6 @@ class Pid {
     int16_t u_;       // last output, Q15 duty
     bool saturated_;
     Coeffs c_;
-
-    friend struct StepLayout;
 };
 
 // The deadband compensation alone, and its inverse (for bumpless starts). Q15.
@@ -109,10 +105,17 @@ int16_t remove_deadband(int16_t u, int16_t deadband, uint16_t db_inverse);
 #define UTRF_HOT __attribute__((always_inline)) inline
 
 UTRF_HOT int16_t add_deadband(int16_t v, int16_t db) {
-    if (v >= kDeadbandRamp15) return fx::sat16((int32_t)v + db);
-    if (v <= -kDeadbandRamp15) return fx::sat16((int32_t)v - db);
+    if (v >= kDeadbandRamp15) return fx::sat_add16(v, db);
+    if (v <= -kDeadbandRamp15) return fx::sat_add16(v, (int16_t)-db);
     // |v| < 2^8 and db <= 2^14: the product fits; the ramp is 2^8, so the shift is a byte move.
-    return (int16_t)(v + (int16_t)(((int32_t)v * db) >> 8));
+    return (int16_t)(v + (int16_t)(fx::mul_su(v, (uint16_t)db) >> 8));
+}
+
+// The same on the unlimited sum (int32, before the limit).
+UTRF_HOT int32_t add_deadband32(int32_t v, int16_t db) {
+    if (v >= kDeadbandRamp15) return v + db;
+    if (v <= -kDeadbandRamp15) return v - db;
+    return v + (fx::mul_su((int16_t)v, (uint16_t)db) >> 8);
 }
 
 UTRF_HOT int16_t slew_limit(int16_t want, int16_t last, int16_t slew) {
@@ -126,31 +129,24 @@ UTRF_HOT int16_t slew_limit(int16_t want, int16_t last, int16_t slew) {
     return want;
 }
 
-UTRF_HOT int16_t Pid::step_c(int16_t limit, int16_t target, int16_t measured) {
+UTRF_HOT int16_t Pid::step(int16_t limit, int16_t target, int16_t measured, int16_t ff) {
     const Coeffs& c = c_;
     // Angles are within +-pi (BU), so these differences fit int16.
     const int16_t e = (int16_t)(target - measured);
-    int16_t dm = (int16_t)(measured - m_prev_);
+    const int16_t dm = fx::clamp16((int16_t)(measured - m_prev_), (int16_t)-kMaxDm, kMaxDm);
     m_prev_ = measured;
     e_last_ = e;
-    dm = fx::clamp16(dm, (int16_t)-kMaxDm, kMaxDm);
-    // v += alpha (256 dm - v): |256 dm - v| < 2^15, one 16 x 16 multiply, rounded.
-    const int16_t dv = (int16_t)(((int16_t)(dm << 8)) - v8_);
+    // v += alpha (256 dm - v): |256 dm - v| < 2^15, one 16 x 16 multiply, rounded. 256 dm is a
+    // multiply, not a shift: dm may be negative.
+    const int16_t dv = (int16_t)(dm * 256 - v8_);
     v8_ = (int16_t)(v8_ + (int16_t)((fx::mul_su(dv, c.alpha) + 32768L) >> 16));
 
-    // Q23 sum (|p| <= 8, |i| < 1, |d| <= 4 duty) to Q15, rounded; kept in 32 bits until the
-    // limit, so no separate saturation is needed.
-    const int32_t sum = fx::apply(c.kp, e, kPMax23) + (i31_ >> 8) - fx::apply(c.kd, v8_, kDMax23);
-    int32_t v = (sum + 128) >> 8;
-    if (c.deadband) {
-        if (v >= kDeadbandRamp15) {
-            v += c.deadband;
-        } else if (v <= -kDeadbandRamp15) {
-            v -= c.deadband;
-        } else {  // |v| < 2^8, deadband <= 2^14: the product fits 32 bits, >> 8 is a byte move
-            v += fx::mul_su((int16_t)v, (uint16_t)c.deadband) >> 8;
-        }
-    }
+    // P and D in Q14 (+-2 duty each), the integrator's high word and the feedforward in Q15:
+    // the sum fits int32 with room to spare.
+    const int32_t p_d =
+        (int32_t)fx::apply16(c.kp, e, kTermMax14) - fx::apply16(c.kd, v8_, kTermMax14);
+    int32_t v = p_d * 2 + (int16_t)(i31_ >> 16) + ff;
+    if (c.deadband) v = add_deadband32(v, c.deadband);
     int16_t u = v > limit ? limit : (v < -limit ? (int16_t)-limit : (int16_t)v);
     u = slew_limit(u, u_, c.slew);
     u_ = u;
@@ -178,24 +174,6 @@ UTRF_HOT int16_t Pid::step_open(int16_t limit, int16_t duty, int16_t measured) {
     u_ = u;
     m_prev_ = measured;  // a switch to closed loop calls reset() with this output
     return u;
-}
-
-}  // namespace pid
-}  // namespace utrf
-
-#if defined(__AVR__)
-#include "pid_step_avr.h"
-#endif
-
-namespace utrf {
-namespace pid {
-
-UTRF_HOT int16_t Pid::step(int16_t limit, int16_t target, int16_t measured) {
-#if defined(__AVR__)
-    return step_avr(limit, target, measured);
-#else
-    return step_c(limit, target, measured);
-#endif
 }
 
 }  // namespace pid

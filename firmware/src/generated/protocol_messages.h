@@ -23,11 +23,12 @@ namespace proto {
 
 static const uint16_t kProtocolVersion = 1;
 // CRC-32 of the canonical spec (doc texts excluded); compared at the handshake.
-static const uint32_t kSchemaHash = 0x1556907BUL;
+static const uint32_t kSchemaHash = 0x94493980UL;
 static const uint8_t kMaxPayload = 64;  // body bytes
 static const uint8_t kFingerCount = 5;
 static const uint32_t kDefaultBaud = 1000000UL;
-static const uint16_t kMaxTelemetryHz = 500;
+static const uint16_t kMaxTelemetryHz = 1000;
+static const uint16_t kDefaultHeartbeatTimeoutMs = 500;
 // Seq of board-initiated frames (state stream, fault, boot): this bit set, the low bits a
 // running counter. Requests use seqs without it and replies echo them, so a reply and a
 // stream frame can never be confused.
@@ -99,6 +100,7 @@ enum class ErrorCode : uint8_t {
   OUT_OF_RANGE = 4,  // a field is outside its range; detail = field index, or 0x80 | finger for a per-finger limit
   FAULTED = 5,  // a finger the request needs has a latched fault; detail = finger
   BUSY = 6,  // the board cannot do it now (EEPROM write under way or failed, or the finger must be idle); detail = finger, or 0xFF for the EEPROM
+  HALTED = 7,  // the firmware has stopped driving (loop-alive or tick-alive rule): every motor is off and the watchdog resets the board within 0.12 s; set_mode and set_targets are refused until then; detail = 0
 };
 
 // Latched faults of one finger. A latched fault stays until clear_faults and the finger refuses
@@ -136,11 +138,13 @@ static const uint8_t CLEAR_FAULTS = 0x33;
 static const uint8_t GET_STATE = 0x34;
 static const uint8_t GET_STATS = 0x35;
 static const uint8_t RESET_STATS = 0x36;
+static const uint8_t GET_STATUS = 0x37;
 static const uint8_t IDENTITY = 0x81;
 static const uint8_t PONG = 0x82;
 static const uint8_t STATE = 0x90;
 static const uint8_t FAULT = 0x91;
 static const uint8_t BOOT = 0x92;
+static const uint8_t STATUS = 0x93;
 static const uint8_t GAINS = 0xA0;
 static const uint8_t LIMITS = 0xA2;
 static const uint8_t SAFETY = 0xA4;
@@ -250,7 +254,7 @@ struct SetMode {
 struct SetTelemetry {
   static const uint8_t kId = 0x12;
   static const uint8_t kSize = 2;
-  uint16_t rate_hz;  // Hz; [0, 500]
+  uint16_t rate_hz;  // Hz; [0, 1000]
 };
 
 // get_gains (0x20, host to board, reply gains, idempotent)
@@ -392,6 +396,14 @@ struct ResetStats {
   static const uint8_t kSize = 0;
 };
 
+// get_status (0x37, host to board, reply status, idempotent)
+// Every finger's mode and faults now (the host asks when a state's status_seq names a status it
+// missed).
+struct GetStatus {
+  static const uint8_t kId = 0x37;
+  static const uint8_t kSize = 0;
+};
+
 // identity (0x81, board to host)
 // The board's identity. The first two fields keep this position in every protocol version, so a
 // host can always tell a mismatch.
@@ -422,27 +434,26 @@ struct Pong {
 };
 
 // state (0x90, board to host)
-// Hand state: the telemetry stream at the rate set by set_telemetry, and the reply to get_state.
-// Stream frames carry the board's running seq; a gap is a lost frame.
+// Hand state, compact: the telemetry stream at the rate set by set_telemetry, and the reply to
+// get_state. Angles and duties at the board's own resolution (no conversion on the board, and a
+// target reads back exactly as the board stores it). What the host can derive (fingertips, from
+// theta2 and the kinematics) or what rarely changes (modes, faults: the `status` message) is not
+// in it; `status_seq` names the latest status, so the host knows whether the status it holds is
+// current. Stream frames carry the board's running seq.
 struct State {
   static const uint8_t kId = 0x90;
-  static const uint8_t kSize = 64;
-  static constexpr float kBoardTimeScale = 1e-06f;
-  static constexpr float kTheta2Scale = 0.0001f;
-  static constexpr float kTargetScale = 0.0001f;
-  static constexpr float kDutyAScale = 0.01f;
-  static constexpr float kDutyBScale = 0.01f;
-  static constexpr float kTipXScale = 1e-05f;
-  static constexpr float kTipYScale = 1e-05f;
-  uint32_t board_time;  // x 1e-06; s; board clock at the sample, wraps every 71.6 min
-  int16_t theta2[5];  // x 0.0001; rad; measured Joint-2 angle
-  int16_t target[5];  // x 0.0001; rad; Joint-2 target in use
-  int8_t duty_a[5];  // x 0.01; 1; motor A duty (flexor, or the rotary motor), signed
-  int8_t duty_b[5];  // x 0.01; 1; motor B duty (extensor), signed; 0 for a rotary finger
-  uint8_t mode[5];  // ControlMode
-  uint8_t faults[5];  // FaultBits
-  int16_t tip_x[5];  // x 1e-05; m; fingertip x from the kinematics table
-  int16_t tip_y[5];  // x 1e-05; m; fingertip y from the kinematics table
+  static const uint8_t kSize = 33;
+  static constexpr float kBoardTimeScale = 0.001f;
+  static constexpr float kTheta2Scale = 0.00019174759848570515f;
+  static constexpr float kTargetScale = 0.00019174759848570515f;
+  static constexpr float kDutyAScale = 0.0078125f;
+  static constexpr float kDutyBScale = 0.0078125f;
+  uint16_t board_time;  // x 0.001; s; board clock at the sample (its tick count), wraps every 65.536 s: the host unwraps it
+  uint8_t status_seq;  // the change count of the latest status (see status)
+  int16_t theta2[5];  // x 0.00019174759848570515; rad; measured Joint-2 angle (2 pi / 32768 rad per count)
+  int16_t target[5];  // x 0.00019174759848570515; rad; Joint-2 target in use, as stored
+  int8_t duty_a[5];  // x 0.0078125; 1; motor A duty (flexor, or the rotary motor), signed, 1/128 per count
+  int8_t duty_b[5];  // x 0.0078125; 1; motor B duty (extensor), signed; 0 for a rotary finger
 };
 
 // fault (0x91, board to host)
@@ -466,6 +477,18 @@ struct Boot {
   uint32_t schema_hash;
   uint8_t reset_cause;  // ResetCause
   uint8_t config_status;  // ConfigStatus
+};
+
+// status (0x93, board to host)
+// What rarely changes: every finger's mode and latched faults. Sent (board seq) whenever any of
+// them changes, before the next state frame, and as the reply to get_status. `change` counts the
+// changes (wrapping at 256); every state frame carries the latest in status_seq.
+struct Status {
+  static const uint8_t kId = 0x93;
+  static const uint8_t kSize = 11;
+  uint8_t change;  // change count: +1 whenever a mode or a fault changes
+  uint8_t mode[5];  // ControlMode
+  uint8_t faults[5];  // FaultBits
 };
 
 // gains (0xA0, board to host)
@@ -531,7 +554,7 @@ struct FingerConfig {
 // Link and timing counters since boot or reset_stats.
 struct Stats {
   static const uint8_t kId = 0xB5;
-  static const uint8_t kSize = 36;
+  static const uint8_t kSize = 44;
   static constexpr float kTickWorstScale = 1e-06f;
   static constexpr float kTickMeanScale = 1e-06f;
   uint32_t rx_frames;  // valid frames received
@@ -544,6 +567,8 @@ struct Stats {
   uint32_t tick_overruns;  // ticks that did not finish within their period
   uint16_t tick_worst;  // x 1e-06; s; longest control tick
   uint16_t tick_mean;  // x 1e-06; s; mean control tick, over the last 1024 ticks
+  uint32_t rx_ignored;  // valid frames ignored: a request seq with the board's flag (bit 7) set
+  uint32_t rx_repeats;  // resent requests answered from the reply cache, not done again
 };
 
 // ack (0xF0, board to host)
@@ -644,21 +669,21 @@ inline DecodeStatus decode(const uint8_t* body, uint8_t len, SetMode& out,
   }
   for (uint8_t i = 0; i < 5; ++i) {
     out.mode[i] = detail::rd_u8(body + 1 + i);
-    if (out.mode[i] > 4) {
+    if (((out.mask >> i) & 1u) && (out.mode[i] > 4)) {
       bad_field = 1;
       return DecodeStatus::OUT_OF_RANGE;
     }
   }
   for (uint8_t i = 0; i < 5; ++i) {
     out.duty[i] = detail::rd_i16(body + 6 + 2 * i);
-    if (out.duty[i] < -1000 || out.duty[i] > 1000) {
+    if (((out.mask >> i) & 1u) && (out.duty[i] < -1000 || out.duty[i] > 1000)) {
       bad_field = 2;
       return DecodeStatus::OUT_OF_RANGE;
     }
   }
   for (uint8_t i = 0; i < 5; ++i) {
     out.effort[i] = detail::rd_u16(body + 16 + 2 * i);
-    if (out.effort[i] > 1000) {
+    if (((out.mask >> i) & 1u) && (out.effort[i] > 1000)) {
       bad_field = 3;
       return DecodeStatus::OUT_OF_RANGE;
     }
@@ -678,7 +703,7 @@ inline DecodeStatus decode(const uint8_t* body, uint8_t len, SetTelemetry& out,
   bad_field = 0xFF;
   if (len != SetTelemetry::kSize) return DecodeStatus::BAD_LENGTH;
   out.rate_hz = detail::rd_u16(body + 0);
-  if (out.rate_hz > 500) {
+  if (out.rate_hz > 1000) {
     bad_field = 0;
     return DecodeStatus::OUT_OF_RANGE;
   }
@@ -1034,6 +1059,19 @@ inline uint8_t encode(const ResetStats& msg, uint8_t* body) {
   return ResetStats::kSize;
 }
 
+inline DecodeStatus decode(const uint8_t* body, uint8_t len, GetStatus& out,
+                           uint8_t& bad_field) {
+  (void)body;
+  (void)out;
+  bad_field = 0xFF;
+  return len == GetStatus::kSize ? DecodeStatus::OK : DecodeStatus::BAD_LENGTH;
+}
+inline uint8_t encode(const GetStatus& msg, uint8_t* body) {
+  (void)msg;
+  (void)body;
+  return GetStatus::kSize;
+}
+
 inline DecodeStatus decode(const uint8_t* body, uint8_t len, Identity& out,
                            uint8_t& bad_field) {
   bad_field = 0xFF;
@@ -1100,51 +1138,29 @@ inline DecodeStatus decode(const uint8_t* body, uint8_t len, State& out,
                            uint8_t& bad_field) {
   bad_field = 0xFF;
   if (len != State::kSize) return DecodeStatus::BAD_LENGTH;
-  out.board_time = detail::rd_u32(body + 0);
+  out.board_time = detail::rd_u16(body + 0);
+  out.status_seq = detail::rd_u8(body + 2);
   for (uint8_t i = 0; i < 5; ++i) {
-    out.theta2[i] = detail::rd_i16(body + 4 + 2 * i);
+    out.theta2[i] = detail::rd_i16(body + 3 + 2 * i);
   }
   for (uint8_t i = 0; i < 5; ++i) {
-    out.target[i] = detail::rd_i16(body + 14 + 2 * i);
+    out.target[i] = detail::rd_i16(body + 13 + 2 * i);
   }
   for (uint8_t i = 0; i < 5; ++i) {
-    out.duty_a[i] = detail::rd_i8(body + 24 + i);
+    out.duty_a[i] = detail::rd_i8(body + 23 + i);
   }
   for (uint8_t i = 0; i < 5; ++i) {
-    out.duty_b[i] = detail::rd_i8(body + 29 + i);
-  }
-  for (uint8_t i = 0; i < 5; ++i) {
-    out.mode[i] = detail::rd_u8(body + 34 + i);
-    if (out.mode[i] > 4) {
-      bad_field = 5;
-      return DecodeStatus::OUT_OF_RANGE;
-    }
-  }
-  for (uint8_t i = 0; i < 5; ++i) {
-    out.faults[i] = detail::rd_u8(body + 39 + i);
-    if ((out.faults[i] & ~FaultBits::kAll) != 0) {
-      bad_field = 6;
-      return DecodeStatus::OUT_OF_RANGE;
-    }
-  }
-  for (uint8_t i = 0; i < 5; ++i) {
-    out.tip_x[i] = detail::rd_i16(body + 44 + 2 * i);
-  }
-  for (uint8_t i = 0; i < 5; ++i) {
-    out.tip_y[i] = detail::rd_i16(body + 54 + 2 * i);
+    out.duty_b[i] = detail::rd_i8(body + 28 + i);
   }
   return DecodeStatus::OK;
 }
 inline uint8_t encode(const State& msg, uint8_t* body) {
-  detail::wr_u32(body + 0, msg.board_time);
-  for (uint8_t i = 0; i < 5; ++i) detail::wr_i16(body + 4 + 2 * i, msg.theta2[i]);
-  for (uint8_t i = 0; i < 5; ++i) detail::wr_i16(body + 14 + 2 * i, msg.target[i]);
-  for (uint8_t i = 0; i < 5; ++i) detail::wr_i8(body + 24 + i, msg.duty_a[i]);
-  for (uint8_t i = 0; i < 5; ++i) detail::wr_i8(body + 29 + i, msg.duty_b[i]);
-  for (uint8_t i = 0; i < 5; ++i) detail::wr_u8(body + 34 + i, msg.mode[i]);
-  for (uint8_t i = 0; i < 5; ++i) detail::wr_u8(body + 39 + i, msg.faults[i]);
-  for (uint8_t i = 0; i < 5; ++i) detail::wr_i16(body + 44 + 2 * i, msg.tip_x[i]);
-  for (uint8_t i = 0; i < 5; ++i) detail::wr_i16(body + 54 + 2 * i, msg.tip_y[i]);
+  detail::wr_u16(body + 0, msg.board_time);
+  detail::wr_u8(body + 2, msg.status_seq);
+  for (uint8_t i = 0; i < 5; ++i) detail::wr_i16(body + 3 + 2 * i, msg.theta2[i]);
+  for (uint8_t i = 0; i < 5; ++i) detail::wr_i16(body + 13 + 2 * i, msg.target[i]);
+  for (uint8_t i = 0; i < 5; ++i) detail::wr_i8(body + 23 + i, msg.duty_a[i]);
+  for (uint8_t i = 0; i < 5; ++i) detail::wr_i8(body + 28 + i, msg.duty_b[i]);
   return State::kSize;
 }
 
@@ -1204,6 +1220,34 @@ inline uint8_t encode(const Boot& msg, uint8_t* body) {
   detail::wr_u8(body + 6, msg.reset_cause);
   detail::wr_u8(body + 7, msg.config_status);
   return Boot::kSize;
+}
+
+inline DecodeStatus decode(const uint8_t* body, uint8_t len, Status& out,
+                           uint8_t& bad_field) {
+  bad_field = 0xFF;
+  if (len != Status::kSize) return DecodeStatus::BAD_LENGTH;
+  out.change = detail::rd_u8(body + 0);
+  for (uint8_t i = 0; i < 5; ++i) {
+    out.mode[i] = detail::rd_u8(body + 1 + i);
+    if (out.mode[i] > 4) {
+      bad_field = 1;
+      return DecodeStatus::OUT_OF_RANGE;
+    }
+  }
+  for (uint8_t i = 0; i < 5; ++i) {
+    out.faults[i] = detail::rd_u8(body + 6 + i);
+    if ((out.faults[i] & ~FaultBits::kAll) != 0) {
+      bad_field = 2;
+      return DecodeStatus::OUT_OF_RANGE;
+    }
+  }
+  return DecodeStatus::OK;
+}
+inline uint8_t encode(const Status& msg, uint8_t* body) {
+  detail::wr_u8(body + 0, msg.change);
+  for (uint8_t i = 0; i < 5; ++i) detail::wr_u8(body + 1 + i, msg.mode[i]);
+  for (uint8_t i = 0; i < 5; ++i) detail::wr_u8(body + 6 + i, msg.faults[i]);
+  return Status::kSize;
 }
 
 inline DecodeStatus decode(const uint8_t* body, uint8_t len, Gains& out,
@@ -1404,6 +1448,8 @@ inline DecodeStatus decode(const uint8_t* body, uint8_t len, Stats& out,
   out.tick_overruns = detail::rd_u32(body + 28);
   out.tick_worst = detail::rd_u16(body + 32);
   out.tick_mean = detail::rd_u16(body + 34);
+  out.rx_ignored = detail::rd_u32(body + 36);
+  out.rx_repeats = detail::rd_u32(body + 40);
   return DecodeStatus::OK;
 }
 inline uint8_t encode(const Stats& msg, uint8_t* body) {
@@ -1417,6 +1463,8 @@ inline uint8_t encode(const Stats& msg, uint8_t* body) {
   detail::wr_u32(body + 28, msg.tick_overruns);
   detail::wr_u16(body + 32, msg.tick_worst);
   detail::wr_u16(body + 34, msg.tick_mean);
+  detail::wr_u32(body + 36, msg.rx_ignored);
+  detail::wr_u32(body + 40, msg.rx_repeats);
   return Stats::kSize;
 }
 
@@ -1438,7 +1486,7 @@ inline DecodeStatus decode(const uint8_t* body, uint8_t len, Nack& out,
   if (len != Nack::kSize) return DecodeStatus::BAD_LENGTH;
   out.msg_id = detail::rd_u8(body + 0);
   out.code = detail::rd_u8(body + 1);
-  if (out.code < 1 || out.code > 6) {
+  if (out.code < 1 || out.code > 7) {
     bad_field = 1;
     return DecodeStatus::OUT_OF_RANGE;
   }
@@ -1450,6 +1498,143 @@ inline uint8_t encode(const Nack& msg, uint8_t* body) {
   detail::wr_u8(body + 1, msg.code);
   detail::wr_u8(body + 2, msg.detail);
   return Nack::kSize;
+}
+
+// write: the body's bytes, one at a time, into a byte sink W (put(uint8_t)): the board's
+// frame writer computes the CRC and the COBS codes as the bytes come, with no body copy.
+template <typename W>
+inline void put_u8(W& w, uint8_t v) { w.put(v); }
+template <typename W>
+inline void put_i8(W& w, int8_t v) { w.put(static_cast<uint8_t>(v)); }
+template <typename W>
+inline void put_u16(W& w, uint16_t v) {
+  w.put(static_cast<uint8_t>(v));
+  w.put(static_cast<uint8_t>(v >> 8));
+}
+template <typename W>
+inline void put_i16(W& w, int16_t v) { put_u16(w, static_cast<uint16_t>(v)); }
+template <typename W>
+inline void put_u32(W& w, uint32_t v) {
+  put_u16(w, static_cast<uint16_t>(v));
+  put_u16(w, static_cast<uint16_t>(v >> 16));
+}
+template <typename W>
+inline void put_i32(W& w, int32_t v) { put_u32(w, static_cast<uint32_t>(v)); }
+template <typename W>
+inline void put_f32(W& w, float f) {
+  uint32_t u;
+  memcpy(&u, &f, sizeof u);
+  put_u32(w, u);
+}
+template <typename W>
+inline void write(W& w, const Identity& msg) {
+  put_u16(w, msg.protocol_version);
+  put_u32(w, msg.schema_hash);
+  put_u8(w, msg.fw_major);
+  put_u8(w, msg.fw_minor);
+  put_u8(w, msg.fw_patch);
+  put_u32(w, msg.build_id);
+  put_u8(w, msg.finger_count);
+  for (uint8_t i = 0; i < 5; ++i) put_u8(w, msg.actuation[i]);
+  put_u16(w, msg.loop_rate_hz);
+  put_u8(w, msg.reset_cause);
+  put_u8(w, msg.config_status);
+  put_u16(w, msg.max_telemetry_hz);
+}
+template <typename W>
+inline void write(W& w, const Pong& msg) {
+  put_u32(w, msg.token);
+  put_u32(w, msg.board_time);
+}
+template <typename W>
+inline void write(W& w, const State& msg) {
+  put_u16(w, msg.board_time);
+  put_u8(w, msg.status_seq);
+  for (uint8_t i = 0; i < 5; ++i) put_i16(w, msg.theta2[i]);
+  for (uint8_t i = 0; i < 5; ++i) put_i16(w, msg.target[i]);
+  for (uint8_t i = 0; i < 5; ++i) put_i8(w, msg.duty_a[i]);
+  for (uint8_t i = 0; i < 5; ++i) put_i8(w, msg.duty_b[i]);
+}
+template <typename W>
+inline void write(W& w, const Fault& msg) {
+  put_u32(w, msg.board_time);
+  put_u8(w, msg.finger);
+  put_u8(w, msg.new_faults);
+  for (uint8_t i = 0; i < 5; ++i) put_u8(w, msg.faults[i]);
+}
+template <typename W>
+inline void write(W& w, const Boot& msg) {
+  put_u16(w, msg.protocol_version);
+  put_u32(w, msg.schema_hash);
+  put_u8(w, msg.reset_cause);
+  put_u8(w, msg.config_status);
+}
+template <typename W>
+inline void write(W& w, const Status& msg) {
+  put_u8(w, msg.change);
+  for (uint8_t i = 0; i < 5; ++i) put_u8(w, msg.mode[i]);
+  for (uint8_t i = 0; i < 5; ++i) put_u8(w, msg.faults[i]);
+}
+template <typename W>
+inline void write(W& w, const Gains& msg) {
+  put_u8(w, msg.finger);
+  put_f32(w, msg.kp);
+  put_f32(w, msg.ki);
+  put_f32(w, msg.kd);
+  put_f32(w, msg.d_cutoff_hz);
+  put_u16(w, msg.deadband_duty);
+  put_f32(w, msg.slew_per_s);
+  put_u16(w, msg.max_duty);
+  put_u16(w, msg.pretension_duty);
+}
+template <typename W>
+inline void write(W& w, const Limits& msg) {
+  put_u8(w, msg.finger);
+  put_f32(w, msg.theta2_min);
+  put_f32(w, msg.theta2_max);
+  put_f32(w, msg.limit_margin);
+  put_f32(w, msg.stall_error);
+  put_f32(w, msg.stall_motion);
+  put_u16(w, msg.stall_time);
+  put_f32(w, msg.encoder_jump);
+}
+template <typename W>
+inline void write(W& w, const Safety& msg) {
+  put_u16(w, msg.heartbeat_timeout);
+  put_u8(w, msg.safe_action);
+}
+template <typename W>
+inline void write(W& w, const FingerConfig& msg) {
+  put_u8(w, msg.finger);
+  put_u8(w, msg.actuation);
+  put_f32(w, msg.encoder_offset);
+  put_u8(w, msg.encoder_invert);
+  put_u8(w, msg.motor_invert);
+}
+template <typename W>
+inline void write(W& w, const Stats& msg) {
+  put_u32(w, msg.rx_frames);
+  put_u32(w, msg.rx_crc_errors);
+  put_u32(w, msg.rx_framing_errors);
+  put_u32(w, msg.rx_overruns);
+  put_u32(w, msg.nacks);
+  put_u32(w, msg.tx_dropped);
+  put_u32(w, msg.ticks);
+  put_u32(w, msg.tick_overruns);
+  put_u16(w, msg.tick_worst);
+  put_u16(w, msg.tick_mean);
+  put_u32(w, msg.rx_ignored);
+  put_u32(w, msg.rx_repeats);
+}
+template <typename W>
+inline void write(W& w, const Ack& msg) {
+  put_u8(w, msg.msg_id);
+}
+template <typename W>
+inline void write(W& w, const Nack& msg) {
+  put_u8(w, msg.msg_id);
+  put_u8(w, msg.code);
+  put_u8(w, msg.detail);
 }
 
 // Body size of a message id, or -1 for an id no message has.
@@ -1476,11 +1661,13 @@ inline int16_t message_size(uint8_t msg_id) {
     case MsgId::GET_STATE: return GetState::kSize;
     case MsgId::GET_STATS: return GetStats::kSize;
     case MsgId::RESET_STATS: return ResetStats::kSize;
+    case MsgId::GET_STATUS: return GetStatus::kSize;
     case MsgId::IDENTITY: return Identity::kSize;
     case MsgId::PONG: return Pong::kSize;
     case MsgId::STATE: return State::kSize;
     case MsgId::FAULT: return Fault::kSize;
     case MsgId::BOOT: return Boot::kSize;
+    case MsgId::STATUS: return Status::kSize;
     case MsgId::GAINS: return Gains::kSize;
     case MsgId::LIMITS: return Limits::kSize;
     case MsgId::SAFETY: return Safety::kSize;
@@ -1515,11 +1702,13 @@ inline int16_t message_size(uint8_t msg_id) {
   X(GetState, GET_STATE) \
   X(GetStats, GET_STATS) \
   X(ResetStats, RESET_STATS) \
+  X(GetStatus, GET_STATUS) \
   X(Identity, IDENTITY) \
   X(Pong, PONG) \
   X(State, STATE) \
   X(Fault, FAULT) \
   X(Boot, BOOT) \
+  X(Status, STATUS) \
   X(Gains, GAINS) \
   X(Limits, LIMITS) \
   X(Safety, SAFETY) \
@@ -1549,7 +1738,8 @@ inline int16_t message_size(uint8_t msg_id) {
   X(ClearFaults, CLEAR_FAULTS) \
   X(GetState, GET_STATE) \
   X(GetStats, GET_STATS) \
-  X(ResetStats, RESET_STATS)
+  X(ResetStats, RESET_STATS) \
+  X(GetStatus, GET_STATUS)
 
 #define UTRF_PROTO_BOARD_MESSAGES(X) \
   X(Identity, IDENTITY) \
@@ -1557,6 +1747,7 @@ inline int16_t message_size(uint8_t msg_id) {
   X(State, STATE) \
   X(Fault, FAULT) \
   X(Boot, BOOT) \
+  X(Status, STATUS) \
   X(Gains, GAINS) \
   X(Limits, LIMITS) \
   X(Safety, SAFETY) \
@@ -1810,6 +2001,15 @@ inline void unflatten(const double* in, ResetStats& m) {
   (void)in;
   (void)m;
 }
+inline uint8_t flatten(const GetStatus& m, double* out) {
+  (void)m;
+  (void)out;
+  return 0;
+}
+inline void unflatten(const double* in, GetStatus& m) {
+  (void)in;
+  (void)m;
+}
 inline uint8_t flatten(const Identity& m, double* out) {
   out[0] = static_cast<double>(m.protocol_version);
   out[1] = static_cast<double>(m.schema_hash);
@@ -1858,90 +2058,52 @@ inline void unflatten(const double* in, Pong& m) {
 }
 inline uint8_t flatten(const State& m, double* out) {
   out[0] = static_cast<double>(m.board_time);
-  out[1] = static_cast<double>(m.theta2[0]);
-  out[2] = static_cast<double>(m.theta2[1]);
-  out[3] = static_cast<double>(m.theta2[2]);
-  out[4] = static_cast<double>(m.theta2[3]);
-  out[5] = static_cast<double>(m.theta2[4]);
-  out[6] = static_cast<double>(m.target[0]);
-  out[7] = static_cast<double>(m.target[1]);
-  out[8] = static_cast<double>(m.target[2]);
-  out[9] = static_cast<double>(m.target[3]);
-  out[10] = static_cast<double>(m.target[4]);
-  out[11] = static_cast<double>(m.duty_a[0]);
-  out[12] = static_cast<double>(m.duty_a[1]);
-  out[13] = static_cast<double>(m.duty_a[2]);
-  out[14] = static_cast<double>(m.duty_a[3]);
-  out[15] = static_cast<double>(m.duty_a[4]);
-  out[16] = static_cast<double>(m.duty_b[0]);
-  out[17] = static_cast<double>(m.duty_b[1]);
-  out[18] = static_cast<double>(m.duty_b[2]);
-  out[19] = static_cast<double>(m.duty_b[3]);
-  out[20] = static_cast<double>(m.duty_b[4]);
-  out[21] = static_cast<double>(m.mode[0]);
-  out[22] = static_cast<double>(m.mode[1]);
-  out[23] = static_cast<double>(m.mode[2]);
-  out[24] = static_cast<double>(m.mode[3]);
-  out[25] = static_cast<double>(m.mode[4]);
-  out[26] = static_cast<double>(m.faults[0]);
-  out[27] = static_cast<double>(m.faults[1]);
-  out[28] = static_cast<double>(m.faults[2]);
-  out[29] = static_cast<double>(m.faults[3]);
-  out[30] = static_cast<double>(m.faults[4]);
-  out[31] = static_cast<double>(m.tip_x[0]);
-  out[32] = static_cast<double>(m.tip_x[1]);
-  out[33] = static_cast<double>(m.tip_x[2]);
-  out[34] = static_cast<double>(m.tip_x[3]);
-  out[35] = static_cast<double>(m.tip_x[4]);
-  out[36] = static_cast<double>(m.tip_y[0]);
-  out[37] = static_cast<double>(m.tip_y[1]);
-  out[38] = static_cast<double>(m.tip_y[2]);
-  out[39] = static_cast<double>(m.tip_y[3]);
-  out[40] = static_cast<double>(m.tip_y[4]);
-  return 41;
+  out[1] = static_cast<double>(m.status_seq);
+  out[2] = static_cast<double>(m.theta2[0]);
+  out[3] = static_cast<double>(m.theta2[1]);
+  out[4] = static_cast<double>(m.theta2[2]);
+  out[5] = static_cast<double>(m.theta2[3]);
+  out[6] = static_cast<double>(m.theta2[4]);
+  out[7] = static_cast<double>(m.target[0]);
+  out[8] = static_cast<double>(m.target[1]);
+  out[9] = static_cast<double>(m.target[2]);
+  out[10] = static_cast<double>(m.target[3]);
+  out[11] = static_cast<double>(m.target[4]);
+  out[12] = static_cast<double>(m.duty_a[0]);
+  out[13] = static_cast<double>(m.duty_a[1]);
+  out[14] = static_cast<double>(m.duty_a[2]);
+  out[15] = static_cast<double>(m.duty_a[3]);
+  out[16] = static_cast<double>(m.duty_a[4]);
+  out[17] = static_cast<double>(m.duty_b[0]);
+  out[18] = static_cast<double>(m.duty_b[1]);
+  out[19] = static_cast<double>(m.duty_b[2]);
+  out[20] = static_cast<double>(m.duty_b[3]);
+  out[21] = static_cast<double>(m.duty_b[4]);
+  return 22;
 }
 inline void unflatten(const double* in, State& m) {
-  m.board_time = static_cast<uint32_t>(in[0]);
-  m.theta2[0] = static_cast<int16_t>(in[1]);
-  m.theta2[1] = static_cast<int16_t>(in[2]);
-  m.theta2[2] = static_cast<int16_t>(in[3]);
-  m.theta2[3] = static_cast<int16_t>(in[4]);
-  m.theta2[4] = static_cast<int16_t>(in[5]);
-  m.target[0] = static_cast<int16_t>(in[6]);
-  m.target[1] = static_cast<int16_t>(in[7]);
-  m.target[2] = static_cast<int16_t>(in[8]);
-  m.target[3] = static_cast<int16_t>(in[9]);
-  m.target[4] = static_cast<int16_t>(in[10]);
-  m.duty_a[0] = static_cast<int8_t>(in[11]);
-  m.duty_a[1] = static_cast<int8_t>(in[12]);
-  m.duty_a[2] = static_cast<int8_t>(in[13]);
-  m.duty_a[3] = static_cast<int8_t>(in[14]);
-  m.duty_a[4] = static_cast<int8_t>(in[15]);
-  m.duty_b[0] = static_cast<int8_t>(in[16]);
-  m.duty_b[1] = static_cast<int8_t>(in[17]);
-  m.duty_b[2] = static_cast<int8_t>(in[18]);
-  m.duty_b[3] = static_cast<int8_t>(in[19]);
-  m.duty_b[4] = static_cast<int8_t>(in[20]);
-  m.mode[0] = static_cast<uint8_t>(in[21]);
-  m.mode[1] = static_cast<uint8_t>(in[22]);
-  m.mode[2] = static_cast<uint8_t>(in[23]);
-  m.mode[3] = static_cast<uint8_t>(in[24]);
-  m.mode[4] = static_cast<uint8_t>(in[25]);
-  m.faults[0] = static_cast<uint8_t>(in[26]);
-  m.faults[1] = static_cast<uint8_t>(in[27]);
-  m.faults[2] = static_cast<uint8_t>(in[28]);
-  m.faults[3] = static_cast<uint8_t>(in[29]);
-  m.faults[4] = static_cast<uint8_t>(in[30]);
-  m.tip_x[0] = static_cast<int16_t>(in[31]);
-  m.tip_x[1] = static_cast<int16_t>(in[32]);
-  m.tip_x[2] = static_cast<int16_t>(in[33]);
-  m.tip_x[3] = static_cast<int16_t>(in[34]);
-  m.tip_x[4] = static_cast<int16_t>(in[35]);
-  m.tip_y[0] = static_cast<int16_t>(in[36]);
-  m.tip_y[1] = static_cast<int16_t>(in[37]);
-  m.tip_y[2] = static_cast<int16_t>(in[38]);
-  m.tip_y[3] = static_cast<int16_t>(in[39]);
-  m.tip_y[4] = static_cast<int16_t>(in[40]);
+  m.board_time = static_cast<uint16_t>(in[0]);
+  m.status_seq = static_cast<uint8_t>(in[1]);
+  m.theta2[0] = static_cast<int16_t>(in[2]);
+  m.theta2[1] = static_cast<int16_t>(in[3]);
+  m.theta2[2] = static_cast<int16_t>(in[4]);
+  m.theta2[3] = static_cast<int16_t>(in[5]);
+  m.theta2[4] = static_cast<int16_t>(in[6]);
+  m.target[0] = static_cast<int16_t>(in[7]);
+  m.target[1] = static_cast<int16_t>(in[8]);
+  m.target[2] = static_cast<int16_t>(in[9]);
+  m.target[3] = static_cast<int16_t>(in[10]);
+  m.target[4] = static_cast<int16_t>(in[11]);
+  m.duty_a[0] = static_cast<int8_t>(in[12]);
+  m.duty_a[1] = static_cast<int8_t>(in[13]);
+  m.duty_a[2] = static_cast<int8_t>(in[14]);
+  m.duty_a[3] = static_cast<int8_t>(in[15]);
+  m.duty_a[4] = static_cast<int8_t>(in[16]);
+  m.duty_b[0] = static_cast<int8_t>(in[17]);
+  m.duty_b[1] = static_cast<int8_t>(in[18]);
+  m.duty_b[2] = static_cast<int8_t>(in[19]);
+  m.duty_b[3] = static_cast<int8_t>(in[20]);
+  m.duty_b[4] = static_cast<int8_t>(in[21]);
 }
 inline uint8_t flatten(const Fault& m, double* out) {
   out[0] = static_cast<double>(m.board_time);
@@ -1976,6 +2138,33 @@ inline void unflatten(const double* in, Boot& m) {
   m.schema_hash = static_cast<uint32_t>(in[1]);
   m.reset_cause = static_cast<uint8_t>(in[2]);
   m.config_status = static_cast<uint8_t>(in[3]);
+}
+inline uint8_t flatten(const Status& m, double* out) {
+  out[0] = static_cast<double>(m.change);
+  out[1] = static_cast<double>(m.mode[0]);
+  out[2] = static_cast<double>(m.mode[1]);
+  out[3] = static_cast<double>(m.mode[2]);
+  out[4] = static_cast<double>(m.mode[3]);
+  out[5] = static_cast<double>(m.mode[4]);
+  out[6] = static_cast<double>(m.faults[0]);
+  out[7] = static_cast<double>(m.faults[1]);
+  out[8] = static_cast<double>(m.faults[2]);
+  out[9] = static_cast<double>(m.faults[3]);
+  out[10] = static_cast<double>(m.faults[4]);
+  return 11;
+}
+inline void unflatten(const double* in, Status& m) {
+  m.change = static_cast<uint8_t>(in[0]);
+  m.mode[0] = static_cast<uint8_t>(in[1]);
+  m.mode[1] = static_cast<uint8_t>(in[2]);
+  m.mode[2] = static_cast<uint8_t>(in[3]);
+  m.mode[3] = static_cast<uint8_t>(in[4]);
+  m.mode[4] = static_cast<uint8_t>(in[5]);
+  m.faults[0] = static_cast<uint8_t>(in[6]);
+  m.faults[1] = static_cast<uint8_t>(in[7]);
+  m.faults[2] = static_cast<uint8_t>(in[8]);
+  m.faults[3] = static_cast<uint8_t>(in[9]);
+  m.faults[4] = static_cast<uint8_t>(in[10]);
 }
 inline uint8_t flatten(const Gains& m, double* out) {
   out[0] = static_cast<double>(m.finger);
@@ -2056,7 +2245,9 @@ inline uint8_t flatten(const Stats& m, double* out) {
   out[7] = static_cast<double>(m.tick_overruns);
   out[8] = static_cast<double>(m.tick_worst);
   out[9] = static_cast<double>(m.tick_mean);
-  return 10;
+  out[10] = static_cast<double>(m.rx_ignored);
+  out[11] = static_cast<double>(m.rx_repeats);
+  return 12;
 }
 inline void unflatten(const double* in, Stats& m) {
   m.rx_frames = static_cast<uint32_t>(in[0]);
@@ -2069,6 +2260,8 @@ inline void unflatten(const double* in, Stats& m) {
   m.tick_overruns = static_cast<uint32_t>(in[7]);
   m.tick_worst = static_cast<uint16_t>(in[8]);
   m.tick_mean = static_cast<uint16_t>(in[9]);
+  m.rx_ignored = static_cast<uint32_t>(in[10]);
+  m.rx_repeats = static_cast<uint32_t>(in[11]);
 }
 inline uint8_t flatten(const Ack& m, double* out) {
   out[0] = static_cast<double>(m.msg_id);

@@ -28,7 +28,9 @@ EXIT_BAD_INPUT = 2
 EXIT_LINK = 3
 
 
-def add_port(p: argparse.ArgumentParser) -> None:
+def add_port(p: argparse.ArgumentParser, *, reset: bool = True) -> None:
+    """--port, --baud, --boot-wait, and --no-reset (or --reset where ``reset`` is False: the
+    command then connects without resetting the board unless asked)."""
     p.add_argument(
         "--port",
         required=True,
@@ -47,6 +49,22 @@ def add_port(p: argparse.ArgumentParser) -> None:
         help="seconds to wait for the board's boot frame after opening the port (a MEGA "
         "resets when its USB port opens; its bootloader keeps it silent 1-2 s); 0 skips",
     )
+    if reset:
+        p.add_argument(
+            "--no-reset",
+            dest="reset",
+            action="store_false",
+            help="connect without resetting the board (no DTR pulse): take over what it is "
+            "doing; not over socket:// (no DTR line: use the emulated board's pty)",
+        )
+    else:
+        p.add_argument(
+            "--reset",
+            dest="reset",
+            action="store_true",
+            help="reset the board on connecting (the MEGA's auto-reset); by default the "
+            "board is left running",
+        )
 
 
 def add_poses(p: argparse.ArgumentParser) -> None:
@@ -66,7 +84,13 @@ def load_poses(args: argparse.Namespace) -> PoseLibrary:
 
 
 def connect(args: argparse.Namespace, **kwargs: object) -> Hand:
-    return Hand.connect(args.port, baudrate=args.baud, boot_wait_s=args.boot_wait, **kwargs)  # type: ignore[arg-type]
+    return Hand.connect(
+        args.port,
+        baudrate=args.baud,
+        boot_wait_s=args.boot_wait,
+        reset=getattr(args, "reset", True),
+        **kwargs,  # type: ignore[arg-type]
+    )
 
 
 def error(command: str, text: object) -> None:

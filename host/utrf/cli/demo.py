@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
 
     print(
         f"utrf demo: {' -> '.join(sequence)} on the real firmware "
-        f"({args.elf or 'build/firmware/utrf.elf'}) on the emulated board",
+        f"({args.elf or 'the default firmware ELF'}) on the emulated board",
         flush=True,
     )
     t0 = time.monotonic()
@@ -153,7 +153,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="X|max",
         help="the board's pace: X times real time (1), or 'max' (as fast as it goes)",
     )
-    p.add_argument("--elf", type=Path, help="firmware ELF (default build/firmware/utrf.elf)")
+    p.add_argument(
+        "--elf",
+        type=Path,
+        help="firmware ELF (default: build/firmware/utrf.elf in a checkout, else built from "
+        "the package's firmware sources into the user's cache)",
+    )
     p.add_argument("--seed", type=int, default=0, help="the plant's noise seed")
     p.add_argument("--no-live", action="store_true", help="no live table, a line per pose")
     p.set_defaults(handler=run)

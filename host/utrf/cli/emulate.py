@@ -1,6 +1,7 @@
 """``utrf emulate``: the emulated board, served until Ctrl-C.
 
-Runs the firmware ELF (default ``build/firmware/utrf.elf``, from ``make firmware``) on simavr
+Runs the firmware ELF (default: ``build/firmware/utrf.elf`` in a checkout, from ``make
+firmware``; installed, one built on first use into the user's cache: ``utrf.artifacts``) on simavr
 with the plant model of the hand, paced to the wall clock, and serves its UART0 on a TCP port
 (``socket://127.0.0.1:PORT``, for pyserial) and on a pty. Prints where to connect, a status
 line now and then with the real-time factor, and takes fault-injection commands on stdin
@@ -111,7 +112,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=COMMANDS_HELP,
     )
-    p.add_argument("--elf", type=Path, help="firmware ELF (default: build/firmware/utrf.elf)")
+    p.add_argument(
+        "--elf",
+        type=Path,
+        help="firmware ELF (default: build/firmware/utrf.elf in a checkout, else built from "
+        "the package's firmware sources into the user's cache)",
+    )
     p.add_argument("--hand", type=Path, help="hand TOML for the plant (default: the shipped hand)")
     p.add_argument("--seed", type=int, default=0, help="seed of the encoder noise and line faults")
     p.add_argument(

@@ -68,13 +68,31 @@ def register(subparsers: Any) -> None:
 
     g = sub.add_parser("grasp-hold", help="hold a grasp pose under hammer hits, record drift")
     _common(g)
-    g.add_argument("--pose", default="grasp-bottle", help="a grasp pose of the library")
+    g.add_argument(
+        "--pose", default=None, help="a grasp pose of the library (default grasp-bottle; with "
+        "--object, the object's)",
+    )  # fmt: skip
+    g.add_argument(
+        "--object",
+        default=None,
+        metavar="NAME",
+        help="emulated: hold a real object on the MuJoCo hand (egg, bottle, ball, box): object "
+        "slip, hits, contact forces, breakage, dropped",
+    )
+    g.add_argument(
+        "--effort", type=float, default=None, help="with --object: GRASP effort (the pose's)"
+    )
     g.add_argument("--duration-s", type=float, default=600.0, help="hold time (paper: 600 s)")
     g.add_argument(
         "--hits", type=int, default=None, help="emulated hammer hits (default one per 30 s)"
     )
     g.add_argument(
-        "--hit-impulse-ns", type=float, default=0.3, help="emulated hit impulse, N s (0.3)"
+        "--hit-impulse",
+        type=float,
+        default=None,
+        metavar="N_S",
+        help="each emulated hammer hit's impulse in newton-seconds (N·s; default 0.3 on a "
+        "fingertip, 0.02 on an --object)",
     )
     g.add_argument(
         "--tracked-finger", default="index", help="the finger carrying the tracker's sensor"
@@ -119,6 +137,13 @@ def _common(p: argparse.ArgumentParser) -> None:
         help="a driven emulated board with the emulated truth and a simulated tracker",
     )
     p.add_argument("--seed", type=int, default=0, help="emulation seed (default 0)")
+    p.add_argument(
+        "--elf",
+        default=None,
+        metavar="FILE",
+        help="--emulated: the firmware ELF (default: build/firmware/utrf.elf in a checkout, "
+        "else built from the package's sources)",
+    )
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
     p.add_argument(
         "--tracker-port",
@@ -146,7 +171,9 @@ def _open(args: argparse.Namespace, tracked: int, truth: Any = None) -> Any:
     from utrf.hil import bench as bench_mod
 
     if args.emulated:
-        return bench_mod.open_emulated(seed=args.seed, tracked_finger=tracked, truth=truth)
+        return bench_mod.open_emulated(
+            seed=args.seed, tracked_finger=tracked, truth=truth, elf=args.elf
+        )
     from utrf.hil.tracker import NDIAuroraTracker
 
     tracker = NDIAuroraTracker(args.tracker_port, sensor=args.tracker_sensor)
@@ -157,7 +184,20 @@ def _open(args: argparse.Namespace, tracked: int, truth: Any = None) -> Any:
         raise
 
 
+def _warn_rate(tracker: Any, hz: float, option: str) -> None:
+    """A sample rate above the tracker's own gives repeated frames, not more samples."""
+    rate = getattr(tracker, "rate_hz", None)
+    if rate is not None and hz > rate:
+        print(
+            f"WARNING: {option} {hz:g} is above the tracker's {rate:g} frames/s: repeated "
+            "frames are not new samples (they are skipped); the run takes no more of them",
+            file=sys.stderr,
+            flush=True,
+        )
+
+
 def _run_guarded(command: str, body: Any) -> int:
+    from utrf.emulator import EmulatorError, HarnessError
     from utrf.hand.errors import HandError
     from utrf.hil.static_loading import RunError, RunStopped
     from utrf.hil.tracker import TrackerError
@@ -168,8 +208,8 @@ def _run_guarded(command: str, body: Any) -> int:
     except (RunStopped, HandError) as exc:
         error(command, f"stopped: {exc}; every sample taken is in the output directory")
         return EXIT_NOT_DONE
-    except (RunError, ValueError) as exc:
-        error(command, exc)
+    except (RunError, ValueError, EmulatorError, HarnessError, ImportError) as exc:
+        error(command, exc)  # a missing firmware, harness or tracker package: nothing written
         return EXIT_BAD_INPUT
     except TrackerError as exc:
         error(command, exc)
@@ -235,15 +275,22 @@ def _static_loading(args: argparse.Namespace) -> int:
             )
         truth = EmulatedTruth() if config.emulated else None
         if not args.resume:
-            meta: dict[str, Any] = {"started": sl.default_time(), "port": args.port}
-            if truth is not None:
-                meta["emulated_truth"] = truth.to_json()
-            meta["planner"] = [
-                {"load_kg": c.load_kg, "safe": c.safe, "reasons": list(c.reasons)} for c in checks
-            ]
-            sl.prepare_output(args.out, config, resume=False, extra_meta=meta)
+            sl.check_new_output(args.out)
+        # Everything that can fail to start (the firmware, the harness, the tracker and its
+        # package, the board) before anything is written: a failed start does not block its
+        # own retry.
         bench = _open(args, config.finger, truth)
         try:
+            _warn_rate(bench.tracker, config.tracker_hz, "--tracker-hz")
+            if not args.resume:
+                meta: dict[str, Any] = {"started": sl.default_time(), "port": args.port}
+                if truth is not None:
+                    meta["emulated_truth"] = truth.to_json()
+                meta["planner"] = [
+                    {"load_kg": c.load_kg, "safe": c.safe, "reasons": list(c.reasons)}
+                    for c in checks
+                ]
+                sl.prepare_output(args.out, config, resume=False, extra_meta=meta)
             result = sl.run(bench, config, args.out, geometry=geometry, progress=progress)
         finally:
             bench.close()
@@ -252,6 +299,30 @@ def _static_loading(args: argparse.Namespace) -> int:
         return EXIT_OK if result.get("complete") else EXIT_NOT_DONE
 
     return _run_guarded(command, body)
+
+
+def _object_hold(args: argparse.Namespace, progress: Any) -> int:
+    """``grasp-hold --emulated --object NAME``: the object on the MuJoCo hand."""
+    from utrf.hil import object_hold as oh
+
+    if not args.emulated:
+        error("hil grasp-hold", "--object needs --emulated (the MuJoCo hand holds the object)")
+        return EXIT_BAD_INPUT
+    hits = args.hits if args.hits is not None else max(1, int(args.duration_s // 10))
+    config = oh.ObjectHoldConfig(
+        object=args.object,
+        pose=args.pose,
+        effort=args.effort,
+        duration_s=args.duration_s,
+        hits=hits,
+        **({} if args.hit_impulse is None else {"hit_impulse_n_s": args.hit_impulse}),
+        seed=args.seed,
+    )
+    result = oh.run(config, args.out, elf=getattr(args, "elf", None), progress=progress)
+    print(oh.describe(result))
+    picture = f", picture: {result['picture']}" if result["picture"] else ""
+    print(f"results: {args.out / 'results.json'}{picture}")
+    return EXIT_OK if not result["dropped"] and not result["broke"] else EXIT_NOT_DONE
 
 
 def _grasp_hold(args: argparse.Namespace) -> int:
@@ -263,13 +334,15 @@ def _grasp_hold(args: argparse.Namespace) -> int:
     progress = (lambda _s: None) if args.quiet else (lambda s: print(s, flush=True))
 
     def body() -> int:
+        if args.object is not None:
+            return _object_hold(args, progress)
         tracked = _finger(args.tracked_finger)
         hits = args.hits if args.hits is not None else int(args.duration_s // 30)
         config = gh.GraspHoldConfig(
-            pose=args.pose,
+            pose=args.pose or "grasp-bottle",
             duration_s=args.duration_s,
             hits=hits if args.emulated else 0,
-            hit_impulse_ns=args.hit_impulse_ns,
+            hit_impulse_n_s=0.3 if args.hit_impulse is None else args.hit_impulse,
             tracked_finger=tracked,
             sample_hz=args.sample_hz,
             emulated=bool(args.emulated),
@@ -278,6 +351,7 @@ def _grasp_hold(args: argparse.Namespace) -> int:
         # The grasp hold uses the hand's own motors (no bench actuator).
         bench = _open(args, tracked, EmulatedTruth(actuator=None))
         try:
+            _warn_rate(bench.tracker, config.sample_hz, "--sample-hz")
             result = gh.run(
                 bench,
                 config,

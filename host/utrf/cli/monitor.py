@@ -7,8 +7,12 @@ one line every ``--every`` seconds, or with ``--json`` one JSON object (SI) per 
 Faults and board resets are printed as they happen; after a reset the monitor says so and
 handshakes again (the board forgot the telemetry rate).
 
-Opening a MEGA's USB port resets it (the monitor waits for it to boot); the monitor changes
-no mode and leaves the hand as it finds it. Runs until Ctrl-C or ``--duration`` seconds.
+The monitor connects without resetting the board (no DTR pulse; ``--reset`` to reset it),
+changes no mode and leaves the hand as it finds it: a pose held stays held. The first
+connection after plugging a MEGA in resets it all the same (DTR rises; see
+``utrf.hand.serial_port``), and over ``socket://`` (the emulated board's TCP port, which has
+no DTR line) every connection resets it: the monitor says so; the emulated board's pty does
+not. Runs until Ctrl-C or ``--duration`` seconds.
 Exit codes: 0; 2 bad input; 3 the board could not be reached.
 """
 
@@ -96,6 +100,13 @@ def run(args: argparse.Namespace) -> int:
     live_view = console.is_terminal and not args.json
     watch = _Watch()
     watch.as_json = args.json
+    if not args.reset and args.port.startswith("socket://"):
+        print(
+            f"utrf monitor: note: {args.port} has no DTR line: connecting resets the emulated "
+            "board (its pty, which `utrf emulate` prints, does not)",
+            file=sys.stderr,
+        )
+        args.reset = True
     with connect(args, telemetry_hz=args.rate, on_close="hold", log_path=args.log) as hand:
         hand.on_state(watch.on_state)
         hand.on_fault(watch.on_fault)
@@ -158,7 +169,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    add_port(p)
+    add_port(p, reset=False)
     p.add_argument("--rate", type=int, default=50, metavar="HZ", help="stream rate (50 Hz)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.add_argument(

@@ -18,7 +18,6 @@ from utrf.emulator.board import (
 )
 from utrf.emulator.plant import EncoderParams, HandPlant, MotorParams, PlantError, PlantParams
 from utrf.emulator.process import BoardProcess
-from utrf.emulator.sim_client import SimClient
 
 __all__ = [
     "DEFAULT_ELF",
@@ -34,7 +33,6 @@ __all__ = [
     "PinState",
     "PlantError",
     "PlantParams",
-    "SimClient",
     "SimSerial",
     "check_elf",
 ]

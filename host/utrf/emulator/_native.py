@@ -1,7 +1,8 @@
 """ctypes binding of the C harness (``harness/utrf_sim.h``); one :class:`NativeBoard` per board.
 
-The library is ``build/emulator/libutrf_sim.so`` in the repository (``make emulator`` builds
-it), or the file named by ``UTRF_SIM_LIB``. Nothing here is thread-safe: the caller
+The library is found by :func:`utrf.artifacts.harness_library`: ``UTRF_SIM_LIB``, a checkout's
+``build/emulator/libutrf_sim.so`` (``make emulator``), or built on first use into the user's
+cache from the harness sources the package ships. Nothing here is thread-safe: the caller
 serialises calls on one board (``EmulatedBoard`` holds a lock).
 """
 
@@ -13,15 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 6
+from utrf import artifacts
+
+ABI = 10
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
 ADC_CHANNELS = 8
 
-HARNESS_DIR = Path(__file__).resolve().parent / "harness"
-REPO_ROOT = Path(__file__).resolve().parents[3]
-DEFAULT_LIBRARY = REPO_ROOT / "build" / "emulator" / "libutrf_sim.so"
 
 STATUS_NAMES = {0: "running", 1: "crashed", 2: "done"}
 RESET_POWER_ON, RESET_PIN = 0, 1
@@ -49,6 +49,13 @@ STAT_FIELDS = (
     "frame_cycles",
     "adc_conversions",
     "late_interrupts",
+    "rx_duplicated",
+    "rx_burst_bytes",
+    "tx_duplicated",
+    "tx_burst_bytes",
+    "stalls",
+    "sleep_cycles",
+    "quieted_timer_events",
 )
 PROFILE_FIELDS = (
     "count",
@@ -73,6 +80,136 @@ class _Stats(ctypes.Structure):
     _fields_ = [(name, ctypes.c_uint64) for name in STAT_FIELDS]
 
 
+class _LineFaults(ctypes.Structure):
+    _fields_ = [
+        ("drop", ctypes.c_double),
+        ("corrupt", ctypes.c_double),
+        ("insert", ctypes.c_double),
+        ("duplicate", ctypes.c_double),
+        ("burst", ctypes.c_double),
+        ("burst_min", ctypes.c_uint32),
+        ("burst_max", ctypes.c_uint32),
+    ]
+
+
+_D = ctypes.c_double
+_I32 = ctypes.c_int32
+
+
+def _arr(kind: type, *shape: int) -> type:
+    t = kind
+    for n in reversed(shape):
+        t = t * n
+    return t
+
+
+class PlantParamsC(ctypes.Structure):
+    """``utrf_plant_params_t``: the plant's constants (utrf.emulator.plant fills it)."""
+
+    _fields_ = [
+        ("R", _arr(_D, 5, 3)),
+        ("L", _arr(_D, 5, 3)),
+        ("link_mass", _arr(_D, 5, 3)),
+        ("com", _arr(_D, 5, 3)),
+        ("tendon_stiffness", _arr(_D, 5)),
+        ("coupling_compliance", _arr(_D, 5, 2)),
+        ("rotary", _arr(_I32, 5)),
+        ("q_limits", _arr(_D, 5, 2)),
+        ("supply_v", _D),
+        ("stall_force", _D),
+        ("no_load_speed", _D),
+        ("electrical_time_constant", _D),
+        ("moving_mass", _D),
+        ("coulomb_friction", _D),
+        ("viscous_friction", _D),
+        ("stroke", _arr(_D, 2)),
+        ("enc_supply", _D),
+        ("enc_offset", _D),
+        ("enc_band", _arr(_D, 2)),
+        ("enc_noise_v", _D),
+        ("enc_unplugged_v", _D),
+        ("enc_invert", _I32),
+        ("enc_bits", _I32),
+        ("joint_damping", _D),
+        ("tendon_damping", _D),
+        ("gravity", _arr(_D, 2)),
+        ("max_substep", _D),
+    ]
+
+
+PLANT_STATE_FIELDS: tuple[tuple[str, tuple[int, ...]], ...] = (
+    ("time", ()),
+    ("q", (5,)),
+    ("qd", (5,)),
+    ("x", (5, 2)),
+    ("xd", (5, 2)),
+    ("current", (5, 2)),
+    ("tension", (5, 2)),
+    ("drive_mode", (5, 2)),
+    ("drive_duty", (5, 2)),
+    ("tip_force", (5, 2)),
+    ("tip_goal", (5, 2)),
+    ("tip_rate", (5,)),
+    ("applied_force", (5, 2)),
+    ("coupling_stretch", (5, 2)),
+    ("q_ext", (5,)),
+    ("block", (5, 2)),
+    ("plugged", (5,)),
+    ("unplugged_v", (5,)),
+    ("encoder_shift", (5,)),
+)
+
+
+class PlantStateC(ctypes.Structure):
+    """``utrf_plant_state_t``: the plant's state, read and written in place."""
+
+    _fields_ = [(name, _arr(_D, *shape) if shape else _D) for name, shape in PLANT_STATE_FIELDS]
+
+
+MJ_LOADS = 16
+
+
+class MjPlantParamsC(ctypes.Structure):
+    """``utrf_mjplant_params_t``: indices into the MuJoCo model and the motors' constants."""
+
+    _fields_ = [
+        ("actuator", _arr(_I32, 5, 2)),
+        ("dof", _arr(_I32, 5, 2)),
+        ("gear", _arr(_D, 5, 2)),
+        ("j2_qpos", _arr(_I32, 5)),
+        ("supply_v", _D),
+        ("force_constant", _D),
+        ("resistance", _D),
+        ("electrical_time_constant", _D),
+        ("stall_force", _D),
+        ("enc_supply", _D),
+        ("enc_offset", _D),
+        ("enc_band", _arr(_D, 2)),
+        ("enc_noise_v", _D),
+        ("enc_unplugged_v", _D),
+        ("enc_invert", _I32),
+        ("enc_bits", _I32),
+    ]
+
+
+MJ_STATE_FIELDS: tuple[tuple[str, tuple[int, ...]], ...] = (
+    ("time", ()),
+    ("current", (5, 2)),
+    ("drive_mode", (5, 2)),
+    ("drive_duty", (5, 2)),
+    ("plugged", (5,)),
+    ("unplugged_v", (5,)),
+    ("encoder_shift", (5,)),
+    ("load_body", (MJ_LOADS,)),
+    ("load_site", (MJ_LOADS,)),
+    ("load_force", (MJ_LOADS, 3)),
+)
+
+
+class MjPlantStateC(ctypes.Structure):
+    _fields_ = [(name, _arr(_D, *shape) if shape else _D) for name, shape in MJ_STATE_FIELDS]
+
+
 class _Profile(ctypes.Structure):
     _fields_ = [(name, ctypes.c_uint64) for name in PROFILE_FIELDS]
 
@@ -81,8 +218,10 @@ _lib: ctypes.CDLL | None = None
 
 
 def library_path() -> Path:
-    env = os.environ.get("UTRF_SIM_LIB")
-    return Path(env) if env else DEFAULT_LIBRARY
+    try:
+        return artifacts.harness_library()
+    except artifacts.ArtifactError as exc:
+        raise HarnessError(str(exc)) from None
 
 
 def _check_fresh(path: Path) -> None:
@@ -91,10 +230,12 @@ def _check_fresh(path: Path) -> None:
             f"the emulator's harness library {path} is missing: run `make emulator` "
             "(or `make test`) in the repository"
         )
-    if os.environ.get("UTRF_SIM_LIB"):
-        return
-    sources = [*HARNESS_DIR.glob("*.c"), *HARNESS_DIR.glob("*.h")]
-    pins = REPO_ROOT / "firmware" / "src" / "board_pins.h"
+    root = artifacts.checkout_root()
+    if os.environ.get("UTRF_SIM_LIB") or root is None or not path.is_relative_to(root):
+        return  # the cache is keyed by its sources' hash: never stale
+    harness = root / "host" / "utrf" / "emulator" / "harness"
+    sources = [*harness.glob("*.c"), *harness.glob("*.h")]
+    pins = root / "firmware" / "src" / "board_pins.h"
     if pins.is_file():
         sources.append(pins)
     newest = max((p.stat().st_mtime for p in sources), default=0.0)
@@ -149,8 +290,16 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_drop_client": (None, [p]),
         "utrf_sim_set_line_faults": (
             ctypes.c_int,
-            [p, ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double],
+            [p, ctypes.c_int, ctypes.POINTER(_LineFaults)],
         ),
+        "utrf_sim_stall_vector": (
+            ctypes.c_int,
+            [p, ctypes.c_int, ctypes.c_uint64, ctypes.c_int64],
+        ),
+        "utrf_sim_stalls_left": (ctypes.c_int64, [p]),
+        "utrf_sim_write_io": (ctypes.c_int, [p, ctypes.c_uint32, ctypes.c_uint8]),
+        "utrf_sim_poke": (ctypes.c_int, [p, ctypes.c_uint32, ctypes.c_uint8]),
+        "utrf_sim_set_quiet_timers": (None, [p, ctypes.c_int]),
         "utrf_sim_inject": (ctypes.c_size_t, [p, ctypes.c_int, ctypes.c_char_p, ctypes.c_size_t]),
         "utrf_sim_reset": (None, [p, ctypes.c_int, ctypes.c_uint64]),
         "utrf_sim_set_auto_reset_hold": (None, [p, ctypes.c_uint64]),
@@ -162,6 +311,43 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_profile_function": (ctypes.c_int, [p, ctypes.c_int64]),
         "utrf_sim_profile_get": (None, [p, ctypes.c_int, ctypes.POINTER(_Profile)]),
         "utrf_sim_log": (ctypes.c_size_t, [p, ctypes.c_char_p, ctypes.c_size_t]),
+        "utrf_plant_new": (p, [ctypes.POINTER(PlantParamsC), ctypes.c_uint64]),
+        "utrf_plant_free": (None, [p]),
+        "utrf_plant_state": (ctypes.POINTER(PlantStateC), [p]),
+        "utrf_plant_refresh": (None, [p]),
+        "utrf_plant_inertia": (ctypes.c_double, [p, ctypes.c_int]),
+        "utrf_plant_step": (None, [p, ctypes.c_double, ctypes.POINTER(ctypes.c_double)]),
+        "utrf_plant_encoder_volts": (None, [p, ctypes.POINTER(ctypes.c_double)]),
+        "utrf_plant_decode": (None, [p, ctypes.POINTER(ctypes.c_double)]),
+        "utrf_plant_hit": (
+            ctypes.c_int,
+            [p, ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double],
+        ),
+        "utrf_plant_pulses": (ctypes.c_int, [p]),
+        "utrf_sim_attach_plant": (None, [p, p]),
+        "utrf_mjplant_new": (
+            p,
+            [
+                ctypes.c_char_p,
+                p,
+                p,
+                ctypes.POINTER(MjPlantParamsC),
+                ctypes.c_uint64,
+                ctypes.c_char_p,
+                ctypes.c_size_t,
+            ],
+        ),
+        "utrf_mjplant_free": (None, [p]),
+        "utrf_mjplant_state": (ctypes.POINTER(MjPlantStateC), [p]),
+        "utrf_mjplant_step": (None, [p, ctypes.c_double, ctypes.POINTER(ctypes.c_double)]),
+        "utrf_mjplant_encoder_volts": (None, [p, ctypes.POINTER(ctypes.c_double)]),
+        "utrf_mjplant_hit": (
+            ctypes.c_int,
+            [p, ctypes.c_int, ctypes.c_int] + [ctypes.c_double] * 4,
+        ),
+        "utrf_mjplant_pulses": (ctypes.c_int, [p]),
+        "utrf_sim_attach_mjplant": (None, [p, p]),
+        "utrf_sim_run_plant": (ctypes.c_int, [p, ctypes.c_uint64, ctypes.c_uint64]),
     }
     for name, (restype, argtypes) in sigs.items():
         fn = getattr(lib, name)
@@ -169,6 +355,136 @@ def load_library() -> ctypes.CDLL:
         fn.argtypes = argtypes
     _lib = lib
     return lib
+
+
+_DP = ctypes.POINTER(ctypes.c_double)
+
+
+class NativePlant:
+    """One C plant (``utrf_plant_t``). ``state`` holds numpy views of its state, by field."""
+
+    def __init__(self, params: PlantParamsC, seed: int) -> None:
+        self._lib = load_library()
+        handle = self._lib.utrf_plant_new(ctypes.byref(params), seed & (2**64 - 1))
+        if not handle:
+            raise HarnessError("out of memory for the plant")
+        self._h: int | None = handle
+        self._c = self._lib.utrf_plant_state(handle).contents
+        self.state = {
+            name: np.ctypeslib.as_array(getattr(self._c, name))
+            for name, shape in PLANT_STATE_FIELDS
+            if shape
+        }
+        self._volts = np.zeros(FINGERS)
+        self._step = self._lib.utrf_plant_step
+
+    @property
+    def handle(self) -> int:
+        if self._h is None:
+            raise HarnessError("the plant is freed")
+        return self._h
+
+    @property
+    def time(self) -> float:
+        return float(self._c.time)
+
+    def close(self) -> None:
+        if self._h is not None:
+            self.state = {k: v.copy() for k, v in self.state.items()}  # views outlive it
+            self._lib.utrf_plant_free(self._h)
+            self._h = None
+
+    def step(self, dt: float, pins: np.ndarray | None) -> None:
+        if pins is None:
+            self._step(self.handle, dt, None)
+            return
+        block = np.ascontiguousarray(pins, dtype=np.float64)
+        self._step(self.handle, dt, block.ctypes.data_as(_DP))
+
+    def decode(self, pins: np.ndarray) -> None:
+        block = np.ascontiguousarray(pins, dtype=np.float64)
+        self._lib.utrf_plant_decode(self.handle, block.ctypes.data_as(_DP))
+
+    def encoder_volts(self) -> np.ndarray:
+        self._lib.utrf_plant_encoder_volts(self.handle, self._volts.ctypes.data_as(_DP))
+        return self._volts.copy()
+
+    def refresh(self) -> None:
+        self._lib.utrf_plant_refresh(self.handle)
+
+    def inertia(self, finger: int) -> float:
+        return self._lib.utrf_plant_inertia(self.handle, finger)
+
+    def hit(self, finger: int, jx: float, jy: float, duration: float) -> None:
+        rc = self._lib.utrf_plant_hit(self.handle, finger, jx, jy, duration)
+        if rc == -2:
+            raise HarnessError("too many hits under way at once (64)")
+        if rc:
+            raise HarnessError(f"bad hit: finger {finger}, duration {duration}")
+
+    def pulses(self) -> int:
+        return self._lib.utrf_plant_pulses(self.handle)
+
+
+class NativeMjPlant:
+    """The MuJoCo plant's stepping in C (``utrf_mjplant_t``) over the caller's model and data."""
+
+    def __init__(
+        self, libmujoco: str, model: int, data: int, params: MjPlantParamsC, seed: int
+    ) -> None:
+        self._lib = load_library()
+        err = ctypes.create_string_buffer(1024)
+        handle = self._lib.utrf_mjplant_new(
+            libmujoco.encode(), model, data, ctypes.byref(params), seed & (2**64 - 1), err, 1024
+        )
+        if not handle:
+            raise HarnessError(err.value.decode(errors="replace"))
+        self._h: int | None = handle
+        self._c = self._lib.utrf_mjplant_state(handle).contents
+        self.state = {
+            name: np.ctypeslib.as_array(getattr(self._c, name))
+            for name, shape in MJ_STATE_FIELDS
+            if shape
+        }
+        self.state["load_body"][:] = -1
+        self._volts = np.zeros(FINGERS)
+
+    @property
+    def handle(self) -> int:
+        if self._h is None:
+            raise HarnessError("the plant is freed")
+        return self._h
+
+    @property
+    def time(self) -> float:
+        return float(self._c.time)
+
+    def close(self) -> None:
+        if self._h is not None:
+            self.state = {k: v.copy() for k, v in self.state.items()}
+            self._lib.utrf_mjplant_free(self._h)
+            self._h = None
+
+    def step(self, dt: float, pins: np.ndarray | None) -> None:
+        if pins is None:
+            self._lib.utrf_mjplant_step(self.handle, dt, None)
+            return
+        block = np.ascontiguousarray(pins, dtype=np.float64)
+        self._lib.utrf_mjplant_step(self.handle, dt, block.ctypes.data_as(_DP))
+
+    def encoder_volts(self) -> np.ndarray:
+        self._lib.utrf_mjplant_encoder_volts(self.handle, self._volts.ctypes.data_as(_DP))
+        return self._volts.copy()
+
+    def hit(self, body: int, site: int, impulse: np.ndarray, duration: float) -> None:
+        rc = self._lib.utrf_mjplant_hit(self.handle, body, site, *map(float, impulse), duration)
+        if rc == -2:
+            raise HarnessError("too many hits under way at once (64)")
+        if rc:
+            raise HarnessError(f"bad hit: body {body}, duration {duration}")
+
+    def pulses(self) -> int:
+        return self._lib.utrf_mjplant_pulses(self.handle)
 
 
 class NativeBoard:
@@ -205,6 +521,15 @@ class NativeBoard:
     # -- running ----------------------------------------------------------------------------
     def run_to(self, cycle: int) -> int:
         return self._run_to(self._h, cycle)
+
+    def attach_plant(self, plant: NativePlant | NativeMjPlant | None) -> None:
+        if isinstance(plant, NativeMjPlant):
+            self._lib.utrf_sim_attach_mjplant(self.handle, plant.handle)
+        else:
+            self._lib.utrf_sim_attach_plant(self.handle, None if plant is None else plant.handle)
+
+    def run_plant(self, cycle: int, period: int) -> int:
+        return self._lib.utrf_sim_run_plant(self._h, cycle, period)
 
     @property
     def cycle(self) -> int:
@@ -267,9 +592,40 @@ class NativeBoard:
     def drop_client(self) -> None:
         self._lib.utrf_sim_drop_client(self.handle)
 
-    def set_line_faults(self, direction: int, drop: float, corrupt: float, insert: float) -> None:
-        if self._lib.utrf_sim_set_line_faults(self.handle, direction, drop, corrupt, insert):
-            raise HarnessError("line fault probabilities must lie in [0, 1] (insert < 1)")
+    def set_line_faults(
+        self,
+        direction: int,
+        drop: float,
+        corrupt: float,
+        insert: float,
+        duplicate: float = 0.0,
+        burst: float = 0.0,
+        burst_length: tuple[int, int] = (8, 32),
+    ) -> None:
+        f = _LineFaults(drop, corrupt, insert, duplicate, burst, *burst_length)
+        if self._lib.utrf_sim_set_line_faults(self.handle, direction, ctypes.byref(f)):
+            raise HarnessError(
+                "line fault probabilities must lie in [0, 1] (insert and duplicate < 1), "
+                "a burst's length 1 <= min <= max"
+            )
+
+    def stall_vector(self, vector: int, cycles: int, count: int) -> None:
+        if self._lib.utrf_sim_stall_vector(self.handle, vector, cycles, count):
+            raise HarnessError(f"interrupt vector {vector} does not exist on the atmega2560")
+
+    def stalls_left(self) -> int:
+        return self._lib.utrf_sim_stalls_left(self.handle)
+
+    def write_io(self, address: int, value: int) -> None:
+        if self._lib.utrf_sim_write_io(self.handle, address, value):
+            raise HarnessError(f"{address:#x} is not an I/O register")
+
+    def set_quiet_timers(self, on: bool) -> None:
+        self._lib.utrf_sim_set_quiet_timers(self.handle, int(on))
+
+    def poke(self, address: int, value: int) -> None:
+        if self._lib.utrf_sim_poke(self.handle, address, value):
+            raise HarnessError(f"{address:#x} is outside the data space")
 
     def inject(self, direction: int, data: bytes) -> int:
         return self._lib.utrf_sim_inject(self.handle, direction, data, len(data))

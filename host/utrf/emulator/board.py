@@ -14,16 +14,23 @@ import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from utrf import artifacts
 from utrf.emulator import _native
 from utrf.emulator._native import F_CPU_HZ, HarnessError, NativeBoard
 from utrf.emulator.plant import DRIVE_NAMES, HandPlant, PlantParams
 from utrf.models.geometry import HandGeometry
 
-DEFAULT_ELF = _native.REPO_ROOT / "build" / "firmware" / "utrf.elf"
+# A checkout's `make firmware` output (relative: found from the working directory); with no
+# ELF given, the board takes utrf.artifacts.firmware_elf() (this, or a cached build).
+DEFAULT_ELF = artifacts.CHECKOUT_ELF
 EXCHANGE_PERIOD_S = 250e-6
+MUJOCO_EXCHANGE_PERIOD_S = 1e-3  # the MJCF's own timestep: one mj_step per exchange
+#: real time: simulated time the board thread runs per hold of the lock (sim_time moves by it)
+SERVE_BATCH_S = 1e-3
 EEPROM_SIZE = 4096
 
 # MCUSR bits, and the order in which the protocol's ResetCause reports them.
@@ -54,6 +61,10 @@ VECTORS = {
     "EE_READY": 30,
 }
 
+
+# Registers the board's faults touch (ATmega2560 datasheet, data-space addresses).
+_TCCR2B, _CS2_MASK = 0xB1, 0x07
+_ADCSRA, _ADEN, _ADSC = 0x7A, 0x80, 0x40
 
 _CLI = 0x94F8  # cli
 _RJMP_SELF = 0xCFFF  # rjmp . (to itself)
@@ -158,6 +169,9 @@ def _shutdown(stop: threading.Event, holder: dict) -> None:
     native = holder.pop("native", None)
     if native is not None:
         native.close()
+    plant = holder.pop("plant", None)  # after the board that steps it
+    if plant is not None:
+        plant.close()
 
 
 class EmulatedBoard:
@@ -186,13 +200,25 @@ class EmulatedBoard:
         auto_reset: bool = True,
         auto_reset_hold: float = 0.1,
         capture: bool | None = None,
-        exchange_period: float = EXCHANGE_PERIOD_S,
+        exchange_period: float | None = None,
+        plant: str | HandPlant | Any = "analytic",
     ) -> None:
-        self.elf = Path(elf) if elf is not None else DEFAULT_ELF
+        if elf is None:
+            try:
+                elf = artifacts.firmware_elf()
+            except artifacts.ArtifactError as exc:
+                raise EmulatorError(str(exc)) from None
+        self.elf = Path(elf)
         check_elf(self.elf)
         if speed is not None and not (isinstance(speed, int | float) and speed > 0):
             raise EmulatorError(
                 f"speed must be a factor > 0 or None (as fast as possible), got {speed!r}"
+            )
+        if exchange_period is None:  # MuJoCo steps once per exchange: its own 1 ms step
+            exchange_period = (
+                MUJOCO_EXCHANGE_PERIOD_S
+                if plant == "mujoco" or hasattr(plant, "set_timestep")
+                else EXCHANGE_PERIOD_S
             )
         if not (isinstance(exchange_period, int | float) and 1e-5 <= exchange_period <= 1e-2):
             raise EmulatorError(
@@ -208,20 +234,32 @@ class EmulatedBoard:
         self.speed = None if speed is None else float(speed)
         self.seed = int(seed)
         self.eeprom_path = Path(eeprom_path) if eeprom_path is not None else None
-        self.plant = HandPlant(hand, plant_params, seed)
+        if plant == "analytic":
+            self.plant = HandPlant(hand, plant_params, seed)
+        elif plant == "mujoco":
+            from utrf.emulator.mujoco_plant import MujocoPlant  # imports MuJoCo only when asked
+
+            self.plant = MujocoPlant(hand, plant_params, seed, timestep=exchange_period)
+        elif isinstance(plant, str):
+            raise EmulatorError(f"plant must be 'analytic', 'mujoco' or a plant, got {plant!r}")
+        else:
+            self.plant = plant
+        if hasattr(self.plant, "set_timestep"):  # MuJoCo steps once per exchange
+            self.plant.set_timestep(round(exchange_period * F_CPU_HZ) / F_CPU_HZ)
         self._lock = threading.RLock()
         self._tick = threading.Condition()
         self._stop = threading.Event()
         self._holder: dict = {}
+        self._holder["plant"] = self.plant
         self._native = NativeBoard(self.elf, self.seed)
         self._holder["native"] = self._native
+        self._native.attach_plant(self.plant.native)
         self._finalizer = weakref.finalize(self, _shutdown, self._stop, self._holder)
         try:
             if self.eeprom_path is not None and self.eeprom_path.exists():
                 self._load_eeprom(self.eeprom_path)
             self._period_cycles = max(1, round(exchange_period * F_CPU_HZ))
             self._cycle = self._native.cycle
-            self._pins_hold = np.zeros_like(self._native.pins)
             self._native.adc_volts[:5] = self.plant.encoder_volts()
             self._status = 0
             self.crash_pc: int | None = None
@@ -305,19 +343,19 @@ class EmulatedBoard:
         """Simulated seconds since power-on (the MCU's cycle count / 16 MHz)."""
         return self._cycle / F_CPU_HZ
 
-    def _exchange(self) -> None:
-        """One lockstep period: the MCU runs with the encoders as they were at its start, then
-        the plant runs with the pins as the MCU had set them at its start."""
-        n = self._native
-        np.copyto(self._pins_hold, n.pins)
-        n.adc_volts[:5] = self.plant.encoder_volts()
-        status = n.run_to(self._cycle + self._period_cycles)
-        cycle = n.cycle
-        self.plant.step((cycle - self._cycle) / F_CPU_HZ, self._pins_hold)
-        self._cycle = cycle
+    def _run_plant(self, target: int) -> None:
+        """Run in lockstep with the plant up to cycle ``target``, all in C: each exchange
+        period the MCU runs with the encoders as the plant had them at its start, then the
+        plant runs the same period with the pins as the MCU had set them at its start."""
+        status = self._native.run_plant(target, self._period_cycles)
+        self._cycle = self._native.cycle
         if status != self._status:
             self._status = status
-            self.crash_pc = n.pc if status == 1 else None
+            self.crash_pc = self._native.pc if status == 1 else None
+
+    def _exchange(self) -> None:
+        """One lockstep period."""
+        self._run_plant(self._cycle + self._period_cycles)
 
     def _run_driven(
         self, seconds: float, until: Callable[[EmulatedBoard], bool] | None = None
@@ -325,9 +363,13 @@ class EmulatedBoard:
         target = self._cycle + round(seconds * F_CPU_HZ)
         t0 = time.perf_counter()
         try:
-            while self._cycle < target:
+            if until is None:
+                while self._cycle < target:  # one call; again only if a crash stopped it
+                    self._run_plant(target)
+                return False
+            while self._cycle < target:  # the predicate is judged between exchanges
                 self._exchange()
-                if until is not None and until(self):
+                if until(self):
                     return True
             return False
         finally:
@@ -394,15 +436,14 @@ class EmulatedBoard:
                 self._tick.notify_all()
 
     def _pace(self) -> None:
-        batch = max(1, round(1e-3 / (self._period_cycles / F_CPU_HZ)))  # ~1 ms per lock hold
+        batch = max(1, round(SERVE_BATCH_S / (self._period_cycles / F_CPU_HZ)))
         wall0, sim0 = time.perf_counter(), self.sim_time
         while not self._stop.is_set():
             t0 = time.perf_counter()
             with self._lock:
                 if not self._finalizer.alive:
                     return
-                for _ in range(batch):
-                    self._exchange()
+                self._run_plant(self._cycle + batch * self._period_cycles)
                 sim = self.sim_time
             t1 = time.perf_counter()
             self._busy += t1 - t0
@@ -553,23 +594,48 @@ class EmulatedBoard:
         drop: float = 0.0,
         corrupt: float = 0.0,
         insert: float = 0.0,
+        duplicate: float = 0.0,
+        burst: float = 0.0,
+        burst_length: tuple[int, int] = (8, 32),
     ) -> None:
-        """Serial line faults, as probabilities per byte: ``drop`` it, ``corrupt`` it (one bit
-        flipped), ``insert`` a random byte before it. ``direction``: "to_board", "to_host",
-        "both". All zero: a clean line."""
+        """Serial line faults, as probabilities per byte, seeded (reproducible when driven):
+        ``drop`` it, ``corrupt`` it (one bit flipped), ``insert`` a random byte before it,
+        ``duplicate`` it (sent twice), or start a ``burst`` of noise there that replaces it and
+        the bytes after it, ``burst_length`` = (min, max) bytes in all, uniformly. ``direction``:
+        "to_board", "to_host", "both". All zero: a clean line. Counted in ``stats``
+        (``rx_dropped``, ``tx_duplicated``, ``rx_burst_bytes``, ...)."""
         dirs = {"to_board": (_native.TO_BOARD,), "to_host": (_native.TO_HOST,)}
         dirs["both"] = dirs["to_board"] + dirs["to_host"]
         if direction not in dirs:
             raise EmulatorError(f"direction must be one of {list(dirs)}, got {direction!r}")
-        for name, p in (("drop", drop), ("corrupt", corrupt), ("insert", insert)):
-            if not (isinstance(p, int | float) and 0.0 <= p <= 1.0) or (
-                name == "insert" and p >= 1
-            ):
-                bound = "[0, 1)" if name == "insert" else "[0, 1]"
+        probs = (
+            ("drop", drop),
+            ("corrupt", corrupt),
+            ("insert", insert),
+            ("duplicate", duplicate),
+            ("burst", burst),
+        )
+        for name, p in probs:
+            below_one = name in ("insert", "duplicate")
+            if not (isinstance(p, int | float) and 0.0 <= p <= 1.0) or (below_one and p >= 1):
+                bound = "[0, 1)" if below_one else "[0, 1]"
                 raise EmulatorError(f"{name} must be a probability in {bound}, got {p!r}")
+        try:
+            lo, hi = (int(n) for n in burst_length)
+        except (TypeError, ValueError):
+            raise EmulatorError(
+                f"burst_length must be (min, max) bytes, got {burst_length!r}"
+            ) from None
+        if not 1 <= lo <= hi <= 65536:
+            raise EmulatorError(
+                f"burst_length must be (min, max) with 1 <= min <= max, got {burst_length!r}"
+            )
         with self._lock:
             for d in dirs[direction]:
-                self._board().set_line_faults(d, float(drop), float(corrupt), float(insert))
+                self._board().set_line_faults(
+                    d, float(drop), float(corrupt), float(insert), float(duplicate),
+                    float(burst), (lo, hi),
+                )  # fmt: skip
 
     def inject_noise(self, data: bytes | int, direction: str = "to_board") -> None:
         """Put a burst of bytes on the line (an int: that many random bytes from the seed)."""
@@ -586,6 +652,71 @@ class EmulatedBoard:
             raise EmulatorError(f"direction must be 'to_board' or 'to_host', got {direction!r}")
         with self._lock:
             self._board().inject(d, bytes(data))
+
+    def slow_tick(self, extra_s: float, count: int | None = 1) -> None:
+        """A slow control tick: each of the next ``count`` timer-2 compare interrupts (the 1 kHz
+        tick; None: every one until called again with 0) takes ``extra_s`` seconds longer, as
+        if the handler ran that many more cycles (the timers run on meanwhile). Past one tick
+        period (1 ms) the next compare comes before the tick ends: the firmware latches
+        OVERRUN. ``extra_s`` 0 or ``count`` 0 ends it. ``stats["stalls"]`` counts the slow
+        ticks."""
+        self.stall_interrupt("TIMER2_COMPA", extra_s, count)
+
+    def stall_interrupt(self, vector: int | str, extra_s: float, count: int | None = 1) -> None:
+        """Make ``count`` entries of an interrupt handler (name as in :data:`VECTORS` or number;
+        None: every entry) last ``extra_s`` seconds longer. See :meth:`slow_tick`."""
+        if isinstance(vector, str):
+            if vector not in VECTORS:
+                raise EmulatorError(f"unknown vector {vector!r}; known: {sorted(VECTORS)}")
+            vector = VECTORS[vector]
+        if not (isinstance(extra_s, int | float) and math.isfinite(extra_s) and 0 <= extra_s <= 10):
+            raise EmulatorError(f"extra_s must be a duration in [0, 10] s, got {extra_s!r}")
+        if count is not None and (
+            isinstance(count, bool) or not isinstance(count, int) or count < 0
+        ):
+            raise EmulatorError(f"count must be an int >= 0 or None (every entry), got {count!r}")
+        cycles = round(extra_s * F_CPU_HZ)
+        with self._lock:
+            self._board().stall_vector(int(vector), cycles, -1 if count is None else count)
+
+    @property
+    def slow_ticks_left(self) -> int | None:
+        """Slow ticks still to come (None: every tick is slow; 0: none)."""
+        with self._lock:
+            left = self._board().stalls_left()
+        return None if left < 0 else left
+
+    def stop_tick_timer(self) -> None:
+        """The tick's timer stops: timer 2's clock select is cleared (TCCR2B's CS22..CS20, as a
+        glitch on the register would), so no compare interrupt comes; everything else runs,
+        ``loop()`` included, which finds no tick for 20 ms (the tick-alive rule: every motor
+        off, the watchdog resets the board). The firmware's own set-up after the reset
+        starts the timer again; nothing else does."""
+        with self._lock:
+            board = self._board()
+            tccr2b = board.read_data(_TCCR2B, 1)[0]
+            board.write_io(_TCCR2B, tccr2b & ~_CS2_MASK)
+
+    def stop_adc(self) -> None:
+        """The ADC stops: ADEN is cleared under the conversion in progress, which then never
+        completes; the firmware's sampling round waits for it, the encoder readings go stale
+        (after 3 ticks: ENCODER_RANGE on every finger, motors off). It stays stopped until
+        :meth:`restart_adc` or a reset (the firmware enables the ADC at start)."""
+        with self._lock:
+            board = self._board()
+            adcsra = board.read_data(_ADCSRA, 1)[0]
+            board.poke(_ADCSRA, adcsra & ~_ADEN)
+
+    def restart_adc(self) -> None:
+        """Undo :meth:`stop_adc`: enable the ADC and redo the conversion it lost, so the
+        firmware's round goes on."""
+        with self._lock:
+            board = self._board()
+            adcsra = board.read_data(_ADCSRA, 1)[0]
+            if adcsra & _ADEN:
+                return
+            board.poke(_ADCSRA, (adcsra | _ADEN) & ~_ADSC)
+            board.write_io(_ADCSRA, adcsra | _ADEN | _ADSC)
 
     def hang_firmware(self, interrupts: bool = True) -> None:
         """Hang the firmware in a self-loop, as a bug that never returns would. With
@@ -866,6 +997,7 @@ class SimSerial:
 
 __all__ = [
     "DEFAULT_ELF",
+    "SERVE_BATCH_S",
     "VECTORS",
     "CycleProfile",
     "EmulatedBoard",

@@ -39,6 +39,10 @@ Per finger (paper Sec. II, IV-B):
 
 Every constant the paper does not give is an assumption, kept in :class:`MotorParams`,
 :class:`EncoderParams` and :class:`PlantParams` and documented in ``README.md``.
+
+The dynamics run in C (``harness/plant.c``), so the board steps the plant in lockstep with the
+MCU without crossing into Python; this module computes the constants from the geometry and
+reads and writes the C state in place (numpy views).
 """
 
 from __future__ import annotations
@@ -48,6 +52,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from utrf.emulator._native import NativePlant, PlantParamsC
 from utrf.models import tendons
 from utrf.models.geometry import HandGeometry
 
@@ -196,7 +201,8 @@ class HandPlant:
 
     ``step(dt, pins)`` advances by ``dt`` with the board's pins held (the (5, 2, 4) block of
     duty, IN1, IN2, STBY per finger and channel); ``encoder_volts()`` gives the encoders'
-    outputs.
+    outputs. The state arrays (``q``, ``qd``, ``x``, ``xd``, ``current``, ``tension``, ...)
+    are views of the C plant's memory: read them, or write them and call :meth:`refresh`.
     """
 
     def __init__(
@@ -208,27 +214,22 @@ class HandPlant:
                 f"the plant needs {FINGERS} fingers, the hand has {len(self.hand.fingers)}"
             )
         self.params = params if params is not None else PlantParams()
-        self._rng = np.random.default_rng(seed)
-        self._noise_block = np.zeros((0, FINGERS))
-        self._noise_next = 0
         self.geometries = tuple(f.geometry for f in self.hand.fingers)
         g = self.geometries
         self.R = np.array([x.guide_radii_m for x in g])  # (5, 3)
         self.L = np.array([x.link_lengths_m for x in g])
         self.link_mass = np.array([x.link_masses_kg for x in g])
-        com = np.array([x.link_com_fraction for x in g])
+        self.com = np.array([x.link_com_fraction for x in g])
         self.c = np.cumsum(1.0 / self.R, axis=1)  # dφ_k/dq, φ_k the link's absolute angle
         # Centre of mass of link k: p_k = Σ_j A[k, j] (cos φ_j, sin φ_j).
         A = np.zeros((FINGERS, 3, 3))
         for k in range(3):
             A[:, k, :k] = self.L[:, :k]
-            A[:, k, k] = com[:, k] * self.L[:, k]
+            A[:, k, k] = self.com[:, k] * self.L[:, k]
         self._A = A
         self._Ac = A * self.c[:, None, :]
-        self._Acc = A * self.c[:, None, :] ** 2
         rod_inertia = self.link_mass * self.L**2 / 12.0  # slender links about their centres
         self._rot_inertia = (rod_inertia * self.c**2).sum(axis=1)
-        self._joint_damping = self.params.joint_damping_n_m_s * (1.0 / self.R**2).sum(axis=1)
         self.tendon_stiffness = np.array(
             [x.tendon_youngs_modulus_pa * x.tendon_area_m2 / x.actuating_tendon_length_m for x in g]
         )
@@ -246,46 +247,57 @@ class HandPlant:
         self.rotary = np.array([f.actuation == "rotary" for f in self.hand.fingers])
         self.q_limits = np.array([x.q_range_m for x in g])  # (5, 2)
         self._gravity = np.asarray(self.params.gravity_m_s2, dtype=float)
-
-        m = self.params.motor
-        self._K = m.force_constant_n_a
-        self._Res = m.resistance_ohm
-        self._V = m.supply_v
-        self._ma = m.moving_mass_kg
-        self._inv_res = 1.0 / self._Res
-        self._k2 = self.tendon_stiffness[:, None]
-        self._rot = self.rotary.astype(float)
-        self._any_rotary = bool(self.rotary.any())
         self._max_substep = self._stable_substep()
+        self._native = NativePlant(self._c_params(), seed)
+        st = self._native.state
+        self.q, self.qd, self.x, self.xd = st["q"], st["qd"], st["x"], st["xd"]
+        self.current, self.tension = st["current"], st["tension"]
+        self.drive_duty = st["drive_duty"]
+        self.tip_force, self.applied_force = st["tip_force"], st["applied_force"]
+        self.coupling_stretch = st["coupling_stretch"]
+        self.encoder_shift = st["encoder_shift"]
+        self._st = st
 
-        # State
-        self.time = 0.0
-        self.q = np.zeros(FINGERS)
-        self.qd = np.zeros(FINGERS)
-        self.x = np.zeros((FINGERS, 2))  # actuator positions (pulled-in tendon), A and B
-        self.xd = np.zeros((FINGERS, 2))
-        self.current = np.zeros((FINGERS, 2))
-        self.tension = np.zeros((FINGERS, 2))  # Tendon 1 (flexor), Tendon 4 (extensor)
-        self.drive_mode = np.zeros((FINGERS, 2), dtype=np.int8)
-        self.drive_duty = np.zeros((FINGERS, 2))  # signed fraction of the supply
-        self._connected = np.zeros((FINGERS, 2))
-        self._voltage = np.zeros((FINGERS, 2))
-        self._last_pins: np.ndarray | None = None
-        self._h = 0.0
-        self._decay = 0.0
-        self.encoder_plugged = np.ones(FINGERS, dtype=bool)
-        self.unplugged_v = np.full(FINGERS, self.params.encoder.unplugged_v)
-        self.encoder_shift = np.zeros(FINGERS)  # rad, a slipped magnet
-        self._block = np.array(self.q_limits)  # the joint limits, narrowed by blocks
-        # Tip loads: the steady force (ramping toward its goal) and short pulses (hits).
-        self.tip_force = np.zeros((FINGERS, 2))  # N, finger frame, steady part now
-        self._tip_goal = np.zeros((FINGERS, 2))
-        self._tip_rate = np.full(FINGERS, np.inf)  # N/s toward the goal
-        self._pulses: list[tuple[int, float, float, np.ndarray]] = []  # finger, t0, t1, force
-        self.applied_force = np.zeros((FINGERS, 2))  # the tip force of the last step (N)
-        self.coupling_stretch = np.zeros((FINGERS, 2))  # e2, e3 (m), Tendon 2/5 and 3/6
-        self._Q_ext = np.zeros(FINGERS)
-        self._geometry_terms()
+    def _c_params(self) -> PlantParamsC:
+        m, e, p = self.params.motor, self.params.encoder, self.params
+        c = PlantParamsC()
+
+        def put(field: object, values: np.ndarray) -> None:
+            np.ctypeslib.as_array(field)[...] = values
+
+        put(c.R, self.R)
+        put(c.L, self.L)
+        put(c.link_mass, self.link_mass)
+        put(c.com, self.com)
+        put(c.tendon_stiffness, self.tendon_stiffness)
+        put(c.coupling_compliance, self.coupling_compliance)
+        put(c.rotary, self.rotary.astype(np.int32))
+        put(c.q_limits, self.q_limits)
+        c.supply_v, c.stall_force = m.supply_v, m.stall_force_n
+        c.no_load_speed = m.no_load_speed_m_s
+        c.electrical_time_constant = m.electrical_time_constant_s
+        c.moving_mass = m.moving_mass_kg
+        c.coulomb_friction, c.viscous_friction = m.coulomb_friction_n, m.viscous_friction_n_s_m
+        put(c.stroke, np.array(m.stroke_m))
+        c.enc_supply, c.enc_offset = e.supply_v, e.offset_rad
+        put(c.enc_band, np.array(e.band))
+        c.enc_noise_v, c.enc_unplugged_v = e.noise_v, e.unplugged_v
+        c.enc_invert, c.enc_bits = int(e.invert), e.resolution_bits
+        c.joint_damping, c.tendon_damping = p.joint_damping_n_m_s, p.tendon_damping_n_s_m
+        put(c.gravity, self._gravity)
+        c.max_substep = self._max_substep
+        return c
+
+    @property
+    def native(self) -> NativePlant:
+        """The C plant, for the board to attach."""
+        return self._native
+
+    def close(self) -> None:
+        """Free the C plant (the state arrays keep their last values)."""
+        self._native.close()
+        st = self._native.state
+        self.q, self.qd, self.x, self.xd = st["q"], st["qd"], st["x"], st["xd"]
 
     # -- set-up ---------------------------------------------------------------------------------
     def _inertia(self, q: np.ndarray) -> np.ndarray:
@@ -301,7 +313,7 @@ class HandPlant:
         grid = np.linspace(self.q_limits[:, 0], self.q_limits[:, 1], 181)  # (181, 5)
         m_min = min(float(self._inertia(row).min()) for row in grid)
         k = float(self.tendon_stiffness.max())
-        inv_mass = 1.0 / m_min + 1.0 / self._ma
+        inv_mass = 1.0 / m_min + 1.0 / self.params.motor.moving_mass_kg
         omega = math.sqrt(2.0 * k * inv_mass)
         damping = self.params.tendon_damping_n_s_m * 2.0 * inv_mass
         return min(0.7 / omega, 0.5 / damping if damping > 0 else math.inf)
@@ -311,190 +323,35 @@ class HandPlant:
         """The integration step the plant keeps under (s)."""
         return self._max_substep
 
-    def _geometry_terms(self) -> None:
-        """M(q), M'(q) and the gravity force at the present q (they vary slowly: refreshed
-        once per step, not per substep)."""
-        phi = self.q[:, None] * self.c
-        s, co = np.sin(phi), np.cos(phi)
-        J = self._Ac @ np.stack((-s, co), axis=-1)  # (5, 3, 2): d(COM_k)/dq
-        dJ = self._Acc @ np.stack((-co, -s), axis=-1)
-        mJ = self.link_mass[:, :, None] * J
-        self._M = (mJ * J).sum(axis=(1, 2)) + self._rot_inertia
-        self._inv_M = 1.0 / self._M
-        self._dM = 2.0 * (mJ * dJ).sum(axis=(1, 2))
-        self._Qg = (mJ @ self._gravity).sum(axis=1)
-        self._q_terms = self.q.copy()
-        self._tip_terms()
-
-    def _phi(self) -> np.ndarray:
-        """Absolute link angles (5, 3) with the coupling stretch."""
-        return np.cumsum(self.theta, axis=1)
-
-    def _tip_terms(self) -> None:
-        """The coupling stretch and the tip force's generalised force on q, for the force
-        applied now (two passes: the stretch moves the arms a little)."""
-        force = self.applied_force
-        self._q_tip = self.q.copy()
-        if not force.any():
-            self.coupling_stretch[:] = 0.0
-            self._Q_ext = np.zeros(FINGERS)
-            return
-        for _ in range(2):
-            phi = self._phi()
-            u = np.stack((np.cos(phi), np.sin(phi)), axis=-1)  # (5, 3, 2)
-            seg = self.L[:, :, None] * u
-            arm3 = seg[:, 2]  # tip − Joint 3
-            arm2 = seg[:, 1] + arm3  # tip − Joint 2
-            tau2 = arm2[:, 0] * force[:, 1] - arm2[:, 1] * force[:, 0]
-            tau3 = arm3[:, 0] * force[:, 1] - arm3[:, 1] * force[:, 0]
-            n3 = -tau3 / self.R[:, 2]
-            n2 = n3 - tau2 / self.R[:, 1]
-            self.coupling_stretch = np.column_stack((n2, n3)) * self.coupling_compliance
-        phi = self._phi()
-        # d tip / d q: the stretch is held (quasi-static), so dθ_k/dq = 1/R_k as when rigid.
-        jac = (self.L * self.c)[:, :, None] * np.stack((-np.sin(phi), np.cos(phi)), axis=-1)
-        self._Q_ext = (jac.sum(axis=1) * force).sum(axis=1)
+    def refresh(self) -> None:
+        """Recompute the terms that depend on q, after writing the state."""
+        self._native.refresh()
 
     # -- the board's side -----------------------------------------------------------------------
+    @property
+    def time(self) -> float:
+        return self._native.time
+
+    @property
+    def drive_mode(self) -> np.ndarray:
+        """Per finger and motor: 0 coast, 1 brake, 2 forward, 3 reverse."""
+        return self._st["drive_mode"].astype(np.int8)
+
     def decode_drive(self, pins: np.ndarray) -> None:
         """TB6612FNG truth table, per channel, from the (5, 2, 4) pin block."""
-        if self._last_pins is not None and np.array_equal(pins, self._last_pins):
-            return
-        self._last_pins = np.array(pins)
-        duty = np.clip(pins[..., 0], 0.0, 1.0)
-        in1 = pins[..., 1] > 0.5
-        in2 = pins[..., 2] > 0.5
-        on = pins[..., 3] > 0.5
-        fwd = on & in1 & ~in2
-        rev = on & ~in1 & in2
-        brake = on & in1 & in2
-        mode = np.where(fwd, FORWARD, np.where(rev, REVERSE, np.where(brake, BRAKE, COAST)))
-        mode[self.rotary, 1] = COAST  # a rotary finger has no motor B
-        self.drive_mode = mode.astype(np.int8)
-        self.drive_duty = np.where(mode == FORWARD, duty, np.where(mode == REVERSE, -duty, 0.0))
-        self._connected = (mode != COAST).astype(float)
-        self._voltage = self.drive_duty * self._V
+        self._native.decode(np.asarray(pins, dtype=float).reshape(FINGERS, 2, 4))
 
     def step(self, dt: float, pins: np.ndarray | None = None) -> None:
         """Advance by dt seconds with the pins held (None: keep the last drive)."""
         if not dt > 0:
             return
         if pins is not None:
-            self.decode_drive(pins)
-        changed = self._update_tip_force(dt)
-        if np.abs(self.q - self._q_terms).max() > 2e-5:  # M, M', gravity vary slowly
-            self._geometry_terms()
-        elif changed or (
-            self.applied_force.any() and np.abs(self.q - self._q_tip).max() > 2e-6
-        ):  # the tip force's arms: finer (the stretch is a small difference of them)
-            self._tip_terms()
-        n = max(1, math.ceil(dt / self._max_substep))
-        h = dt / n
-        if h != self._h:
-            self._h = h
-            self._decay = math.exp(-h / self.params.motor.electrical_time_constant_s)
-        for _ in range(n):
-            self._substep(h)
-        self.time += dt
-
-    def _update_tip_force(self, dt: float) -> bool:
-        """The tip force over the coming step: the steady part ramped toward its goal, plus
-        each pulse's force times the fraction of the step it covers. True when it changed."""
-        if not (
-            self._pulses or self.tip_force.any() or self._tip_goal.any() or self.applied_force.any()
-        ):
-            return False
-        gap = self._tip_goal - self.tip_force
-        dist = np.hypot(gap[:, 0], gap[:, 1])
-        reach = self._tip_rate * dt
-        frac = np.where(dist > reach, reach / np.where(dist > 0, dist, 1.0), 1.0)
-        self.tip_force = self.tip_force + gap * frac[:, None]
-        force = self.tip_force.copy()
-        t0, t1 = self.time, self.time + dt
-        keep = []
-        for pulse in self._pulses:
-            f, p0, p1, fv = pulse
-            overlap = min(t1, p1) - max(t0, p0)
-            if overlap > 0:
-                force[f] += fv * (overlap / dt)
-            if p1 > t1:
-                keep.append(pulse)
-        self._pulses = keep
-        changed = not np.array_equal(force, self.applied_force)
-        self.applied_force = force
-        return changed
-
-    def _substep(self, h: float) -> None:
-        """One semi-implicit Euler step: forces from the present state, velocities, then
-        positions from the new velocities, then the hard stops."""
-        m = self.params.motor
-        q, qd, x, xd = self.q, self.qd, self.x, self.xd
-        # Tendon 1 stretches as motor A pulls in past q, Tendon 4 as motor B pulls past −q.
-        stretch = x + q[:, None] * _SIDE
-        tension = np.maximum(
-            self._k2 * stretch + self.params.tendon_damping_n_s_m * (xd + qd[:, None] * _SIDE), 0.0
-        )
-        tension *= stretch > 0.0
-        self.tension = tension
-
-        # Motors: the current's exact response over h with the speed held; open when coasting.
-        i_ss = (self._voltage - self._K * xd) * self._inv_res
-        self.current = (i_ss + (self.current - i_ss) * self._decay) * self._connected
-        force = self._K * self.current - m.viscous_friction_n_s_m * xd - tension
-        if self._any_rotary:  # one pulley: Tendon 4 pulls motor A back the other way
-            force[:, 0] += self._rot * tension[:, 1]
-            force[self.rotary, 1] = 0.0
-        v_free = xd + (h / self._ma) * force
-        stick = h * m.coulomb_friction_n / self._ma
-        xd = np.where(np.abs(v_free) <= stick, 0.0, v_free - np.copysign(stick, v_free))
-
-        gen_force = (
-            tension[:, 0]
-            - tension[:, 1]
-            + self._Qg
-            + self._Q_ext
-            - (self._joint_damping + 0.5 * self._dM * qd) * qd
-        )
-        qd = qd + h * gen_force * self._inv_M
-        q = q + h * qd
-        x = x + h * xd
-
-        lo, hi = self._block[:, 0], self._block[:, 1]
-        if np.logical_or(q < lo, q > hi).any():  # a joint limit or a block: a hard stop
-            qd = np.where(q < lo, np.maximum(qd, 0.0), np.where(q > hi, np.minimum(qd, 0.0), qd))
-            q = np.minimum(np.maximum(q, lo), hi)
-        s_lo, s_hi = m.stroke_m
-        if np.logical_or(x < s_lo, x > s_hi).any():  # an actuator at the end of its stroke
-            xd = np.where((x < s_lo) | (x > s_hi), 0.0, xd)
-            x = np.minimum(np.maximum(x, s_lo), s_hi)
-        if self._any_rotary:
-            x[self.rotary, 1] = -x[self.rotary, 0]
-            xd[self.rotary, 1] = -xd[self.rotary, 0]
-        self.q, self.qd, self.x, self.xd = q, qd, x, xd
+            pins = np.asarray(pins, dtype=float).reshape(FINGERS, 2, 4)
+        self._native.step(float(dt), pins)
 
     def encoder_volts(self) -> np.ndarray:
         """Each finger's AS5600 output (V), noise included: the ADC0..4 inputs."""
-        e = self.params.encoder
-        theta2 = self.theta2 + self.encoder_shift
-        turns = (e.offset_rad + (-theta2 if e.invert else theta2)) * (0.5 / math.pi)
-        turns -= np.floor(turns)  # the angle within one turn, as a fraction
-        steps = 1 << e.resolution_bits
-        counts = np.floor(turns * steps)
-        lo, hi = e.band
-        volts = e.supply_v * lo + (e.supply_v * (hi - lo) / steps) * counts
-        if e.noise_v > 0:
-            volts += self._noise()
-        if not self.encoder_plugged.all():
-            volts = np.where(self.encoder_plugged, volts, self.unplugged_v)
-        return volts
-
-    def _noise(self) -> np.ndarray:
-        """The encoders' next noise sample (V), drawn from the seeded generator in blocks."""
-        if self._noise_next >= len(self._noise_block):
-            self._noise_block = self._rng.normal(0.0, self.params.encoder.noise_v, (1024, FINGERS))
-            self._noise_next = 0
-        self._noise_next += 1
-        return self._noise_block[self._noise_next - 1]
+        return self._native.encoder_volts()
 
     # -- observations ---------------------------------------------------------------------------
     @property
@@ -509,6 +366,10 @@ class HandPlant:
     def theta2(self) -> np.ndarray:
         return (self.q - self.coupling_stretch[:, 0]) / self.R[:, 1]
 
+    def _phi(self) -> np.ndarray:
+        """Absolute link angles (5, 3) with the coupling stretch."""
+        return np.cumsum(self.theta, axis=1)
+
     @property
     def tip(self) -> np.ndarray:
         """Fingertips in each finger's frame (m), shape (5, 2): Eq. 1 at the joint angles
@@ -521,7 +382,7 @@ class HandPlant:
     @property
     def generalised_tip_force(self) -> np.ndarray:
         """The tip force's generalised force on q (N), per finger: J_tipᵀ F."""
-        return self._Q_ext.copy()
+        return self._st["q_ext"].copy()
 
     # -- tip loads --------------------------------------------------------------------------------
     def set_tip_force(self, finger: int, force_n: tuple[float, float], ramp_s: float = 0.0) -> None:
@@ -532,11 +393,12 @@ class HandPlant:
         fv = _force_vector(force_n, "tip force")
         if not (isinstance(ramp_s, int | float) and math.isfinite(ramp_s) and ramp_s >= 0):
             raise PlantError(f"ramp_s must be a duration >= 0 s, got {ramp_s!r}")
-        self._tip_goal[f] = fv
-        dist = float(np.hypot(*(fv - self.tip_force[f])))
-        self._tip_rate[f] = dist / ramp_s if ramp_s > 0 else np.inf
+        st = self._st
+        st["tip_goal"][f] = fv
+        dist = float(np.hypot(*(fv - st["tip_force"][f])))
+        st["tip_rate"][f] = dist / ramp_s if ramp_s > 0 else np.inf
         if ramp_s == 0:
-            self.tip_force[f] = fv
+            st["tip_force"][f] = fv
 
     def hit(self, finger: int, impulse_ns: tuple[float, float], duration_s: float = 5e-3) -> None:
         """A hammer hit on the tip: a force pulse carrying ``impulse_ns`` (Jx, Jy) in N s,
@@ -547,7 +409,7 @@ class HandPlant:
             isinstance(duration_s, int | float) and math.isfinite(duration_s) and duration_s > 0
         ):
             raise PlantError(f"a hit's duration must be > 0 s, got {duration_s!r}")
-        self._pulses.append((f, self.time, self.time + float(duration_s), jv / duration_s))
+        self._native.hit(f, float(jv[0]), float(jv[1]), float(duration_s))
 
     def energy(self) -> tuple[float, float]:
         """(kinetic, potential) energy of the whole hand in J: links, actuators, taut tendons
@@ -555,7 +417,8 @@ class HandPlant:
         M = self._inertia(self.q)
         xd = self.xd.copy()
         xd[self.rotary, 1] = 0.0
-        kinetic = 0.5 * (M * self.qd**2).sum() + 0.5 * self._ma * (xd**2).sum()
+        ma = self.params.motor.moving_mass_kg
+        kinetic = 0.5 * (M * self.qd**2).sum() + 0.5 * ma * (xd**2).sum()
         phi = self.q[:, None] * self.c
         com = self._A @ np.stack((np.cos(phi), np.sin(phi)), axis=-1)  # (5, 3, 2)
         potential = -(self.link_mass[:, :, None] * com @ self._gravity).sum()
@@ -580,7 +443,11 @@ class HandPlant:
         self.x[f] = (q, -q)
         self.xd[f] = 0.0
         self.current[f] = 0.0
-        self._geometry_terms()
+        self.refresh()
+
+    @property
+    def encoder_plugged(self) -> np.ndarray:
+        return self._st["plugged"] > 0.5
 
     def unplug_encoder(self, finger: int, volts: float | None = None) -> None:
         """The encoder's cable comes off: the ADC input reads ``volts`` (default: the
@@ -590,11 +457,11 @@ class HandPlant:
             volts = self.params.encoder.unplugged_v
         if not (math.isfinite(volts) and 0.0 <= volts <= 5.0):
             raise PlantError(f"an unplugged encoder's input must lie in [0, 5] V, got {volts!r}")
-        self.unplugged_v[f] = volts
-        self.encoder_plugged[f] = False
+        self._st["unplugged_v"][f] = volts
+        self._st["plugged"][f] = 0.0
 
     def plug_encoder(self, finger: int) -> None:
-        self.encoder_plugged[_finger_index(finger)] = True
+        self._st["plugged"][_finger_index(finger)] = 1.0
 
     def shift_encoder(self, finger: int, radians: float) -> None:
         """The encoder's magnet slips: its reading is off by ``radians`` from now on."""
@@ -616,13 +483,13 @@ class HandPlant:
             raise PlantError(
                 f"finger {f}: cannot block at θ2 = {q / self.R[f, 1]:.3f} rad, outside its range"
             )
-        self._block[f] = (q, q) if direction == "both" else (lo, q)
+        self._st["block"][f] = (q, q) if direction == "both" else (lo, q)
 
     def unblock(self, finger: int) -> None:
         f = _finger_index(finger)
-        self._block[f] = self.q_limits[f]
+        self._st["block"][f] = self.q_limits[f]
 
     @property
     def blocks(self) -> np.ndarray:
         """Each finger's allowed q interval (m), shape (5, 2): its limits narrowed by blocks."""
-        return self._block.copy()
+        return self._st["block"].copy()

@@ -52,7 +52,14 @@ from utrf.hand.errors import (
     NotSettledError,
     TargetError,
 )
-from utrf.hand.state import CLOSED_LOOP, BoardClock, FaultEvent, HandState
+from utrf.hand.state import (
+    CLOSED_LOOP,
+    STATE_CLOCK_WRAP_S,
+    BoardClock,
+    FaultEvent,
+    HandState,
+    TipModel,
+)
 from utrf.hand.telemetry_log import TelemetryLog
 from utrf.models import kinematics
 from utrf.models.geometry import HandGeometry
@@ -143,6 +150,19 @@ class _Forward:
             target(item)
 
 
+def _open_link(url: str, baudrate: int, forward: _Forward, reset: bool) -> Link:
+    """A Link on ``url``; the board reset by the open or not (``serial_port.open_line``)."""
+    from utrf.hand.serial_port import open_line
+    from utrf.protocol.transport import SerialTransport
+
+    def opener() -> Link:
+        # No queue: the Hand takes every frame through its callback (a queue nobody read
+        # counted each frame as "dropped"); real loss is stream_lost.
+        return Link(SerialTransport(url, baudrate), on_telemetry=forward, telemetry_queue_size=0)
+
+    return open_line(url, reset, opener)  # type: ignore[return-value]
+
+
 def _mode(value: m.ControlMode | str) -> m.ControlMode:
     if isinstance(value, m.ControlMode):
         return value
@@ -201,7 +221,10 @@ class Hand:
         # Held while callbacks run, so an unsubscribe returns only once no call is under way
         # (re-entrant: a callback may unsubscribe itself).
         self._dispatch_lock = threading.RLock()
-        self._board_clock = BoardClock()
+        self._board_clock = BoardClock(STATE_CLOCK_WRAP_S)  # the state's ms clock
+        self._fault_clock = BoardClock()  # the fault message's µs clock
+        self._tips = TipModel(self.geometry)
+        self._status: m.Status | None = None  # the latest status (modes, faults)
         self._latest: HandState | None = None
         self._state_callbacks: list[Callable[[HandState], None]] = []
         self._fault_callbacks: list[Callable[[FaultEvent], None]] = []
@@ -216,6 +239,7 @@ class Hand:
         ]
         self._goal = np.full(m.FINGER_COUNT, np.nan)  # the last Joint-2 targets commanded
         self._identity: m.Identity | None = None
+        self._reset_on_open = True  # how reconnect() reopens the line
         self._forward = forward or _Forward()
         if forward is None:
             link.add_telemetry_callback(self._forward)
@@ -236,15 +260,21 @@ class Hand:
         boot_wait_s: float = 2.5,
         handshake_timeout_s: float = 5.0,
         log_path: str | Path | None = None,
+        reset: bool = True,
     ) -> Hand:
         """Open ``url`` (``/dev/ttyACM0``, ``COM3``, ``socket://127.0.0.1:PORT``...), wait up to
         ``boot_wait_s`` for the board's ``boot`` (the auto-reset), handshake, start telemetry.
 
         ``boot_wait_s=0`` skips the wait (a board that does not reset when the port opens);
         a boot that comes during the handshake is ridden out all the same.
+
+        ``reset=False`` opens the port without pulsing DTR (``utrf.hand.serial_port``), skips
+        the boot wait and takes over the board as it runs: identify, read its modes, targets
+        and faults, resume heartbeats; nothing moves. ``socket://`` cannot (no DTR line: a
+        ResetModeError says so); the emulated board's pty and serial ports can.
         """
         forward = _Forward()
-        link = Link.open(url, baudrate, on_telemetry=forward, telemetry_queue_size=1)
+        link = _open_link(url, baudrate, forward, reset)
         try:
             hand = cls(
                 link,
@@ -257,7 +287,10 @@ class Hand:
                 url=url,
                 baudrate=baudrate,
             )
-            hand._start(boot_wait_s, handshake_timeout_s)
+            hand._reset_on_open = reset
+            hand._start(boot_wait_s if reset else 0.0, handshake_timeout_s)
+            if not reset:
+                hand._take_over()
             if log_path is not None:
                 hand.start_log(log_path)
         except BaseException:
@@ -311,6 +344,13 @@ class Hand:
             hand.start_log(log_path)
         return hand
 
+    def _take_over(self) -> None:
+        """A board found running: its own targets become the ones commanded (so a wait or a
+        move starts from what it holds); its modes and latched faults are in ``latest``."""
+        st = self.state()
+        for i, f in enumerate(st.fingers):
+            self._goal[i] = f.target if f.closed_loop else np.nan
+
     def _start(self, boot_wait_s: float, handshake_timeout_s: float) -> None:
         deadline = self.clock.now() + boot_wait_s
         while self._reset is None and self.clock.now() < deadline:
@@ -338,6 +378,7 @@ class Hand:
             )
         self._identity = identity
         self._request(m.SetTelemetry(rate_hz=self._telemetry_hz))
+        self._take_status(self._request(m.GetStatus()))
         self._read_limits()
         self._goal[:] = np.nan
         self._handshaken = True
@@ -411,9 +452,7 @@ class Hand:
         while True:
             try:
                 forward = _Forward()
-                link = Link.open(
-                    self.url, self.baudrate, on_telemetry=forward, telemetry_queue_size=1
-                )
+                link = _open_link(self.url, self.baudrate, forward, self._reset_on_open)
                 break
             except DisconnectedError as exc:
                 last = exc
@@ -463,14 +502,22 @@ class Hand:
             self._faults_seen.clear()
 
     def state(self) -> HandState:
-        """Ask the board for its state now (``get_state``)."""
+        """Ask the board for its state now (``get_state``; and ``get_status`` when the
+        sample names a status not received yet)."""
         msg = self._request(m.GetState())
+        with self._lock:
+            status = self._status
+        if status is None or status.change != msg.status_seq:
+            self._take_status(self._request(m.GetStatus()))
+        host_time = self.clock.timestamp()
         with self._lock:
             st = HandState.from_message(
                 msg,
                 self.fingers,
-                board_time=self._board_clock.unwrap(msg.board_time),
-                host_time=self.clock.timestamp(),
+                self._status,
+                self._tips,
+                board_time=self._board_clock.unwrap(msg.board_time, host_time),
+                host_time=host_time,
             )
             if self._latest is None or st.board_time >= self._latest.board_time:
                 self._latest = st
@@ -556,15 +603,26 @@ class Hand:
         if old is not None:
             old.close()
 
+    def _take_status(self, msg: m.Status) -> None:
+        """A status (stream or get_status reply): the newest by change count is kept."""
+        with self._lock:
+            old = self._status
+            if old is None or (msg.change - old.change) % 256 < 128:
+                self._status = msg
+
     def _on_telemetry(self, item: Telemetry) -> None:
         msg = item.message
         host_time = self.clock.timestamp()
-        if isinstance(msg, m.State):
+        if isinstance(msg, m.Status):
+            self._take_status(msg)
+        elif isinstance(msg, m.State):
             with self._lock:
                 st = HandState.from_message(
                     msg,
                     self.fingers,
-                    board_time=self._board_clock.unwrap(msg.board_time),
+                    self._status,
+                    self._tips,
+                    board_time=self._board_clock.unwrap(msg.board_time, host_time),
                     host_time=host_time,
                     seq=item.seq,
                 )
@@ -583,7 +641,7 @@ class Hand:
                     index=msg.finger,
                     new_faults=msg.new_faults,
                     faults={n: msg.faults[i] for i, n in enumerate(self.fingers)},
-                    board_time=self._board_clock.unwrap(msg.board_time),
+                    board_time=self._fault_clock.unwrap(msg.board_time, host_time),
                     host_time=host_time,
                 )
                 self._faults_seen.append(event)
@@ -592,6 +650,8 @@ class Hand:
             with self._lock:
                 self._last_boot = msg
                 self._board_clock.restart()
+                self._fault_clock.restart()
+                self._status = None
                 self._reset = BoardResetError(msg)
                 self._latest = None
 

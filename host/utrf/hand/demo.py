@@ -93,7 +93,8 @@ def run_demo(
 ) -> DemoResult:
     """Run the sequence; write ``pose-NN-NAME.png``, ``trajectories.png`` and
     ``telemetry.csv`` into ``out_dir``. Unknown poses raise KeyError before anything starts;
-    a missing firmware ELF raises EmulatorError saying to run ``make firmware``."""
+    a missing firmware ELF raises EmulatorError saying to run ``make firmware``, and leaves
+    ``out_dir`` as it was."""
     from utrf.emulator import EmulatedBoard  # the harness library: only when a demo runs
 
     library = poses if poses is not None else PoseLibrary.load()
@@ -104,15 +105,22 @@ def run_demo(
     if not (move_s > 0 and hold_s >= 0):
         raise ValueError(f"move_s must be > 0 and hold_s >= 0, got {move_s}, {hold_s}")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    for old in [*out.glob("pose-*.png"), out / "trajectories.png", out / "telemetry.csv"]:
-        old.unlink(missing_ok=True)  # a fresh run: no picture of a previous one left over
     csv = out / "telemetry.csv"
     steps = [Step(i + 1, name) for i, name in enumerate(sequence)]
     recorder = _Recorder()
     with EmulatedBoard(elf, realtime=True, speed=speed, pty=False, seed=seed) as board:
+        # The board is up (firmware and harness found): only now is the previous run replaced,
+        # so a demo that cannot start leaves the last one's files as they were.
+        out.mkdir(parents=True, exist_ok=True)
+        for old in [*out.glob("pose-*.png"), out / "trajectories.png", csv]:
+            old.unlink(missing_ok=True)  # a fresh run: no picture of a previous one left over
         url = board.url or ""
         with Hand.connect(url, poses=library, log_path=csv) as hand:
+            if speed is None:
+                # Unpaced, the board outruns the wall clock by whatever the machine gives
+                # (5x and more since the plant steps in C): the host's heartbeats, sent on the
+                # wall clock, would miss the default 0.5 s of board time.
+                hand.set_safety(heartbeat_timeout=10.0)
             hand.on_state(recorder)
             if on_connect is not None:
                 on_connect(hand, board)

@@ -2,8 +2,11 @@
 
 :class:`HandState` is one ``state`` message (a telemetry sample or a ``get_state`` reply) with
 the finger names of the hand, the host's receive time and the board's clock unwrapped (the
-wire's 32-bit microsecond counter wraps every 71.6 min; a bench run holding a grasp for
-longer must not see time run backwards). :class:`FaultEvent` is one ``fault`` message.
+state's 16-bit millisecond clock wraps every 65.5 s; a bench run holding a grasp for longer
+must not see time run backwards). The compact ``state`` leaves out what the host derives or
+what rarely changes: each finger's mode and faults come from the latest ``status`` message
+(:attr:`HandState.status_current` says whether the sample's ``status_seq`` names it), its tip
+from the hand's kinematics (:class:`TipModel`). :class:`FaultEvent` is one ``fault`` message.
 """
 
 from __future__ import annotations
@@ -14,9 +17,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from utrf.models import kinematics
+from utrf.models.geometry import HandGeometry
 from utrf.protocol import messages as m
 
+#: the fault message's 32-bit microsecond clock
 BOARD_CLOCK_WRAP_S = 2**32 * 1e-6
+#: the state message's 16-bit millisecond clock
+STATE_CLOCK_WRAP_S = 2**16 * 1e-3
+#: rows of a tip table: linear interpolation over the Joint-2 range, well under 0.01 mm
+TIP_TABLE_ROWS = 2048
 CLOSED_LOOP = (m.ControlMode.POSITION, m.ControlMode.GRASP)
 
 
@@ -38,7 +48,7 @@ class FingerState:
     duty_b: float  # motor B (extensor)
     mode: m.ControlMode
     faults: m.FaultBits
-    tip_x: float  # fingertip from the board's kinematics table
+    tip_x: float  # fingertip, from theta2 by the hand's kinematics (m)
     tip_y: float
 
     @property
@@ -59,6 +69,9 @@ class HandState:
     host_time: float  # s, when it arrived (see Clock.timestamp)
     seq: int | None  # the stream seq, None for a get_state reply
     fingers: tuple[FingerState, ...]
+    #: the modes and faults are those of the status the sample names (False: a status
+    #: message is missing, they are the last known ones)
+    status_current: bool = True
 
     def __getitem__(self, key: int | str) -> FingerState:
         if isinstance(key, str):
@@ -95,11 +108,20 @@ class HandState:
         cls,
         msg: m.State,
         names: Sequence[str],
+        status: m.Status | None,
+        tips: TipModel | None = None,
         *,
         board_time: float | None = None,
         host_time: float = math.nan,
         seq: int | None = None,
     ) -> HandState:
+        """One sample: ``msg`` with the modes and faults of ``status`` (COAST and no fault
+        when None) and the tips of ``tips`` (NaN when None)."""
+        n = len(names)
+        if tips is not None:
+            tip_x, tip_y = tips.tips(msg.theta2[:n])
+        else:
+            tip_x = tip_y = [math.nan] * n
         fingers = tuple(
             FingerState(
                 name=names[i],
@@ -108,19 +130,52 @@ class HandState:
                 target=msg.target[i],
                 duty_a=msg.duty_a[i],
                 duty_b=msg.duty_b[i],
-                mode=m.ControlMode(msg.mode[i]),
-                faults=m.FaultBits(msg.faults[i]),
-                tip_x=msg.tip_x[i],
-                tip_y=msg.tip_y[i],
+                mode=m.ControlMode(status.mode[i]) if status else m.ControlMode.COAST,
+                faults=m.FaultBits(status.faults[i]) if status else m.FaultBits(0),
+                tip_x=float(tip_x[i]),
+                tip_y=float(tip_y[i]),
             )
-            for i in range(len(names))
+            for i in range(n)
         )
         return cls(
             board_time=msg.board_time if board_time is None else board_time,
             host_time=host_time,
             seq=seq,
             fingers=fingers,
+            status_current=status is not None and status.change == msg.status_seq,
         )
+
+
+class TipModel:
+    """Each finger's fingertip (x, y) from its Joint-2 angle, by the hand's coupled
+    kinematics: what the board used to send, now derived on the host. A table per distinct
+    geometry over its Joint-2 range, interpolated linearly (clamped at the ends)."""
+
+    def __init__(self, hand: HandGeometry) -> None:
+        tables: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._tables: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        for finger in hand.fingers:
+            key = id(finger.geometry)
+            if key not in tables:
+                lo, hi = finger.geometry.theta2_range_rad
+                theta2 = np.linspace(lo, hi, TIP_TABLE_ROWS)
+                q = kinematics.q_from_theta2(finger.geometry, theta2)
+                tip = np.asarray(kinematics.forward(finger.geometry, q).tip, dtype=float)
+                tables[key] = (theta2, tip[:, 0].copy(), tip[:, 1].copy())
+            self._tables.append(tables[key])
+
+    def tip(self, finger: int, theta2: float) -> tuple[float, float]:
+        """The tip of ``finger`` (0..4) at Joint-2 angle ``theta2`` (rad), in m."""
+        grid, x, y = self._tables[finger]
+        return float(np.interp(theta2, grid, x)), float(np.interp(theta2, grid, y))
+
+    def tips(self, theta2: Sequence[float]) -> tuple[list[float], list[float]]:
+        xs, ys = [], []
+        for i, th in enumerate(theta2):
+            x, y = self.tip(i, th)
+            xs.append(x)
+            ys.append(y)
+        return xs, ys
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,18 +197,35 @@ class FaultEvent:
 
 
 class BoardClock:
-    """Unwraps the board's 32-bit microsecond clock. A ``boot`` starts it again at 0."""
+    """Unwraps a board clock that wraps every ``wrap_s``. A ``boot`` starts it again at 0.
 
-    def __init__(self) -> None:
-        self._offset = 0.0
-        self._last: float | None = None
+    Between two readings the clock advanced by their difference modulo the wrap, plus as
+    many whole wraps as the host's own clock says passed (so a stream paused for minutes
+    does not lose time); with no host time, by less than half a wrap either way.
+    """
+
+    def __init__(self, wrap_s: float = BOARD_CLOCK_WRAP_S) -> None:
+        self.wrap_s = wrap_s
+        self._last_raw: float | None = None
+        self._last = 0.0
+        self._last_host = math.nan
 
     def restart(self) -> None:
-        self._offset = 0.0
-        self._last = None
+        self._last_raw = None
+        self._last = 0.0
+        self._last_host = math.nan
 
-    def unwrap(self, raw: float) -> float:
-        if self._last is not None and raw < self._last - BOARD_CLOCK_WRAP_S / 2:
-            self._offset += BOARD_CLOCK_WRAP_S
-        self._last = raw
-        return raw + self._offset
+    def unwrap(self, raw: float, host_time: float = math.nan) -> float:
+        if self._last_raw is None:
+            value = raw
+        else:
+            step = (raw - self._last_raw) % self.wrap_s
+            elapsed = host_time - self._last_host
+            if math.isfinite(elapsed):
+                step += self.wrap_s * round((elapsed - step) / self.wrap_s)
+            elif step > self.wrap_s / 2:
+                step -= self.wrap_s
+            value = self._last + step
+        if self._last_raw is None or value >= self._last:  # an older sample moves nothing
+            self._last_raw, self._last, self._last_host = raw, value, host_time
+        return value

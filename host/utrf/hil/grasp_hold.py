@@ -37,7 +37,7 @@ HIT_COLUMNS = ("time_s", "finger", "impulse_x_ns", "impulse_y_ns", "duration_s")
 
 
 def sample_columns(names: list[str]) -> list[str]:
-    cols = ["time_s", "phase", "raw_x_m", "raw_y_m", "raw_z_m", "visible"]
+    cols = ["time_s", "phase", "raw_x_m", "raw_y_m", "raw_z_m", "visible", "tracker_frame"]
     for n in names:
         cols += [f"{n}_{f}" for f in FINGER_FIELDS]
     return cols
@@ -48,7 +48,7 @@ class GraspHoldConfig:
     pose: str = "grasp-bottle"
     duration_s: float = 600.0
     hits: int = 20  # emulated: hammer hits spread over the hold
-    hit_impulse_ns: float = 0.3  # emulated: each hit's impulse (N s)
+    hit_impulse_n_s: float = 0.3  # emulated: each hit's impulse, newton-seconds (N·s)
     hit_duration_s: float = 5e-3
     contact_fraction: float = 0.6  # emulated: the object stops closing fingers there
     tracked_finger: int = 1
@@ -72,8 +72,8 @@ class GraspHoldConfig:
                 f"hits need a hold of at least {2 * self.baseline_s + 1.0:g} s (two baselines "
                 f"and time to recover), got {self.duration_s:g} s"
             )
-        if not (math.isfinite(self.hit_impulse_ns) and 0 <= self.hit_impulse_ns <= 5):
-            raise RunError(f"hit_impulse_ns must lie in [0, 5] N s, got {self.hit_impulse_ns}")
+        if not (math.isfinite(self.hit_impulse_n_s) and 0 <= self.hit_impulse_n_s <= 5):
+            raise RunError(f"hit_impulse_n_s must lie in [0, 5] N s, got {self.hit_impulse_n_s}")
         if not 0.1 <= self.contact_fraction <= 1.0:
             raise RunError(f"contact_fraction must lie in [0.1, 1], got {self.contact_fraction}")
         if not 0 <= self.tracked_finger <= 4:
@@ -100,7 +100,7 @@ class GraspHoldConfig:
             f = int(rng.choice(closing))
             u = opening[f]
             a = math.atan2(u[1], u[0]) + rng.uniform(-math.pi / 4, math.pi / 4)
-            j = self.hit_impulse_ns
+            j = self.hit_impulse_n_s
             out.append((float(t), f, (j * math.cos(a), j * math.sin(a))))
         return out
 
@@ -180,6 +180,7 @@ def run(
                 "baseline" if t < config.baseline_s else "hold",
                 *(f"{v:.7f}" for v in s.position_m),
                 int(s.visible),
+                s.frame,
             ]
             for i in range(len(names)):
                 if st is None:
@@ -307,6 +308,11 @@ def analyse(out: Path, hand_geometry: HandGeometry | None = None) -> dict[str, A
             ),
         }
     vis = np.array([int(r["visible"]) for r in rows]) == 1
+    # A row sampled faster than the tracker measures repeats its last frame: not a new sample.
+    tracker_frames = np.array([int(r.get("tracker_frame", -1) or -1) for r in rows])
+    repeated = np.zeros(len(rows), dtype=bool)
+    repeated[1:] = (tracker_frames[1:] >= 0) & (tracker_frames[1:] == tracker_frames[:-1])
+    vis &= ~repeated
     raw = np.array([[float(r[c]) for c in ("raw_x_m", "raw_y_m", "raw_z_m")] for r in rows])
     slip = None
     if (vis & base).any() and (vis & end).any():
@@ -318,6 +324,7 @@ def analyse(out: Path, hand_geometry: HandGeometry | None = None) -> dict[str, A
         "planned_duration_s": config.duration_s,
         "complete": bool(t[-1] >= config.duration_s - 2.0 / config.sample_hz),
         "samples": len(rows),
+        "tracker_repeated_frames": int(repeated.sum()),
         "emulated": config.emulated,
         "hits_applied": [
             {
@@ -341,32 +348,87 @@ def analyse(out: Path, hand_geometry: HandGeometry | None = None) -> dict[str, A
     return result
 
 
+def _running_mean(t: np.ndarray, y: np.ndarray, window_s: float) -> np.ndarray:
+    """Mean of ``y`` over the trailing ``window_s`` at each sample (NaNs skipped)."""
+    ok = np.isfinite(y)
+    c = np.concatenate(([0.0], np.cumsum(np.where(ok, y, 0.0))))
+    n = np.concatenate(([0], np.cumsum(ok)))
+    lo = np.searchsorted(t, t - window_s, side="left")
+    hi = np.arange(1, len(t) + 1)
+    count = n[hi] - n[lo]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count > 0, (c[hi] - c[lo]) / np.maximum(count, 1), np.nan)
+
+
 def plot(result: dict[str, Any], rows: list[dict[str, Any]], names: list[str], path: Path) -> Path:
+    """What the run concludes: each finger's drift (Joint 2 averaged over 1 s outside its
+    disturbances, so the drift shows under the readings' noise; the drift from the baseline to
+    the end window in the legend), each disturbance's deviation and recovery time, and the
+    tracked tip's displacement from its baseline (1 s means of the tracker's new frames)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     t = np.array([float(r["time_s"]) for r in rows])
-    fig, ax = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
-    for n in names:
+    fig, ax = plt.subplots(3, 1, figsize=(7.5, 7.5), sharex=True)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for k, n in enumerate(names):
+        p = result["fingers"][n]
+        c = colours[k % len(colours)]
         th = np.array([float(r[f"{n}_theta2_rad"]) for r in rows])
-        ax[0].plot(t, np.degrees(th - result["fingers"][n]["baseline_theta2_rad"]), lw=0.8,
-                   label=n)  # fmt: skip
-        ax[1].plot(t, [float(r[f"{n}_duty_a"]) for r in rows], lw=0.8, label=n)
+        held = th.copy()  # the disturbances are the middle panel's: left out of the drift
+        for e in p["disturbances"]:
+            stop = e["start_s"] + (e["recovery_s"] if e["recovery_s"] is not None else np.inf)
+            held[(t >= e["start_s"]) & (t <= stop)] = np.nan
+        dev = np.degrees(_running_mean(t, held, 1.0) - p["baseline_theta2_rad"])
+        ax[0].plot(t, dev, lw=0.9, color=c,
+                   label=f"{n}: drift {math.degrees(p['drift_rad']):+.2f} deg")  # fmt: skip
+        for e in p["disturbances"]:
+            peak = math.degrees(e["largest_deviation_rad"])
+            rec = e["recovery_s"]
+            end = e["start_s"] + (rec if rec is not None else t[-1] - e["start_s"])
+            ax[1].plot([e["start_s"], end], [peak, peak], color=c, lw=2.0, alpha=0.6)
+            ax[1].plot([e["peak_s"]], [peak], "o", color=c, ms=4)
+            ax[1].annotate(f"{rec:.2f} s" if rec is not None else "not recovered",
+                           (e["start_s"], peak), fontsize=6, xytext=(3, 3),
+                           textcoords="offset points")  # fmt: skip
     for h in result["hits_applied"]:
         for a in ax:
-            a.axvline(h["time_s"], color="k", lw=0.5, alpha=0.4)
-    ax[0].set_ylabel("Joint 2 from baseline (deg)")
-    ax[1].set_ylabel("flexor duty")
-    ax[1].set_xlabel("time into the hold (s)")
+            a.axvline(h["time_s"], color="k", lw=0.5, alpha=0.3)
+    ax[0].axhline(0.0, color="k", lw=0.5)
+    ax[0].set_ylabel("Joint 2 from baseline,\n1 s mean, held (deg)")
+    ax[0].legend(fontsize=6, ncol=3)
+    ax[1].axhline(0.0, color="k", lw=0.5)
+    ax[1].set_ylabel("disturbance: largest\ndeviation (deg)")
+    ax[1].set_title("bars: from the disturbance to its recovery (time written); grey: hits",
+                    fontsize=7)  # fmt: skip
+    vis = np.array([int(r["visible"]) for r in rows]) == 1
+    frames = np.array([int(r.get("tracker_frame", -1) or -1) for r in rows])
+    vis[1:] &= ~((frames[1:] >= 0) & (frames[1:] == frames[:-1]))
+    raw = np.array([[float(r[c]) for c in ("raw_x_m", "raw_y_m", "raw_z_m")] for r in rows])
+    base = vis & (t < t[0] + 1.0)
+    if base.any():
+        # The 1 s mean position's distance from the baseline's: the norm of each noisy
+        # sample would sit at the noise's size, not at the tip's movement.
+        mean_xyz = np.column_stack([_running_mean(t[vis], raw[vis, k], 1.0) for k in range(3)])
+        moved = np.linalg.norm(mean_xyz - raw[base].mean(axis=0), axis=1) * 1e3
+        ax[2].plot(t[vis], moved, lw=1.0, color="C3", label="1 s mean")
+        ax[2].legend(fontsize=6)
+    slip = result.get("tracked_tip_slip_m")
+    ax[2].set_ylabel(f"tracked tip ({result['tracked_finger']})\nfrom baseline (mm)")
+    ax[2].set_title(
+        "tracked tip: "
+        + (f"moved {slip * 1e3:.2f} mm, baseline to end" if slip is not None else "not seen"),
+        fontsize=7,
+    )
+    ax[2].set_xlabel("time into the hold (s)")
     ax[0].set_title(
         f"Grasp hold {result['pose']}: largest deviation "
         f"{math.degrees(result['largest_deviation_rad']):.1f} deg, longest recovery "
         f"{result['longest_recovery_s']:.2f} s",
         fontsize=9,
     )
-    ax[0].legend(fontsize=7, ncol=5)
     for a in ax:
         a.grid(alpha=0.3)
     fig.tight_layout()

@@ -47,9 +47,16 @@ from utrf.hand.state import fault_names
 from utrf.hil import joint2
 from utrf.hil.bench import BENCH_GAINS, Bench, ProgressFn, finite_mean
 from utrf.hil.joint2 import Joint2Frames
-from utrf.hil.tracker import Registration, TrackerError, mean_position, register
+from utrf.hil.tracker import (
+    NewFrames,
+    Registration,
+    TrackerError,
+    TrackerSample,
+    mean_position,
+    register,
+)
 from utrf.models import calibration, kinematics, statics
-from utrf.models.geometry import FingerGeometry
+from utrf.models.geometry import FingerGeometry, HandGeometry
 from utrf.models.planning import Target, plan
 from utrf.models.statics import Load
 from utrf.models.tendons import Limits
@@ -78,6 +85,7 @@ SAMPLE_COLUMNS = (
     "faults",
     "current_a_a",
     "current_b_a",
+    "tracker_frame",
 )
 STEP_COLUMNS = (
     "step",
@@ -263,6 +271,12 @@ def _attempts(out: Path) -> dict[int, int]:
     return seen
 
 
+def check_new_output(out: Path) -> None:
+    """RunError if ``out`` already holds a run (a new run must not mix with it)."""
+    if (out / "meta.json").exists() or (out / "samples.csv").exists():
+        raise RunError(f"{out} already holds a run: continue it with --resume, or give a new --out")
+
+
 def prepare_output(
     out: Path, config: StaticLoadingConfig, *, resume: bool, extra_meta: dict[str, Any]
 ) -> StaticLoadingConfig:
@@ -279,8 +293,7 @@ def prepare_output(
                 f"--resume: {out} was run {'emulated' if stored.emulated else 'on the bench'}"
             )
         return stored
-    if meta_path.exists() or (out / "samples.csv").exists():
-        raise RunError(f"{out} already holds a run: continue it with --resume, or give a new --out")
+    check_new_output(out)
     out.mkdir(parents=True, exist_ok=True)
     _write_json(meta_path, {"config": config.to_json(), **extra_meta})
     return config
@@ -295,8 +308,13 @@ def _sample_row(
     attempt: int,
     repeat: int,
     load: float,
-) -> dict[str, Any]:
+    new_frames: NewFrames,
+) -> dict[str, Any] | None:
+    """A row of samples.csv, or None when the tracker returned a frame already taken (read
+    faster than it measures: not a new sample)."""
     s = bench.tracker.read()
+    if not new_frames.new(s):
+        return None
     st = bench.hand.latest
     f = st.fingers[finger] if st is not None else None
     theta2, n_frames, frames_sd = frames.take()
@@ -331,6 +349,7 @@ def _sample_row(
         "faults": int(f.faults) if f else 0,
         "current_a_a": f"{cur[0]:.4f}",
         "current_b_a": f"{cur[1]:.4f}",
+        "tracker_frame": s.frame,
     }
 
 
@@ -350,11 +369,14 @@ def _record(
 ) -> list[dict[str, Any]]:
     rows = []
     period = 1.0 / config.tracker_hz
-    for _ in range(n):
+    for _ in range(4 * n):  # a repeated tracker frame is no sample: read again, up to 4n
         bench.sleep(period)
         row = write()  # logged first: the samples around a fault are kept too
-        rows.append(row)
         _check_faults(bench, config.finger, seen, during)
+        if row is not None:
+            rows.append(row)
+            if len(rows) == n:
+                break
     return rows
 
 
@@ -378,11 +400,16 @@ def _registration(
             bench.hand.move({f: th}, duration=0.4, tolerance=config.settle_tolerance_rad)
             bench.sleep(config.settle_s)
             _check_faults(bench, f, seen, "registration")
-            readings = []
+            readings: list[TrackerSample] = []
+            new_frames = NewFrames()
             frames.take()  # from here on
-            for _ in range(n):
+            for _ in range(4 * n):  # n new tracker frames (a repeated one is no sample)
                 bench.sleep(1.0 / config.tracker_hz)
-                readings.append(bench.tracker.read())
+                reading = bench.tracker.read()
+                if new_frames.new(reading):
+                    readings.append(reading)
+                    if len(readings) == n:
+                        break
             raw, visible = mean_position(readings)
             if not visible:
                 raise RunStopped(f"registration: the tracker never saw the sensor at pose {k}")
@@ -483,10 +510,16 @@ def _run_steps(
                 t0 = bench.now()
                 frames.take()  # the step's frames start now
 
+                new_frames = NewFrames()
+
                 def write(step: int = step, attempt: int = attempt, repeat: int = repeat,
-                          load: float = load) -> dict[str, Any]:  # fmt: skip
-                    row = _sample_row(bench, reg, frames, f, step, attempt, repeat, load)
-                    samples.write(row)
+                          load: float = load, new_frames: NewFrames = new_frames,
+                          ) -> dict[str, Any] | None:  # fmt: skip
+                    row = _sample_row(
+                        bench, reg, frames, f, step, attempt, repeat, load, new_frames
+                    )
+                    if row is not None:
+                        samples.write(row)
                     return row
 
                 rows = _record(bench, config, n, write, seen, during)
@@ -624,6 +657,7 @@ def analyse(out: Path, *, geometry: FingerGeometry, figure: bool = True) -> dict
     result: dict[str, Any] = {
         "experiment": "static loading (paper Sec. IV-A)",
         "finger": config.finger,
+        "finger_name": HandGeometry.default().fingers[config.finger].name,
         "finger_length_m": length,
         "hold": {
             "boundary_condition": "Joint-2 angle held by the firmware's closed loop",
@@ -694,6 +728,15 @@ def analyse(out: Path, *, geometry: FingerGeometry, figure: bool = True) -> dict
         result["calibration"] = calibrate(steps, geometry, source=str(out / "samples.csv"))
     except calibration.CalibrationError as exc:
         result["calibration"] = {"error": str(exc)}
+    if "modulus_pa" in result["calibration"]:
+        # The calibrated model where the points are: at each step's measured Joint-2 angles
+        # (the fit's own basis), not at the setpoint, which it would miss by the hold's error.
+        gcal = replace(geometry, tendon_youngs_modulus_pa=result["calibration"]["modulus_pa"])
+        pred_cal = _model_deflection(gcal, loads, th, th_ref)
+        for p in per:
+            k = loads == p["load_kg"]
+            p["calibrated_model_deflection_m"] = float(np.hypot(*pred_cal[k].T).mean())
+        result["error"]["calibrated_mean_m"] = float(np.hypot(*(meas - pred_cal).T).mean())
     if config.emulated:
         result["emulated_truth"] = meta.get("emulated_truth")
     _write_json(out / "results.json", result)
@@ -813,17 +856,17 @@ def plot(result: dict[str, Any], path: Path, geometry: FingerGeometry) -> Path:
     nominal = np.hypot(*_model_deflection(geometry, grid, th, th).T) * 1e3
     ax.plot(grid, nominal, "-", label="model, Joint 2 held at the setpoint")
     cal = result.get("calibration", {})
-    if "modulus_pa" in cal:
-        gcal = replace(geometry, tendon_youngs_modulus_pa=cal["modulus_pa"])
-        fitted = np.hypot(*_model_deflection(gcal, grid, th, th).T) * 1e3
-        ax.plot(
-            grid, fitted, ":", label=f"calibrated model (E = {cal['modulus_pa'] / 1e9:.0f} GPa)"
-        )
+    if "modulus_pa" in cal and all("calibrated_model_deflection_m" in p for p in per):
+        fitted = np.array([p["calibrated_model_deflection_m"] for p in per]) * 1e3
+        ax.plot(w, fitted, "d:", mfc="none",
+                label=f"calibrated model (E = {cal['modulus_pa'] / 1e9:.0f} GPa) at the "
+                "measured Joint-2 angles")  # fmt: skip
     ax.set_xlabel("payload at the tip (kg)")
     ax.set_ylabel("tip displacement (mm)")
     e = result.get("error", {})
+    name = result.get("finger_name") or f"finger {result['finger']}"
     ax.set_title(
-        f"Static loading, finger {result['finger']}: mean error "
+        f"Static loading, {name}: mean error "
         f"{e.get('mean_m', math.nan) * 1e3:.3f} mm, "
         f"max {e.get('max_m', math.nan) * 1e3:.3f} mm",
         fontsize=9,

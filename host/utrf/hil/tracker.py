@@ -7,7 +7,8 @@ the straight finger, y toward flexion, origin at Joint 1; ``docs/architecture.md
 fitted by :func:`register` from the sensor's positions at known finger poses.
 
 - :class:`NDIAuroraTracker`: an NDI Aurora (or Polaris) through ``scikit-surgerynditracker``,
-  an optional dependency (``pip install 'utrf[bench]'``) imported only when one is opened.
+  an optional dependency (``pip install 'utrf[bench]'``; in a checkout
+  ``pip install -e '.[bench]'``) imported only when one is opened.
 - :class:`SimulatedTracker`: for the emulated board. It reads the plant's true fingertip,
   places it in a tracker frame of its own (a rotation and an offset the run does not know),
   and adds seeded Gaussian noise, so registration and calibration have something to find.
@@ -24,7 +25,10 @@ from typing import Any, Protocol
 import numpy as np
 
 NDI_PACKAGE = "scikit-surgerynditracker"
-NDI_INSTALL = "pip install 'utrf[bench]'  (or: pip install scikit-surgerynditracker)"
+NDI_INSTALL = (
+    "pip install 'utrf[bench]' (an installed utrf), or pip install -e '.[bench]' "
+    "(in a checkout of the repository)"
+)
 
 
 class TrackerError(RuntimeError):
@@ -33,20 +37,42 @@ class TrackerError(RuntimeError):
 
 @dataclass(frozen=True)
 class TrackerSample:
-    """One reading: position in the tracker's frame (m), its time (s), visibility, quality.
+    """One reading: position in the tracker's frame (m), its time (s), visibility, quality,
+    and the tracker's frame number.
 
     ``position_m`` is NaN when the sensor was not seen. ``quality`` is the tracker's own
     figure (NDI: the RMS error of the sensor's fit, smaller is better; NaN if none).
+    ``frame``: the tracker's own frame number (NDI counts its measurements); a read faster
+    than the tracker measures returns the same frame again, which is not a new sample.
     """
 
     time_s: float
     position_m: np.ndarray  # (3,)
     visible: bool
     quality: float = math.nan
+    frame: int = -1
+
+
+class NewFrames:
+    """Passes each tracker frame once: ``new(sample)`` is False for a frame seen before."""
+
+    def __init__(self) -> None:
+        self.last: int | None = None
+        self.repeated = 0
+
+    def new(self, sample: TrackerSample) -> bool:
+        if sample.frame >= 0 and sample.frame == self.last:
+            self.repeated += 1
+            return False
+        self.last = sample.frame
+        return True
 
 
 class Tracker(Protocol):
-    """What a bench run needs of a tracker."""
+    """What a bench run needs of a tracker. ``rate_hz``: how many frames a second it
+    measures (None: a new one at every read)."""
+
+    rate_hz: float | None
 
     def read(self) -> TrackerSample: ...
 
@@ -168,7 +194,9 @@ class SimulatedTracker:
     """A tracker for the emulated board: ``tip()`` gives the true fingertip in the finger
     frame (m, e.g. ``lambda: board.tip[1]``); readings are that point in this tracker's
     frame (``frame``, unknown to the run) plus seeded Gaussian noise of ``noise_m`` per axis.
-    ``clock`` gives the timestamps (the board's simulated time)."""
+    ``clock`` gives the timestamps (the board's simulated time). ``rate_hz``: measure at this
+    rate, as a real tracker does (a read within the same frame returns it again, frame
+    number and all); None: every read is a new frame."""
 
     def __init__(
         self,
@@ -179,7 +207,10 @@ class SimulatedTracker:
         noise_m: float = 1e-4,
         seed: int = 0,
         dropout: float = 0.0,
+        rate_hz: float | None = None,
     ) -> None:
+        if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0):
+            raise TrackerError(f"rate_hz must be > 0 or None, got {rate_hz!r}")
         if not (math.isfinite(noise_m) and noise_m >= 0):
             raise TrackerError(f"noise_m must be >= 0, got {noise_m!r}")
         if not 0.0 <= dropout < 1.0:
@@ -190,17 +221,30 @@ class SimulatedTracker:
         self.noise_m = float(noise_m)
         self.dropout = float(dropout)
         self._rng = np.random.default_rng(seed)
+        self.rate_hz = rate_hz
+        self._frames = 0
+        self._last: TrackerSample | None = None
         self.closed = False
 
     def read(self) -> TrackerSample:
         if self.closed:
             raise TrackerError("the simulated tracker is closed")
         t = float(self._clock())
+        if self.rate_hz is not None:
+            frame = math.floor(t * self.rate_hz + 1e-9)
+            if self._last is not None and self._last.frame == frame:
+                return self._last
+        else:
+            frame = self._frames
+            self._frames += 1
         noise = self._rng.normal(0.0, self.noise_m, 3)
         if self.dropout and self._rng.random() < self.dropout:
-            return TrackerSample(t, np.full(3, np.nan), False)
-        p = self.frame.to_tracker(np.asarray(self._tip(), dtype=float))[0] + noise
-        return TrackerSample(t, p, True, float(np.linalg.norm(noise)))
+            sample = TrackerSample(t, np.full(3, np.nan), False, frame=frame)
+        else:
+            p = self.frame.to_tracker(np.asarray(self._tip(), dtype=float))[0] + noise
+            sample = TrackerSample(t, p, True, float(np.linalg.norm(noise)), frame)
+        self._last = sample
+        return sample
 
     def close(self) -> None:
         self.closed = True
@@ -224,8 +268,11 @@ class NDIAuroraTracker:
     ``serial_port``: the System Control Unit's port (None: the package probes for it);
     ``ports_to_probe``: how many to try. ``sensor``: which of the tracked tools is the
     fingertip's sensor (0: the first). Positions come in mm from the package; they are
-    returned in m. A tool the tracker does not see comes as NaN, ``visible`` False.
+    returned in m. A tool the tracker does not see comes as NaN, ``visible`` False. Each
+    sample keeps the Aurora's frame number; it measures at ``rate_hz`` (40 Hz).
     """
+
+    rate_hz: float | None = 40.0  # the Aurora's measurement rate
 
     def __init__(
         self,
@@ -257,7 +304,7 @@ class NDIAuroraTracker:
         if self.closed:
             raise TrackerError("the NDI tracker is closed")
         try:
-            _ports, _stamps, _frame_numbers, matrices, quality = self._tracker.get_frame()
+            _ports, _stamps, frame_numbers, matrices, quality = self._tracker.get_frame()
         except Exception as exc:
             raise TrackerError(f"NDI Aurora read failed ({exc})") from exc
         t = float(self._clock())
@@ -269,7 +316,11 @@ class NDIAuroraTracker:
         pos = mat[:3, 3] * 1e-3 if mat.shape == (4, 4) else np.full(3, np.nan)
         q = float(quality[self.sensor]) if self.sensor < len(quality) else math.nan
         visible = bool(np.all(np.isfinite(pos)))
-        return TrackerSample(t, pos if visible else np.full(3, np.nan), visible, q)
+        try:
+            frame = int(frame_numbers[self.sensor])
+        except (IndexError, TypeError, ValueError):
+            frame = -1
+        return TrackerSample(t, pos if visible else np.full(3, np.nan), visible, q, frame)
 
     def close(self) -> None:
         if not self.closed:

@@ -196,6 +196,11 @@ class Field:
         return raw
 
 
+class Unread(int):
+    """A finger's wire value that its message's mask leaves unread and that is no valid value
+    of the field (e.g. an enum value out of its table): kept as it came, re-encoded as is."""
+
+
 def _as_int(value: Any, where: str) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise ValueError(f"{where}: {value!r} is not an integer")
@@ -220,6 +225,9 @@ class Message:
     SIZE: ClassVar[int] = 0
     DIRECTION: ClassVar[Direction] = Direction.BOARD_TO_HOST
     FIELDS: ClassVar[tuple[Field, ...]] = ()
+    #: The u8 field selecting fingers, if any: the board reads and checks the per-finger
+    #: arrays only for the fingers it selects, and so does :meth:`decode`.
+    MASKED_BY: ClassVar[str | None] = None
     _STRUCT: ClassVar[struct.Struct] = struct.Struct("<")
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
@@ -246,7 +254,10 @@ class Message:
             items = list(value)
             if len(items) != f.count:
                 raise ValueError(f"{where}: needs {f.count} values, got {len(items)}")
-            raw[f.name] = tuple(f.to_raw(v, f"{where}[{i}]") for i, v in enumerate(items))
+            raw[f.name] = tuple(
+                int(v) if isinstance(v, Unread) else f.to_raw(v, f"{where}[{i}]")
+                for i, v in enumerate(items)
+            )
         return raw
 
     @classmethod
@@ -263,9 +274,7 @@ class Message:
                 continue
             if not isinstance(value, Sequence) or len(value) != f.count:
                 raise DecodeError(cls.NAME, f.name, f"needs {f.count} values")
-            for i, v in enumerate(value):
-                f.check_raw(v, cls.NAME, f"{f.name}[{i}]")
-            kwargs[f.name] = tuple(f.from_raw(v) for v in value)
+            kwargs[f.name] = cls._array(f, value, raw.get(cls.MASKED_BY or "", 0xFF))
         extra = sorted(set(raw) - {f.name for f in cls.FIELDS})
         if extra:
             raise DecodeError(cls.NAME, extra[0], "is not a field of this message")
@@ -298,12 +307,27 @@ class Message:
                 kwargs[f.name] = f.from_raw(v)
                 pos += 1
             else:
-                items = values[pos : pos + f.count]
-                for i, v in enumerate(items):
-                    f.check_raw(v, cls.NAME, f"{f.name}[{i}]")
-                kwargs[f.name] = tuple(f.from_raw(v) for v in items)
+                mask = kwargs.get(cls.MASKED_BY or "", 0xFF)
+                kwargs[f.name] = cls._array(f, values[pos : pos + f.count], mask)
                 pos += f.count
         return cls(**kwargs)
+
+    @classmethod
+    def _array(cls, f: Field, items: Sequence[RawValue], mask: Any) -> tuple[Value, ...]:
+        """An array's values; with MASKED_BY, an unselected finger's value is not checked (it
+        stays raw when it is no valid value)."""
+        out: list[Value] = []
+        for i, v in enumerate(items):
+            if cls.MASKED_BY is not None and f.name != cls.MASKED_BY and not int(mask) >> i & 1:
+                try:
+                    f.check_raw(v, cls.NAME, f"{f.name}[{i}]")
+                except DecodeError:
+                    out.append(Unread(v) if isinstance(v, int) else v)
+                    continue
+            else:
+                f.check_raw(v, cls.NAME, f"{f.name}[{i}]")
+            out.append(f.from_raw(v))
+        return tuple(out)
 
 
 def _is_array(value: Any) -> bool:

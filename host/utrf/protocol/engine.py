@@ -38,6 +38,7 @@ from utrf.protocol.errors import (
     DecodeError,
     DisconnectedError,
     NackError,
+    Outcome,
     ProtocolError,
     ReplyTimeout,
     SchemaMismatchError,
@@ -46,8 +47,9 @@ from utrf.protocol.framing import DELIMITER, Frame, FrameDecoder, FrameError, Rx
 
 log = logging.getLogger(__name__)
 
-StreamMessage = m.State | m.Fault | m.Boot
-STREAM_IDS = frozenset({m.State.ID, m.Fault.ID, m.Boot.ID})
+StreamMessage = m.State | m.Status | m.Fault | m.Boot
+#: board-initiated messages: one running seq counts them all (a gap is a loss of any of them)
+STREAM_IDS = frozenset({m.State.ID, m.Status.ID, m.Fault.ID, m.Boot.ID})
 SEQ_MASK = m.BOARD_SEQ_FLAG - 1  # host seqs run 0..127, the board's stream counter likewise
 #: heartbeat seqs remembered so that their acks are not counted as stale
 HEARTBEAT_SEQS_KEPT = 32
@@ -147,6 +149,9 @@ class _Pending:
     timeout_s: float
     allowed: int  # attempts in all
     attempt: int = 0
+    #: attempts written out that no BAD_CRC nack naming this request accounts for: each
+    #: may have been applied (its reply lost)
+    maybe_applied: int = 0
     deadline: float | None = None  # None: (re)send now; inf: sent, not yet reported
     inbox: deque[Frame | _Hint | BaseException] = field(default_factory=deque)
 
@@ -292,6 +297,7 @@ class Engine:
             pending = self._pending
             if pending is not None and pending.deadline == math.inf:
                 pending.deadline = now + pending.timeout_s
+                pending.maybe_applied += 1
         elif tx.kind is Kind.HEARTBEAT:
             self._counts["tx_frames"] += 1
             self._counts["heartbeats"] += 1
@@ -316,7 +322,8 @@ class Engine:
         if p.attempt < p.allowed:
             return self._transmit(p)
         self._counts["timeouts"] += 1
-        return self._done(error=ReplyTimeout(p.request, p.timeout_s, p.attempt))
+        outcome = Outcome.UNKNOWN if p.maybe_applied else Outcome.NOT_APPLIED
+        return self._done(error=ReplyTimeout(p.request, p.timeout_s, p.attempt, outcome))
 
     def _transmit(self, p: _Pending) -> Transmit:
         p.attempt += 1
@@ -468,7 +475,10 @@ class Engine:
         if nack.code is m.ErrorCode.BAD_CRC:
             # The board saw a damaged frame, maybe ours. A hint: resend an idempotent request
             # now rather than at its timeout. It ends the request only if it names this very
-            # request (seq and id) and no attempt is left.
+            # request (seq and id) and no attempt is left. Naming it, it also says that one
+            # attempt arrived damaged: that one was not applied.
+            if matches and pending.maybe_applied:
+                pending.maybe_applied -= 1
             if request.IDEMPOTENT:
                 pending.inbox.append(_Hint(error if matches else None))
                 return

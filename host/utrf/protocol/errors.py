@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from enum import Enum
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -27,15 +28,36 @@ class DecodeError(ProtocolError, ValueError):
         super().__init__(f"{where}: {reason}")
 
 
-class ReplyTimeout(ProtocolError, TimeoutError):
-    """No reply came within the request's timeout, after every allowed retry."""
+class Outcome(Enum):
+    """What a request that timed out did on the board."""
 
-    def __init__(self, request: Message, timeout_s: float, attempts: int) -> None:
+    #: the board did not apply it: every attempt that went out came back as a BAD_CRC nack
+    #: naming it (it arrived damaged), or none went out
+    NOT_APPLIED = "not applied"
+    #: an attempt may have arrived whole and been applied, its reply lost
+    UNKNOWN = "unknown"
+
+
+class ReplyTimeout(ProtocolError, TimeoutError):
+    """No reply came within the request's timeout, after every allowed retry.
+
+    ``outcome`` says whether the request is known not to have been applied, or unknown.
+    """
+
+    def __init__(
+        self,
+        request: Message,
+        timeout_s: float,
+        attempts: int,
+        outcome: Outcome = Outcome.UNKNOWN,
+    ) -> None:
         self.request = request
         self.timeout_s = timeout_s
         self.attempts = attempts
+        self.outcome = outcome
         super().__init__(
-            f"no reply to {request.NAME} after {attempts} attempt(s) of {timeout_s:g} s each"
+            f"no reply to {request.NAME} after {attempts} attempt(s) of {timeout_s:g} s each "
+            f"({outcome.value})"
         )
 
 

@@ -56,7 +56,8 @@ class Link(EngineDriver):
     ``heartbeat_period_s``: after a successful :meth:`handshake`, send a ``heartbeat`` when
     nothing else went out for this long (None: never), so the board's host-silence watchdog
     stays fed. ``retries``: resends of an idempotent request after the first attempt.
-    ``telemetry_queue_size``: when :attr:`telemetry` is full the oldest items are dropped.
+    ``telemetry_queue_size``: when :attr:`telemetry` is full the oldest items are dropped
+    (counted as ``telemetry_dropped``); 0: no queue, the callbacks only (what a Hand uses).
     Callbacks (``on_telemetry``) run on the reader thread: keep them short.
     """
 
@@ -72,7 +73,8 @@ class Link(EngineDriver):
         self._engine = Engine(
             retries=retries, heartbeat_period_s=heartbeat_period_s, now=time.monotonic()
         )
-        self.telemetry: queue.Queue[Telemetry] = queue.Queue(maxsize=telemetry_queue_size)
+        self.telemetry: queue.Queue[Telemetry] = queue.Queue(maxsize=max(telemetry_queue_size, 1))
+        self._queue_telemetry = telemetry_queue_size > 0
         self._callbacks: list[Callable[[Telemetry], None]] = []
         if on_telemetry is not None:
             self._callbacks.append(on_telemetry)
@@ -227,7 +229,7 @@ class Link(EngineDriver):
                 self._deliver(item)
 
     def _deliver(self, item: Telemetry) -> None:
-        while True:
+        while self._queue_telemetry:
             try:
                 self.telemetry.put_nowait(item)
                 break

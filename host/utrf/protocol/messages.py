@@ -16,14 +16,16 @@ from utrf.protocol.codec import Direction, Field, Message, Request
 
 PROTOCOL_VERSION = 1
 #: CRC-32 of the canonical spec (doc texts excluded), compared at the handshake.
-SCHEMA_HASH = 0x1556907B
+SCHEMA_HASH = 0x94493980
 MAX_PAYLOAD = 64
 FINGER_COUNT = 5
 DEFAULT_BAUD = 1000000
 REPLY_TIMEOUT_S = 0.1
-RETRIES = 3
+RETRIES = 8
 HEARTBEAT_PERIOD_S = 0.1
-MAX_TELEMETRY_HZ = 500
+MAX_TELEMETRY_HZ = 1000
+#: The board's heartbeat timeout until the host sets one (set_safety).
+DEFAULT_HEARTBEAT_TIMEOUT_S = 0.5
 #: Set in the seq of board-initiated frames (state stream, fault, boot), clear in requests.
 BOARD_SEQ_FLAG = 0x80
 
@@ -130,6 +132,10 @@ class ErrorCode(IntEnum):
     #: the board cannot do it now (EEPROM write under way or failed, or the finger must be idle);
     #: detail = finger, or 0xFF for the EEPROM
     BUSY = 6
+    #: the firmware has stopped driving (loop-alive or tick-alive rule): every motor is off and the
+    #: watchdog resets the board within 0.12 s; set_mode and set_targets are refused until then;
+    #: detail = 0
+    HALTED = 7
 
 
 class FaultBits(IntFlag):
@@ -207,6 +213,7 @@ class SetTargets(Request["Ack"]):
     ID: ClassVar[int] = 0x10
     SIZE: ClassVar[int] = 22
     DIRECTION: ClassVar[Direction] = Direction.HOST_TO_BOARD
+    MASKED_BY: ClassVar[str | None] = "mask"
     IDEMPOTENT: ClassVar[bool] = True
     REPLY_TIMEOUT_S: ClassVar[float] = 0.1
     FIELDS: ClassVar[tuple[Field, ...]] = (
@@ -233,6 +240,7 @@ class SetMode(Request["Ack"]):
     ID: ClassVar[int] = 0x11
     SIZE: ClassVar[int] = 26
     DIRECTION: ClassVar[Direction] = Direction.HOST_TO_BOARD
+    MASKED_BY: ClassVar[str | None] = "mask"
     IDEMPOTENT: ClassVar[bool] = True
     REPLY_TIMEOUT_S: ClassVar[float] = 0.1
     FIELDS: ClassVar[tuple[Field, ...]] = (
@@ -261,7 +269,7 @@ class SetTelemetry(Request["Ack"]):
     DIRECTION: ClassVar[Direction] = Direction.HOST_TO_BOARD
     IDEMPOTENT: ClassVar[bool] = True
     REPLY_TIMEOUT_S: ClassVar[float] = 0.1
-    FIELDS: ClassVar[tuple[Field, ...]] = (Field("rate_hz", "u16", 0, raw_max=500, unit="Hz"),)
+    FIELDS: ClassVar[tuple[Field, ...]] = (Field("rate_hz", "u16", 0, raw_max=1000, unit="Hz"),)
 
     #: [Hz]
     rate_hz: int
@@ -557,6 +565,20 @@ class ResetStats(Request["Ack"]):
 
 
 @dataclass(frozen=True, slots=True)
+class GetStatus(Request["Status"]):
+    """Every finger's mode and faults now (the host asks when a state's status_seq names a status it
+    missed).
+    """
+
+    NAME: ClassVar[str] = "get_status"
+    ID: ClassVar[int] = 0x37
+    SIZE: ClassVar[int] = 0
+    DIRECTION: ClassVar[Direction] = Direction.HOST_TO_BOARD
+    IDEMPOTENT: ClassVar[bool] = True
+    REPLY_TIMEOUT_S: ClassVar[float] = 0.1
+
+
+@dataclass(frozen=True, slots=True)
 class Identity(Message):
     """The board's identity. The first two fields keep this position in every protocol version, so a
     host can always tell a mismatch.
@@ -617,42 +639,39 @@ class Pong(Message):
 
 @dataclass(frozen=True, slots=True)
 class State(Message):
-    """Hand state: the telemetry stream at the rate set by set_telemetry, and the reply to
-    get_state. Stream frames carry the board's running seq; a gap is a lost frame.
+    """Hand state, compact: the telemetry stream at the rate set by set_telemetry, and the reply to
+    get_state. Angles and duties at the board's own resolution (no conversion on the board, and a
+    target reads back exactly as the board stores it). What the host can derive (fingertips, from
+    theta2 and the kinematics) or what rarely changes (modes, faults: the `status` message) is
+    not in it; `status_seq` names the latest status, so the host knows whether the status it
+    holds is current. Stream frames carry the board's running seq.
     """
 
     NAME: ClassVar[str] = "state"
     ID: ClassVar[int] = 0x90
-    SIZE: ClassVar[int] = 64
+    SIZE: ClassVar[int] = 33
     DIRECTION: ClassVar[Direction] = Direction.BOARD_TO_HOST
     FIELDS: ClassVar[tuple[Field, ...]] = (
-        Field("board_time", "u32", 0, scale=1e-06, unit="s"),
-        Field("theta2", "i16", 1, count=5, scale=0.0001, unit="rad"),
-        Field("target", "i16", 2, count=5, scale=0.0001, unit="rad"),
-        Field("duty_a", "i8", 3, count=5, scale=0.01, unit="1"),
-        Field("duty_b", "i8", 4, count=5, scale=0.01, unit="1"),
-        Field("mode", "u8", 5, count=5, enum=ControlMode),
-        Field("faults", "u8", 6, count=5, flags=FaultBits),
-        Field("tip_x", "i16", 7, count=5, scale=1e-05, unit="m"),
-        Field("tip_y", "i16", 8, count=5, scale=1e-05, unit="m"),
+        Field("board_time", "u16", 0, scale=0.001, unit="s"),
+        Field("status_seq", "u8", 1),
+        Field("theta2", "i16", 2, count=5, scale=0.00019174759848570515, unit="rad"),
+        Field("target", "i16", 3, count=5, scale=0.00019174759848570515, unit="rad"),
+        Field("duty_a", "i8", 4, count=5, scale=0.0078125, unit="1"),
+        Field("duty_b", "i8", 5, count=5, scale=0.0078125, unit="1"),
     )
 
-    #: board clock at the sample, wraps every 71.6 min [s]
+    #: board clock at the sample (its tick count), wraps every 65.536 s: the host unwraps it [s]
     board_time: float
-    #: measured Joint-2 angle [rad]
+    #: the change count of the latest status (see status)
+    status_seq: int
+    #: measured Joint-2 angle (2 pi / 32768 rad per count) [rad]
     theta2: tuple[float, ...]
-    #: Joint-2 target in use [rad]
+    #: Joint-2 target in use, as stored [rad]
     target: tuple[float, ...]
-    #: motor A duty (flexor, or the rotary motor), signed
+    #: motor A duty (flexor, or the rotary motor), signed, 1/128 per count
     duty_a: tuple[float, ...]
     #: motor B duty (extensor), signed; 0 for a rotary finger
     duty_b: tuple[float, ...]
-    mode: tuple[ControlMode, ...]
-    faults: tuple[FaultBits, ...]
-    #: fingertip x from the kinematics table [m]
-    tip_x: tuple[float, ...]
-    #: fingertip y from the kinematics table [m]
-    tip_y: tuple[float, ...]
 
 
 @dataclass(frozen=True, slots=True)
@@ -698,6 +717,29 @@ class Boot(Message):
     schema_hash: int
     reset_cause: ResetCause
     config_status: ConfigStatus
+
+
+@dataclass(frozen=True, slots=True)
+class Status(Message):
+    """What rarely changes: every finger's mode and latched faults. Sent (board seq) whenever any of
+    them changes, before the next state frame, and as the reply to get_status. `change` counts
+    the changes (wrapping at 256); every state frame carries the latest in status_seq.
+    """
+
+    NAME: ClassVar[str] = "status"
+    ID: ClassVar[int] = 0x93
+    SIZE: ClassVar[int] = 11
+    DIRECTION: ClassVar[Direction] = Direction.BOARD_TO_HOST
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        Field("change", "u8", 0),
+        Field("mode", "u8", 1, count=5, enum=ControlMode),
+        Field("faults", "u8", 2, count=5, flags=FaultBits),
+    )
+
+    #: change count: +1 whenever a mode or a fault changes
+    change: int
+    mode: tuple[ControlMode, ...]
+    faults: tuple[FaultBits, ...]
 
 
 @dataclass(frozen=True, slots=True)
@@ -843,7 +885,7 @@ class Stats(Message):
 
     NAME: ClassVar[str] = "stats"
     ID: ClassVar[int] = 0xB5
-    SIZE: ClassVar[int] = 36
+    SIZE: ClassVar[int] = 44
     DIRECTION: ClassVar[Direction] = Direction.BOARD_TO_HOST
     FIELDS: ClassVar[tuple[Field, ...]] = (
         Field("rx_frames", "u32", 0),
@@ -856,6 +898,8 @@ class Stats(Message):
         Field("tick_overruns", "u32", 7),
         Field("tick_worst", "u16", 8, scale=1e-06, unit="s"),
         Field("tick_mean", "u16", 9, scale=1e-06, unit="s"),
+        Field("rx_ignored", "u32", 10),
+        Field("rx_repeats", "u32", 11),
     )
 
     #: valid frames received
@@ -878,6 +922,10 @@ class Stats(Message):
     tick_worst: float
     #: mean control tick, over the last 1024 ticks [s]
     tick_mean: float
+    #: valid frames ignored: a request seq with the board's flag (bit 7) set
+    rx_ignored: int
+    #: resent requests answered from the reply cache, not done again
+    rx_repeats: int
 
 
 @dataclass(frozen=True, slots=True)
@@ -936,6 +984,7 @@ ClearFaults.REPLY = Ack
 GetState.REPLY = State
 GetStats.REPLY = Stats
 ResetStats.REPLY = Ack
+GetStatus.REPLY = Status
 
 #: Every message, in spec order.
 MESSAGES: tuple[type[Message], ...] = (
@@ -960,11 +1009,13 @@ MESSAGES: tuple[type[Message], ...] = (
     GetState,
     GetStats,
     ResetStats,
+    GetStatus,
     Identity,
     Pong,
     State,
     Fault,
     Boot,
+    Status,
     Gains,
     Limits,
     Safety,

@@ -5,7 +5,7 @@
 //   timer 0            left to the Arduino core (millis)
 //   ADC                interrupt-driven round robin over the five encoder channels
 //   UART0              own interrupt-driven driver: counts lost bytes, never blocks
-//   watchdog           120 ms, reset mode; fed by loop() only while the tick runs
+//   watchdog           30 ms, reset mode; fed by loop() only while the tick runs
 #include "hal_avr.h"
 
 #include <avr/eeprom.h>
@@ -173,46 +173,19 @@ void adc_select(uint8_t finger) {
 }  // namespace
 
 // ---- UART0 ---------------------------------------------------------------------------------
-// Ring buffers shared with the interrupt routines below, which are written in assembly (C
-// names for that reason): at 1 Mbaud and a 500 Hz state stream they run 35,000 times a
-// second, and the compiler's prologues doubled their cost. The receive interrupt also nests
-// in the control tick, once for each byte that arrives while it runs, so its every cycle
-// counts there. Its usual path changes no status flag, so it need not save SREG: the ring
-// sits on a 128-byte boundary and its head and tail are kept as the low bytes of the slots'
-// addresses, in the general-purpose I/O registers GPIOR1 (head, written by the interrupt)
-// and GPIOR2 (tail, written by serial_read()), read and written with in/out (nothing else
-// uses them); the next slot's low byte comes from a table in flash (lpm), and a full ring is
-// found with cpse. Only the rare paths (a byte lost) save SREG to count it.
-extern "C" {
-uint8_t utrf_rx_buf[128] __attribute__((aligned(128)));
-uint8_t utrf_tx_buf[256];
-volatile uint8_t utrf_tx_head, utrf_tx_tail;
-volatile uint16_t utrf_rx_lost;
-// utrf_rx_next[a]: the low byte of the address of the slot after the one at low byte a, for
-// either position of the ring in its 256-byte page (a's top bit is the page half).
-extern const uint8_t utrf_rx_next[256];
-#define UTRF_RX_NEXT(a) (uint8_t)(((a) & 0x80) | (((a) + 1) & 0x7F))
-#define UTRF_RX_NEXT4(a) UTRF_RX_NEXT(a), UTRF_RX_NEXT(a + 1), UTRF_RX_NEXT(a + 2), UTRF_RX_NEXT(a + 3)
-#define UTRF_RX_NEXT16(a) \
-    UTRF_RX_NEXT4(a), UTRF_RX_NEXT4(a + 4), UTRF_RX_NEXT4(a + 8), UTRF_RX_NEXT4(a + 12)
-#define UTRF_RX_NEXT64(a) \
-    UTRF_RX_NEXT16(a), UTRF_RX_NEXT16(a + 16), UTRF_RX_NEXT16(a + 32), UTRF_RX_NEXT16(a + 48)
-const uint8_t utrf_rx_next[256] PROGMEM __attribute__((aligned(256))) = {
-    UTRF_RX_NEXT64(0), UTRF_RX_NEXT64(64), UTRF_RX_NEXT64(128), UTRF_RX_NEXT64(192)};
-#undef UTRF_RX_NEXT64
-#undef UTRF_RX_NEXT16
-#undef UTRF_RX_NEXT4
-#undef UTRF_RX_NEXT
-}
-
+// Ring buffers shared with the interrupt routines below. The receive ring's head and tail live
+// in the general-purpose I/O registers GPIOR1 (head, written by the interrupt) and GPIOR2
+// (tail, written by serial_read()): single-cycle in/out, nothing else uses them, and the
+// receive interrupt, which nests in the control tick once for each byte that arrives while it
+// runs, touches no other memory on its usual path.
 namespace {
-static_assert(sizeof utrf_tx_buf == 256, "the transmit index wraps by itself at 256");
-static_assert(sizeof utrf_rx_buf == 128, "the receive ring is 128 slots (utrf_rx_next)");
-
-// The receive ring's head or tail (a slot's address low byte) and the slot after it.
-inline uint8_t rx_base() { return (uint8_t)(uintptr_t)utrf_rx_buf; }
-inline uint8_t rx_next(uint8_t a) { return (uint8_t)((a & 0x80) | ((a + 1) & 0x7F)); }
+uint8_t g_rx_buf[128];
+uint8_t g_tx_buf[256];
+volatile uint8_t g_tx_head, g_tx_tail;
+volatile uint8_t g_rx_lost;  // bytes lost since serial_take_overruns() (8 bits: one register)
 }  // namespace
+static_assert(sizeof g_tx_buf == 256, "the transmit index wraps by itself at 256");
+static_assert(sizeof g_rx_buf == 128, "the receive ring is 128 slots");
 
 // ---- interrupts --------------------------------------------------------------------------------
 extern "C" void utrf_read_reset_flags(void) __attribute__((naked, used, section(".init3")));
@@ -265,10 +238,11 @@ __attribute__((always_inline)) inline uint16_t cycles_from(const Stamp& start) {
 }
 
 // Runs ticks while any is due. Called with interrupts disabled; returns with them disabled.
-// The UART transmitter's interrupt waits during the tick (the byte in the shift register and
-// the one in UDR0 still go out), and so does timer 0's overflow (millis(); its flag keeps one
-// overflow, and the tick lasts far less than its 1.024 ms): the control tick comes first, and
-// its measured time is its own. Receiving stays on, or bytes would be lost.
+// Timer 0's overflow (millis()) waits during the tick: its flag keeps one overflow, and the
+// tick lasts far less than its 1.024 ms. The UART's interrupts stay on: receiving, or bytes
+// would be lost; transmitting, or the line would stand idle for the tick's 250-370 us and the
+// 1 kHz state stream (39 bytes, 0.39 ms of line a frame) would lose frames behind replies.
+// The tick's measured time includes those nested interrupts.
 // One tick, timed. Out of line, so that its timing arithmetic is not hoisted into registers
 // the loop below would keep (and save) across the tick's call; the start is in memory for the
 // same reason.
@@ -276,7 +250,6 @@ Stamp g_tick_start;
 __attribute__((noinline)) void run_one_tick() {
     g_tick_deferred = 0;
     g_tick_running = 1;
-    UCSR0B &= (uint8_t)~_BV(UDRIE0);
     TIMSK0 &= (uint8_t)~_BV(TOIE0);
     g_tick_start = read_stamp();
     sei();
@@ -286,7 +259,6 @@ __attribute__((noinline)) void run_one_tick() {
     app::tick_done(cycles, overran);
     cli();
     TIMSK0 |= _BV(TOIE0);
-    if (utrf_tx_head != utrf_tx_tail) UCSR0B |= _BV(UDRIE0);
     g_tick_running = 0;
 }
 
@@ -323,89 +295,30 @@ ISR(ADC_vect) {
 }
 
 // A received byte into the ring; a byte that finds the ring full, or that the UART itself
-// lost (DOR0), is counted in utrf_rx_lost. The byte is stored at the head before the ring is
-// found full: that slot is the one a full ring keeps empty, so nothing is overwritten.
-ISR(USART0_RX_vect, ISR_NAKED) {
-    __asm__ __volatile__(
-        "push r30\n\t"
-        "push r31\n\t"
-        "push r24\n\t"
-        "lds  r24, %[ucsra]\n\t"
-        "sbrc r24, %[dor]\n\t"
-        "rjmp 2f\n"
-        "1:\n\t"
-        "lds  r24, %[udr]\n\t"
-        "in   r30, %[head]\n\t"
-        "ldi  r31, hi8(utrf_rx_buf)\n\t"
-        "st   Z, r24\n\t"
-        "ldi  r31, hi8(utrf_rx_next)\n\t"
-        "lpm  r30, Z\n\t"
-        "in   r24, %[tail]\n\t"
-        "cpse r30, r24\n\t"
-        "rjmp 3f\n\t"
-        // full: the byte is not kept
-        "in   r24, __SREG__\n\t"
-        "lds  r30, utrf_rx_lost\n\t"
-        "lds  r31, utrf_rx_lost+1\n\t"
-        "adiw r30, 1\n\t"
-        "sts  utrf_rx_lost+1, r31\n\t"
-        "sts  utrf_rx_lost, r30\n\t"
-        "out  __SREG__, r24\n\t"
-        "rjmp 4f\n"
-        "3:\n\t"
-        "out  %[head], r30\n"
-        "4:\n\t"
-        "pop  r24\n\t"
-        "pop  r31\n\t"
-        "pop  r30\n\t"
-        "reti\n"
-        "2:\n\t"
-        // the UART lost a byte before this one
-        "in   r24, __SREG__\n\t"
-        "lds  r30, utrf_rx_lost\n\t"
-        "lds  r31, utrf_rx_lost+1\n\t"
-        "adiw r30, 1\n\t"
-        "sts  utrf_rx_lost+1, r31\n\t"
-        "sts  utrf_rx_lost, r30\n\t"
-        "out  __SREG__, r24\n\t"
-        "rjmp 1b\n\t" ::[ucsra] "n"(_SFR_MEM_ADDR(UCSR0A)),
-        [udr] "n"(_SFR_MEM_ADDR(UDR0)), [dor] "n"(DOR0), [head] "I"(_SFR_IO_ADDR(GPIOR1)),
-        [tail] "I"(_SFR_IO_ADDR(GPIOR2)));
+// lost (DOR0), is counted in g_rx_lost.
+ISR(USART0_RX_vect) {
+    const uint8_t status = UCSR0A;
+    const uint8_t byte = UDR0;
+    const uint8_t head = GPIOR1;
+    const uint8_t next = (uint8_t)((head + 1) & 0x7F);
+    if (__builtin_expect((status & _BV(DOR0)) != 0, 0)) g_rx_lost = (uint8_t)(g_rx_lost + 1);
+    if (__builtin_expect(next == GPIOR2, 0)) {
+        g_rx_lost = (uint8_t)(g_rx_lost + 1);  // full: the byte is not kept
+        return;
+    }
+    g_rx_buf[head] = byte;
+    GPIOR1 = next;
 }
 
 // The next byte of the ring into UDR0; when the ring is empty, this interrupt goes off.
-ISR(USART0_UDRE_vect, ISR_NAKED) {
-    __asm__ __volatile__(
-        "push r24\n\t"
-        "in r24, __SREG__\n\t"
-        "push r24\n\t"
-        "push r30\n\t"
-        "push r31\n\t"
-        "lds r24, utrf_tx_tail\n\t"
-        "lds r30, utrf_tx_head\n\t"
-        "cp r24, r30\n\t"
-        "breq 1f\n\t"
-        "mov r30, r24\n\t"
-        "ldi r31, 0\n\t"
-        "subi r30, lo8(-(utrf_tx_buf))\n\t"
-        "sbci r31, hi8(-(utrf_tx_buf))\n\t"
-        "ld r30, Z\n\t"
-        "sts %[udr], r30\n\t"
-        "inc r24\n\t"
-        "sts utrf_tx_tail, r24\n\t"
-        "rjmp 2f\n\t"
-        "1:\n\t"
-        "lds r24, %[ucsrb]\n\t"
-        "andi r24, %[off]\n\t"
-        "sts %[ucsrb], r24\n\t"
-        "2:\n\t"
-        "pop r31\n\t"
-        "pop r30\n\t"
-        "pop r24\n\t"
-        "out __SREG__, r24\n\t"
-        "pop r24\n\t"
-        "reti\n\t" ::[udr] "n"(_SFR_MEM_ADDR(UDR0)),
-        [ucsrb] "n"(_SFR_MEM_ADDR(UCSR0B)), [off] "n"(0xFF & ~(1 << UDRIE0)));
+ISR(USART0_UDRE_vect) {
+    const uint8_t tail = g_tx_tail;
+    if (tail == g_tx_head) {
+        UCSR0B &= (uint8_t)~_BV(UDRIE0);
+        return;
+    }
+    UDR0 = g_tx_buf[tail];
+    g_tx_tail = (uint8_t)(tail + 1);
 }
 
 // ---- hal.h -------------------------------------------------------------------------------------
@@ -461,10 +374,10 @@ void avr_init() {
     UCSR0A = _BV(U2X0);
     UBRR0 = (uint16_t)((F_CPU + 4UL * UTRF_BAUD) / (8UL * UTRF_BAUD) - 1);
     UCSR0C = _BV(UCSZ01) | _BV(UCSZ00);
-    GPIOR1 = rx_base();  // receive head: empty
-    GPIOR2 = rx_base();  // receive tail
-    utrf_tx_head = utrf_tx_tail = 0;
-    utrf_rx_lost = 0;
+    GPIOR1 = 0;  // receive head: empty
+    GPIOR2 = 0;  // receive tail
+    g_tx_head = g_tx_tail = 0;
+    g_rx_lost = 0;
     UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
 }
 
@@ -602,29 +515,29 @@ uint16_t serial_read(uint8_t* buf, uint16_t max) {
     uint16_t n = 0;
     uint8_t tail = GPIOR2;
     while (n < max && tail != GPIOR1) {
-        buf[n++] = utrf_rx_buf[tail & 0x7F];
-        tail = rx_next(tail);
+        buf[n++] = g_rx_buf[tail];
+        tail = (uint8_t)((tail + 1) & 0x7F);
     }
     GPIOR2 = tail;
     return n;
 }
 
 uint16_t serial_tx_room() {
-    return (uint16_t)((uint8_t)(utrf_tx_tail - utrf_tx_head - 1));  // 256-byte ring
+    return (uint16_t)((uint8_t)(g_tx_tail - g_tx_head - 1));  // 256-byte ring
 }
 
 void serial_write(const uint8_t* data, uint16_t len) {
-    uint8_t head = utrf_tx_head;
-    for (uint16_t i = 0; i < len; ++i) utrf_tx_buf[head++] = data[i];
-    utrf_tx_head = head;
+    uint8_t head = g_tx_head;
+    for (uint16_t i = 0; i < len; ++i) g_tx_buf[head++] = data[i];
+    g_tx_head = head;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { UCSR0B |= _BV(UDRIE0); }
 }
 
 uint16_t serial_take_overruns() {
     uint16_t n;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
-        n = utrf_rx_lost;
-        utrf_rx_lost = 0;
+        n = g_rx_lost;
+        g_rx_lost = 0;
     }
     return n;
 }
@@ -633,7 +546,11 @@ uint8_t eeprom_read(uint16_t addr) { return eeprom_read_byte((const uint8_t*)add
 bool eeprom_ready() { return eeprom_is_ready(); }
 void eeprom_write(uint16_t addr, uint8_t value) { eeprom_write_byte((uint8_t*)addr, value); }
 
-void watchdog_start() { wdt_enable(WDTO_120MS); }
+// 30 ms (WDTO_30MS: 4K cycles of the 128 kHz watchdog oscillator, 32 ms nominal): the longest
+// a hang with interrupts off leaves the motors at their last duty (nothing of the firmware
+// runs then). loop() feeds it every pass (a pass takes a few ms at most), and the loop-alive
+// rule (hand.h, 20 ticks) turns the motors off before it fires when the tick still runs.
+void watchdog_start() { wdt_enable(WDTO_30MS); }
 void watchdog_feed() { wdt_reset(); }
 void watchdog_mark_hang() { g_hang_mark = kHangMagic; }
 void watchdog_clear_hang_mark() { g_hang_mark = 0; }

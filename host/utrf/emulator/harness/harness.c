@@ -105,11 +105,13 @@ static avr_cycle_count_t stop_timer(avr_t *avr, avr_cycle_count_t when, void *pa
     return 0;
 }
 
-/* Idle sleep: simavr's default sleeps the thread to follow the wall clock; pacing is ours. */
+/* Idle sleep: simavr's default sleeps the thread to follow the wall clock; pacing is ours.
+ * simavr skips the slept cycles (to its next timer event); count them. */
 static void no_sleep(avr_t *avr, avr_cycle_count_t how_long)
 {
-    (void)avr;
-    (void)how_long;
+    utrf_sim_t *s = avr->custom.data;
+    if (s)
+        s->stats.sleep_cycles += 1 + how_long;
 }
 
 static int status_of(const avr_t *avr)
@@ -134,6 +136,7 @@ int utrf_sim_run_to(utrf_sim_t *s, uint64_t target)
         /* held in reset: time passes, nothing runs */
         avr->cycle = target < s->hold_until ? target : s->hold_until;
     }
+    timers_quiet(s);
     if (target > avr->cycle) {
         s->target = target;
         s->stop = 0;
@@ -448,6 +451,7 @@ utrf_sim_t *utrf_sim_open(const char *elf_path, uint64_t seed, char *err, size_t
     s->avr->frequency = F_CPU_HZ;
     s->avr->vcc = s->avr->avcc = s->avr->aref = SUPPLY_MV;
     s->avr->sleep = no_sleep;
+    s->avr->custom.data = s;
     s->avr->log = LOG_WARNING;
 
     s->uart0 = (avr_uart_t *)find_io(s->avr, "uart", '0');
@@ -472,6 +476,8 @@ utrf_sim_t *utrf_sim_open(const char *elf_path, uint64_t seed, char *err, size_t
     s->jump_at = -1;
     board_io_init(s);
     interrupts_init(s);
+    timers_init(s);
+    s->quiet_timers = 1;
     avr_register_io_write(s->avr, board_io_eecr(), eecr_write, s);
     s->stats.last_reset_flags = board_io_mcusr(s->avr); /* PORF, set by avr_init */
     board_io_read_pins(s);

@@ -2,17 +2,24 @@
 # ctypes) and its own test fixture (a small AVR program). Included by the top-level Makefile.
 
 EMU_DIR      := host/utrf/emulator/harness
+FW_SRC       ?= firmware/src
 EMU_BUILD    := $(BUILD)/emulator
 EMU_LIB      := $(EMU_BUILD)/libutrf_sim.so
 EMU_FIXTURE  := $(EMU_BUILD)/fixture.elf
 EMU_SRCS     := $(wildcard $(EMU_DIR)/*.c)
-EMU_HDRS     := $(wildcard $(EMU_DIR)/*.h) firmware/src/board_pins.h
+EMU_HDRS     := $(wildcard $(EMU_DIR)/*.h) $(FW_SRC)/board_pins.h
 
 # simavr's and avr-libc's headers are -isystem/-idirafter: -Wall -Wextra judge our code only.
 EMU_CC       ?= cc
 EMU_CFLAGS   := -std=gnu11 -O2 -g -fPIC -Wall -Wextra -Wshadow \
-                -isystem /usr/include/simavr -idirafter /usr/lib/avr/include -Ifirmware/src
-EMU_LDLIBS   := -lsimavr -lelf -lpthread
+                -isystem /usr/include/simavr -idirafter /usr/lib/avr/include -I$(FW_SRC)
+EMU_LDLIBS   := -lsimavr -lelf -lpthread -ldl -lm
+# MuJoCo's headers from the mujoco package (the MuJoCo plant, mjplant.c); libmujoco itself is
+# found at run time, the one the package loaded. Without the package the plant says so.
+MUJOCO_INC   := $(shell $(PY) -c "import mujoco, os; print(os.path.join(os.path.dirname(mujoco.__file__), 'include'))" 2>/dev/null)
+ifneq ($(wildcard $(MUJOCO_INC)/mujoco/mujoco.h),)
+EMU_CFLAGS   += -DUTRF_WITH_MUJOCO -isystem $(MUJOCO_INC)
+endif
 
 FIXTURE_CFLAGS := -mmcu=atmega2560 -DF_CPU=16000000UL -Os -std=gnu99 -Wall -Wextra \
                   -Ifirmware/src

@@ -21,8 +21,19 @@ typedef struct {
 } tx_byte_t;
 
 typedef struct {
-    double drop, corrupt, insert;
+    double drop, corrupt, insert, duplicate, burst;
+    uint32_t burst_min, burst_max; /* a burst's length in bytes */
+    uint32_t burst_left;           /* bytes of the burst under way still to garble */
 } line_faults_t;
+
+struct avr_timer_t;
+typedef struct {
+    struct avr_timer_t *timer;
+    int read;    /* the firmware read its TCNT: never quieted again */
+    int quieted; /* its events were cancelled */
+    avr_io_read_t orig_read;
+    void *orig_param;
+} quiet_timer_t;
 
 typedef struct {
     utrf_sim_profile_t p;
@@ -67,6 +78,7 @@ struct utrf_sim {
     int pty_fd;
     char pty_path[128];
     int pty_open;
+    int pty_dtr; /* the modelled DTR line of the pty (see serve.c) */
     int listen_fd;
     int client_fd;
     int auto_reset;
@@ -87,6 +99,21 @@ struct utrf_sim {
     int64_t jump_at;
     uint32_t jump_to;
     int jump_interrupts;
+
+    /* the plant stepped in lockstep (plant.c, mjplant.c); not owned */
+    void *plant_ctx;
+    void (*plant_step)(void *ctx, double dt, const double *pins);
+    void (*plant_volts)(void *ctx, double *out5);
+
+    /* faults.c: a stalled interrupt vector (0: none) */
+    int stall_vector;
+    uint64_t stall_cycles;
+    int64_t stall_count; /* stalls left; -1: every entry */
+
+    /* timers.c */
+    quiet_timer_t quiet[3];
+    int n_quiet;
+    int quiet_timers;
 
     utrf_sim_stats_t stats;
     char log[LOG_SIZE];
@@ -124,6 +151,10 @@ uint32_t board_io_sram_start(void);
 
 /* interrupts.c */
 void interrupts_init(utrf_sim_t *s);
+
+/* timers.c */
+void timers_init(utrf_sim_t *s);
+void timers_quiet(utrf_sim_t *s);
 
 /* profile.c */
 void profile_init(utrf_sim_t *s);

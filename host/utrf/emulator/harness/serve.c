@@ -5,6 +5,13 @@
  * side is open (the master sees POLLHUP otherwise); output while nobody listens is lost, as
  * on a serial line. With auto-reset, a new client resets the board, as the MEGA's USB-serial
  * chip does when a port is opened (DTR).
+ *
+ * DTR, as Linux drives it for a real serial port: opening the port raises DTR (the MEGA resets
+ * on that edge), and the last close drops it only if HUPCL is set in the port's termios (the
+ * default). A client that clears HUPCL leaves DTR raised when it closes, so the next open is
+ * no edge and does not reset the board (`Hand.connect(url, reset=False)`). The pty models
+ * exactly that: the slave's termios (which the master reads) is checked while nobody has it
+ * open. A TCP connection has no DTR line: every connection is an open that raises it.
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -28,14 +35,15 @@ void serve_init(utrf_sim_t *s)
     s->listen_fd = -1;
     s->client_fd = -1;
     s->pty_open = 0;
+    s->pty_dtr = 0;
 }
 
-static void client_connected(utrf_sim_t *s)
+static void client_connected(utrf_sim_t *s, int dtr_edge)
 {
     s->stats.clients++;
     /* A new session: the previous client's unsent bytes are not this one's. */
     s->rx_tail = s->rx_head;
-    if (s->auto_reset)
+    if (s->auto_reset && dtr_edge)
         utrf_sim_reset(s, UTRF_SIM_RESET_PIN, s->auto_reset_hold);
 }
 
@@ -67,12 +75,14 @@ int utrf_sim_serve_pty(utrf_sim_t *s, char *path, size_t len)
         struct termios t;
         if (tcgetattr(sl, &t) == 0) {
             cfmakeraw(&t);
+            t.c_cflag |= HUPCL; /* a serial port's default (a pty's is off) */
             tcsetattr(sl, TCSANOW, &t);
         }
         close(sl);
     }
     s->pty_fd = m;
     s->pty_open = 0;
+    s->pty_dtr = 0;
     snprintf(path, len, "%s", s->pty_path);
     return 0;
 }
@@ -156,9 +166,14 @@ void serve_poll(utrf_sim_t *s, int timeout_ms)
         if (open_now && !s->pty_open) {
             s->pty_open = 1;
             tcflush(s->pty_fd, TCIOFLUSH);
-            client_connected(s);
+            client_connected(s, !s->pty_dtr);
+            s->pty_dtr = 1;
         } else if (!open_now) {
             s->pty_open = 0;
+            /* Closed (or opened and closed between two polls): HUPCL set means DTR dropped. */
+            struct termios t;
+            if (tcgetattr(s->pty_fd, &t) == 0 && (t.c_cflag & HUPCL))
+                s->pty_dtr = 0;
         }
         if (open_now && (p[ipty].revents & POLLIN))
             read_into_queue(s, s->pty_fd, 0);
@@ -172,7 +187,7 @@ void serve_poll(utrf_sim_t *s, int timeout_ms)
                 int one = 1;
                 setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
                 s->client_fd = fd;
-                client_connected(s);
+                client_connected(s, 1);
                 iclient = -1; /* not in this poll set */
             }
         }

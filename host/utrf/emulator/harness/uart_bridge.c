@@ -48,6 +48,21 @@ static uint8_t flip_bit(utrf_sim_t *s, uint8_t b)
     return (uint8_t)(b ^ (1u << (next_random(s) >> 61)));
 }
 
+/* A burst of noise: starts at a byte with probability f->burst and replaces it and the
+ * bytes after it, burst_min..burst_max in all. True when b was replaced. */
+static int burst_byte(utrf_sim_t *s, line_faults_t *f, uint8_t *b)
+{
+    if (!f->burst_left && chance(s, f->burst)) {
+        uint32_t span = f->burst_max - f->burst_min + 1;
+        f->burst_left = f->burst_min + (uint32_t)((next_random(s) >> 32) % span);
+    }
+    if (!f->burst_left)
+        return 0;
+    f->burst_left--;
+    *b = (uint8_t)(next_random(s) >> 56);
+    return 1;
+}
+
 void bridge_sync_baud(utrf_sim_t *s)
 {
     uint64_t frame = board_io_uart0_frame_cycles(s->avr, NULL);
@@ -76,21 +91,28 @@ static avr_cycle_count_t rx_wire(avr_t *avr, avr_cycle_count_t when, void *param
         s->stats.rx_held++;
         return when + frame;
     }
-    const line_faults_t *f = &s->faults[UTRF_SIM_TO_BOARD];
+    line_faults_t *f = &s->faults[UTRF_SIM_TO_BOARD];
     uint8_t b;
-    if (chance(s, f->insert)) { /* a noise byte takes this frame; the host byte waits */
+    if (!f->burst_left && chance(s, f->insert)) { /* a noise byte takes this frame; the host byte waits */
         b = (uint8_t)(next_random(s) >> 56);
         s->stats.rx_inserted++;
     } else {
         b = s->rx[s->rx_tail & RX_MASK];
-        s->rx_tail++;
-        if (chance(s, f->drop)) {
-            s->stats.rx_dropped++;
-            return when + frame;
-        }
-        if (chance(s, f->corrupt)) {
-            b = flip_bit(s, b);
-            s->stats.rx_corrupted++;
+        if (!f->burst_left && chance(s, f->duplicate))
+            s->stats.rx_duplicated++; /* left at the tail: it goes on the wire again */
+        else
+            s->rx_tail++;
+        if (burst_byte(s, f, &b)) {
+            s->stats.rx_burst_bytes++;
+        } else {
+            if (chance(s, f->drop)) {
+                s->stats.rx_dropped++;
+                return when + frame;
+            }
+            if (chance(s, f->corrupt)) {
+                b = flip_bit(s, b);
+                s->stats.rx_corrupted++;
+            }
         }
     }
     if (!rx_enabled) {
@@ -167,14 +189,19 @@ void bridge_deliver(utrf_sim_t *s)
 {
     uint8_t out[512];
     size_t n = 0;
-    const line_faults_t *f = &s->faults[UTRF_SIM_TO_HOST];
+    line_faults_t *f = &s->faults[UTRF_SIM_TO_HOST];
     uint64_t now = s->avr->cycle;
     while (s->tx_tail != s->tx_head && s->tx[s->tx_tail & TX_MASK].due <= now) {
         uint8_t b = s->tx[s->tx_tail & TX_MASK].byte;
         s->tx_tail++;
-        if (n + 2 > sizeof out) {
+        if (n + 3 > sizeof out) {
             bridge_to_host(s, out, n);
             n = 0;
+        }
+        if (burst_byte(s, f, &b)) {
+            out[n++] = b;
+            s->stats.tx_burst_bytes++;
+            continue;
         }
         if (chance(s, f->insert)) {
             out[n++] = (uint8_t)(next_random(s) >> 56);
@@ -189,6 +216,10 @@ void bridge_deliver(utrf_sim_t *s)
             s->stats.tx_corrupted++;
         }
         out[n++] = b;
+        if (chance(s, f->duplicate)) {
+            out[n++] = b;
+            s->stats.tx_duplicated++;
+        }
     }
     if (n)
         bridge_to_host(s, out, n);
@@ -256,14 +287,23 @@ void utrf_sim_set_capture(utrf_sim_t *s, int on)
         s->cap_head = s->cap_tail = 0;
 }
 
-int utrf_sim_set_line_faults(utrf_sim_t *s, int dir, double drop, double corrupt, double insert)
+static int probability(double p)
+{
+    return p >= 0.0 && p <= 1.0;
+}
+
+int utrf_sim_set_line_faults(utrf_sim_t *s, int dir, const utrf_sim_line_faults_t *f)
 {
     if (dir != UTRF_SIM_TO_BOARD && dir != UTRF_SIM_TO_HOST)
         return -1;
-    if (!(drop >= 0.0 && drop <= 1.0 && corrupt >= 0.0 && corrupt <= 1.0 && insert >= 0.0 &&
-          insert < 1.0))
+    if (!(probability(f->drop) && probability(f->corrupt) && probability(f->insert) &&
+          f->insert < 1.0 && probability(f->duplicate) && f->duplicate < 1.0 &&
+          probability(f->burst)))
         return -1;
-    s->faults[dir] = (line_faults_t){drop, corrupt, insert};
+    if (f->burst > 0.0 && !(f->burst_min >= 1 && f->burst_min <= f->burst_max))
+        return -1;
+    s->faults[dir] = (line_faults_t){f->drop,      f->corrupt,   f->insert, f->duplicate,
+                                     f->burst,     f->burst_min, f->burst_max, 0};
     return 0;
 }
 

@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 6
+#define UTRF_SIM_ABI 10
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -61,6 +61,13 @@ typedef struct {
     uint64_t frame_cycles;      /* UART0 frame time in CPU cycles at its configured baud */
     uint64_t adc_conversions;   /* conversions started */
     uint64_t late_interrupts;   /* interrupts raised when enabled with their flag already set */
+    uint64_t rx_duplicated;     /* line faults: bytes sent twice */
+    uint64_t rx_burst_bytes;    /* line faults: bytes garbled by bursts */
+    uint64_t tx_duplicated;
+    uint64_t tx_burst_bytes;
+    uint64_t stalls;            /* stalled entries of the stalled vector (utrf_sim_stall_vector) */
+    uint64_t sleep_cycles;      /* cycles the CPU slept (SLEEP; simavr skips them) */
+    uint64_t quieted_timer_events; /* PWM timer events left out (timers.c) */
 } utrf_sim_stats_t;
 
 /* Cycle profile of one interrupt vector or one function. */
@@ -138,8 +145,13 @@ int utrf_sim_clients(const utrf_sim_t *s); /* bit 0: pty open, bit 1: TCP connec
 void utrf_sim_drop_client(utrf_sim_t *s);
 
 /* Line faults per direction, as probabilities per byte: drop it, flip one random bit of it,
- * insert one random byte before it. */
-int utrf_sim_set_line_faults(utrf_sim_t *s, int dir, double drop, double corrupt, double insert);
+ * insert one random byte before it, send it twice, or start a burst of noise there that
+ * replaces it and the bytes after it, burst_min..burst_max bytes in all (uniform). */
+typedef struct {
+    double drop, corrupt, insert, duplicate, burst;
+    uint32_t burst_min, burst_max;
+} utrf_sim_line_faults_t;
+int utrf_sim_set_line_faults(utrf_sim_t *s, int dir, const utrf_sim_line_faults_t *f);
 /* Put raw bytes on the line now (noise bursts); to the board they queue behind host bytes. */
 size_t utrf_sim_inject(utrf_sim_t *s, int dir, const uint8_t *buf, size_t n);
 
@@ -162,6 +174,136 @@ void utrf_sim_stats(const utrf_sim_t *s, utrf_sim_stats_t *out);
 int utrf_sim_profile_vector(utrf_sim_t *s, int vector);
 int utrf_sim_profile_function(utrf_sim_t *s, int64_t addr);
 void utrf_sim_profile_get(const utrf_sim_t *s, int which, utrf_sim_profile_t *out); /* 0 vector, 1 function */
+
+/* Quiet PWM timers (timers.c, on by default): the events of a 16-bit timer whose interrupts
+ * are all off and whose TCNT the firmware never read are cancelled before each run (its
+ * flags stay clear; its registers, and the duty, are untouched). */
+void utrf_sim_set_quiet_timers(utrf_sim_t *s, int on);
+
+/* Faults of the board (faults.c), for the safety tests. A stalled vector: at each of the
+ * next `count` entries of the interrupt (-1: every entry; 0 or vector 0: none) the clock
+ * jumps `cycles` ahead, as if its handler ran that much longer (the timers run on). */
+int utrf_sim_stall_vector(utrf_sim_t *s, int vector, uint64_t cycles, int64_t count);
+int64_t utrf_sim_stalls_left(const utrf_sim_t *s);
+/* Write an I/O register as the CPU would (simavr's module for it reacts: a timer's clock
+ * select stops the timer); -1 outside the data space. */
+int utrf_sim_write_io(utrf_sim_t *s, uint32_t addr, uint8_t value);
+/* Write a byte of the data space behind every module's back (no module reacts). */
+int utrf_sim_poke(utrf_sim_t *s, uint32_t addr, uint8_t value);
+
+/* ---- The plant (plant.c) ------------------------------------------------------------------
+ * The hand's five fingers, motors and encoders, stepped in C. Python computes the constants
+ * from the geometry files (utrf.emulator.plant) and reads and writes the state in place. */
+#define UTRF_PLANT_FINGERS 5
+
+typedef struct {
+    /* per finger: guide radii R1..R3, link lengths, masses, centres of mass (fraction of the
+     * link from its joint), the actuating tendon's stiffness, Tendon 2 and 3's compliance
+     * under tension (m/N), rotary actuation (one motor), q's range (m) */
+    double R[5][3], L[5][3], link_mass[5][3], com[5][3];
+    double tendon_stiffness[5];
+    double coupling_compliance[5][2];
+    int32_t rotary[5];
+    double q_limits[5][2];
+    /* motors (one per tendon, all alike) */
+    double supply_v, stall_force, no_load_speed, electrical_time_constant, moving_mass;
+    double coulomb_friction, viscous_friction, stroke[2];
+    /* encoder (AS5600, analog) */
+    double enc_supply, enc_offset, enc_band[2], enc_noise_v, enc_unplugged_v;
+    int32_t enc_invert, enc_bits;
+    /* the rest */
+    double joint_damping, tendon_damping, gravity[2];
+    double max_substep; /* the integration step the plant keeps under (s) */
+} utrf_plant_params_t;
+
+/* The plant's state, SI. Written by Python between runs (poses, faults, loads); call
+ * utrf_plant_refresh after moving q. drive_mode: 0 coast, 1 brake, 2 forward, 3 reverse. */
+typedef struct {
+    double time;
+    double q[5], qd[5];
+    double x[5][2], xd[5][2];      /* actuators A and B: pulled-in tendon (m) and speed */
+    double current[5][2];          /* A */
+    double tension[5][2];          /* Tendon 1 (flexor), Tendon 4 (extensor), N */
+    double drive_mode[5][2], drive_duty[5][2];
+    double tip_force[5][2];        /* steady tip force now (N, finger frame) */
+    double tip_goal[5][2];         /* and where it ramps to */
+    double tip_rate[5];            /* N/s toward the goal (inf: at once) */
+    double applied_force[5][2];    /* the tip force of the last step, pulses included */
+    double coupling_stretch[5][2]; /* e2, e3 (m) */
+    double q_ext[5];               /* the tip force's generalised force on q (N) */
+    double block[5][2];            /* q's allowed interval: the limits narrowed by blocks */
+    double plugged[5], unplugged_v[5], encoder_shift[5];
+} utrf_plant_state_t;
+
+typedef struct utrf_plant utrf_plant_t;
+
+utrf_plant_t *utrf_plant_new(const utrf_plant_params_t *params, uint64_t seed);
+void utrf_plant_free(utrf_plant_t *pl);
+utrf_plant_state_t *utrf_plant_state(utrf_plant_t *pl);
+/* Recompute the terms that depend on q (after q was written). */
+void utrf_plant_refresh(utrf_plant_t *pl);
+double utrf_plant_inertia(const utrf_plant_t *pl, int finger); /* M(q) as last computed */
+/* Advance dt seconds with the pin block held (NULL: the last drive). */
+void utrf_plant_step(utrf_plant_t *pl, double dt, const double *pins);
+void utrf_plant_encoder_volts(utrf_plant_t *pl, double *out5);
+/* Decode the pin block into the drive now (the step does it too). */
+void utrf_plant_decode(utrf_plant_t *pl, const double *pins);
+/* A hammer hit: a force pulse carrying (jx, jy) N s over duration s from now. -2: too many
+ * pulses under way. */
+int utrf_plant_hit(utrf_plant_t *pl, int finger, double jx, double jy, double duration);
+int utrf_plant_pulses(const utrf_plant_t *pl);
+
+/* The board's plant (NULL: none; the ADC inputs and pins are then the caller's). The board
+ * does not own it: free it after the board. */
+void utrf_sim_attach_plant(utrf_sim_t *s, utrf_plant_t *pl);
+/* Run in lockstep with the plant up to `target`, one exchange every `period` cycles: the MCU
+ * runs each period with the encoders as the plant had them at its start, then the plant the
+ * same period with the pins as they were at its start. Returns the status; stops early
+ * after a period in which it changed. */
+int utrf_sim_run_plant(utrf_sim_t *s, uint64_t target, uint64_t period);
+
+/* ---- The MuJoCo plant (mjplant.c) ----------------------------------------------------------
+ * The MuJoCo hand (utrf.models.mjcf, drive "force") stepped here; its mjModel and mjData
+ * belong to the caller (the mujoco package) and stay live there. Indices are MuJoCo's. */
+#define UTRF_MJPLANT_LOADS 16
+
+typedef struct {
+    int32_t actuator[5][2]; /* actuator id of motor A, B (-1: none, e.g. a rotary finger's B) */
+    int32_t dof[5][2];      /* its joint's qvel index */
+    double gear[5][2];      /* pulling speed (m/s) per unit of that qvel */
+    int32_t j2_qpos[5];     /* Joint 2's qpos index */
+    double supply_v, force_constant, resistance, electrical_time_constant, stall_force;
+    double enc_supply, enc_offset, enc_band[2], enc_noise_v, enc_unplugged_v;
+    int32_t enc_invert, enc_bits;
+} utrf_mjplant_params_t;
+
+typedef struct {
+    double time;
+    double current[5][2], drive_mode[5][2], drive_duty[5][2];
+    double plugged[5], unplugged_v[5], encoder_shift[5];
+    /* steady loads: a world-frame force (N) on a body at a site (-1: at its centre of mass);
+     * body -1: the slot is free */
+    double load_body[UTRF_MJPLANT_LOADS], load_site[UTRF_MJPLANT_LOADS];
+    double load_force[UTRF_MJPLANT_LOADS][3];
+} utrf_mjplant_state_t;
+
+typedef struct utrf_mjplant utrf_mjplant_t;
+
+/* libmujoco: the path of the library the mujoco package loaded; model, data: the addresses of
+ * its MjModel and MjData (kept alive by the caller). NULL with a message in err. */
+utrf_mjplant_t *utrf_mjplant_new(const char *libmujoco, void *model, void *data,
+                                 const utrf_mjplant_params_t *params, uint64_t seed, char *err,
+                                 size_t errlen);
+void utrf_mjplant_free(utrf_mjplant_t *mp);
+utrf_mjplant_state_t *utrf_mjplant_state(utrf_mjplant_t *mp);
+void utrf_mjplant_step(utrf_mjplant_t *mp, double dt, const double *pins);
+void utrf_mjplant_encoder_volts(utrf_mjplant_t *mp, double *out5);
+/* A hammer hit: a world-frame force pulse carrying (jx, jy, jz) N s on a body at a site (-1:
+ * its centre of mass) over duration s from now. -2: too many under way. */
+int utrf_mjplant_hit(utrf_mjplant_t *mp, int body, int site, double jx, double jy, double jz,
+                     double duration);
+int utrf_mjplant_pulses(const utrf_mjplant_t *mp);
+void utrf_sim_attach_mjplant(utrf_sim_t *s, utrf_mjplant_t *mp);
 
 /* The last messages simavr logged for this board (errors and warnings), NUL-terminated. */
 size_t utrf_sim_log(const utrf_sim_t *s, char *buf, size_t n);

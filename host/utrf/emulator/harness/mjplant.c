@@ -1,0 +1,310 @@
+/* The MuJoCo hand as the board's plant, stepped in C in lockstep with the MCU.
+ *
+ * Python builds the model (utrf.models.mjcf, drive "force": each actuator's control is its
+ * motor's force in N) and its data with the mujoco package, and hands this file their
+ * addresses: MuJoCo's state stays in the Python objects (observation, rendering, object
+ * poses and contacts are read there, live), and only the stepping runs here. libmujoco is the
+ * one the mujoco package loaded; its mj_step is found with dlsym, so the harness does not
+ * link MuJoCo and builds without it (utrf_mjplant_new then says why it cannot run).
+ *
+ * Per exchange: the pins through the TB6612FNG truth table give each motor's voltage (coast:
+ * the circuit open); the DC motor's current follows L di/dt = u V − R i − K v exactly over
+ * the period with the carriage speed v held (from MuJoCo's state); its force K i is the
+ * actuator's control; tip loads and hammer pulses go into xfrc_applied at their points; then
+ * one mj_step (the model's timestep is the exchange period). Joint 2's angle gives the
+ * AS5600's analog voltage: 12-bit quantisation, 10-90 % band, seeded Gaussian noise.
+ */
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "harness_internal.h"
+
+#ifdef UTRF_WITH_MUJOCO
+#include <mujoco/mujoco.h>
+#endif
+
+#define F UTRF_PLANT_FINGERS
+#define MAX_PULSES 64
+#define TWO_PI 6.28318530717958647692
+
+enum { COAST = 0, BRAKE = 1, FORWARD = 2, REVERSE = 3 };
+
+typedef struct {
+    int body, site;
+    double t0, t1, f[3];
+} mj_pulse_t;
+
+struct utrf_mjplant {
+    utrf_mjplant_params_t p;
+    utrf_mjplant_state_t st;
+    void *lib;
+#ifdef UTRF_WITH_MUJOCO
+    const mjModel *m;
+    mjData *d;
+    void (*step)(const mjModel *, mjData *);
+#endif
+    double voltage[F][2], connected[F][2];
+    double decay, decay_dt;
+    mj_pulse_t pulses[MAX_PULSES];
+    int n_pulses;
+    uint64_t rng;
+    double spare;
+    int have_spare;
+};
+
+static uint64_t next_u64(utrf_mjplant_t *mp)
+{
+    uint64_t x = mp->rng;
+    x ^= x >> 12;
+    x ^= x << 25;
+    x ^= x >> 27;
+    mp->rng = x;
+    return x * 0x2545F4914F6CDD1DULL;
+}
+
+static double normal(utrf_mjplant_t *mp)
+{
+    if (mp->have_spare) {
+        mp->have_spare = 0;
+        return mp->spare;
+    }
+    double u, v, s;
+    do {
+        u = 2.0 * ((double)(next_u64(mp) >> 11) * (1.0 / 9007199254740992.0)) - 1.0;
+        v = 2.0 * ((double)(next_u64(mp) >> 11) * (1.0 / 9007199254740992.0)) - 1.0;
+        s = u * u + v * v;
+    } while (s >= 1.0 || s == 0.0);
+    double k = sqrt(-2.0 * log(s) / s);
+    mp->spare = v * k;
+    mp->have_spare = 1;
+    return u * k;
+}
+
+utrf_mjplant_t *utrf_mjplant_new(const char *libmujoco, void *model, void *data,
+                                 const utrf_mjplant_params_t *params, uint64_t seed, char *err,
+                                 size_t errlen)
+{
+#ifndef UTRF_WITH_MUJOCO
+    (void)libmujoco;
+    (void)model;
+    (void)data;
+    (void)params;
+    (void)seed;
+    snprintf(err, errlen, "the harness was built without MuJoCo's headers (pip install mujoco, "
+                          "then make emulator)");
+    return NULL;
+#else
+    utrf_mjplant_t *mp = calloc(1, sizeof *mp);
+    if (!mp) {
+        snprintf(err, errlen, "out of memory");
+        return NULL;
+    }
+    mp->lib = dlopen(libmujoco, RTLD_NOW | RTLD_NOLOAD);
+    if (!mp->lib)
+        mp->lib = dlopen(libmujoco, RTLD_NOW);
+    if (!mp->lib) {
+        snprintf(err, errlen, "cannot load %s: %s", libmujoco, dlerror());
+        free(mp);
+        return NULL;
+    }
+    *(void **)&mp->step = dlsym(mp->lib, "mj_step");
+    if (!mp->step) {
+        snprintf(err, errlen, "%s has no mj_step", libmujoco);
+        dlclose(mp->lib);
+        free(mp);
+        return NULL;
+    }
+    mp->m = model;
+    mp->d = data;
+    mp->p = *params;
+    for (int f = 0; f < F; f++) {
+        mp->st.plugged[f] = 1.0;
+        mp->st.unplugged_v[f] = params->enc_unplugged_v;
+    }
+    uint64_t z = seed + 0x9E3779B97F4A7C15ULL; /* splitmix64: never a zero state */
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    z ^= z >> 31;
+    mp->rng = z ? z : 1;
+    return mp;
+#endif
+}
+
+void utrf_mjplant_free(utrf_mjplant_t *mp)
+{
+    if (!mp)
+        return;
+    if (mp->lib)
+        dlclose(mp->lib);
+    free(mp);
+}
+
+utrf_mjplant_state_t *utrf_mjplant_state(utrf_mjplant_t *mp)
+{
+    return &mp->st;
+}
+
+static void decode(utrf_mjplant_t *mp, const double *pins)
+{
+    for (int f = 0; f < F; f++) {
+        for (int c = 0; c < 2; c++) {
+            const double *b = &pins[(f * 2 + c) * UTRF_SIM_PIN_FIELDS];
+            double duty = b[0] < 0.0 ? 0.0 : b[0] > 1.0 ? 1.0 : b[0];
+            int in1 = b[1] > 0.5, in2 = b[2] > 0.5, on = b[3] > 0.5;
+            int mode = COAST;
+            if (on && in1 && !in2)
+                mode = FORWARD;
+            else if (on && !in1 && in2)
+                mode = REVERSE;
+            else if (on && in1 && in2)
+                mode = BRAKE;
+            if (mp->p.actuator[f][c] < 0)
+                mode = COAST; /* no such motor (a rotary finger's B) */
+            double sd = mode == FORWARD ? duty : mode == REVERSE ? -duty : 0.0;
+            mp->st.drive_mode[f][c] = mode;
+            mp->st.drive_duty[f][c] = sd;
+            mp->connected[f][c] = mode != COAST;
+            mp->voltage[f][c] = sd * mp->p.supply_v;
+        }
+    }
+}
+
+int utrf_mjplant_hit(utrf_mjplant_t *mp, int body, int site, double jx, double jy, double jz,
+                     double duration)
+{
+    if (!(duration > 0.0) || body < 0)
+        return -1;
+    if (mp->n_pulses >= MAX_PULSES)
+        return -2;
+    double t = mp->st.time;
+    mp->pulses[mp->n_pulses++] =
+        (mj_pulse_t){body, site, t, t + duration, {jx / duration, jy / duration, jz / duration}};
+    return 0;
+}
+
+int utrf_mjplant_pulses(const utrf_mjplant_t *mp)
+{
+    return mp->n_pulses;
+}
+
+#ifdef UTRF_WITH_MUJOCO
+/* A force at a point of a body: MuJoCo applies xfrc_applied at the body's centre of mass, so
+ * the point's offset adds a torque. */
+static void apply_at(utrf_mjplant_t *mp, int body, int site, const double *force, double scale)
+{
+    const mjData *d = mp->d;
+    double *x = mp->d->xfrc_applied + 6 * body;
+    const double *com = d->xipos + 3 * body;
+    const double *pt = site >= 0 ? d->site_xpos + 3 * site : com;
+    double fx = force[0] * scale, fy = force[1] * scale, fz = force[2] * scale;
+    double rx = pt[0] - com[0], ry = pt[1] - com[1], rz = pt[2] - com[2];
+    x[0] += fx;
+    x[1] += fy;
+    x[2] += fz;
+    x[3] += ry * fz - rz * fy;
+    x[4] += rz * fx - rx * fz;
+    x[5] += rx * fy - ry * fx;
+}
+
+static void apply_loads(utrf_mjplant_t *mp, double dt)
+{
+    utrf_mjplant_state_t *st = &mp->st;
+    for (int i = 0; i < UTRF_MJPLANT_LOADS; i++) /* clear what the loads wrote last time */
+        if (st->load_body[i] >= 0)
+            memset(mp->d->xfrc_applied + 6 * (int)st->load_body[i], 0, 6 * sizeof(double));
+    for (int i = 0; i < mp->n_pulses; i++)
+        memset(mp->d->xfrc_applied + 6 * mp->pulses[i].body, 0, 6 * sizeof(double));
+    for (int i = 0; i < UTRF_MJPLANT_LOADS; i++)
+        if (st->load_body[i] >= 0)
+            apply_at(mp, (int)st->load_body[i], (int)st->load_site[i], st->load_force[i], 1.0);
+    double t0 = st->time, t1 = st->time + dt;
+    int keep = 0;
+    for (int i = 0; i < mp->n_pulses; i++) {
+        mj_pulse_t *pu = &mp->pulses[i];
+        double overlap = (t1 < pu->t1 ? t1 : pu->t1) - (t0 > pu->t0 ? t0 : pu->t0);
+        if (overlap > 0)
+            apply_at(mp, pu->body, pu->site, pu->f, overlap / dt);
+        if (pu->t1 > t1)
+            mp->pulses[keep++] = *pu;
+    }
+    mp->n_pulses = keep;
+}
+#endif
+
+void utrf_mjplant_step(utrf_mjplant_t *mp, double dt, const double *pins)
+{
+#ifdef UTRF_WITH_MUJOCO
+    if (!(dt > 0.0))
+        return;
+    if (pins)
+        decode(mp, pins);
+    if (dt != mp->decay_dt) {
+        mp->decay_dt = dt;
+        mp->decay = exp(-dt / mp->p.electrical_time_constant);
+    }
+    const double K = mp->p.force_constant, R = mp->p.resistance, stall = mp->p.stall_force;
+    for (int f = 0; f < F; f++) {
+        for (int c = 0; c < 2; c++) {
+            int act = mp->p.actuator[f][c];
+            if (act < 0)
+                continue;
+            double v = mp->p.gear[f][c] * mp->d->qvel[mp->p.dof[f][c]]; /* pulling speed */
+            double i_ss = (mp->voltage[f][c] - K * v) / R;
+            double i = (i_ss + (mp->st.current[f][c] - i_ss) * mp->decay) * mp->connected[f][c];
+            mp->st.current[f][c] = i;
+            double force = K * i;
+            mp->d->ctrl[act] = force > stall ? stall : force < -stall ? -stall : force;
+        }
+    }
+    apply_loads(mp, dt);
+    mp->step(mp->m, mp->d);
+    mp->st.time += dt;
+#else
+    (void)mp;
+    (void)dt;
+    (void)pins;
+#endif
+}
+
+void utrf_mjplant_encoder_volts(utrf_mjplant_t *mp, double *out)
+{
+#ifdef UTRF_WITH_MUJOCO
+    const utrf_mjplant_params_t *p = &mp->p;
+    double steps = (double)(1u << p->enc_bits);
+    for (int f = 0; f < F; f++) {
+        double theta2 = mp->d->qpos[p->j2_qpos[f]] + mp->st.encoder_shift[f];
+        double turns = (p->enc_offset + (p->enc_invert ? -theta2 : theta2)) / TWO_PI;
+        turns -= floor(turns);
+        double counts = floor(turns * steps);
+        double v = p->enc_supply * p->enc_band[0] +
+                   (p->enc_supply * (p->enc_band[1] - p->enc_band[0]) / steps) * counts;
+        if (p->enc_noise_v > 0.0)
+            v += p->enc_noise_v * normal(mp);
+        out[f] = mp->st.plugged[f] > 0.5 ? v : mp->st.unplugged_v[f];
+    }
+#else
+    (void)mp;
+    memset(out, 0, F * sizeof(double));
+#endif
+}
+
+static void mj_ops_step(void *ctx, double dt, const double *pins)
+{
+    utrf_mjplant_step(ctx, dt, pins);
+}
+
+static void mj_ops_volts(void *ctx, double *out)
+{
+    utrf_mjplant_encoder_volts(ctx, out);
+}
+
+void utrf_sim_attach_mjplant(utrf_sim_t *s, utrf_mjplant_t *mp)
+{
+    s->plant_ctx = mp;
+    s->plant_step = mp ? mj_ops_step : NULL;
+    s->plant_volts = mp ? mj_ops_volts : NULL;
+}

@@ -1,0 +1,362 @@
+"""The MuJoCo hand as the emulated board's plant (``EmulatedBoard(plant="mujoco")``).
+
+The model is :func:`utrf.models.mjcf.hand_xml` with ``drive="force"`` (each actuator's
+control is its motor's force, N), optionally with an object of :mod:`utrf.models.objects`.
+The mujoco package owns the ``MjModel`` and ``MjData``; the harness (``harness/mjplant.c``)
+steps them in C in lockstep with the MCU, one ``mj_step`` per exchange (the model's timestep
+is set to the board's exchange period): the TB6612FNG truth table and the DC motor's
+electrical model (:class:`~utrf.emulator.plant.MotorParams`) turn the firmware's pins into the
+actuators' forces, and Joint 2's angle becomes the AS5600's analog voltage
+(:class:`~utrf.emulator.plant.EncoderParams`: 12-bit, 10-90 % band, seeded noise). Everything
+MuJoCo knows (poses, contacts, the object) is live in :attr:`MujocoPlant.data`.
+
+Gravity is the model's, −z in the world (for index..little, −y of the finger frame, as on the
+bench); ``PlantParams.gravity_m_s2 == (0, 0)`` turns it off. The analytic plant's coupling
+modulus (``PlantParams.coupling_modulus_pa``) has no meaning here: the coupling tendons'
+stiffness is the geometry's.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from utrf.emulator._native import HarnessError, MjPlantParamsC, NativeMjPlant
+from utrf.emulator.plant import FINGERS, PlantError, PlantParams, _finger_index, _force_vector
+from utrf.models import mjcf, objects
+from utrf.models.geometry import HandGeometry
+
+#: where the object sits, in the world frame (m), by name: resting on the palm behind the
+#: knuckle line (x < 0; the palm's top face is z = 0), where the curling fingers close over
+#: it; long objects lie across the palm (their axis along y). ASSUMED placements.
+_ACROSS = (0.7071068, 0.7071068, 0.0, 0.0)  # the object's z axis along the world's y
+OBJECT_PLACEMENT = {
+    "bottle": ((-0.040, 0.0, 0.0951), (1.0, 0.0, 0.0, 0.0)),  # standing
+    "ball": ((-0.040, 0.0, 0.0326), (1.0, 0.0, 0.0, 0.0)),
+    "box": ((-0.035, 0.0, 0.0301), _ACROSS),
+    "egg": ((-0.030, 0.0, 0.0221), _ACROSS),
+}
+
+
+def libmujoco_path() -> str:
+    """The libmujoco the mujoco package loaded (the harness steps with it)."""
+    root = Path(mujoco.__file__).resolve().parent
+    found = sorted(root.glob("libmujoco.so*"))
+    if not found:
+        raise HarnessError(f"no libmujoco.so* next to the mujoco package in {root}")
+    return str(found[-1])
+
+
+class MujocoPlant:
+    """The MuJoCo hand, stepped by the harness. SI units; fingers 0 thumb .. 4 little."""
+
+    def __init__(
+        self,
+        hand: HandGeometry | None = None,
+        params: PlantParams | None = None,
+        seed: int = 0,
+        *,
+        obj: objects.GraspObject | str | None = None,
+        object_pose: tuple[tuple[float, ...], tuple[float, ...]] | None = None,
+        timestep: float = 1e-3,
+    ) -> None:
+        self.hand = hand if hand is not None else HandGeometry.default()
+        if len(self.hand.fingers) != FINGERS:
+            raise PlantError(
+                f"the plant needs {FINGERS} fingers, the hand has {len(self.hand.fingers)}"
+            )
+        self.params = params if params is not None else PlantParams()
+        self.names = [f.name for f in self.hand.fingers]
+        self.geometries = tuple(f.geometry for f in self.hand.fingers)
+        self.R = np.array([g.guide_radii_m for g in self.geometries])
+        self.L = np.array([g.link_lengths_m for g in self.geometries])
+        self.q_limits = np.array([g.q_range_m for g in self.geometries])
+        xml = mjcf.hand_xml(self.hand, drive="force")
+        self.object: objects.GraspObject | None = None
+        if obj is not None:
+            self.object = objects.get_object(obj) if isinstance(obj, str) else obj
+            pose = object_pose or OBJECT_PLACEMENT.get(self.object.name)
+            if pose is None:
+                raise PlantError(
+                    f"no placement known for object {self.object.name!r}: give object_pose"
+                )
+            xml = objects.add_object(xml, self.object, pose[0], pose[1], name="object")
+            # a weld to the world: an operator's hand keeping the object in place while the
+            # fingers close on it (hold_object), off once the grasp has it
+            xml = xml.replace(
+                "</mujoco>",
+                '<equality><weld name="object_held" body1="object" active="false"/></equality>'
+                "\n</mujoco>",
+            )
+        self.xml = xml
+        self.model = mujoco.MjModel.from_xml_string(xml)
+        self.model.opt.timestep = float(timestep)
+        if tuple(self.params.gravity_m_s2) == (0.0, 0.0):
+            self.model.opt.gravity[:] = 0.0
+        self.data = mujoco.MjData(self.model)
+        mujoco.mj_forward(self.model, self.data)
+        m = self.model
+        self._j = np.array(
+            [[m.jnt_qposadr[m.joint(f"{n}_j{k}").id] for k in (1, 2, 3)] for n in self.names]
+        )
+        self._jid = np.array([[m.joint(f"{n}_j{k}").id for k in (1, 2, 3)] for n in self.names])
+        self._range0 = m.jnt_range[self._jid].copy()
+        self._tip_site = [m.site(f"{n}_tip").id for n in self.names]
+        self._link3 = [m.body(f"{n}_link3").id for n in self.names]
+        self._t1 = [m.tendon(f"{n}_t1").id for n in self.names]
+        self._t4 = [m.tendon(f"{n}_t4").id for n in self.names]
+        self.frames = [mjcf.finger_frame(m, self.data, n) for n in self.names]
+        self._native = NativeMjPlant(
+            libmujoco_path(), m._address, self.data._address, self._c_params(), seed
+        )
+        st = self._native.state
+        self.current, self.drive_duty = st["current"], st["drive_duty"]
+        self.encoder_shift = st["encoder_shift"]
+        self._st = st
+        self.tip_force = np.zeros((FINGERS, 2))  # steady tip loads (N, finger frame)
+        self._slots: dict[str, int] = {}
+        self._block = self.q_limits.copy()
+
+    def _c_params(self) -> MjPlantParamsC:
+        m, mot, enc = self.model, self.params.motor, self.params.encoder
+        c = MjPlantParamsC()
+        act = np.full((FINGERS, 2), -1, dtype=np.int32)
+        dof = np.zeros((FINGERS, 2), dtype=np.int32)
+        gear = np.zeros((FINGERS, 2))
+        for f, spec in enumerate(self.hand.fingers):
+            n = spec.name
+            names = (
+                [f"{n}_motor"] if spec.actuation == "rotary" else [f"{n}_motor_a", f"{n}_motor_b"]
+            )
+            for k, a in enumerate(names):
+                aid = m.actuator(a).id
+                act[f, k] = aid
+                joint = int(m.actuator_trnid[aid, 0])
+                dof[f, k] = int(m.jnt_dofadr[joint])
+                gear[f, k] = float(m.actuator_gear[aid, 0])
+        np.ctypeslib.as_array(c.actuator)[...] = act
+        np.ctypeslib.as_array(c.dof)[...] = dof
+        np.ctypeslib.as_array(c.gear)[...] = gear
+        np.ctypeslib.as_array(c.j2_qpos)[...] = self._j[:, 1]
+        c.supply_v, c.force_constant = mot.supply_v, mot.force_constant_n_a
+        c.resistance, c.electrical_time_constant = (
+            mot.resistance_ohm,
+            mot.electrical_time_constant_s,
+        )
+        c.stall_force = mot.stall_force_n
+        c.enc_supply, c.enc_offset = enc.supply_v, enc.offset_rad
+        np.ctypeslib.as_array(c.enc_band)[...] = enc.band
+        c.enc_noise_v, c.enc_unplugged_v = enc.noise_v, enc.unplugged_v
+        c.enc_invert, c.enc_bits = int(enc.invert), enc.resolution_bits
+        return c
+
+    # -- the board's side ----------------------------------------------------------------------
+    @property
+    def native(self) -> NativeMjPlant:
+        return self._native
+
+    def set_timestep(self, seconds: float) -> None:
+        """MuJoCo steps once per exchange: its timestep is the board's exchange period."""
+        self.model.opt.timestep = float(seconds)
+
+    def close(self) -> None:
+        self._native.close()
+
+    @property
+    def time(self) -> float:
+        return self._native.time
+
+    @property
+    def drive_mode(self) -> np.ndarray:
+        return self._st["drive_mode"].astype(np.int8)
+
+    def step(self, dt: float, pins: np.ndarray | None = None) -> None:
+        """One MuJoCo step of ``dt`` (the model's timestep) with the pins held."""
+        if dt > 0:
+            self._native.step(float(dt), None if pins is None else np.asarray(pins, float))
+
+    def encoder_volts(self) -> np.ndarray:
+        return self._native.encoder_volts()
+
+    # -- observation ----------------------------------------------------------------------------
+    @property
+    def theta(self) -> np.ndarray:
+        """Relative joint angles θ1..θ3 (rad), (5, 3)."""
+        return self.data.qpos[self._j].copy()
+
+    @property
+    def theta2(self) -> np.ndarray:
+        return self.data.qpos[self._j[:, 1]].copy()
+
+    @property
+    def q(self) -> np.ndarray:
+        """The tendon displacement at Joint 1, R1 θ1 (m)."""
+        return self.data.qpos[self._j[:, 0]] * self.R[:, 0]
+
+    def to_finger(self, f: int, world: np.ndarray) -> np.ndarray:
+        origin, rot = self.frames[f]
+        return rot.T @ (np.asarray(world) - origin)
+
+    @property
+    def tip(self) -> np.ndarray:
+        """Fingertips in each finger's frame (m), (5, 2)."""
+        return np.array(
+            [self.to_finger(f, self.data.site_xpos[s])[:2] for f, s in enumerate(self._tip_site)]
+        )
+
+    @property
+    def tension(self) -> np.ndarray:
+        """Tendon 1 and Tendon 4 tensions (N), (5, 2): their springs' pull when stretched."""
+        k = self.model.tendon_stiffness
+        length = self.data.ten_length
+        out = np.empty((FINGERS, 2))
+        for f in range(FINGERS):
+            for c, t in enumerate((self._t1[f], self._t4[f])):
+                out[f, c] = k[t] * max(float(length[t]), 0.0)
+        return out
+
+    @property
+    def applied_force(self) -> np.ndarray:
+        return self.tip_force.copy()
+
+    @property
+    def blocks(self) -> np.ndarray:
+        return self._block.copy()
+
+    # -- set-up and faults ------------------------------------------------------------------------
+    def set_theta2(self, finger: int, theta2: float) -> None:
+        """Put a finger at rest at a Joint-2 angle on the rigid coupling, tendons just taut."""
+        f = _finger_index(finger)
+        q = float(theta2) * self.R[f, 1]
+        lo, hi = self.q_limits[f]
+        if not lo <= q <= hi:
+            raise PlantError(
+                f"finger {f}: θ2 = {theta2:.3f} rad is outside its range "
+                f"[{lo / self.R[f, 1]:.3f}, {hi / self.R[f, 1]:.3f}] rad"
+            )
+        mjcf.set_coupled_pose(self.model, self.data, {self.names[f]: q}, self.hand)
+        self.current[f] = 0.0
+
+    def unplug_encoder(self, finger: int, volts: float | None = None) -> None:
+        f = _finger_index(finger)
+        volts = self.params.encoder.unplugged_v if volts is None else volts
+        if not (math.isfinite(volts) and 0.0 <= volts <= 5.0):
+            raise PlantError(f"an unplugged encoder's input must lie in [0, 5] V, got {volts!r}")
+        self._st["unplugged_v"][f] = volts
+        self._st["plugged"][f] = 0.0
+
+    def plug_encoder(self, finger: int) -> None:
+        self._st["plugged"][_finger_index(finger)] = 1.0
+
+    def shift_encoder(self, finger: int, radians: float) -> None:
+        f = _finger_index(finger)
+        if not (isinstance(radians, int | float) and math.isfinite(radians)):
+            raise PlantError(f"encoder shift must be a finite angle in rad, got {radians!r}")
+        self.encoder_shift[f] = float(radians)
+
+    def block(self, finger: int, theta2: float | None = None, direction: str = "both") -> None:
+        """Block a finger at a Joint-2 angle (default: where it is) by narrowing its joints'
+        ranges at the coupled pose there: ``both`` jams it, ``flexion`` stops it flexing."""
+        f = _finger_index(finger)
+        if direction not in ("both", "flexion"):
+            raise PlantError(f"direction must be 'both' or 'flexion', got {direction!r}")
+        th2 = self.theta2[f] if theta2 is None else float(theta2)
+        q = th2 * self.R[f, 1]
+        lo, hi = self.q_limits[f]
+        if not lo <= q <= hi:
+            raise PlantError(f"finger {f}: cannot block at θ2 = {th2:.3f} rad, outside its range")
+        at = q / self.R[f]
+        rng = self.model.jnt_range
+        for k in range(3):
+            j = self._jid[f, k]
+            rng[j] = (at[k], at[k]) if direction == "both" else (self._range0[f, k, 0], at[k])
+        self._block[f] = (q, q) if direction == "both" else (lo, q)
+
+    def unblock(self, finger: int) -> None:
+        f = _finger_index(finger)
+        self.model.jnt_range[self._jid[f]] = self._range0[f]
+        self._block[f] = self.q_limits[f]
+
+    # -- loads ------------------------------------------------------------------------------------
+    def _slot(self, key: str) -> int:
+        if key not in self._slots:
+            free = [i for i in range(len(self._st["load_body"])) if i not in self._slots.values()]
+            if not free:
+                raise PlantError("too many steady loads at once")
+            self._slots[key] = free[0]
+        return self._slots[key]
+
+    def _world(self, f: int, v: np.ndarray) -> np.ndarray:
+        return self.frames[f][1] @ np.array([v[0], v[1], 0.0])
+
+    def set_tip_force(self, finger: int, force_n: tuple[float, float], ramp_s: float = 0.0) -> None:
+        """A steady tip force (Fx, Fy) in N, finger frame, at the tip site. The MuJoCo plant
+        applies it at once (``ramp_s`` must be 0)."""
+        f = _finger_index(finger)
+        fv = _force_vector(force_n, "tip force")
+        if ramp_s:
+            raise PlantError("the MuJoCo plant applies tip forces at once: ramp_s must be 0")
+        i = self._slot(f"tip{f}")
+        st = self._st
+        st["load_body"][i] = self._link3[f] if fv.any() else -1
+        st["load_site"][i] = self._tip_site[f]
+        st["load_force"][i] = self._world(f, fv)
+        self.tip_force[f] = fv
+
+    def hit(self, finger: int, impulse_ns: tuple[float, float], duration_s: float = 5e-3) -> None:
+        """A hammer hit at the fingertip: (Jx, Jy) N s in the finger frame over ``duration_s``."""
+        f = _finger_index(finger)
+        jv = _force_vector(impulse_ns, "impulse")
+        if not (
+            isinstance(duration_s, int | float) and math.isfinite(duration_s) and duration_s > 0
+        ):
+            raise PlantError(f"a hit's duration must be > 0 s, got {duration_s!r}")
+        self._native.hit(self._link3[f], self._tip_site[f], self._world(f, jv), float(duration_s))
+
+    # -- the object -------------------------------------------------------------------------------
+    def _object_body(self) -> int:
+        if self.object is None:
+            raise PlantError("this plant holds no object (MujocoPlant(obj=...))")
+        return self.model.body("object").id
+
+    def hit_object(self, impulse_ns: tuple[float, float, float], duration_s: float = 5e-3) -> None:
+        """A hammer hit on the object at its centre of mass: (Jx, Jy, Jz) N s, world frame."""
+        body = self._object_body()
+        jv = np.asarray(impulse_ns, dtype=float)
+        if jv.shape != (3,) or not np.all(np.isfinite(jv)):
+            raise PlantError(f"impulse must be three finite numbers (N s), got {impulse_ns!r}")
+        self._native.hit(body, -1, jv, float(duration_s))
+
+    def hold_object(self, held: bool) -> None:
+        """Keep the object at its placement (welded to the world: an operator holding it while
+        the hand closes) or let it go."""
+        self._object_body()
+        self.data.eq_active[self.model.equality("object_held").id] = int(bool(held))
+
+    def object_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The object's position (m) and orientation (w, x, y, z), world frame."""
+        b = self._object_body()
+        return self.data.xpos[b].copy(), self.data.xquat[b].copy()
+
+    def contact_forces(self) -> np.ndarray:
+        """Per finger, the total normal force (N) of its contacts with the object now."""
+        b = self._object_body()
+        m, d = self.model, self.data
+        finger_of = {}
+        for f, n in enumerate(self.names):
+            for k in (1, 2, 3):
+                finger_of[m.body(f"{n}_link{k}").id] = f
+        out = np.zeros(FINGERS)
+        wrench = np.zeros(6)
+        for i in range(d.ncon):
+            con = d.contact[i]
+            b1, b2 = m.geom_bodyid[con.geom1], m.geom_bodyid[con.geom2]
+            other = b2 if b1 == b else b1 if b2 == b else None
+            if other is None or other not in finger_of:
+                continue
+            mujoco.mj_contactForce(m, d, i, wrench)
+            out[finger_of[other]] += abs(wrench[0])
+        return out

@@ -1,0 +1,337 @@
+"""The grasp hold with a real object, on the MuJoCo hand (``utrf hil grasp-hold --emulated
+--object NAME``; paper Sec. IV-C, Fig. 11).
+
+The real firmware on the emulated board drives the MuJoCo hand (``EmulatedBoard(plant=
+MujocoPlant(obj=NAME))``) over a ``Hand``. The object (``utrf.models.objects``) rests on the
+palm, the hand palm-up; the grasp pose's closing fingers close on it in GRASP mode with the
+pose's effort (or ``effort``) until they stop against it. Then the hand is turned over (gravity
+along +z of the world: palm down), so only the grasp holds the object, and seeded hammer hits
+(force pulses on the object) come during the hold. Samples at ``sample_hz``: the object's
+pose, each finger's contact force on it and Joint-2 angle.
+
+Reported (``results.json``): the object's slip (mm, from its pose at the start of the hold to
+the end, as a tracker's sensor on it would see), each hit's peak displacement and recovery
+time (back to rest within ``rest_mm`` for ``rest_s``), the largest contact force per finger,
+for a fragile object whether (and when) a contact force passed its breaking force, and a
+grasp that lets the object fall is reported as dropped (it moved more than ``drop_mm``), not
+as settled. A picture of the hand holding the object (MuJoCo, rendered off-screen) goes with
+them, when the machine can render.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from utrf.datalog import CsvLog
+from utrf.hil.static_loading import RunError, _write_json
+from utrf.models import objects
+
+#: the pose that grasps each object of the library (a grasp pose of poses.toml)
+OBJECT_POSES = {
+    "bottle": "grasp-bottle",
+    "ball": "grasp-ball",
+    "box": "grasp-bottle",
+    "egg": "grasp-egg",
+}
+G = 9.81
+
+
+@dataclass(frozen=True)
+class ObjectHoldConfig:
+    object: str = "bottle"
+    pose: str | None = None  # default: OBJECT_POSES[object]
+    effort: float | None = None  # GRASP duty limit; default: the pose's
+    duration_s: float = 120.0
+    hits: int = 10
+    hit_impulse_n_s: float = 0.02  # each hit's impulse on the object (N s)
+    hit_duration_s: float = 5e-3
+    sample_hz: float = 100.0
+    baseline_s: float = 1.0
+    close_s: float = 1.5  # the fingers' way to the object
+    settle_s: float = 1.0  # after the turn-over, before the hold's baseline
+    drop_mm: float = 20.0
+    rest_mm: float = 0.5
+    rest_s: float = 0.2
+    seed: int = 0
+    picture: bool = True
+
+    def __post_init__(self) -> None:
+        if self.object not in objects.load_objects():
+            raise RunError(
+                f"unknown object {self.object!r}; the library has {sorted(objects.load_objects())}"
+            )
+        if not (math.isfinite(self.duration_s) and self.duration_s >= 2 * self.baseline_s):
+            raise RunError(
+                f"duration_s must be at least {2 * self.baseline_s:g} s, got {self.duration_s}"
+            )
+        if self.effort is not None and not 0.0 < self.effort <= 1.0:
+            raise RunError(f"effort must lie in (0, 1], got {self.effort}")
+        if not 0 <= self.hits <= 10_000:
+            raise RunError(f"hits must be 0..10000, got {self.hits}")
+        if not (math.isfinite(self.hit_impulse_n_s) and 0 <= self.hit_impulse_n_s <= 5):
+            raise RunError(f"hit_impulse_n_s must lie in [0, 5] N s, got {self.hit_impulse_n_s}")
+        if not 5 <= self.sample_hz <= 1000:
+            raise RunError(f"sample_hz must lie in [5, 1000], got {self.sample_hz}")
+
+    @property
+    def pose_name(self) -> str:
+        return self.pose or OBJECT_POSES.get(self.object, "grasp-bottle")
+
+    def hit_plan(self) -> list[tuple[float, tuple[float, float, float]]]:
+        """Seeded hits: (time into the hold, world-frame impulse), spread over the hold after
+        its baseline, each in a random direction."""
+        if not self.hits:
+            return []
+        rng = np.random.default_rng(self.seed + 7919)
+        lo, hi = self.baseline_s + 0.1, self.duration_s - 0.5
+        edges = np.linspace(lo, hi, self.hits + 1)
+        slots = edges[:-1] + np.diff(edges) * rng.uniform(0.1, 0.6, self.hits)
+        out = []
+        for t in slots:
+            u = rng.normal(size=3)
+            u /= np.linalg.norm(u)
+            out.append((float(t), tuple(float(x) for x in self.hit_impulse_n_s * u)))
+        return out
+
+
+SAMPLE_COLUMNS = (
+    ["time_s", "phase", "x_m", "y_m", "z_m", "qw", "qx", "qy", "qz"]
+    + [f"force_{n}_n" for n in ("thumb", "index", "middle", "ring", "little")]
+    + [f"theta2_{n}_rad" for n in ("thumb", "index", "middle", "ring", "little")]
+)
+
+
+def run(
+    config: ObjectHoldConfig,
+    out: Path,
+    *,
+    elf: Path | None = None,
+    progress: Any = print,
+) -> dict[str, Any]:
+    """Close on the object, turn the hand over, hold under hits, record, analyse."""
+    from utrf.emulator import EmulatedBoard
+    from utrf.emulator.mujoco_plant import MujocoPlant
+    from utrf.hand import Hand
+
+    if (out / "object_samples.csv").exists():
+        raise RunError(f"{out} already holds an object hold; give a new --out")
+    obj = objects.get_object(config.object)
+    plant = MujocoPlant(obj=obj, seed=config.seed, timestep=1e-3)
+    # palm up (the model's gravity, −z) while the hand closes: the object rests on the palm
+    out.mkdir(parents=True, exist_ok=True)
+    _write_json(out / "meta.json", {"config": asdict(config), "object": asdict(obj)})
+    board = EmulatedBoard(elf, realtime=False, seed=config.seed, plant=plant, exchange_period=1e-3)
+    with board, Hand.emulated(board) as hand:
+        closed_forces = _close(hand, plant, config, progress)
+        picture = _picture(plant, out / "object_hold.png") if config.picture else None
+        plant.hold_object(False)
+        progress("turning the hand over: palm down, the grasp alone holds the object")
+        plant.model.opt.gravity[:] = (0.0, 0.0, G)
+        hand.clock.sleep(config.settle_s)
+        _hold(hand, board, plant, config, out, progress)
+    result = analyse(out)
+    result["closed_contact_forces_n"] = [float(x) for x in closed_forces]
+    result["picture"] = str(picture) if picture else None
+    _write_json(out / "results.json", result)
+    return result
+
+
+def _close(hand: Any, plant: Any, config: ObjectHoldConfig, progress: Any) -> np.ndarray:
+    """The grasp pose's closing fingers close on the object in GRASP with its effort, each
+    heading for (almost) full flexion: it stops on the object. The thumb stays open: in the
+    MJCF layout it does not oppose the fingers, and closing it pushes the object off the palm
+    (measured), so the four fingers pin the object against the palm. Returns the contact
+    forces once closed."""
+    from utrf.protocol import messages as m
+
+    pose = hand.poses.get(config.pose_name)
+    if pose is None or pose.grasp is None:
+        raise RunError(f"pose {config.pose_name!r} is not a grasp pose")
+    effort = config.effort if config.effort is not None else pose.grasp.effort
+    goal = pose.theta2(hand.geometry)
+    closing = [i for i in range(1, 5) if goal[i] > 0.2]
+    hand.clear_faults()
+    plant.hold_object(True)  # an operator keeps it in place while the fingers close
+    progress(
+        f"closing on the {plant.object.name} "
+        f"({', '.join(hand.fingers[i] for i in closing)}; GRASP, effort {effort:g})"
+    )
+    targets = [0.95 if i in closing else 0.0 for i in range(5)]
+    hand.move(
+        targets, config.close_s, kind="flexion", mode=m.ControlMode.GRASP, effort=effort,
+        wait=False,
+    )  # fmt: skip
+    hand.clock.sleep(0.5)
+    forces = plant.contact_forces()
+    progress("closed: contact forces " + " ".join(f"{f:.1f}" for f in forces) + " N")
+    return forces
+
+
+def _hold(
+    hand: Any, board: Any, plant: Any, config: ObjectHoldConfig, out: Path, progress: Any
+) -> None:
+    """Sample the object and the fingers at sample_hz, hitting the object as planned; stop
+    early once the object has fallen well clear of the hand."""
+    hits = config.hit_plan()
+    period = 1.0 / config.sample_hz
+    t0 = hand.clock.now()
+    start = plant.object_pose()[0]
+    k = 0
+    hit_columns = ["time_s", "jx_ns", "jy_ns", "jz_ns", "duration_s"]
+    with (
+        CsvLog(out / "object_samples.csv", SAMPLE_COLUMNS) as log,
+        CsvLog(out / "object_hits.csv", hit_columns) as hit_log,
+    ):
+        while True:
+            k += 1
+            hand.clock.sleep(t0 + k * period - hand.clock.now())
+            t = hand.clock.now() - t0
+            if t > config.duration_s:
+                break
+            while hits and hits[0][0] <= t:
+                _, imp = hits.pop(0)
+                plant.hit_object(imp, config.hit_duration_s)
+                hit_log.write([f"{t:.6f}", *imp, config.hit_duration_s])
+            pos, quat = plant.object_pose()
+            row: list[object] = [f"{t:.6f}", "baseline" if t < config.baseline_s else "hold"]
+            row += [f"{v:.7f}" for v in (*pos, *quat)]
+            row += [f"{v:.4f}" for v in plant.contact_forces()]
+            row += [f"{v:.5f}" for v in board.theta2]
+            log.write(row)
+            if np.linalg.norm(pos - start) * 1e3 > 5 * config.drop_mm:
+                progress(f"the {plant.object.name} fell out of the hand at {t:.2f} s")
+                return
+            if k % max(1, round(config.sample_hz * max(config.duration_s / 10, 1.0))) == 0:
+                progress(
+                    f"hold {t:7.1f} / {config.duration_s:g} s  object moved "
+                    f"{np.linalg.norm(pos - start) * 1e3:.2f} mm"
+                )
+
+
+def _picture(plant: Any, path: Path) -> Path | None:
+    """The hand holding the object, rendered off-screen; None when this machine cannot."""
+    try:
+        from utrf.models.render import RenderError, render_png
+    except ImportError:
+        return None
+    try:
+        return render_png(plant.model, plant.data, path)
+    except RenderError:
+        return None
+
+
+def analyse(out: Path) -> dict[str, Any]:
+    """The object hold's figures, from its logs alone."""
+    meta = json.loads((out / "meta.json").read_text())
+    config = ObjectHoldConfig(**meta["config"])
+    obj = objects.get_object(config.object)
+    rows = _read(out / "object_samples.csv")
+    t = rows["time_s"]
+    pos = np.column_stack((rows["x_m"], rows["y_m"], rows["z_m"]))
+    forces = np.column_stack([rows[f"force_{n}_n"] for n in FINGERS])
+    base = pos[t < config.baseline_s].mean(axis=0) if (t < config.baseline_s).any() else pos[0]
+    disp = np.linalg.norm(pos - base, axis=1) * 1e3  # mm
+    dropped_at = next((float(t[i]) for i in range(len(t)) if disp[i] > config.drop_mm), None)
+    hits_t = _read(out / "object_hits.csv").get("time_s", np.zeros(0))
+    hit_rows = []
+    for j, th in enumerate(hits_t):
+        end = hits_t[j + 1] if j + 1 < len(hits_t) else t[-1] + 1e-9
+        seg = (t >= th) & (t < end)
+        if not seg.any():
+            continue
+        before = pos[t < th][-1] if (t < th).any() else base
+        d = np.linalg.norm(pos[seg] - before, axis=1) * 1e3
+        ts = t[seg]
+        rest = _rest_time(ts, pos[seg], config.rest_mm, config.rest_s)
+        hit_rows.append(
+            {
+                "time_s": float(th),
+                "peak_displacement_mm": float(d.max()),
+                "recovery_s": None if rest is None else float(rest - th),
+                "offset_after_mm": float(d[-1]),
+            }
+        )
+    fmax = forces.max(axis=0) if len(forces) else np.zeros(5)
+    broke_at = None
+    if obj.breaking_force_n is not None:
+        over = np.nonzero(forces.max(axis=1) > obj.breaking_force_n)[0]
+        broke_at = float(t[over[0]]) if len(over) else None
+    return {
+        "object": obj.name,
+        "pose": config.pose_name,
+        "effort": config.effort,
+        "duration_s": float(t[-1]) if len(t) else 0.0,
+        "dropped": dropped_at is not None,
+        "dropped_at_s": dropped_at,
+        "slip_mm": float(disp[-1]) if len(disp) else math.nan,
+        "largest_displacement_mm": float(disp.max()) if len(disp) else math.nan,
+        "hits": hit_rows,
+        "largest_contact_force_n": {n: float(f) for n, f in zip(FINGERS, fmax, strict=True)},
+        "breaking_force_n": obj.breaking_force_n,
+        "broke": broke_at is not None if obj.fragile else None,
+        "broke_at_s": broke_at,
+    }
+
+
+FINGERS = ("thumb", "index", "middle", "ring", "little")
+
+
+def _rest_time(t: np.ndarray, pos: np.ndarray, rest_mm: float, rest_s: float) -> float | None:
+    """The first time after which the object stays within ``rest_mm`` of where it ends up
+    (its position at the end of the segment) for ``rest_s``."""
+    final = pos[-1]
+    d = np.linalg.norm(pos - final, axis=1) * 1e3
+    for i in range(len(t)):
+        j = np.searchsorted(t, t[i] + rest_s)
+        if j >= len(t):
+            return None
+        if (d[i : j + 1] <= rest_mm).all():
+            return float(t[i])
+    return None
+
+
+def _read(path: Path) -> dict[str, np.ndarray]:
+    import csv
+
+    with path.open() as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        return {}
+    out: dict[str, np.ndarray] = {}
+    for key in rows[0]:
+        try:
+            out[key] = np.array([float(r[key]) for r in rows])
+        except ValueError:
+            out[key] = np.array([r[key] for r in rows])
+    return out
+
+
+def describe(result: dict[str, Any]) -> str:
+    lines = [
+        f"object hold: the {result['object']} ({result['pose']}), {result['duration_s']:.1f} s, "
+        + (f"DROPPED at {result['dropped_at_s']:.2f} s" if result["dropped"] else "held"),
+        f"object slip {result['slip_mm']:.2f} mm (largest displacement "
+        f"{result['largest_displacement_mm']:.2f} mm)",
+        "largest contact force per finger: "
+        + "  ".join(f"{n} {f:.1f} N" for n, f in result["largest_contact_force_n"].items()),
+    ]
+    if result["broke"] is not None:
+        lines.append(
+            f"fragile ({result['breaking_force_n']:g} N): "
+            + (f"BROKE at {result['broke_at_s']:.2f} s" if result["broke"] else "intact")
+        )
+    for h in result["hits"]:
+        rec = (
+            "not recovered" if h["recovery_s"] is None else f"at rest after {h['recovery_s']:.3f} s"
+        )
+        lines.append(
+            f"hit at {h['time_s']:7.2f} s: peak {h['peak_displacement_mm']:.2f} mm, {rec}, "
+            f"{h['offset_after_mm']:.2f} mm off"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,80 @@
+"""The grasp hold with a real object on the MuJoCo hand (``utrf hil grasp-hold --emulated
+--object``): a grasp that holds, one that drops (too little effort), and the analysis of the
+logs (slip, hits, contact forces, breakage)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from utrf.datalog import CsvLog
+from utrf.hil import object_hold as oh
+
+
+def test_the_pose_effort_holds_the_ball(firmware_elf: Path, tmp_path: Path) -> None:
+    config = oh.ObjectHoldConfig(object="ball", duration_s=3.0, hits=1, picture=False)
+    result = oh.run(config, tmp_path / "run", elf=firmware_elf, progress=lambda s: None)
+    assert not result["dropped"]
+    assert result["slip_mm"] < 5.0
+    assert sum(f > 1.0 for f in result["closed_contact_forces_n"]) >= 2  # fingers on it
+    assert result["largest_contact_force_n"]["thumb"] == 0.0  # the thumb stays open
+    assert len(result["hits"]) == 1
+    assert result["broke"] is None  # not fragile
+    saved = json.loads((tmp_path / "run" / "results.json").read_text())
+    assert saved["slip_mm"] == pytest.approx(result["slip_mm"])
+
+
+def test_too_little_effort_drops_the_ball(firmware_elf: Path, tmp_path: Path) -> None:
+    config = oh.ObjectHoldConfig(object="ball", effort=0.05, duration_s=3.0, hits=0, picture=False)
+    result = oh.run(config, tmp_path / "run", elf=firmware_elf, progress=lambda s: None)
+    assert result["dropped"]
+    assert result["dropped_at_s"] < 1.0
+    assert result["largest_displacement_mm"] > config.drop_mm
+    assert "DROPPED" in oh.describe(result)
+
+
+def _log(out: Path, config: oh.ObjectHoldConfig, rows: list[list[float]], hits: list[float]):
+    out.mkdir()
+    (out / "meta.json").write_text(json.dumps({"config": oh.asdict(config)}))
+    with CsvLog(out / "object_samples.csv", oh.SAMPLE_COLUMNS) as log:
+        for r in rows:
+            t, z, f = r
+            log.write([t, "hold", 0.0, 0.0, z, 1, 0, 0, 0, 0, f, f, 0, 0, 0, 0, 0, 0, 0])
+    with CsvLog(out / "object_hits.csv", ["time_s", "jx_ns", "jy_ns", "jz_ns", "duration_s"]) as h:
+        for t in hits:
+            h.write([t, 0, 0, 0.02, 0.005])
+
+
+def test_analysis_finds_breakage_hits_and_their_recovery(tmp_path: Path) -> None:
+    config = oh.ObjectHoldConfig(object="egg", duration_s=3.0, baseline_s=1.0, rest_mm=0.5)
+    rows = []
+    for k in range(300):
+        t = k * 0.01
+        z = 0.0
+        if 2.0 <= t < 2.1:
+            z = 0.002 * (1 - (t - 2.0) / 0.1)  # a 2 mm kick, back within 0.1 s
+        force = 30.0 if 2.5 <= t < 2.6 else 10.0  # past the egg's 25 N once
+        rows.append([t, z, force])
+    _log(tmp_path / "a", config, rows, [2.0])
+    r = oh.analyse(tmp_path / "a")
+    assert not r["dropped"]
+    assert r["broke"] is True and r["broke_at_s"] == pytest.approx(2.5)
+    assert r["largest_contact_force_n"]["index"] == pytest.approx(30.0)
+    assert r["largest_contact_force_n"]["ring"] == 0.0
+    (hit,) = r["hits"]
+    assert hit["peak_displacement_mm"] == pytest.approx(2.0, abs=1e-6)
+    assert hit["recovery_s"] == pytest.approx(0.08, abs=0.011)  # within 0.5 mm from 2.075 s
+    assert r["slip_mm"] == pytest.approx(0.0)
+    # the same log below the breaking force: intact
+    rows2 = [[t, z, min(f, 20.0)] for t, z, f in rows]
+    _log(tmp_path / "b", config, rows2, [2.0])
+    assert oh.analyse(tmp_path / "b")["broke"] is False
+
+
+def test_unknown_object_and_bad_effort_are_refused_by_name() -> None:
+    with pytest.raises(oh.RunError, match="unknown object 'vase'"):
+        oh.ObjectHoldConfig(object="vase")
+    with pytest.raises(oh.RunError, match="effort"):
+        oh.ObjectHoldConfig(object="ball", effort=1.5)

@@ -1,0 +1,241 @@
+"""The soak (issue 13 §5): the served emulated board at real time for a long while, telemetry at
+the highest rate, commands at 100 Hz, a fault injected now and then; fails on memory growth,
+on frames lost, on an error or a fault nobody injected.
+
+    python tools/soak.py --seconds 1800            # make soak (SOAK_SECONDS=...)
+
+The board runs as ``utrf emulate`` in its own process (``BoardProcess``), the Hand in this one
+over TCP, as a user's program would. Every ``--fault-every`` seconds one fault in turn: an
+encoder unplugged, a finger jammed under load, a burst of line noise; each latched fault is
+cleared and the finger driven again. Reported: the RSS of both processes after the warm-up
+and at the end (and its peak), the board's lag events and real-time factor, the stream's
+frames received and lost (seq gaps) and the board's own dropped count, the commands sent,
+late and failed, and every fault latched. The figures go to ``--json`` (default
+build/reliability/soak.json) for docs/reliability.md (tools/reliability_doc.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from utrf.emulator.process import BoardProcess
+from utrf.hand import Hand
+from utrf.protocol import messages as M
+
+REPO_BUILD = Path("build") / "reliability"
+COMMAND_HZ = 100
+# Growth allowed between the end of the warm-up and the end, per process (MiB): allocator
+# noise and caches; a leak of a frame's worth a second is 0.2 MiB a minute and shows.
+RSS_GROWTH_LIMIT_MIB = 8.0
+
+
+def rss_mib(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return math.nan
+
+
+def targets_at(t: float) -> dict[int, float]:
+    """A slow wave on every finger, inside the default limits."""
+    return {f: 0.45 + 0.35 * math.sin(2 * math.pi * 0.25 * t + f) for f in range(5)}
+
+
+class Faults:
+    """One fault in turn: what to do, which finger latches what, how to undo it."""
+
+    def __init__(self, board: BoardProcess) -> None:
+        self.board = board
+        self.k = 0
+        self.injected: list[dict[str, Any]] = []
+
+    def inject(self, hand: Hand) -> None:
+        kind = ("unplug", "block", "noise")[self.k % 3]
+        finger = self.k % 5
+        self.k += 1
+        t0 = time.monotonic()
+        expect: set[str] = set()
+        if kind == "unplug":
+            self.board.command(f"unplug {finger}")
+            time.sleep(0.2)
+            self.board.command(f"plug {finger}")
+            expect = {"ENCODER_RANGE"}
+        elif kind == "block":
+            # jammed where it is while the wave pushes it on: a stall, or nothing if the wave
+            # happens to hold still long enough (then it is only the block)
+            self.board.command(f"block {finger}")
+            time.sleep(0.8)
+            self.board.command(f"unblock {finger}")
+            expect = {"STALL"}
+        else:
+            self.board.command("noise 64")
+            time.sleep(0.05)
+        time.sleep(0.05)
+        self.injected.append(
+            {"kind": kind, "finger": finger, "may_latch": sorted(expect), "t": round(t0, 3)}
+        )
+        hand.clear_faults()
+        hand.set_targets(targets_at(time.monotonic()))  # back in POSITION
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=1800.0)
+    ap.add_argument("--fault-every", type=float, default=None, help="default: seconds / 12")
+    ap.add_argument("--warmup", type=float, default=None, help="default: min(60, seconds / 10)")
+    ap.add_argument("--elf", default=None)
+    ap.add_argument("--json", type=Path, default=REPO_BUILD / "soak.json")
+    a = ap.parse_args(argv)
+    fault_every = a.fault_every or max(a.seconds / 12, 10.0)
+    warmup = a.warmup if a.warmup is not None else min(60.0, a.seconds / 10)
+
+    board = BoardProcess(a.elf, seed=7, pty=False, speed=1.0)
+    frames = 0
+
+    def on_state(_st: object) -> None:
+        nonlocal frames
+        frames += 1
+
+    out: dict[str, Any] = {"seconds": a.seconds, "command_hz": COMMAND_HZ}
+    sent = late = failed = 0
+    errors: list[str] = []
+    try:
+        assert board.url is not None
+        hand = Hand.connect(board.url, telemetry_hz=M.MAX_TELEMETRY_HZ)
+        out["telemetry_hz"] = hand.telemetry_hz
+        hand.on_state(on_state)
+        faults = Faults(board)
+        pids = {"host (Hand)": os.getpid(), "board (utrf emulate)": board._proc.pid}
+        rss: dict[str, dict[str, float]] = {n: {"start": rss_mib(p)} for n, p in pids.items()}
+        hand.set_targets(targets_at(time.monotonic()))
+        t_start = time.monotonic()
+        next_cmd = t_start
+        next_fault = t_start + fault_every
+        warmed = False
+        status0: dict[str, Any] = {}
+        stats0 = None
+        while True:
+            now = time.monotonic()
+            if now - t_start >= a.seconds:
+                break
+            if not warmed and now - t_start >= warmup:
+                warmed = True
+                for n, p in pids.items():
+                    rss[n]["after_warmup"] = rss_mib(p)
+                status0 = board.status()
+                stats0 = hand.link_stats()
+                frames_at_warm = frames
+            if now >= next_fault:
+                faults.inject(hand)
+                next_fault += fault_every
+                next_cmd = time.monotonic()
+                continue
+            if now < next_cmd:
+                time.sleep(next_cmd - now)
+                continue
+            if now - next_cmd > 1.0 / COMMAND_HZ:
+                late += 1
+                next_cmd = now  # do not burst to catch up
+            try:
+                hand.set_targets(targets_at(now), enable=False)
+            except Exception as exc:
+                failed += 1
+                if len(errors) < 20:
+                    errors.append(f"{now - t_start:.1f} s: {exc!r}")
+            sent += 1
+            next_cmd += 1.0 / COMMAND_HZ
+            for n, p in pids.items():
+                rss[n]["peak"] = max(rss[n].get("peak", 0.0), rss_mib(p))
+        elapsed = time.monotonic() - t_start
+        for n, p in pids.items():
+            rss[n]["end"] = rss_mib(p)
+        status1 = board.status()
+        stats1 = hand.link_stats()
+        board_stats = hand.stats()
+        seen = [
+            {"finger": e.finger, "faults": e.new_faults.name, "board_time_s": e.board_time}
+            for e in hand.faults_seen
+        ]
+        hand.close()
+    finally:
+        final = board.close()
+    assert stats0 is not None, "the soak ended before its warm-up"
+    allowed = {(f["finger"], n) for f in faults.injected for n in f["may_latch"]}
+    names = list(hand.fingers)
+    unexpected = [
+        s
+        for s in seen
+        if not all((names.index(s["finger"]), b) in allowed for b in s["faults"].split("|"))
+    ]
+    out.update(
+        {
+            "elapsed_s": round(elapsed, 1),
+            "rss_mib": {n: {k: round(v, 1) for k, v in d.items()} for n, d in rss.items()},
+            "commands_sent": sent,
+            "commands_late": late,
+            "commands_failed": failed,
+            "errors": errors,
+            "stream_frames": frames,
+            "stream_frames_after_warmup": frames - frames_at_warm,
+            "stream_lost": stats1.stream_lost - stats0.stream_lost,
+            "telemetry_dropped_by_consumer": stats1.telemetry_dropped,
+            "link_retries": stats1.retries,
+            "link_timeouts": stats1.timeouts,
+            "crc_errors": stats1.crc_errors,
+            "board_tx_dropped": board_stats.tx_dropped,
+            "board_rx_overruns": board_stats.rx_overruns,
+            "board_tick_overruns": board_stats.tick_overruns,
+            "lag_events": int(status1.get("lag_events", 0)) - int(status0.get("lag_events", 0)),
+            "realtime_factor": status1.get("realtime_factor"),
+            "board_status": {k: status1.get(k) for k in ("sim_time_s", "resets", "clients")},
+            "faults_injected": faults.injected,
+            "faults_latched": seen,
+            "faults_unexpected": unexpected,
+            "final": final,
+        }
+    )
+    growth = {
+        n: d["end"] - d["after_warmup"] for n, d in out["rss_mib"].items() if "after_warmup" in d
+    }
+    out["rss_growth_mib"] = {n: round(g, 1) for n, g in growth.items()}
+    problems = []
+    for n, g in growth.items():
+        if g > RSS_GROWTH_LIMIT_MIB:
+            problems.append(f"{n} grew {g:.1f} MiB (limit {RSS_GROWTH_LIMIT_MIB})")
+    if out["stream_lost"]:
+        problems.append(f"{out['stream_lost']} stream frames lost")
+    if out["board_tx_dropped"]:
+        problems.append(f"the board dropped {out['board_tx_dropped']} state frames")
+    if failed:
+        problems.append(f"{failed} commands failed: {errors[:3]}")
+    if unexpected:
+        problems.append(f"faults nobody injected: {unexpected[:3]}")
+    out["problems"] = problems
+    out["passed"] = not problems
+    out["date"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    out["load_average"] = os.getloadavg()
+    a.json.parent.mkdir(parents=True, exist_ok=True)
+    a.json.write_text(json.dumps(out, indent=1, default=str) + "\n")
+    print(
+        f"soak {elapsed:.0f} s: {sent} commands ({late} late, {failed} failed), "
+        f"{frames} state frames at {out['telemetry_hz']} Hz, {out['stream_lost']} lost, "
+        f"board dropped {out['board_tx_dropped']}, lag events {out['lag_events']}, "
+        f"{len(seen)} faults latched ({len(unexpected)} unexpected) of "
+        f"{len(faults.injected)} injected"
+    )
+    for n, d in out["rss_mib"].items():
+        print(f"  RSS {n}: " + ", ".join(f"{k} {v:.1f} MiB" for k, v in d.items()))
+    for p in problems:
+        print(f"  FAIL: {p}")
+    return 0 if not problems else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
