@@ -125,8 +125,6 @@ void serial_write(const uint8_t* data, uint16_t len) {
     g_state.tx_len = (uint16_t)(g_state.tx_len + len);
 }
 
-void idle() {}  // the host's loop() never sleeps
-
 uint16_t serial_take_overruns() {
     const uint16_t n = g_state.rx_lost;
     g_state.rx_lost = 0;

@@ -344,8 +344,6 @@ void loop() {
     save_progress(b);
     flush_reply(b);
     board_frames(b);
-    // Nothing left for this pass: sleep until the next interrupt (saves power; simavr skips it).
-    if (b.reply_len == 0 && !b.writer.busy()) hal::idle();
 }
 
 void tick() {

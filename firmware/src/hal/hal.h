@@ -92,12 +92,6 @@ void serial_write(const uint8_t* data, uint16_t len);
 // Bytes lost since the last call because the receive buffer or the UART itself overflowed.
 uint16_t serial_take_overruns();
 
-// Nothing to do until the next interrupt (loop() context): sleep (the AVR's idle mode: the
-// CPU stops, timers, UART and ADC run on) unless a received byte waits or a tick ran since the
-// last call (its work, e.g. a state frame falling due, needs one more pass of loop()); any
-// interrupt wakes it. Returns at once otherwise.
-void idle();
-
 // ---- EEPROM ------------------------------------------------------------------------------------
 uint8_t eeprom_read(uint16_t addr);
 bool eeprom_ready();                           // no write under way

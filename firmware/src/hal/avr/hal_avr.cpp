@@ -12,7 +12,6 @@
 #include <avr/interrupt.h>
 #include <avr/io.h>
 #include <avr/pgmspace.h>
-#include <avr/sleep.h>
 #include <avr/wdt.h>
 #include <util/atomic.h>
 
@@ -204,7 +203,6 @@ extern "C" void utrf_read_reset_flags(void) {
 // the chip, but simavr drops an interrupt raised while its enable bit is clear.
 static volatile uint8_t g_tick_locked;
 static volatile uint8_t g_tick_running;
-static volatile uint8_t g_ticked;  // a tick ran since the last idle(): loop() has work
 static volatile uint8_t g_tick_deferred;
 
 namespace {
@@ -252,7 +250,6 @@ Stamp g_tick_start;
 __attribute__((noinline)) void run_one_tick() {
     g_tick_deferred = 0;
     g_tick_running = 1;
-    g_ticked = 1;
     TIMSK0 &= (uint8_t)~_BV(TOIE0);
     g_tick_start = read_stamp();
     sei();
@@ -534,22 +531,6 @@ void serial_write(const uint8_t* data, uint16_t len) {
     for (uint16_t i = 0; i < len; ++i) g_tx_buf[head++] = data[i];
     g_tx_head = head;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { UCSR0B |= _BV(UDRIE0); }
-}
-
-void idle() {
-    // Checked and entered atomically: interrupts stay off from the check until SLEEP (the
-    // instruction after SEI always runs first), so a byte or tick in between wakes it. A tick
-    // that ran during loop()'s pass, after it looked, must not wait for the next one: no sleep.
-    set_sleep_mode(SLEEP_MODE_IDLE);
-    cli();
-    if (GPIOR1 == GPIOR2 && !g_ticked) {
-        sleep_enable();
-        sei();
-        sleep_cpu();
-        sleep_disable();
-    }
-    g_ticked = 0;
-    sei();
 }
 
 uint16_t serial_take_overruns() {
