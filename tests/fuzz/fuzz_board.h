@@ -59,6 +59,8 @@ inline int board_msg_size(uint8_t id) {
         case proto::Limits::kId: return proto::Limits::kSize;
         case proto::Safety::kId: return proto::Safety::kSize;
         case proto::FingerConfig::kId: return proto::FingerConfig::kSize;
+        case proto::Motion::kId: return proto::Motion::kSize;
+        case proto::Moving::kId: return proto::Moving::kSize;
         case proto::Stats::kId: return proto::Stats::kSize;
         case proto::Ack::kId: return proto::Ack::kSize;
         case proto::Nack::kId: return proto::Nack::kSize;

@@ -50,6 +50,8 @@ int reply_id(uint8_t req) {
         case proto::GetLimits::kId: return proto::Limits::kId;
         case proto::GetSafety::kId: return proto::Safety::kId;
         case proto::GetFingerConfig::kId: return proto::FingerConfig::kId;
+        case proto::GetMotion::kId: return proto::Motion::kId;
+        case proto::Move::kId: return proto::Moving::kId;
         case proto::GetState::kId: return proto::State::kId;
         case proto::GetStats::kId: return proto::Stats::kId;
         case proto::GetStatus::kId: return proto::Status::kId;
