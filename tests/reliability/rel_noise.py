@@ -9,7 +9,7 @@ value the board shows can be traced to the command that sent it.
 - **wrong applied**: the board shows (in the state stream, or in a read-back) a target, a mode
   or a kp that was never sent;
 - **silent loss**: a command returned without error, but the board does not show its value
-  (the first state frame after it, or set_gains' own read-back);
+  (``get_state`` and ``get_status`` read back after it, or set_gains' own read-back);
 - **errors**: a command raised (each is counted, with whether its value was applied after all);
 - latency: simulated time from the call to its return (p50, p99, max).
 
@@ -111,14 +111,12 @@ def run_campaign(
     sent_targets: list[set[float]] = [{0.0} for _ in range(4)]
     sent_modes = {M.ControlMode.COAST}
     sent_kp = {kp0}
-    frames: list[HandState] = []
     timed_out: list[float] = []  # when the stream first showed HOST_TIMEOUT, until cleared
 
     def trace(v: float, sent: set[float], tol: float) -> bool:
         return any(abs(v - s) <= tol for s in sent)
 
     def on_state(st: HandState) -> None:
-        frames.append(st)
         res.stream_frames += 1
         for i in range(4):
             if trace(st[i].target, sent_targets[i], TARGET_TOL):
@@ -205,20 +203,10 @@ def run_campaign(
                 timed_out.clear()
             if want is None:
                 continue
-            # A target shows in the first state frame that arrives after the command returned;
-            # a mode in the status, which get_state (with get_status) reads back.
+            # The board's state read back (get_state is answered after the command was
+            # applied; a stream frame may carry a sample its tick took before).
             what, f, v = want
-            if what == "target":
-                n_after = len(frames)
-                deadline = hand.clock.now() + 2.0
-                while len(frames) == n_after and hand.clock.now() < deadline:
-                    hand.clock.sleep(0.002)
-                if len(frames) == n_after:
-                    res.notes.append(f"command {k}: no state frame within 2 s")
-                    continue
-                st = frames[n_after]
-            else:
-                st = _retry(hand.state)
+            st = _retry(hand.state)
             now_v = st[f].target if what == "target" else st[f].mode
             applied = abs(now_v - v) <= TARGET_TOL if what == "target" else now_v == v
             if failed is None and not applied:
