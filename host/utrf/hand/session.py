@@ -102,7 +102,7 @@ def _open_link(url: str, baudrate: int, forward: _Forward, reset: bool) -> Link:
         # counted each frame as "dropped"); real loss is stream_lost.
         return Link(SerialTransport(url, baudrate), on_telemetry=forward, telemetry_queue_size=0)
 
-    return open_line(url, reset, opener)  # type: ignore[return-value]
+    return open_line(url, reset, opener)
 
 
 class HandSession:
