@@ -363,7 +363,13 @@ def _command(board: EmulatedBoard, line: str, say: _Printer) -> bool:
             kind, p = rest[0], _probability(rest[1])
             if kind not in ("drop", "corrupt", "insert"):
                 raise ValueError(f"line fault must be drop, corrupt or insert, got {kind!r}")
-            board.set_line_faults(rest[2] if len(rest) > 2 else "both", **{kind: p})
+            rates = {"drop": 0.0, "corrupt": 0.0, "insert": 0.0} | {kind: p}
+            board.set_line_faults(
+                rest[2] if len(rest) > 2 else "both",
+                drop=rates["drop"],
+                corrupt=rates["corrupt"],
+                insert=rates["insert"],
+            )
             say.say(f"line: {kind} {p}")
         elif cmd == "clean":
             board.set_line_faults("both")
@@ -371,7 +377,7 @@ def _command(board: EmulatedBoard, line: str, say: _Printer) -> bool:
         else:
             say.say(f"error: unknown command {cmd!r} (try 'help')")
     except (IndexError, ValueError, argparse.ArgumentTypeError, EmulatorError, PlantError) as exc:
-        say.say(f"error: {cmd}: {exc or 'missing argument'} (try 'help')")
+        say.say(f"error: {cmd}: {str(exc) or 'missing argument'} (try 'help')")
     return True
 
 
