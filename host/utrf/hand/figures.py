@@ -56,8 +56,8 @@ def _front_segments(geom: FingerGeometry, theta2: float, base: tuple[float, floa
 
 def draw_pose(
     hand: HandGeometry,
-    measured: Sequence[float],
-    target: Sequence[float],
+    measured: Sequence[float] | np.ndarray,
+    target: Sequence[float] | np.ndarray,
     path: str | Path,
     *,
     title: str,
