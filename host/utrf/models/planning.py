@@ -193,7 +193,7 @@ def plan(
     """The q to command so that the finger under ``load`` lands on ``target`` (see module doc)."""
     load = load if load is not None else Load()
     limits = limits if limits is not None else Limits()
-    statics._check_model(model)
+    statics.check_model(model)
     if match not in MATCHES:
         raise PlanError(f"match must be one of {MATCHES}, got {match!r}")
     if not (math.isfinite(tolerance_m) and tolerance_m > 0):
