@@ -19,8 +19,8 @@ A plan is refused (``safe`` False, with the reasons) when a tendon's safety fact
 the limit, a motor would pull more than its rating, Joint 1 would leave its range, the statics
 do not converge, or the loaded finger cannot reach the target within ``tolerance_m``.
 
-Named poses (``"fist"``, ...) come from the pose library (``utrf.poses``) through
-``named_pose_target``.
+Named poses (``"fist"``, ...) come from a pose library (``utrf.poses``, loaded by the caller)
+through ``named_pose_target``.
 """
 
 from __future__ import annotations
@@ -112,13 +112,11 @@ class Target:
 
 
 # -- named poses -------------------------------------------------------------------------------
-def named_pose_target(name: str, finger: str, library: Mapping[str, Any] | None = None) -> Target:
-    """Finger ``finger``'s target in the named pose of the pose library (utrf.poses)."""
-    from utrf.poses import PoseLibrary  # the library imports the models: import it late
-
-    poses = library if library is not None else PoseLibrary.load()
+def named_pose_target(name: str, finger: str, library: Mapping[str, Any]) -> Target:
+    """Finger ``finger``'s target in the named pose of ``library`` (a
+    :class:`utrf.poses.PoseLibrary`, which sits above the models and is passed in)."""
     try:
-        pose = poses[name]
+        pose = library[name]
     except KeyError as exc:
         raise PlanError(exc.args[0]) from None
     if finger not in pose.targets:
@@ -264,37 +262,15 @@ def plan(
         "FLEXION": float(kinematics.flexion_from_q(geometry, r2 * theta2_sp)),
     }
 
-    reasons: list[str] = []
-    if not result.converged:
-        reasons.append("the statics did not converge: the finger may not hold this load here")
-    for tendon, t, sf in zip(
-        result.loaded_tendons, result.tensions_n, result.safety_factor, strict=True
-    ):
-        if sf < limits.min_safety_factor:
-            reasons.append(
-                f"Tendon {tendon} would carry {t:.1f} N, safety factor {sf:.2f} < "
-                f"{limits.min_safety_factor:g} (breaking stress "
-                f"{limits.tendon_breaking_stress_pa / 1e6:.0f} MPa)"
-            )
-    for motor, force in zip("AB", result.motor_force_n, strict=True):
-        if force > limits.actuator_rated_force_n:
-            reasons.append(
-                f"motor {motor} would pull {force:.1f} N, above its rated "
-                f"{limits.actuator_rated_force_n:g} N"
-            )
-    th1_lo, th1_hi = geometry.theta1_range_rad
-    if not th1_lo <= result.theta_rad[0] <= th1_hi:
-        reasons.append(
-            f"theta1 would be {math.degrees(result.theta_rad[0]):.1f} deg, outside "
-            f"[{math.degrees(th1_lo):g}, {math.degrees(th1_hi):g}] deg"
-        )
+    # The statics' own safety rules (one home: statics_result), then the plan's own.
+    reasons = statics.check_safety(result)
     if match == "tip" and tip_error > tolerance_m:
         reasons.append(
             f"the loaded finger's tip comes no nearer than {tip_error * 1e3:.2f} mm to the "
             f"target (tolerance {tolerance_m * 1e3:g} mm)"
         )
-    # The statics' own warnings that are not already reasons (e.g. a strand leaving its guide).
-    warnings += [w for w in result.warnings if "leave" in w]
+    # Where the model stops holding (a strand leaving its guide): a warning, not a refusal.
+    warnings += statics.check_routing(result)
     return Plan(
         target=target,
         match=match,

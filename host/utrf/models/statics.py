@@ -59,7 +59,13 @@ from utrf.models.statics_batch import (
     check_solver,
     solve_batch,
 )
-from utrf.models.statics_result import StaticsResult, _warnings, check
+from utrf.models.statics_result import (
+    StaticsResult,
+    _warnings,
+    check,
+    check_routing,
+    check_safety,
+)
 from utrf.models.tendons import Limits
 
 __all__ = [
@@ -76,6 +82,8 @@ __all__ = [
     "StaticsResult",
     "check",
     "check_model",
+    "check_routing",
+    "check_safety",
     "configuration",
     "elongations",
     "generalised_forces",

@@ -109,12 +109,28 @@ class StaticsResult:
 
 
 def check(result: StaticsResult) -> list[str]:
-    """Warnings for an equilibrium: no convergence, overstress, actuator overload, validity."""
-    net = result.net_tensions_n
-    th = result.theta_rad
-    return _warnings(
-        result.geometry,
-        result.limits,
+    """Warnings for an equilibrium: no convergence, overstress, actuator overload, validity
+    (:func:`check_safety`, then :func:`check_routing`)."""
+    return _warnings(result.geometry, result.limits, *_plain(result))
+
+
+def check_safety(result: StaticsResult) -> list[str]:
+    """What makes an equilibrium unsafe to command: no convergence, a tendon below its
+    safety factor, a motor above its rating, Joint 1 outside its range."""
+    return _safety(result.geometry, result.limits, *_plain(result))
+
+
+def check_routing(result: StaticsResult) -> list[str]:
+    """Where the model stops holding: a coupling strand that would leave its guide."""
+    return _routing(result.geometry, _plain(result)[1])
+
+
+Vec3 = tuple[float, float, float]
+
+
+def _plain(result: StaticsResult) -> tuple[Vec3, Vec3, bool, int, float]:
+    net, th = result.net_tensions_n, result.theta_rad
+    return (
         (float(net[0]), float(net[1]), float(net[2])),
         (float(th[0]), float(th[1]), float(th[2])),
         result.converged,
@@ -144,8 +160,8 @@ def _limit_texts(lim: Limits) -> tuple[str, str]:
 def _warnings(
     geom: FingerGeometry,
     lim: Limits,
-    net: tuple[float, float, float],
-    theta: tuple[float, float, float],
+    net: Vec3,
+    theta: Vec3,
     converged: bool,
     iterations: int,
     threshold_m: float,
@@ -155,15 +171,16 @@ def _warnings(
     th1, th2, th3 = theta
     lo, hi = geom.theta1_range_rad
     a2, a3 = finger_constants(geom).wraps
-    # Plain floats: a numpy scalar would warn where a tiny tension gives an infinite factor.
-    area = float(geom.tendon_area_m2)
-    breaking = float(lim.tendon_breaking_stress_pa)
     # The common case first: clearly nothing to report (a margin keeps it conservative).
-    safe = breaking * area / lim.min_safety_factor * (1.0 - 1e-9)
-    t_max = max(abs(n1), abs(n2), abs(n3))
+    safe = (
+        float(lim.tendon_breaking_stress_pa)
+        * float(geom.tendon_area_m2)
+        / lim.min_safety_factor
+        * (1.0 - 1e-9)
+    )
     if (
         converged
-        and t_max < safe
+        and max(abs(n1), abs(n2), abs(n3)) < safe
         and abs(n1) <= lim.actuator_rated_force_n
         and lo <= th1 <= hi
         and abs(th1) <= a2
@@ -171,6 +188,26 @@ def _warnings(
         and abs(th3) <= a3
     ):
         return []
+    return _safety(geom, lim, net, theta, converged, iterations, threshold_m) + _routing(
+        geom, theta
+    )
+
+
+def _safety(
+    geom: FingerGeometry,
+    lim: Limits,
+    net: Vec3,
+    theta: Vec3,
+    converged: bool,
+    iterations: int,
+    threshold_m: float,
+) -> list[str]:
+    n1 = net[0]
+    th1 = theta[0]
+    lo, hi = geom.theta1_range_rad
+    # Plain floats: a numpy scalar would warn where a tiny tension gives an infinite factor.
+    area = float(geom.tendon_area_m2)
+    breaking = float(lim.tendon_breaking_stress_pa)
     out: list[str] = []
     if not converged:
         out.append(
@@ -189,16 +226,23 @@ def _warnings(
                 f"safety factor {sf:.2f}{stress_tail}"
             )
     if n1 > lim.actuator_rated_force_n:
-        out.append(f"motor A (Tendon 1) must pull {n1:.1f} N{motor_tail}")
+        out.append(f"motor A would pull {n1:.1f} N (Tendon 1){motor_tail}")
     if -n1 > lim.actuator_rated_force_n:
-        out.append(f"motor B (Tendon 4) must pull {-n1:.1f} N{motor_tail}")
+        out.append(f"motor B would pull {-n1:.1f} N (Tendon 4){motor_tail}")
     if not lo <= th1 <= hi:
         out.append(
-            f"theta1 = {math.degrees(th1):.1f} deg is outside theta1_range "
+            f"theta1 would be {math.degrees(th1):.1f} deg, outside theta1_range "
             f"[{math.degrees(lo):g}, {math.degrees(hi):g}] deg"
         )
+    return out
+
+
+def _routing(geom: FingerGeometry, theta: Vec3) -> list[str]:
+    th1, th2, th3 = theta
+    a2, a3 = finger_constants(geom).wraps
     if abs(th1) <= a2 and abs(th2) <= min(a2, a3) and abs(th3) <= a3:
-        return out  # every strand still wraps its guides
+        return []  # every strand still wraps its guides
+    out: list[str] = []
     wraps = ((a2 + th1, a2 - th2, a3 + th2, a3 - th3), (a2 - th1, a2 + th2, a3 - th2, a3 + th3))
     for g, group_wraps in enumerate(wraps):
         for (tendon, guide), w in zip(_WRAP_NAMES, group_wraps, strict=True):
