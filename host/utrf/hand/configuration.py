@@ -5,13 +5,15 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import replace
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from utrf.hand.session import FingerKey, HandSession
 from utrf.protocol import messages as m
 from utrf.protocol.codec import Message
+
+M = TypeVar("M", bound=Message)
 
 
 class HandConfiguration(HandSession):
@@ -106,12 +108,12 @@ class HandConfiguration(HandSession):
         return self.finger_config(i)
 
     @staticmethod
-    def _changed(current: Message, changes: Mapping[str, Any], during: str) -> Any:
+    def _changed(current: M, changes: Mapping[str, Any], during: str) -> M:
         names = {f.name for f in type(current).FIELDS} - {"finger"}
         unknown = sorted(set(changes) - names)
         if unknown:
             raise TypeError(f"{during}: unknown field(s) {unknown}; fields are {sorted(names)}")
-        return replace(current, **changes)  # type: ignore[type-var]
+        return replace(current, **changes)
 
     # --- saved configuration, zero, faults ------------------------------------------------------
 

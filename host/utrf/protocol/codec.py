@@ -11,6 +11,7 @@ not a valid message. A body that fails a check never becomes a message.
 from __future__ import annotations
 
 import builtins
+import dataclasses
 import math
 import numbers
 import struct
@@ -231,6 +232,9 @@ class Message:
     #: arrays only for the fingers it selects, and so does :meth:`decode`.
     MASKED_BY: ClassVar[str | None] = None
     _STRUCT: ClassVar[struct.Struct] = struct.Struct("<")
+    # Every message class is a dataclass (the generator decorates each): declared here so
+    # that dataclasses.replace() takes any Message.
+    __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
