@@ -9,7 +9,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from utrf.hand.session import FingerKey, HandSession
+from utrf.hand.session import FingerKey, HandSession, finger_mask
 from utrf.protocol import messages as m
 from utrf.protocol.codec import Message
 
@@ -135,10 +135,10 @@ class HandConfiguration(HandSession):
     def calibrate_zero(self, fingers: Iterable[FingerKey] | FingerKey) -> None:
         """Take the present readings as Joint-2 angle 0 (fingers straight and idle)."""
         idx = self._finger_set(fingers)
-        self._request(m.CalibrateZero(mask=sum(1 << i for i in idx)))
+        self._request(m.CalibrateZero(mask=finger_mask(idx)))
 
     def clear_faults(self, fingers: Iterable[FingerKey] | FingerKey | None = None) -> None:
         """Clear latched faults. The fingers stay in COAST: command them again."""
         idx = self._finger_set(fingers)
-        self._request(m.ClearFaults(mask=sum(1 << i for i in idx)))
+        self._request(m.ClearFaults(mask=finger_mask(idx)))
         self._goal[idx] = np.nan

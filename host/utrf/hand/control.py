@@ -9,7 +9,7 @@ from collections.abc import Iterable, Mapping, Sequence
 import numpy as np
 
 from utrf.hand.errors import TargetError
-from utrf.hand.session import FingerKey, Kind
+from utrf.hand.session import FingerKey, Kind, finger_mask
 from utrf.hand.state import CLOSED_LOOP
 from utrf.hand.telemetry import HandTelemetry
 from utrf.models import kinematics
@@ -102,7 +102,7 @@ class HandControl(HandTelemetry):
         finger's limits: TargetError naming it). ``enable``: fingers not under closed-loop
         control are switched to POSITION."""
         values = self._targets(targets, kind, "set_targets")
-        mask = sum(1 << i for i in values)
+        mask = finger_mask(values)
         wire = [values.get(i, 0.0) for i in range(len(self.fingers))]
         try:
             self._request(m.SetTargets(kind=KINDS[kind], mask=mask, value=tuple(wire)))
@@ -127,9 +127,7 @@ class HandControl(HandTelemetry):
         for i, v in zip(idx, values, strict=True):
             wire[i] = float(v)
         self._request(
-            m.SetTargets(
-                kind=m.TargetKind.JOINT2_ANGLE, mask=sum(1 << i for i in idx), value=tuple(wire)
-            )
+            m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=finger_mask(idx), value=tuple(wire))
         )
 
     # --- modes ----------------------------------------------------------------------------------
@@ -171,7 +169,7 @@ class HandControl(HandTelemetry):
         for i in idx:
             modes[i] = mode_
         try:
-            self._set_mode_raw(sum(1 << i for i in idx), modes, duties, efforts)
+            self._set_mode_raw(finger_mask(idx), modes, duties, efforts)
         except NackError as exc:
             if exc.code == m.ErrorCode.FAULTED:
                 raise self._fault_error(exc, f"set_mode {mode_.name}") from exc

@@ -10,7 +10,7 @@ import numpy as np
 
 from utrf.hand.control import HandControl, TargetsArg, _mode
 from utrf.hand.errors import FingerFaultError, NotControlledError, NotSettledError
-from utrf.hand.session import FingerKey, Kind, log
+from utrf.hand.session import FingerKey, Kind, finger_mask, log
 from utrf.hand.state import CLOSED_LOOP, HandState
 from utrf.poses import Pose, PoseLibrary
 from utrf.protocol import messages as m
@@ -140,7 +140,7 @@ class HandMotion(HandControl):
                 m.Move(
                     move_id=self._move_id,
                     kind=m.TargetKind.JOINT2_ANGLE,
-                    mask=sum(1 << i for i in idx),
+                    mask=finger_mask(idx),
                     value=tuple(float(end.get(i, 0.0)) for i in range(n)),
                     duration=tuple(duration if i in end else 0.0 for i in range(n)),
                 )
@@ -163,8 +163,7 @@ class HandMotion(HandControl):
         faults. Board time comes from telemetry (or get_state without a stream); the wait
         follows the board's clock, however fast it runs against the host's (an emulated
         board may run slower), and ends early only if that clock stops for a second."""
-        period = 1.0 / self._telemetry_hz if self._telemetry_hz else 0.02
-        period = min(max(period, 0.002), 0.02)
+        period = self._poll_period()
         st: HandState | None = None
         last_time, last_progress = -math.inf, self.clock.now()
         while True:
@@ -250,8 +249,7 @@ class HandMotion(HandControl):
                 idx = [i for i in range(len(self.fingers)) if st.fingers[i].closed_loop]
         if not idx:
             return st
-        period = 1.0 / self._telemetry_hz if self._telemetry_hz else 0.02
-        period = min(max(period, 0.002), 0.02)
+        period = self._poll_period()
         start = self.clock.now()
         ok_since: float | None = None
         history: list[tuple[float, np.ndarray]] = []

@@ -105,6 +105,11 @@ def _open_link(url: str, baudrate: int, forward: _Forward, reset: bool) -> Link:
     return open_line(url, reset, opener)
 
 
+def finger_mask(idx: Iterable[int]) -> int:
+    """The wire's finger bitmask (bit i: finger i) of finger indices."""
+    return sum(1 << i for i in set(idx))
+
+
 class HandSession:
     """The link to one board and the state the Hand's parts share. Not used alone: build a
     :class:`~utrf.hand.Hand`."""

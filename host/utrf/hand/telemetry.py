@@ -63,6 +63,12 @@ class HandTelemetry(HandSession):
                 self._latest = st
         return st
 
+    def _poll_period(self) -> float:
+        """How often a wait looks at the state: each sample at the stream's rate, between
+        2 ms and 20 ms (20 ms without a stream: each look is then a get_state)."""
+        period = 1.0 / self._telemetry_hz if self._telemetry_hz else 0.02
+        return min(max(period, 0.002), 0.02)
+
     def _fresh_state(self, previous: HandState | None) -> HandState:
         """The latest telemetry sample if it is newer than ``previous`` and recent; else ask."""
         self._check_alive()
