@@ -199,7 +199,7 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         "interrupt, nested UART/ADC interrupts included). *simavr*: cycles from app::tick()'s "
         "entry to its return, counted by the simulator; *own* is that less the interrupts "
         "served while it ran (*nested*: the UART's receive interrupt, one a byte; the "
-        "transmitter's and timer 0's wait for the tick's end), each counted from the step that "
+        "transmitter's too; timer 0's waits for the tick's end), each counted from the step that "
         "accepts it to its reti. *whole interrupt*: the timer interrupt that runs the tick, "
         "from its vector to its reti (register saves, the tick's timing and bookkeeping "
         "included). Target: at most 15 % (2,400 cycles). The tick is plain C++ (no assembly).",

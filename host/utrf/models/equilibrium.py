@@ -26,7 +26,7 @@ class StaticsError(ValueError):
     """A statics request that cannot be answered (bad input, or no convergence)."""
 
 
-def check_model(model: str) -> str:
+def require_model(model: str) -> str:
     """``model`` if it names one of :data:`MODELS`; StaticsError naming them otherwise."""
     if model not in MODELS:
         raise StaticsError(f"model must be one of {MODELS}, got {model!r}")
@@ -183,7 +183,7 @@ def configuration(
 
     ``serial``: R_k θ_k = q − (e1 + ... + e_k); ``printed`` (Eq. 16): R_k θ_k = q − e_k.
     """
-    check_model(model)
+    require_model(model)
     e = np.asarray(stretch, dtype=float)
     if model == "serial":
         e = np.cumsum(e, axis=-1)

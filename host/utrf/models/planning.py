@@ -15,12 +15,13 @@ angle through the rigid coupling (θ2 = q / R2). So the plan also gives the Join
 encoder reads when the loaded finger is on target, and the TENDON_Q and FLEXION values that
 the firmware maps to that same angle (``firmware_targets``).
 
-A plan is refused (``safe`` False, with the reasons) when a tendon's safety factor falls below
-the limit, a motor would pull more than its rating, Joint 1 would leave its range, the statics
-do not converge, or the loaded finger cannot reach the target within ``tolerance_m``.
+A plan is refused (``safe`` False, with the reasons) when the statics' own limit checks
+(``statics.limit_violations``: a tendon's safety factor below the limit, a motor over its
+rating, Joint 1 out of range, no convergence) find anything, or the loaded finger cannot reach
+the target within ``tolerance_m``.
 
-Named poses (``"fist"``, ...) come from a pose library (``utrf.poses``, loaded by the caller)
-through ``named_pose_target``.
+Named poses (``"fist"``, ...) come from the pose library (``utrf.poses``), which the caller
+loads and hands to ``named_pose_target``: the models import nothing above them.
 """
 
 from __future__ import annotations
@@ -115,8 +116,8 @@ class Target:
 
 # -- named poses -------------------------------------------------------------------------------
 def named_pose_target(name: str, finger: str, library: Mapping[str, Any]) -> Target:
-    """Finger ``finger``'s target in the named pose of ``library`` (a
-    :class:`utrf.poses.PoseLibrary`, which sits above the models and is passed in)."""
+    """Finger ``finger``'s target in the named pose of ``library`` (a ``utrf.poses.PoseLibrary``,
+    which the caller loads: the pose library sits above the models, which import nothing above)."""
     try:
         pose = library[name]
     except KeyError as exc:
@@ -193,7 +194,7 @@ def plan(
     """The q to command so that the finger under ``load`` lands on ``target`` (see module doc)."""
     load = load if load is not None else Load()
     limits = limits if limits is not None else Limits()
-    statics.check_model(model)
+    statics.require_model(model)
     if match not in MATCHES:
         raise PlanError(f"match must be one of {MATCHES}, got {match!r}")
     if not (math.isfinite(tolerance_m) and tolerance_m > 0):
@@ -264,15 +265,14 @@ def plan(
         "FLEXION": float(kinematics.flexion_from_q(geometry, r2 * theta2_sp)),
     }
 
-    # The statics' own safety rules (one home: statics_result), then the plan's own.
-    reasons = statics.check_safety(result)
+    # One home for each rule: the statics' limits refuse the plan, its validity warnings warn.
+    reasons = statics.limit_violations(result)
     if match == "tip" and tip_error > tolerance_m:
         reasons.append(
             f"the loaded finger's tip comes no nearer than {tip_error * 1e3:.2f} mm to the "
             f"target (tolerance {tolerance_m * 1e3:g} mm)"
         )
-    # Where the model stops holding (a strand leaving its guide): a warning, not a refusal.
-    warnings += statics.check_routing(result)
+    warnings += statics.wrap_warnings(result)
     return Plan(
         target=target,
         match=match,

@@ -40,12 +40,12 @@ from utrf.models.equilibrium import (
     MODELS,
     Load,
     StaticsError,
-    check_model,
     configuration,
     elongations,
     finger_constants,
     generalised_forces,
     net_tensions,
+    require_model,
 )
 from utrf.models.geometry import FingerGeometry
 from utrf.models.statics_batch import (
@@ -63,8 +63,8 @@ from utrf.models.statics_result import (
     StaticsResult,
     _warnings,
     check,
-    check_routing,
-    check_safety,
+    limit_violations,
+    wrap_warnings,
 )
 from utrf.models.tendons import Limits
 
@@ -81,15 +81,15 @@ __all__ = [
     "StaticsError",
     "StaticsResult",
     "check",
-    "check_model",
-    "check_routing",
-    "check_safety",
     "configuration",
     "elongations",
     "generalised_forces",
+    "limit_violations",
     "net_tensions",
+    "require_model",
     "solve",
     "solve_batch",
+    "wrap_warnings",
 ]
 
 Vec3 = tuple[float, float, float]

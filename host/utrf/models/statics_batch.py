@@ -17,9 +17,9 @@ from utrf.models.equilibrium import (
     StaticsError,
     _chain,
     _torques,
-    check_model,
     configuration,
     net_tensions,
+    require_model,
 )
 from utrf.models.geometry import FingerGeometry
 
@@ -33,7 +33,7 @@ _OMEGA_BOUNDS = (0.02, 5.0)  # keep the Aitken factor sane on nonlinear steps
 
 def check_solver(model: str, relaxation: str, threshold_m: float, max_iterations: int) -> None:
     """StaticsError naming the first bad option of Algorithm 1 (``solve``, ``solve_batch``)."""
-    check_model(model)
+    require_model(model)
     if relaxation not in RELAXATIONS:
         raise StaticsError(f"relaxation must be one of {RELAXATIONS}, got {relaxation!r}")
     if not (math.isfinite(threshold_m) and threshold_m > 0):

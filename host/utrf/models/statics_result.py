@@ -110,19 +110,19 @@ class StaticsResult:
 
 def check(result: StaticsResult) -> list[str]:
     """Warnings for an equilibrium: no convergence, overstress, actuator overload, validity
-    (:func:`check_safety`, then :func:`check_routing`)."""
+    (:func:`limit_violations`, then :func:`wrap_warnings`)."""
     return _warnings(result.geometry, result.limits, *_plain(result))
 
 
-def check_safety(result: StaticsResult) -> list[str]:
+def limit_violations(result: StaticsResult) -> list[str]:
     """What makes an equilibrium unsafe to command: no convergence, a tendon below its
     safety factor, a motor above its rating, Joint 1 outside its range."""
-    return _safety(result.geometry, result.limits, *_plain(result))
+    return _limit_violations(result.geometry, result.limits, *_plain(result))
 
 
-def check_routing(result: StaticsResult) -> list[str]:
+def wrap_warnings(result: StaticsResult) -> list[str]:
     """Where the model stops holding: a coupling strand that would leave its guide."""
-    return _routing(result.geometry, _plain(result)[1])
+    return _wrap_warnings(result.geometry, _plain(result)[1])
 
 
 Vec3 = tuple[float, float, float]
@@ -188,12 +188,12 @@ def _warnings(
         and abs(th3) <= a3
     ):
         return []
-    return _safety(geom, lim, net, theta, converged, iterations, threshold_m) + _routing(
-        geom, theta
-    )
+    return _limit_violations(
+        geom, lim, net, theta, converged, iterations, threshold_m
+    ) + _wrap_warnings(geom, theta)
 
 
-def _safety(
+def _limit_violations(
     geom: FingerGeometry,
     lim: Limits,
     net: Vec3,
@@ -226,18 +226,18 @@ def _safety(
                 f"safety factor {sf:.2f}{stress_tail}"
             )
     if n1 > lim.actuator_rated_force_n:
-        out.append(f"motor A would pull {n1:.1f} N (Tendon 1){motor_tail}")
+        out.append(f"motor A (Tendon 1) must pull {n1:.1f} N{motor_tail}")
     if -n1 > lim.actuator_rated_force_n:
-        out.append(f"motor B would pull {-n1:.1f} N (Tendon 4){motor_tail}")
+        out.append(f"motor B (Tendon 4) must pull {-n1:.1f} N{motor_tail}")
     if not lo <= th1 <= hi:
         out.append(
-            f"theta1 would be {math.degrees(th1):.1f} deg, outside theta1_range "
+            f"theta1 = {math.degrees(th1):.1f} deg is outside theta1_range "
             f"[{math.degrees(lo):g}, {math.degrees(hi):g}] deg"
         )
     return out
 
 
-def _routing(geom: FingerGeometry, theta: Vec3) -> list[str]:
+def _wrap_warnings(geom: FingerGeometry, theta: Vec3) -> list[str]:
     th1, th2, th3 = theta
     a2, a3 = finger_constants(geom).wraps
     if abs(th1) <= a2 and abs(th2) <= min(a2, a3) and abs(th3) <= a3:
