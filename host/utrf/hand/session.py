@@ -148,8 +148,10 @@ class HandSession:
                 f"the protocol drives {m.FINGER_COUNT} fingers; the hand file has "
                 f"{len(self.fingers)}"
             )
-        self._telemetry_hz = int(telemetry_hz)
+        # State shared by the parts, under _lock (telemetry arrives on the reader thread).
         self._lock = threading.Lock()
+        # telemetry: the stream and what it reports
+        self._telemetry_hz = int(telemetry_hz)
         # Held while callbacks run, so an unsubscribe returns only once no call is under way
         # (re-entrant: a callback may unsubscribe itself).
         self._dispatch_lock = threading.RLock()
@@ -161,11 +163,15 @@ class HandSession:
         self._state_callbacks: list[Callable[[HandState], None]] = []
         self._fault_callbacks: list[Callable[[FaultEvent], None]] = []
         self._faults_seen: list[FaultEvent] = []
+        self._log: TelemetryLog | None = None
+        # lifecycle: a reset seen, the handshake, closing
         self._reset: BoardResetError | None = None
         self._last_boot: m.Boot | None = None
         self._handshaken = False
         self._closed = False
-        self._log: TelemetryLog | None = None
+        self._identity: m.Identity | None = None
+        self._reset_on_open = True  # how reconnect() reopens the line
+        # control and motion: the limits targets are checked against, what was commanded
         self._limits: list[tuple[float, float]] = [
             f.geometry.theta2_range_rad for f in self.geometry.fingers
         ]
@@ -174,8 +180,7 @@ class HandSession:
         # this session's first for a resend of it.
         self._move_id = random.randrange(0x10000)
         self._last_move: MoveResult | None = None
-        self._identity: m.Identity | None = None
-        self._reset_on_open = True  # how reconnect() reopens the line
+        # the link's frames reach _on_telemetry through _forward (which kept any early ones)
         self._forward = forward or _Forward()
         if forward is None:
             link.add_telemetry_callback(self._forward)
