@@ -279,7 +279,9 @@ def _calibrate(args: argparse.Namespace) -> int:
 
 
 # -- plan -------------------------------------------------------------------------------------
-def _plan_one(args: argparse.Namespace, geom: FingerGeometry, target: planning.Target):
+def _plan_one(
+    args: argparse.Namespace, geom: FingerGeometry, target: planning.Target
+) -> planning.Plan:
     return planning.plan(
         geom,
         target,

@@ -97,7 +97,9 @@ class HandTelemetry(HandSession):
         returns, the callback is not called again."""
         return self._subscribe(self._state_callbacks, callback)
 
-    def _subscribe(self, callbacks: list[Callable[[Any], None]], callback: Callable[[Any], None]):
+    def _subscribe(
+        self, callbacks: list[Callable[[Any], None]], callback: Callable[[Any], None]
+    ) -> Callable[[], None]:
         with self._lock:
             callbacks.append(callback)
 
