@@ -32,7 +32,7 @@ from utrf.protocol.link import Link, LinkStats, Telemetry
 if TYPE_CHECKING:
     from utrf.hand.motion import MoveResult
 
-log = logging.getLogger("utrf.hand.client")
+log = logging.getLogger("utrf.hand.client")  # one logger for every part, named as it always was
 
 R = TypeVar("R", bound=Message)
 FingerKey = int | str
