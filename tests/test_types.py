@@ -27,6 +27,34 @@ def test_mypy_passes_on_the_package() -> None:
     assert run.returncode == 0, f"mypy (config in pyproject.toml):\n{run.stdout}{run.stderr}"
 
 
+def test_the_configuration_catches_a_wrong_optional_and_an_untyped_body(tmp_path: Path) -> None:
+    """The checker is as strict as the suite relies on: these must fail under pyproject.toml."""
+    probe = tmp_path / "probe.py"
+    probe.write_text(
+        "def first(xs: list[int]) -> int | None:\n"
+        "    return xs[0] if xs else None\n"
+        "\n"
+        "\n"
+        "def double(xs: list[int]) -> int:\n"
+        "    return first(xs) * 2\n"  # a wrong Optional
+        "\n"
+        "\n"
+        "def untyped(x):\n"  # no annotations
+        "    y: str = 1\n"  # an error inside an untyped body
+        "    return x + 1  # type: ignore\n"  # a bare ignore (and an unused one)
+    )
+    run = subprocess.run(
+        [sys.executable, "-m", "mypy", "--config-file", str(ROOT / "pyproject.toml"), str(probe)],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+    )
+    out = run.stdout
+    assert run.returncode == 1, out
+    for code in ("operator", "no-untyped-def", "assignment", "unused-ignore"):
+        assert f"[{code}]" in out, f"mypy missed [{code}]:\n{out}"
+
+
 def unjustified_ignores(text: str) -> list[int]:
     """Line numbers of `type: ignore` comments lacking an error code and a reason."""
     bad = []
