@@ -26,7 +26,7 @@ KINDS: dict[str, m.TargetKind] = {
 KIND_UNITS = {"theta2": "rad", "q": "m", "flexion": ""}
 
 
-def _mode(value: m.ControlMode | str) -> m.ControlMode:
+def control_mode(value: m.ControlMode | str) -> m.ControlMode:
     if isinstance(value, m.ControlMode):
         return value
     try:
@@ -144,7 +144,7 @@ class HandControl(HandTelemetry):
         fingers (default all). ``duty`` (DUTY, signed, positive flexes) and ``effort`` (GRASP:
         the largest closing duty) are fractions, one for all or per finger. A finger with a
         latched fault cannot be driven: FingerFaultError."""
-        mode_ = _mode(mode)
+        mode_ = control_mode(mode)
         idx = self._finger_set(fingers)
         n = len(self.fingers)
 

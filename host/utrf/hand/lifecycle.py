@@ -13,9 +13,9 @@ from utrf.hand.session import (
     ALL_FINGERS,
     DEFAULT_TELEMETRY_HZ,
     OnClose,
-    _Forward,
-    _open_link,
+    TelemetryForward,
     log,
+    open_link,
 )
 from utrf.hand.telemetry import HandTelemetry
 from utrf.models.geometry import HandGeometry
@@ -64,8 +64,8 @@ class HandLifecycle(HandTelemetry):
         and faults, resume heartbeats; nothing moves. ``socket://`` cannot (no DTR line: a
         ResetModeError says so); the emulated board's pty and serial ports can.
         """
-        forward = _Forward()
-        link = _open_link(url, baudrate, forward, reset)
+        forward = TelemetryForward()
+        link = open_link(url, baudrate, forward, reset)
         try:
             hand = cls(
                 link,
@@ -119,7 +119,7 @@ class HandLifecycle(HandTelemetry):
             )
         from utrf.hand.simlink import SimLink
 
-        forward = _Forward()
+        forward = TelemetryForward()
         link = SimLink(board, on_telemetry=forward)
         hand = cls(
             link,
@@ -236,8 +236,8 @@ class HandLifecycle(HandTelemetry):
         last: Exception | None = None
         while True:
             try:
-                forward = _Forward()
-                link = _open_link(self.url, self.baudrate, forward, self._reset_on_open)
+                forward = TelemetryForward()
+                link = open_link(self.url, self.baudrate, forward, self._reset_on_open)
                 break
             except DisconnectedError as exc:
                 last = exc

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from utrf.hand.control import HandControl, TargetsArg, _mode
+from utrf.hand.control import HandControl, TargetsArg, control_mode
 from utrf.hand.errors import FingerFaultError, NotControlledError, NotSettledError
 from utrf.hand.session import FingerKey, Kind, finger_mask, log
 from utrf.hand.state import CLOSED_LOOP, HandState
@@ -81,7 +81,7 @@ class HandMotion(HandControl):
             raise ValueError(
                 f"duration must be a number of seconds in [0, {MAX_MOVE_S:g}], got {duration}"
             )
-        mode_ = _mode(mode)
+        mode_ = control_mode(mode)
         if mode_ not in CLOSED_LOOP:
             raise ValueError(f"move needs POSITION or GRASP, got {mode_.name}")
         values = self._targets(targets, kind, "move")

@@ -67,7 +67,7 @@ class LinkLike(Protocol):
     def close(self) -> None: ...
 
 
-class _Forward:
+class TelemetryForward:
     """A telemetry callback that exists before its Hand does: the link is built (and starts
     reading) first, so frames that arrive meanwhile (a ``boot``) are kept and handed over."""
 
@@ -92,7 +92,7 @@ class _Forward:
             target(item)
 
 
-def _open_link(url: str, baudrate: int, forward: _Forward, reset: bool) -> Link:
+def open_link(url: str, baudrate: int, forward: TelemetryForward, reset: bool) -> Link:
     """A Link on ``url``; the board reset by the open or not (``serial_port.open_line``)."""
     from utrf.hand.serial_port import open_line
     from utrf.protocol.transport import SerialTransport
@@ -123,7 +123,7 @@ class HandSession:
         poses: PoseLibrary | None = None,
         telemetry_hz: int = DEFAULT_TELEMETRY_HZ,
         on_close: OnClose = "brake",
-        forward: _Forward | None = None,
+        forward: TelemetryForward | None = None,
         url: str | None = None,
         baudrate: int = m.DEFAULT_BAUD,
     ) -> None:
@@ -181,7 +181,7 @@ class HandSession:
         self._move_id = random.randrange(0x10000)
         self._last_move: MoveResult | None = None
         # the link's frames reach _on_telemetry through _forward (which kept any early ones)
-        self._forward = forward or _Forward()
+        self._forward = forward or TelemetryForward()
         if forward is None:
             link.add_telemetry_callback(self._forward)
         self._forward.attach(self._on_telemetry)

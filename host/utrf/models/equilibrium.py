@@ -99,7 +99,7 @@ def generalised_forces(
     (0, −m g)); ``grasp_force_n`` acts along Link 3's normal, against flexion.
     """
     th = np.asarray(theta, dtype=float)
-    return _torques(
+    return chain_torques(
         geom,
         th,
         kinematics.chain_positions(geom, th),
@@ -110,7 +110,7 @@ def generalised_forces(
     )
 
 
-def _torques(
+def chain_torques(
     geom: FingerGeometry,
     th: np.ndarray,
     pts: np.ndarray,
@@ -145,7 +145,7 @@ def _torques(
     return np.stack(np.broadcast_arrays(tau1, tau2, tau3), axis=-1)
 
 
-def _chain(geom: FingerGeometry, th: np.ndarray) -> np.ndarray:
+def chain_points(geom: FingerGeometry, th: np.ndarray) -> np.ndarray:
     """``kinematics.chain_positions`` for (n, 3) angles, column by column: the same sums in
     the same order, without cumsum's strided passes."""
     L1, L2, L3 = geom.link_lengths_m

@@ -49,21 +49,21 @@ from utrf.models.equilibrium import (
 )
 from utrf.models.geometry import FingerGeometry
 from utrf.models.statics_batch import (
-    _OMEGA_BOUNDS,
-    _SLOW_CONTRACTION,
     DEFAULT_MAX_ITERATIONS,
     DEFAULT_RELAXATION,
     DEFAULT_THRESHOLD_M,
+    OMEGA_BOUNDS,
     RELAXATIONS,
+    SLOW_CONTRACTION,
     StaticsBatch,
     check_solver,
     solve_batch,
 )
 from utrf.models.statics_result import (
     StaticsResult,
-    _warnings,
     check,
     limit_violations,
+    plain_warnings,
     wrap_warnings,
 )
 from utrf.models.tendons import Limits
@@ -120,8 +120,8 @@ def _solve_one(
     w1, w2, w3 = C.neg_weight
     c1, c2, c3 = C.com
     cos, sin, hypot = math.cos, math.sin, math.hypot
-    lo_om, hi_om = _OMEGA_BOUNDS
-    slow = _SLOW_CONTRACTION
+    lo_om, hi_om = OMEGA_BOUNDS
+    slow = SLOW_CONTRACTION
     # The chain (``kinematics.chain_positions``) is written out where it is needed: a call
     # costs more than its arithmetic. Points: Joint 2 (x1, y1), Joint 3 (x2, y2), tip (x3, y3).
     t1, t2, t3 = q / R1, q / R2, q / R3
@@ -140,7 +140,7 @@ def _solve_one(
     converged = False
     k = 0
     for k in range(1, max_iterations + 1):
-        # Loads at the present configuration (``_torques``; a link's weight only turns the
+        # Loads at the present configuration (``chain_torques``; a link's weight only turns the
         # joints proximal to it, so the batch's zero terms are left out).
         if grasp:
             a = t1 + t2 + t3
@@ -256,6 +256,8 @@ def solve(
         iterations=iterations,
         converged=converged,
         threshold_m=threshold_m,
-        warnings=tuple(_warnings(geom, limits, net, theta, converged, iterations, threshold_m)),
+        warnings=tuple(
+            plain_warnings(geom, limits, net, theta, converged, iterations, threshold_m)
+        ),
     )
     return result

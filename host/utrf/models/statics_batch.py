@@ -15,8 +15,8 @@ from utrf.models.equilibrium import (
     DEFAULT_MODEL,
     GRAVITY_MPS2,
     StaticsError,
-    _chain,
-    _torques,
+    chain_points,
+    chain_torques,
     configuration,
     net_tensions,
     require_model,
@@ -27,8 +27,8 @@ DEFAULT_THRESHOLD_M = 1e-9
 DEFAULT_MAX_ITERATIONS = 100
 RELAXATIONS = ("auto", "none", "aitken")
 DEFAULT_RELAXATION = "auto"
-_SLOW_CONTRACTION = 0.5  # "auto" relaxes a case whose tip movement shrinks less than this
-_OMEGA_BOUNDS = (0.02, 5.0)  # keep the Aitken factor sane on nonlinear steps
+SLOW_CONTRACTION = 0.5  # "auto" relaxes a case whose tip movement shrinks less than this
+OMEGA_BOUNDS = (0.02, 5.0)  # keep the Aitken factor sane on nonlinear steps
 
 
 def check_solver(model: str, relaxation: str, threshold_m: float, max_iterations: int) -> None:
@@ -127,7 +127,7 @@ def solve_batch(
 
     compliance = 1.0 / tendons.stiffnesses(geom)
     theta = kinematics.joint_angles(geom, qa)
-    pts = _chain(geom, theta)
+    pts = chain_points(geom, theta)
     tip_unloaded = pts[:, 3, :].copy()
     net = np.zeros((*n, 3))
     stretch = np.zeros((*n, 3))
@@ -144,17 +144,17 @@ def solve_batch(
         sel = slice(None) if everyone else active
         th, pts_a = theta[sel], pts[sel]
         net_a = net_tensions(
-            geom, _torques(geom, th, pts_a, force[sel], moment[sel], grasp[sel], gravity)
+            geom, chain_torques(geom, th, pts_a, force[sel], moment[sel], grasp[sel], gravity)
         )
         stretch_a = net_a * compliance
         plain = configuration(geom, qa[sel], stretch_a, model)  # one pass of Algorithm 1
-        pts_plain = _chain(geom, plain)
+        pts_plain = chain_points(geom, plain)
         change = np.hypot(*(pts_plain[:, 3, :] - pts_a[:, 3, :]).T)
         done = change <= threshold_m
         step = plain - th
         rel = relaxed[sel]
         if relaxation == "auto" and k >= 2:
-            rel = rel | (change > _SLOW_CONTRACTION * change_prev[sel])
+            rel = rel | (change > SLOW_CONTRACTION * change_prev[sel])
         om = omega[sel]
         if k >= 2 and rel.any():
             # Aitken (Irons-Tuck) factor from the last two plain steps.
@@ -162,13 +162,13 @@ def solve_batch(
             denom = (diff * diff).sum(-1)
             safe = np.where(denom > 0, denom, 1.0)
             aitken = -om * (step_prev[sel] * diff).sum(-1) / safe
-            om = np.where(rel & (denom > 0), np.clip(aitken, *_OMEGA_BOUNDS), om)
+            om = np.where(rel & (denom > 0), np.clip(aitken, *OMEGA_BOUNDS), om)
         move = rel & ~done
         nxt, pts_nxt = plain, pts_plain
         if move.any():
             nxt = np.where(move[:, None], th + om[:, None] * step, plain)
             pts_nxt = pts_plain.copy()
-            pts_nxt[move] = _chain(geom, nxt[move])
+            pts_nxt[move] = chain_points(geom, nxt[move])
         net[sel], stretch[sel], theta[sel], pts[sel] = net_a, stretch_a, nxt, pts_nxt
         step_prev[sel], omega[sel], change_prev[sel], relaxed[sel] = step, om, change, rel
         iterations[sel] = k

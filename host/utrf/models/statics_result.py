@@ -111,7 +111,7 @@ class StaticsResult:
 def check(result: StaticsResult) -> list[str]:
     """Warnings for an equilibrium: no convergence, overstress, actuator overload, validity
     (:func:`limit_violations`, then :func:`wrap_warnings`)."""
-    return _warnings(result.geometry, result.limits, *_plain(result))
+    return plain_warnings(result.geometry, result.limits, *_plain(result))
 
 
 def limit_violations(result: StaticsResult) -> list[str]:
@@ -157,7 +157,7 @@ def _limit_texts(lim: Limits) -> tuple[str, str]:
     )
 
 
-def _warnings(
+def plain_warnings(
     geom: FingerGeometry,
     lim: Limits,
     net: Vec3,
