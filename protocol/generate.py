@@ -829,6 +829,9 @@ def render_header(spec: Spec) -> str:
         w(f"struct {m.class_name} {{")
         w(f"  static const uint8_t kId = 0x{m.id:02X};")
         w(f"  static const uint8_t kSize = {m.size};")
+        reply = spec.reply_of(m) if m.is_request else None
+        if reply is not None:
+            w(f"  static const uint8_t kReplyId = 0x{reply.id:02X};  // {reply.name}")
         for f in m.fields:
             if f.scale is not None:
                 w(f"  static constexpr float k{camel(f.name)}Scale = {c_float(f.scale)};")

@@ -207,6 +207,7 @@ inline bool is_finite(float v) { return (v - v) == (v - v); }
 struct Identify {
   static const uint8_t kId = 0x01;
   static const uint8_t kSize = 0;
+  static const uint8_t kReplyId = 0x81;  // identity
 };
 
 // ping (0x02, host to board, reply pong, idempotent)
@@ -214,6 +215,7 @@ struct Identify {
 struct Ping {
   static const uint8_t kId = 0x02;
   static const uint8_t kSize = 4;
+  static const uint8_t kReplyId = 0x82;  // pong
   uint32_t token;  // any value, echoed
 };
 
@@ -223,6 +225,7 @@ struct Ping {
 struct Heartbeat {
   static const uint8_t kId = 0x03;
   static const uint8_t kSize = 0;
+  static const uint8_t kReplyId = 0xF0;  // ack
 };
 
 // set_targets (0x10, host to board, reply ack, idempotent)
@@ -233,6 +236,7 @@ struct Heartbeat {
 struct SetTargets {
   static const uint8_t kId = 0x10;
   static const uint8_t kSize = 22;
+  static const uint8_t kReplyId = 0xF0;  // ack
   static constexpr float kValueScale = 1e-06f;
   uint8_t kind;  // TargetKind
   uint8_t mask;  // [0, 31]; bit i set: finger i's target is in this frame
@@ -246,6 +250,7 @@ struct SetTargets {
 struct SetMode {
   static const uint8_t kId = 0x11;
   static const uint8_t kSize = 26;
+  static const uint8_t kReplyId = 0xF0;  // ack
   static constexpr float kDutyScale = 0.001f;
   static constexpr float kEffortScale = 0.001f;
   uint8_t mask;  // [0, 31]; bit i set: finger i's mode is in this frame
@@ -259,6 +264,7 @@ struct SetMode {
 struct SetTelemetry {
   static const uint8_t kId = 0x12;
   static const uint8_t kSize = 2;
+  static const uint8_t kReplyId = 0xF0;  // ack
   uint16_t rate_hz;  // Hz; [0, 1000]
 };
 
@@ -275,6 +281,7 @@ struct SetTelemetry {
 struct Move {
   static const uint8_t kId = 0x13;
   static const uint8_t kSize = 34;
+  static const uint8_t kReplyId = 0x83;  // moving
   static constexpr float kValueScale = 1e-06f;
   static constexpr float kDurationScale = 0.001f;
   uint16_t move_id;  // chosen by the host, a new one for every move: a resend repeats it
@@ -288,6 +295,7 @@ struct Move {
 struct GetGains {
   static const uint8_t kId = 0x20;
   static const uint8_t kSize = 1;
+  static const uint8_t kReplyId = 0xA0;  // gains
   uint8_t finger;  // [0, 4]
 };
 
@@ -296,6 +304,7 @@ struct GetGains {
 struct SetGains {
   static const uint8_t kId = 0x21;
   static const uint8_t kSize = 27;
+  static const uint8_t kReplyId = 0xF0;  // ack
   static constexpr float kDeadbandDutyScale = 0.001f;
   static constexpr float kMaxDutyScale = 0.001f;
   static constexpr float kPretensionDutyScale = 0.001f;
@@ -314,6 +323,7 @@ struct SetGains {
 struct GetLimits {
   static const uint8_t kId = 0x22;
   static const uint8_t kSize = 1;
+  static const uint8_t kReplyId = 0xA2;  // limits
   uint8_t finger;  // [0, 4]
 };
 
@@ -323,6 +333,7 @@ struct GetLimits {
 struct SetLimits {
   static const uint8_t kId = 0x23;
   static const uint8_t kSize = 27;
+  static const uint8_t kReplyId = 0xF0;  // ack
   static constexpr float kStallTimeScale = 0.001f;
   uint8_t finger;  // [0, 4]
   float theta2_min;  // rad; [-3.2, 3.2]
@@ -338,6 +349,7 @@ struct SetLimits {
 struct GetSafety {
   static const uint8_t kId = 0x24;
   static const uint8_t kSize = 0;
+  static const uint8_t kReplyId = 0xA4;  // safety
 };
 
 // set_safety (0x25, host to board, reply ack, idempotent)
@@ -345,6 +357,7 @@ struct GetSafety {
 struct SetSafety {
   static const uint8_t kId = 0x25;
   static const uint8_t kSize = 3;
+  static const uint8_t kReplyId = 0xF0;  // ack
   static constexpr float kHeartbeatTimeoutScale = 0.001f;
   uint16_t heartbeat_timeout;  // x 0.001; s; [0.05, 10.0]
   uint8_t safe_action;  // SafeAction
@@ -354,6 +367,7 @@ struct SetSafety {
 struct GetFingerConfig {
   static const uint8_t kId = 0x26;
   static const uint8_t kSize = 1;
+  static const uint8_t kReplyId = 0xA6;  // finger_config
   uint8_t finger;  // [0, 4]
 };
 
@@ -363,6 +377,7 @@ struct GetFingerConfig {
 struct SetFingerConfig {
   static const uint8_t kId = 0x27;
   static const uint8_t kSize = 8;
+  static const uint8_t kReplyId = 0xF0;  // ack
   uint8_t finger;  // [0, 4]
   uint8_t actuation;  // Actuation
   float encoder_offset;  // rad; [-6.3, 6.3]; encoder reading at Joint-2 angle 0
@@ -374,6 +389,7 @@ struct SetFingerConfig {
 struct GetMotion {
   static const uint8_t kId = 0x28;
   static const uint8_t kSize = 1;
+  static const uint8_t kReplyId = 0xA8;  // motion
   uint8_t finger;  // [0, 4]
 };
 
@@ -384,6 +400,7 @@ struct GetMotion {
 struct SetMotion {
   static const uint8_t kId = 0x29;
   static const uint8_t kSize = 17;
+  static const uint8_t kReplyId = 0xF0;  // ack
   uint8_t finger;  // [0, 4]
   float max_speed;  // rad/s; [0.1, 100.0]; largest Joint-2 speed a move may ask for
   float max_accel;  // rad/s^2; [0.1, 10000.0]; largest Joint-2 acceleration a move may ask for
@@ -396,6 +413,7 @@ struct SetMotion {
 struct SaveConfig {
   static const uint8_t kId = 0x30;
   static const uint8_t kSize = 0;
+  static const uint8_t kReplyId = 0xF0;  // ack
 };
 
 // load_config (0x31, host to board, reply ack, idempotent)
@@ -403,6 +421,7 @@ struct SaveConfig {
 struct LoadConfig {
   static const uint8_t kId = 0x31;
   static const uint8_t kSize = 1;
+  static const uint8_t kReplyId = 0xF0;  // ack
   uint8_t source;  // ConfigSource
 };
 
@@ -413,6 +432,7 @@ struct LoadConfig {
 struct CalibrateZero {
   static const uint8_t kId = 0x32;
   static const uint8_t kSize = 1;
+  static const uint8_t kReplyId = 0xF0;  // ack
   uint8_t mask;  // [0, 31]
 };
 
@@ -423,6 +443,7 @@ struct CalibrateZero {
 struct ClearFaults {
   static const uint8_t kId = 0x33;
   static const uint8_t kSize = 1;
+  static const uint8_t kReplyId = 0xF0;  // ack
   uint8_t mask;  // [0, 31]
 };
 
@@ -430,18 +451,21 @@ struct ClearFaults {
 struct GetState {
   static const uint8_t kId = 0x34;
   static const uint8_t kSize = 0;
+  static const uint8_t kReplyId = 0x90;  // state
 };
 
 // get_stats (0x35, host to board, reply stats, idempotent)
 struct GetStats {
   static const uint8_t kId = 0x35;
   static const uint8_t kSize = 0;
+  static const uint8_t kReplyId = 0xB5;  // stats
 };
 
 // reset_stats (0x36, host to board, reply ack, idempotent)
 struct ResetStats {
   static const uint8_t kId = 0x36;
   static const uint8_t kSize = 0;
+  static const uint8_t kReplyId = 0xF0;  // ack
 };
 
 // get_status (0x37, host to board, reply status, idempotent)
@@ -450,6 +474,7 @@ struct ResetStats {
 struct GetStatus {
   static const uint8_t kId = 0x37;
   static const uint8_t kSize = 0;
+  static const uint8_t kReplyId = 0x93;  // status
 };
 
 // identity (0x81, board to host)
