@@ -14,6 +14,7 @@ Angles on the command line are in degrees (Joint-2 angle), and say so; the API i
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -25,10 +26,9 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from utrf.emulator import EmulatedBoard, EmulatorError, HarnessError, PlantError
-from utrf.models.geometry import GeometryError
+from utrf.models.geometry import GeometryError, HandGeometry
 
 EXIT_BAD_INPUT = 2
-FINGER_NAMES = ("thumb", "index", "middle", "ring", "little")
 
 COMMANDS_HELP = """\
 commands (angles in degrees, fingers 0..4 or thumb/index/middle/ring/little):
@@ -48,17 +48,24 @@ commands (angles in degrees, fingers 0..4 or thumb/index/middle/ring/little):
   help, quit"""
 
 
+@functools.cache
+def _finger_names() -> tuple[str, ...]:
+    """The fingers' names as the shipped hand file gives them (their one home)."""
+    return tuple(f.name for f in HandGeometry.default().fingers)
+
+
 def _finger(text: str) -> int:
-    if text in FINGER_NAMES:
-        return FINGER_NAMES.index(text)
+    names = _finger_names()
+    if text in names:
+        return names.index(text)
     try:
         f = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(
-            f"finger must be 0..4 or one of {', '.join(FINGER_NAMES)}, got {text!r}"
+            f"finger must be 0..{len(names) - 1} or one of {', '.join(names)}, got {text!r}"
         ) from None
-    if not 0 <= f <= 4:
-        raise argparse.ArgumentTypeError(f"finger must be 0..4, got {f}")
+    if not 0 <= f < len(names):
+        raise argparse.ArgumentTypeError(f"finger must be 0..{len(names) - 1}, got {f}")
     return f
 
 
