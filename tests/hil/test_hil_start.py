@@ -46,7 +46,7 @@ def test_missing_tracker_package_writes_nothing(
     for _ in range(2):
         assert main(argv) == 2
         err = capsys.readouterr().err
-        assert "pip install -e '.[bench]'" in err and "already holds" not in err
+        assert "pip install -e '.[rig]'" in err and "already holds" not in err
         assert not out.exists()
 
 

@@ -2,7 +2,7 @@
 
     python -m utrf.hil.readme_table --update hil/README.md     # make hil-readme
 
-Runs the static loading on the emulated bench as ``utrf hil static-loading --emulated
+Runs the static loading on the emulated rig as ``utrf hil static-loading --emulated
 --seed 0 --force`` does (the paper's schedule: 0.5-3 kg, three repeats), driven in simulated
 time, so the same code gives the same figures on every machine, and writes the section
 between its markers (``utrf.benchdoc``). ``tests/hil/test_readme_table.py`` runs it again
@@ -26,22 +26,26 @@ COMMAND = "utrf hil static-loading --emulated --seed 0 --out out/static --force"
 
 
 def run_seed0(out: Path) -> dict[str, Any]:
-    """The seed-0 run of the paper's schedule on the emulated bench; its results."""
-    from utrf.hil import static_loading as sl
-    from utrf.hil.bench import BENCH_ACTUATOR, EmulatedTruth, open_emulated
+    """The seed-0 run of the paper's schedule on the emulated rig; its results."""
+    from utrf.hil.rig import RIG_ACTUATOR, EmulatedTruth, open_emulated
+    from utrf.hil.static_loading import analysis, run
+    from utrf.hil.static_loading.config import StaticLoadingConfig
     from utrf.models.geometry import HandGeometry
 
-    config = sl.StaticLoadingConfig(
-        seed=0, emulated=True, force=True, actuator_rating_n=BENCH_ACTUATOR.stall_force_n
+    config = StaticLoadingConfig(
+        seed=0, emulated=True, force=True, actuator_rating_n=RIG_ACTUATOR.stall_force_n
     )
     truth = EmulatedTruth()
     geometry = HandGeometry.default().fingers[config.finger].geometry
-    bench = open_emulated(seed=0, tracked_finger=config.finger, truth=truth)
+    rig = open_emulated(seed=0, tracked_finger=config.finger, truth=truth)
     try:
-        sl.prepare_output(out, config, resume=False, extra_meta={"emulated_truth": truth.to_json()})
-        return sl.run(bench, config, out, geometry=geometry, progress=lambda _s: None)
+        run.prepare_output(
+            out, config, resume=False, extra_meta={"emulated_truth": truth.to_json()}
+        )
+        run.run(rig, config, out, geometry=geometry, progress=lambda _s: None)
     finally:
-        bench.close()
+        rig.close()
+    return analysis.analyse(out, geometry=geometry)
 
 
 def section(result: dict[str, Any]) -> str:

@@ -7,8 +7,8 @@ the straight finger, y toward flexion, origin at Joint 1; ``docs/architecture.md
 fitted by :func:`register` from the sensor's positions at known finger poses.
 
 - :class:`NDIAuroraTracker`: an NDI Aurora (or Polaris) through ``scikit-surgerynditracker``,
-  an optional dependency (``pip install 'utrf[bench]'``; in a checkout
-  ``pip install -e '.[bench]'``) imported only when one is opened.
+  an optional dependency (``pip install 'utrf[rig]'``; in a checkout
+  ``pip install -e '.[rig]'``) imported only when one is opened.
 - :class:`SimulatedTracker`: for the emulated board. It reads the plant's true fingertip,
   places it in a tracker frame of its own (a rotation and an offset the run does not know),
   and adds seeded Gaussian noise, so registration and calibration have something to find.
@@ -26,7 +26,7 @@ import numpy as np
 
 NDI_PACKAGE = "scikit-surgerynditracker"
 NDI_INSTALL = (
-    "pip install 'utrf[bench]' (an installed utrf), or pip install -e '.[bench]' "
+    "pip install 'utrf[rig]' (an installed utrf), or pip install -e '.[rig]' "
     "(in a checkout of the repository)"
 )
 
