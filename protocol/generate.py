@@ -1,14 +1,15 @@
 """Generate the protocol bindings from protocol/spec.toml (the single source of truth).
 
-    python protocol/generate.py            # write every output
-    python protocol/generate.py --check    # exit 1 and name the outputs that are stale
+    python -m protocol.generate            # write every output (from the repository's root)
+    python -m protocol.generate --check    # exit 1 and name the outputs that are stale
 
 Outputs (all committed):
   firmware/src/generated/protocol_messages.h   C++11 structs, constants, decode/encode (AVR + host)
   host/utrf/protocol/messages.py               Python dataclasses in SI units
   protocol/README.md                           the message tables between the GENERATED markers
 
-Standard library only, so it runs before the Python package is installed.
+Standard library only (with tools.generated), so it runs before the Python package is
+installed.
 """
 
 from __future__ import annotations
@@ -27,6 +28,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from tools.generated import write_or_check
+
+COMMAND = "python -m protocol.generate"
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SPEC_PATH = REPO_ROOT / "protocol" / "spec.toml"
 HEADER_PATH = REPO_ROOT / "firmware" / "src" / "generated" / "protocol_messages.h"
@@ -1518,25 +1522,9 @@ def main(argv: list[str] | None = None) -> int:
     except SpecError as exc:
         print(f"generate: error: {exc}", file=sys.stderr)
         return 2
-    stale = []
-    for path, text in rendered.items():
-        current = path.read_text(encoding="utf-8") if path.exists() else None
-        if current == text:
-            continue
-        rel = path.relative_to(REPO_ROOT)
-        if args.check:
-            stale.append(str(rel))
-        else:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(text, encoding="utf-8")
-            print(f"generate: wrote {rel}")
-    if stale:
-        print(
-            "generate: stale (run `python protocol/generate.py`): " + ", ".join(stale),
-            file=sys.stderr,
-        )
-        return 1
-    return 0
+    return write_or_check(
+        rendered, check=args.check, tool="generate", command=COMMAND, root=REPO_ROOT
+    )
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from utrf.benchdoc import cpu_name, write_section
+from tools.doc_sections import cpu_name, write_section
 from utrf.emulator import DEFAULT_ELF, EmulatedBoard
 from utrf.hand import Hand
 from utrf.protocol import messages as m
@@ -134,7 +134,7 @@ def report(lat: dict[int, dict], sweep: list[dict], args: argparse.Namespace, to
         BEGIN,
         "## Client",
         "",
-        f"Measured with `make bench-client` (`python tools/bench_client.py`) on {cpu_name()}, "
+        f"Measured with `make bench-client` (`python -m tools.bench_client`) on {cpu_name()}, "
         f"Python {platform.python_version()}, {date.today().isoformat()}: the real firmware "
         "(`build/firmware/utrf.elf`) on the driven emulated board, a `Hand` over a `SimLink`, "
         f"times in simulated seconds; {took:.0f} s of wall time in all.",

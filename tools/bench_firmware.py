@@ -1,6 +1,6 @@
 """Firmware benchmark: memory, the control tick's CPU load, and the PID's step figures.
 
-    python tools/bench_firmware.py [--update docs/benchmarks.md] [--seconds 2]
+    python -m tools.bench_firmware [--update docs/benchmarks.md] [--seconds 2]
 
 Run by `make bench-firmware`, which builds the ELF, the host library and the simavr harness
 first. Every figure is measured here:
@@ -24,7 +24,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from utrf.benchdoc import cpu_name, write_section
+from tools.doc_sections import cpu_name, write_section
 
 REPO = Path(__file__).resolve().parents[1]
 ELF = REPO / "build" / "firmware" / "utrf.elf"
@@ -35,8 +35,6 @@ END = "<!-- END firmware -->"
 CPU_HZ = 16_000_000
 TICK_CYCLES = CPU_HZ // 1000
 TARGET = 0.15  # issue 11 goal 4: the tick at most 15 % of the CPU at its worst
-
-sys.path.insert(0, str(REPO / "tests" / "firmware"))
 
 
 def run(cmd: list[str]) -> str:
@@ -60,7 +58,7 @@ def memory() -> dict[str, int]:
 
 
 def table() -> list[str]:
-    out = run([sys.executable, "-m", "utrf.firmware_table", "--check"])
+    out = run([sys.executable, "-m", "tools.kinematics_table", "--check"])
     return [ln for ln in out.splitlines() if ln.startswith(("geometry", "total"))]
 
 
@@ -81,7 +79,7 @@ def tick_load(scenario: str, seconds: float) -> dict:
 def step_figures() -> list[tuple[float, dict[str, float]]]:
     import ctypes
 
-    import fwsim
+    from tests.firmware import fwsim  # the host build's driver, shared with the firmware tests
 
     lib = fwsim.load_library(fwsim.build_library())
     rows = []

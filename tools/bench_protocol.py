@@ -2,7 +2,7 @@
 ATmega2560 in simavr), the AVR footprint of framing and the generated codec, and Link's round
 trip over TCP loopback.
 
-    make protocol-bench          # or: .venv/bin/python tools/bench_protocol.py
+    make protocol-bench          # or: .venv/bin/python -m tools.bench_protocol
 
 Prints a Markdown section and writes it into docs/benchmarks.md between the protocol markers
 (the rest of that file is left alone).
@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from utrf.benchdoc import cpu_name, write_section
+from tools.doc_sections import cpu_name, write_section
 from utrf.protocol import Link
 from utrf.protocol import messages as M
 from utrf.protocol.framing import MAX_BODY_BYTES, Frame, FrameDecoder, encode_frame

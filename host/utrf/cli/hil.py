@@ -171,9 +171,7 @@ def _open(args: argparse.Namespace, tracked: int, truth: Any = None) -> Any:
     from utrf.hil import rig
 
     if args.emulated:
-        return rig.open_emulated(
-            seed=args.seed, tracked_finger=tracked, truth=truth, elf=args.elf
-        )
+        return rig.open_emulated(seed=args.seed, tracked_finger=tracked, truth=truth, elf=args.elf)
     from utrf.hil.tracker import NDIAuroraTracker
 
     tracker = NDIAuroraTracker(args.tracker_port, sensor=args.tracker_sensor)
