@@ -1,4 +1,4 @@
-"""A bench run that cannot start writes nothing, so the same command can simply be run again;
+"""A rig run that cannot start writes nothing, so the same command can simply be run again;
 the reason is one line on stderr and exit 2 (no traceback)."""
 
 from __future__ import annotations

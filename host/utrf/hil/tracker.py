@@ -1,4 +1,4 @@
-"""Tip tracking for the bench runs: an electromagnetic tracker's sensor on the fingertip.
+"""Tip tracking for the rig runs: an electromagnetic tracker's sensor on the fingertip.
 
 A :class:`Tracker` gives :class:`TrackerSample` s: the sensor's position in the tracker's own
 frame (3D, m), a timestamp and whether the sensor was seen (``visible``) with the tracker's
@@ -69,7 +69,7 @@ class NewFrames:
 
 
 class Tracker(Protocol):
-    """What a bench run needs of a tracker. ``rate_hz``: how many frames a second it
+    """What a rig run needs of a tracker. ``rate_hz``: how many frames a second it
     measures (None: a new one at every read)."""
 
     rate_hz: float | None
