@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -70,9 +71,22 @@ def tick_addresses() -> tuple[str, str]:
     return entry, dis[call + 1].split(":")[0].strip()
 
 
+def loop_address() -> str:
+    nm = run(["avr-nm", "-C", str(ELF)])
+    return next(ln.split()[0] for ln in nm.splitlines() if ln.endswith(" utrf::app::loop()"))
+
+
 def tick_load(scenario: str, seconds: float) -> dict:
     entry, ret = tick_addresses()
-    out = run([str(BENCH), str(ELF), scenario, str(seconds), entry, ret])
+    env = {**os.environ, "UTRF_LOOP_ENTRY": loop_address()}
+    out = subprocess.run(
+        [str(BENCH), str(ELF), scenario, str(seconds), entry, ret],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        check=True,
+        env=env,
+    ).stdout
     return json.loads(out.strip().splitlines()[-1])
 
 
@@ -175,7 +189,7 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         BEGIN,
         "## Firmware",
         "",
-        f"Measured with `make bench-firmware` (`python tools/bench_firmware.py`) on "
+        f"Measured with `make bench-firmware` (`python -m tools.bench_firmware`) on "
         f"{cpu_name()}, avr-gcc 5.4 (Debian), simavr 1.6, {now}.",
         "",
         "### Memory (`avr-size -A build/firmware/utrf.elf`)",
@@ -192,12 +206,13 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         "### Control tick (five fingers in POSITION, 1 kHz = 16,000 cycles)",
         "",
         f"simavr runs the ELF {seconds:g} s per row (after 0.3 s of start-up and a reset_stats),"
-        " the encoders sweeping ±0.4 rad at 1.3 Hz, the state stream at 500 Hz. *firmware*: "
+        " the encoders sweeping ±0.4 rad at 1.3 Hz, the state stream at 500 Hz (1 kHz in the "
+        "moves row, 10 s). *firmware*: "
         "its own figures (get_stats; timer 2 and timer 1, around app::tick() in the timer "
         "interrupt, nested UART/ADC interrupts included). *simavr*: cycles from app::tick()'s "
         "entry to its return, counted by the simulator; *own* is that less the interrupts "
         "served while it ran (*nested*: the UART's receive interrupt, one a byte; the "
-        "transmitter's and timer 0's wait for the tick's end), each counted from the step that "
+        "transmitter's too; timer 0's waits for the tick's end), each counted from the step that "
         "accepts it to its reti. *whole interrupt*: the timer interrupt that runs the tick, "
         "from its vector to its reti (register saves, the tick's timing and bookkeeping "
         "included). Target: at most 15 % (2,400 cycles). The tick is plain C++ (no assembly).",
@@ -211,6 +226,7 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         "typical": "set_targets at 200 Hz",
         "stress": "set_targets back to back (line saturated)",
         "silent": "none: the host falls silent, HOLD at the heartbeat timeout",
+        "moves": "1 kHz stream, a five-finger move every 0.4 s, heartbeats",
     }
     for d in loads:
         fm, fw = d["tick_mean_us"] * 16, d["tick_worst_us"] * 16
@@ -226,14 +242,16 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         )
     lines += [
         "",
-        "| host traffic | state frames / dropped | rx frames / overruns | "
-        "interrupts nested in the tick |",
-        "|---|---|---|---|",
+        "| host traffic | state frames / dropped / seq gaps | rx frames / overruns | "
+        "interrupts nested in the tick | loop() passes / longest |",
+        "|---|---|---|---|---|",
     ]
     for d in loads:
         lines.append(
-            f"| {what[d['scenario']]} | {d['state_frames']} / {d['tx_dropped']} | "
-            f"{d['rx_frames']} / {d['rx_overruns']} | {d['sim_nested_interrupts']:,} |"
+            f"| {what[d['scenario']]} | {d['state_frames']} / {d['tx_dropped']} / "
+            f"{d['state_seq_gaps']} | {d['rx_frames']} / {d['rx_overruns']} | "
+            f"{d['sim_nested_interrupts']:,} | {d['loop_passes']:,} / "
+            f"{d['loop_worst_cycles']:,} cycles ({d['loop_worst_cycles'] / 16e3:.1f} ms) |"
         )
     lines += ["", *verdict(loads), *silent_verdict(loads), ""]
     lines += [
@@ -262,6 +280,7 @@ def main(argv: list[str] | None = None) -> int:
     mem = memory()
     tbl = table()
     loads = [tick_load(s, args.seconds) for s in ("idle", "typical", "stress", "silent")]
+    loads.append(tick_load("moves", max(args.seconds, 10.0)))  # issue 11 goal 2: 10 s at 1 kHz
     steps = step_figures()
     section = render(mem, tbl, loads, steps, args.seconds)
     print(section)

@@ -8,6 +8,10 @@ Runs the static loading on the emulated rig as ``utrf hil static-loading --emula
 time, so the same code gives the same figures on every machine, and writes the section
 between its markers (``tools.doc_sections``). ``tests/tools/test_hil_readme.py`` runs it
 again and fails when the committed section is not what the run gives.
+
+The firmware it runs is built with build id 0 (``make hil-readme`` builds it so): the id is
+the git commit, and its bytes in the identify reply shift the simulated run's timing, so a
+table from a firmware carrying the commit would go stale with every commit.
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ END = "<!-- END hil-static-seed0 -->"
 COMMAND = "utrf hil static-loading --emulated --seed 0 --out out/static --force"
 
 
-def run_seed0(out: Path) -> dict[str, Any]:
+def run_seed0(out: Path, elf: str | None = None) -> dict[str, Any]:
     """The seed-0 run of the paper's schedule on the emulated rig; its results."""
     from utrf.hil.rig import RIG_ACTUATOR, EmulatedTruth, open_emulated
     from utrf.hil.static_loading import analysis, run
@@ -41,7 +45,7 @@ def run_seed0(out: Path) -> dict[str, Any]:
     )
     truth = EmulatedTruth()
     geometry = HandGeometry.default().fingers[config.finger].geometry
-    rig = open_emulated(seed=0, tracked_finger=config.finger, truth=truth)
+    rig = open_emulated(seed=0, tracked_finger=config.finger, truth=truth, elf=elf)
     try:
         run.prepare_output(
             out, config, resume=False, extra_meta={"emulated_truth": truth.to_json()}
@@ -112,9 +116,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--check", action="store_true", help="exit 1 if the section is stale")
     p.add_argument("--print", action="store_true", help="print the section, write nothing")
     p.add_argument("--out", type=Path, help="keep the run here (default: a temporary folder)")
+    p.add_argument("--elf", help="the firmware to run (make hil-readme: one with build id 0)")
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
-        result = run_seed0(args.out or Path(tmp) / "static")
+        result = run_seed0(args.out or Path(tmp) / "static", elf=args.elf)
     text = section(result)
     if not math.isfinite(result["error"]["mean_m"]):
         print("hil_readme: the run gave no figures", file=sys.stderr)

@@ -24,9 +24,12 @@ generate: setup
 kinematics-table: setup
 	$(PY) -m tools.kinematics_table
 
+# The firmware it runs has build id 0: the id (the git commit) is in the identify reply, whose
+# bytes shift the simulated run's timing, so the table would otherwise change with every commit.
 hil-readme: setup
-	@$(SUBMAKE) firmware emulator
-	$(PY) -m tools.hil_readme
+	@$(SUBMAKE) emulator
+	@$(SUBMAKE) BUILD=$(BUILD)/id0 FW_GIT_ID= $(BUILD)/id0/firmware/utrf.elf
+	$(PY) -m tools.hil_readme --elf $(BUILD)/id0/firmware/utrf.elf
 
 # Pictures, not text: their bytes follow the matplotlib version, so no test compares them and
 # `make generate` leaves them alone.

@@ -95,6 +95,18 @@ struct Bench {
     // Optional profile (UTRF_TICK_PROFILE=file): own cycles per instruction address, of the
     // tick and of the timer interrupt around it.
     std::vector<uint64_t> profile;
+    // loop()'s passes (UTRF_LOOP_ENTRY=<hex byte address of app::loop()>): cycles from one
+    // entry to the next, the worst and when it began; with UTRF_LOOP_PROFILE=file, cycles per
+    // instruction address of the worst pass (interrupts included).
+    uint32_t loop_entry = 0;
+    uint64_t loop_start = 0;
+    uint64_t loop_worst = 0;
+    uint64_t loop_worst_at = 0;
+    uint64_t loop_passes = 0;
+    bool measuring = false;
+    std::vector<uint64_t> pass_profile;
+    std::vector<uint32_t> pass_touched;  // addresses of pass_profile to clear at the next pass
+    std::vector<std::pair<uint32_t, uint64_t>> worst_profile;
 };
 
 Bench g;
@@ -229,6 +241,27 @@ void run_until(double t_end) {
                 if (g.tick_nested > g.sim_nested_worst) g.sim_nested_worst = g.tick_nested;
             }
         }
+        if (g.loop_entry) {
+            if (!g.pass_profile.empty() && pc0 < g.pass_profile.size()) {
+                if (g.pass_profile[pc0] == 0) g.pass_touched.push_back(pc0);
+                g.pass_profile[pc0] += g.avr->cycle - c0;
+            }
+            if (g.avr->pc == g.loop_entry) {
+                const uint64_t c = g.avr->cycle - g.loop_start;
+                if (g.measuring && g.loop_start) {
+                    ++g.loop_passes;
+                    if (c > g.loop_worst) {
+                        g.loop_worst = c;
+                        g.loop_worst_at = g.loop_start;
+                        g.worst_profile.clear();
+                        for (uint32_t a : g.pass_touched) g.worst_profile.push_back({a, g.pass_profile[a]});
+                    }
+                }
+                for (uint32_t a : g.pass_touched) g.pass_profile[a] = 0;
+                g.pass_touched.clear();
+                g.loop_start = g.avr->cycle;
+            }
+        }
         if (!g.to_board.empty() && g.xon && g.avr->cycle >= g.next_byte_cycle) {
             avr_raise_irq(in, g.to_board.front());
             g.to_board.pop_front();
@@ -355,7 +388,7 @@ int main(int argc, char** argv) {
     const std::string scenario = argv[2];
     const double seconds = atof(argv[3]);
     if (scenario != "idle" && scenario != "typical" && scenario != "stress" &&
-        scenario != "silent" && scenario != "pins") {
+        scenario != "silent" && scenario != "pins" && scenario != "moves") {
         fprintf(stderr, "tick_bench: unknown scenario %s\n", scenario.c_str());
         return 2;
     }
@@ -401,7 +434,7 @@ int main(int argc, char** argv) {
     }
     send(mode);
     proto::SetTelemetry tel;
-    tel.rate_hz = 500;
+    tel.rate_hz = scenario == "moves" ? 1000 : 500;
     send(tel);
     run_until(0.3);
     send(proto::ResetStats());
@@ -412,6 +445,12 @@ int main(int argc, char** argv) {
     g.isr_count = g.isr_sum = g.isr_worst = 0;
     const char* profile_path = getenv("UTRF_TICK_PROFILE");
     if (profile_path && *profile_path) g.profile.assign(256 * 1024, 0);
+    const char* loop_entry = getenv("UTRF_LOOP_ENTRY");
+    if (loop_entry && *loop_entry) g.loop_entry = (uint32_t)strtoul(loop_entry, nullptr, 16);
+    const char* loop_profile = getenv("UTRF_LOOP_PROFILE");
+    if (g.loop_entry && loop_profile && *loop_profile) g.pass_profile.assign(256 * 1024, 0);
+    g.measuring = true;
+    uint16_t move_id = 0;
     const uint32_t frames_before = g.state_frames;
     const uint32_t gaps_before = g.state_gaps;
     const double t0 = g.avr->cycle / kCpuHz;
@@ -422,6 +461,27 @@ int main(int argc, char** argv) {
         if (scenario == "stress") {
             if (g.to_board.size() < 64) send(targets(t));
             run_until(t + 0.0005);
+        } else if (scenario == "moves") {
+            // A move of all five fingers every 0.4 s (0.3 s paths, ends alternating), set_targets
+            // at 100 Hz in between would end them: heartbeats at 20 Hz instead.
+            if (t >= next_send) {
+                const int k = (int)lround((next_send - t0) / 0.05 + 40e-6);
+                if (k % 8 == 0) {
+                    proto::Move m;
+                    m.move_id = ++move_id;
+                    m.kind = (uint8_t)proto::TargetKind::JOINT2_ANGLE;
+                    m.mask = 0x1F;
+                    for (int f = 0; f < 5; ++f) {
+                        m.value[f] = (move_id & 1) ? 600000 : -300000;
+                        m.duration[f] = 300;
+                    }
+                    send(m);
+                } else {
+                    send(proto::Heartbeat());
+                }
+                next_send += 0.05 + 40e-6;
+            }
+            run_until(next_send < t + 0.0005 ? next_send : t + 0.0005);
         } else if (scenario == "silent") {
             run_until(t + 0.0005);
         } else {
@@ -465,6 +525,20 @@ int main(int argc, char** argv) {
         fclose(pf);
         g.profile.clear();
     }
+    g.measuring = false;
+    if (!g.worst_profile.empty()) {
+        FILE* pf = fopen(loop_profile, "w");
+        if (!pf) {
+            fprintf(stderr, "tick_bench: cannot write %s\n", loop_profile);
+            return 1;
+        }
+        fprintf(pf, "# byte address, cycles in loop()'s longest pass (%llu cycles)\n",
+                (unsigned long long)g.loop_worst);
+        for (const auto& e : g.worst_profile) {
+            fprintf(pf, "%x %llu\n", e.first, (unsigned long long)e.second);
+        }
+        fclose(pf);
+    }
     // Let the board work off what it has received, then ask for its counters. A lone 0x00
     // first ends whatever partial frame the board holds (the queue was cut mid-frame).
     g.to_board.clear();
@@ -486,7 +560,8 @@ int main(int argc, char** argv) {
            "\"sim_own_mean_cycles\": %.1f, \"sim_nested_worst_cycles\": %llu, "
            "\"sim_nested_mean_cycles\": %.1f, \"sim_nested_interrupts\": %llu, "
            "\"sim_isr_mean_cycles\": %.1f, \"sim_isr_worst_cycles\": %llu, "
-           "\"sim_isr_ticks\": %llu}\n",
+           "\"sim_isr_ticks\": %llu, \"loop_passes\": %llu, \"loop_worst_cycles\": %llu, "
+           "\"loop_worst_at_s\": %.6f}\n",
            scenario.c_str(), seconds, (unsigned)s.ticks, (unsigned)s.tick_overruns,
            (unsigned)s.tick_worst, (unsigned)s.tick_mean, (unsigned)s.rx_frames,
            (unsigned)s.rx_crc_errors, (unsigned)s.rx_framing_errors, (unsigned)s.rx_overruns,
@@ -495,6 +570,7 @@ int main(int argc, char** argv) {
            sim_mean, (unsigned long long)sim_own_worst, sim_own_mean,
            (unsigned long long)sim_nested_worst, sim_nested_mean,
            (unsigned long long)sim_nested_count, isr_mean, (unsigned long long)isr_worst,
-           (unsigned long long)isr_ticks);
+           (unsigned long long)isr_ticks, (unsigned long long)g.loop_passes,
+           (unsigned long long)g.loop_worst, g.loop_worst_at / kCpuHz);
     return 0;
 }

@@ -18,6 +18,7 @@ from utrf.hil.rig import EmulatedTruth, open_emulated
 from utrf.hil.runs import RunError
 
 
+@pytest.mark.slow
 def test_hits_are_found_and_the_grasp_recovers(
     firmware_elf: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
