@@ -148,6 +148,19 @@ def test_calibration_finds_the_emulated_truth(finished) -> None:
 
 
 @pytest.mark.slow
+def test_analyse_gives_the_runs_results_from_the_files_alone(finished, capsys) -> None:
+    """``utrf hil analyse`` shares the run's analysis: from the logs it writes the same results
+    and the figure again, and prints the table."""
+    out, _, _, _ = finished
+    before = json.loads((out / "results.json").read_text())
+    (out / "results.json").unlink()
+    (out / report.FIGURE).unlink()
+    assert main(["hil", "analyse", str(out)]) == 0
+    assert json.loads((out / "results.json").read_text()) == before
+    assert (out / report.FIGURE).exists()
+    assert "calibration: effective tendon modulus" in capsys.readouterr().out
+
+
 def test_an_undithered_encoder_carries_its_resolution(firmware_elf: Path, tmp_path: Path) -> None:
     """Without encoder noise the quantiser is not dithered and the hold parks a loaded
     finger at a count's edge: the fit is biased low (hil/README.md: -8 % over 12 seeds),
