@@ -24,6 +24,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <algorithm>
 #include <deque>
 #include <vector>
 #include <string>
@@ -103,10 +104,18 @@ struct Bench {
     uint64_t loop_worst = 0;
     uint64_t loop_worst_at = 0;
     uint64_t loop_passes = 0;
+    bool profile_all = false;  // UTRF_LOOP_PROFILE_ALL: every cycle of the run, not one pass
     bool measuring = false;
     std::vector<uint64_t> pass_profile;
     std::vector<uint32_t> pass_touched;  // addresses of pass_profile to clear at the next pass
     std::vector<std::pair<uint32_t, uint64_t>> worst_profile;
+    // Round trips (the latency scenario): from the request's first byte on the line to its
+    // reply's last byte off it, in cycles, per message id.
+    int rt_seq = -1;          // the request waiting for its reply
+    uint8_t rt_id = 0;
+    uint64_t rt_start = 0;
+    bool rt_started = false;  // its first byte went out
+    std::vector<uint64_t> rt_ping, rt_targets;
 };
 
 Bench g;
@@ -137,10 +146,17 @@ void adc_trigger(avr_irq_t*, uint32_t value, void*) {
     avr_raise_irq(avr_io_getirq(g.avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + ch), mv);
 }
 
+bool g_trace = false;
 void uart_out(avr_irq_t*, uint32_t value, void*) {
+    if (g_trace && g.rt_seq >= 0) fprintf(stderr, "  out %02x at %llu\n", value, (unsigned long long)(g.avr->cycle - g.rt_start));
     const framing::RxEvent ev = g.decoder.feed((uint8_t)value);
     if (ev != framing::RxEvent::FRAME) return;
     const uint8_t id = g.decoder.msg_id();
+    if (g.rt_seq >= 0 && g.decoder.seq() == (uint8_t)g.rt_seq && g.rt_started) {
+        const uint64_t c = g.avr->cycle - g.rt_start;
+        (g.rt_id == proto::Ping::kId ? g.rt_ping : g.rt_targets).push_back(c);
+        g.rt_seq = -1;
+    }
     if (id == proto::MsgId::STATE && (g.decoder.seq() & proto::kBoardSeqFlag)) {
         ++g.state_frames;
         if (g.last_state_seq >= 0 && g.decoder.seq() != proto::next_board_seq((uint8_t)g.last_state_seq)) {
@@ -223,6 +239,10 @@ void run_until(double t_end) {
                 pc0 < g.profile.size()) {
                 g.profile[pc0] += g.avr->cycle - c0;
             }
+            if (g_trace && g.rt_seq >= 0 && g.rt_started && g.avr->pc == g.tick_entry && !g.in_tick)
+                fprintf(stderr, " tick at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
+            if (g_trace && g.rt_seq >= 0 && g.rt_started && g.avr->pc == g.tick_return && g.in_tick && g.nest_depth == 0)
+                fprintf(stderr, " tickend at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
             if (g.avr->pc == g.tick_entry && !g.in_tick) {
                 g.in_tick = true;
                 g.tick_start = g.avr->cycle;
@@ -247,6 +267,7 @@ void run_until(double t_end) {
                 g.pass_profile[pc0] += g.avr->cycle - c0;
             }
             if (g.avr->pc == g.loop_entry) {
+                if (g_trace && g.rt_seq >= 0 && g.rt_started) fprintf(stderr, " loop at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
                 const uint64_t c = g.avr->cycle - g.loop_start;
                 if (g.measuring && g.loop_start) {
                     ++g.loop_passes;
@@ -257,12 +278,19 @@ void run_until(double t_end) {
                         for (uint32_t a : g.pass_touched) g.worst_profile.push_back({a, g.pass_profile[a]});
                     }
                 }
-                for (uint32_t a : g.pass_touched) g.pass_profile[a] = 0;
-                g.pass_touched.clear();
+                if (!g.profile_all) {
+                    for (uint32_t a : g.pass_touched) g.pass_profile[a] = 0;
+                    g.pass_touched.clear();
+                }
                 g.loop_start = g.avr->cycle;
             }
         }
         if (!g.to_board.empty() && g.xon && g.avr->cycle >= g.next_byte_cycle) {
+            if (g_trace && g.rt_seq >= 0) fprintf(stderr, "  in at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
+            if (g.rt_seq >= 0 && !g.rt_started) {
+                g.rt_started = true;
+                g.rt_start = g.avr->cycle;
+            }
             avr_raise_irq(in, g.to_board.front());
             g.to_board.pop_front();
             g.next_byte_cycle = g.avr->cycle + kByteCycles;
@@ -388,7 +416,8 @@ int main(int argc, char** argv) {
     const std::string scenario = argv[2];
     const double seconds = atof(argv[3]);
     if (scenario != "idle" && scenario != "typical" && scenario != "stress" &&
-        scenario != "silent" && scenario != "pins" && scenario != "moves") {
+        scenario != "silent" && scenario != "pins" && scenario != "moves" &&
+        scenario != "latency") {
         fprintf(stderr, "tick_bench: unknown scenario %s\n", scenario.c_str());
         return 2;
     }
@@ -434,7 +463,7 @@ int main(int argc, char** argv) {
     }
     send(mode);
     proto::SetTelemetry tel;
-    tel.rate_hz = scenario == "moves" ? 1000 : 500;
+    tel.rate_hz = (scenario == "moves" || scenario == "latency") ? 1000 : 500;
     send(tel);
     run_until(0.3);
     send(proto::ResetStats());
@@ -449,6 +478,8 @@ int main(int argc, char** argv) {
     if (loop_entry && *loop_entry) g.loop_entry = (uint32_t)strtoul(loop_entry, nullptr, 16);
     const char* loop_profile = getenv("UTRF_LOOP_PROFILE");
     if (g.loop_entry && loop_profile && *loop_profile) g.pass_profile.assign(256 * 1024, 0);
+    g.profile_all = getenv("UTRF_LOOP_PROFILE_ALL") != nullptr;
+    g_trace = getenv("UTRF_TRACE") != nullptr;
     g.measuring = true;
     uint16_t move_id = 0;
     const uint32_t frames_before = g.state_frames;
@@ -482,6 +513,26 @@ int main(int argc, char** argv) {
                 next_send += 0.05 + 40e-6;
             }
             run_until(next_send < t + 0.0005 ? next_send : t + 0.0005);
+        } else if (scenario == "latency") {
+            // One request at a time, ping and set_targets in turn, each sent when the last one
+            // was answered plus 0.5-3 ms (a fixed irrational-ish step: every phase of the
+            // tick and of the stream comes round).
+            if (g.rt_seq < 0 && t >= next_send) {
+                g.rt_started = false;
+                if ((g.rt_ping.size() + g.rt_targets.size()) % 2 == 0) {
+                    send(proto::Ping());
+                    g.rt_id = proto::Ping::kId;
+                } else {
+                    send(targets(t));
+                    g.rt_id = proto::SetTargets::kId;
+                }
+                g.rt_seq = g.seq;
+                static double phase = 0.0;
+                phase = fmod(phase + 0.6180339887, 1.0);
+                next_send = t + 0.0005 + 0.0025 * phase;
+            }
+            if (g.rt_seq >= 0) next_send = g.avr->cycle / kCpuHz + 0.0005;
+            run_until(g.avr->cycle / kCpuHz + 0.00002);
         } else if (scenario == "silent") {
             run_until(t + 0.0005);
         } else {
@@ -526,6 +577,26 @@ int main(int argc, char** argv) {
         g.profile.clear();
     }
     g.measuring = false;
+    if (g.profile_all) {
+        g.worst_profile.clear();
+        for (uint32_t a : g.pass_touched) g.worst_profile.push_back({a, g.pass_profile[a]});
+    }
+    auto pct = [](std::vector<uint64_t> v, double q) -> double {
+        if (v.empty()) return 0.0;
+        std::sort(v.begin(), v.end());
+        const size_t i = (size_t)std::min<double>(v.size() - 1, floor(q * (v.size() - 1) + 0.5));
+        return v[i] / kCpuHz * 1e6;
+    };
+    char rt[512] = "";
+    if (scenario == "latency") {
+        snprintf(rt, sizeof rt,
+                 ", \"ping_n\": %zu, \"ping_median_us\": %.1f, \"ping_p99_us\": %.1f, "
+                 "\"ping_max_us\": %.1f, \"targets_n\": %zu, \"targets_median_us\": %.1f, "
+                 "\"targets_p99_us\": %.1f, \"targets_max_us\": %.1f",
+                 g.rt_ping.size(), pct(g.rt_ping, 0.5), pct(g.rt_ping, 0.99), pct(g.rt_ping, 1.0),
+                 g.rt_targets.size(), pct(g.rt_targets, 0.5), pct(g.rt_targets, 0.99),
+                 pct(g.rt_targets, 1.0));
+    }
     if (!g.worst_profile.empty()) {
         FILE* pf = fopen(loop_profile, "w");
         if (!pf) {
@@ -561,7 +632,7 @@ int main(int argc, char** argv) {
            "\"sim_nested_mean_cycles\": %.1f, \"sim_nested_interrupts\": %llu, "
            "\"sim_isr_mean_cycles\": %.1f, \"sim_isr_worst_cycles\": %llu, "
            "\"sim_isr_ticks\": %llu, \"loop_passes\": %llu, \"loop_worst_cycles\": %llu, "
-           "\"loop_worst_at_s\": %.6f}\n",
+           "\"loop_worst_at_s\": %.6f%s}\n",
            scenario.c_str(), seconds, (unsigned)s.ticks, (unsigned)s.tick_overruns,
            (unsigned)s.tick_worst, (unsigned)s.tick_mean, (unsigned)s.rx_frames,
            (unsigned)s.rx_crc_errors, (unsigned)s.rx_framing_errors, (unsigned)s.rx_overruns,
@@ -571,6 +642,6 @@ int main(int argc, char** argv) {
            (unsigned long long)sim_nested_worst, sim_nested_mean,
            (unsigned long long)sim_nested_count, isr_mean, (unsigned long long)isr_worst,
            (unsigned long long)isr_ticks, (unsigned long long)g.loop_passes,
-           (unsigned long long)g.loop_worst, g.loop_worst_at / kCpuHz);
+           (unsigned long long)g.loop_worst, g.loop_worst_at / kCpuHz, rt);
     return 0;
 }

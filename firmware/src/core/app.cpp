@@ -151,13 +151,12 @@ bool report_faults(Board& b) {
     return false;
 }
 
-// The board's own frames, one per pass, in priority order: faults, the status, the state
-// stream's oldest sample. A frame starts only into an empty transmit buffer, so a reply waits
-// behind at most one; once two samples wait (loop() or the line fell a period behind) the
-// next goes out whenever the buffer has room for it.
+// The board's own frames, in priority order: faults, the status, the state stream's samples.
+// A frame starts only into an empty transmit buffer, so a reply waits behind at most one; once
+// two samples wait (loop() or the line fell a period behind), the waiting samples go out in
+// this pass, back to back, as far as the buffer has room.
 void board_frames(Board& b) {
     poll_status(b);
-    const uint8_t pending = b.hand.stream_pending();
     const bool idle = tx_idle(b);
     if (idle && report_faults(b)) return;
     if (idle && b.status_pending) {
@@ -167,6 +166,7 @@ void board_frames(Board& b) {
         b.status_pending = false;
         return;
     }
+    uint8_t pending = b.hand.stream_pending();
     if (pending == 0) return;
     if (pending < 2) {
         // A request is coming in: its reply goes first, onto a free line. The state waits (it
@@ -174,18 +174,20 @@ void board_frames(Board& b) {
         const bool request_coming =
             b.decoder.in_frame() && b.hand.ticks() - b.rx_frame_tick < kRequestHoldTicks;
         if (!idle || request_coming) return;
-    } else if (b.reply_len != 0 || hal::serial_tx_room() < framing::kMaxFrameBytes) {
-        return;
     }
-    const hand::StateSample& s = b.hand.stream_oldest();
-    for (uint8_t k = 0; k < s.skipped; ++k) {  // dropped samples: their seqs skipped
-        ++b.link.tx_dropped;
-        b.board_seq = proto::next_board_seq(b.board_seq);
+    while (pending != 0 && b.reply_len == 0 &&
+           hal::serial_tx_room() >= framing::kMaxFrameBytes) {
+        const hand::StateSample& s = b.hand.stream_oldest();
+        for (uint8_t k = 0; k < s.skipped; ++k) {  // dropped samples: their seqs skipped
+            ++b.link.tx_dropped;
+            b.board_seq = proto::next_board_seq(b.board_seq);
+        }
+        uint8_t frame[framing::kMaxFrameBytes];
+        const uint8_t n = dispatch::write_state_frame(b, b.board_seq, s, frame);
+        b.hand.stream_pop();
+        send_board_frame(b, frame, n);
+        --pending;
     }
-    uint8_t frame[framing::kMaxFrameBytes];
-    const uint8_t n = dispatch::write_state_frame(b, b.board_seq, s, frame);
-    b.hand.stream_pop();
-    send_board_frame(b, frame, n);
 }
 
 }  // namespace

@@ -97,10 +97,16 @@ void Path::next_segment() {
 void Path::plan_next() {
     // Only loop() writes the planning fields and sets next_ready_; the tick clears it and
     // stop() ends the path: read the flag and the path's state under the lock.
+    // Without the lock first: plan_left_ is loop()'s own and next_ready_ a byte, and most
+    // passes have nothing to do.
+    if (plan_left_ == 0 || next_ready_) return;
     hal::tick_lock();
-    const bool todo = left_ != 0 && !next_ready_ && plan_left_ != 0;
+    const bool todo = left_ != 0 && !next_ready_;
     hal::tick_unlock();
-    if (!todo) return;
+    if (!todo) {
+        plan_left_ = 0;  // the path ended early (a stop): nothing more to plan
+        return;
+    }
     const uint8_t n = plan_left_ < plan_n_ ? (uint8_t)plan_left_ : plan_n_;
     const uint32_t acc = plan_acc_ + inc_ * n;
     const uint16_t after = (uint16_t)(plan_left_ - n);

@@ -70,7 +70,7 @@ Plan plan(float distance_rad, float duration_s, int16_t end_bu, const Limits& k)
 
 class Path {
    public:
-    Path() : left_(0), seg_left_(0), next_ready_(0) {}
+    Path() : left_(0), seg_left_(0), next_ready_(0), plan_left_(0) {}
     bool active() const { return left_ != 0; }
     uint16_t left() const { return left_; }  // ticks to go
     int16_t feedforward() const { return ff_; }
