@@ -253,7 +253,7 @@ class SimulatedTracker:
 # -- NDI -------------------------------------------------------------------------------------
 def _import_ndi() -> Any:
     try:
-        from sksurgerynditracker.nditracker import NDITracker  # type: ignore[import-not-found]
+        from sksurgerynditracker.nditracker import NDITracker
     except ImportError as exc:
         raise TrackerError(
             f"the NDI tracker needs the optional package {NDI_PACKAGE}, which is not "

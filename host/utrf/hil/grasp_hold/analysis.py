@@ -85,9 +85,9 @@ def analyse(out: Path, hand_geometry: HandGeometry | None = None) -> dict[str, A
     names = [f.name for f in geometry.fingers]
     rows = read_samples(out, names)
     if not rows:
-        result = {"experiment": "grasp hold (paper Sec. IV-C)", "samples": 0}
-        write_json(out / "results.json", result)
-        return result
+        empty: dict[str, Any] = {"experiment": "grasp hold (paper Sec. IV-C)", "samples": 0}
+        write_json(out / "results.json", empty)
+        return empty
     t = np.array([float(r["time_s"]) for r in rows])
     base = t < config.baseline_s
     end = t >= t[-1] - config.baseline_s

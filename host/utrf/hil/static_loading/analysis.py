@@ -221,7 +221,8 @@ def calibrate(
     names = ["modulus", "tip_offset"]
     fit = calibration.fit(data, geometry, fit_params=names)
     modulus = fit.params.geometry.tendon_youngs_modulus_pa
-    sd_stat = fit.std_errors["modulus"]
+    sd = fit.std_errors["modulus"]
+    sd_stat = sd if isinstance(sd, float) else None  # one parameter: a number, or None (no fit)
     # The same fit if the encoder were perfect: the tracker's noise alone, taken as the paired
     # samples' spread across the tip's Jacobian (the tracker's noise is isotropic in the plane).
     across = np.array([[-j[1], j[0]] / np.hypot(*j) for j in jac])
