@@ -5,17 +5,14 @@ default 20), and the seed corpora up to date with protocol/vectors."""
 from __future__ import annotations
 
 import os
-import sys
 from collections.abc import Callable
 from pathlib import Path
 
+import make_seeds  # tests/fuzz: on the path as this test's folder (pytest's rootdir insertion)
 import pytest
+import runfuzz
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-
-import make_seeds  # noqa: E402
-import runfuzz  # noqa: E402
 
 SECONDS = float(os.environ.get("FUZZ_TEST_SECONDS", "20"))
 

@@ -40,7 +40,7 @@ generate = _load("generate")
 
 def test_generated_files_are_fresh() -> None:
     result = subprocess.run(
-        [sys.executable, "protocol/generate.py", "--check"],
+        [sys.executable, "-m", "protocol.generate", "--check"],
         cwd=REPO_ROOT,
         capture_output=True,
         text=True,
@@ -50,7 +50,7 @@ def test_generated_files_are_fresh() -> None:
 
 def test_vectors_are_fresh() -> None:
     result = subprocess.run(
-        [sys.executable, "protocol/make_vectors.py", "--check"],
+        [sys.executable, "-m", "protocol.make_vectors", "--check"],
         cwd=REPO_ROOT,
         capture_output=True,
         text=True,

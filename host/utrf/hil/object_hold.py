@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from utrf.datalog import CsvLog
-from utrf.hil.static_loading import RunError, _write_json
+from utrf.hil.runs import RunError, write_json
 from utrf.models import objects
 
 G = 9.81
@@ -138,7 +138,7 @@ def run(
     plant = MujocoPlant(obj=obj, seed=config.seed, timestep=1e-3)
     # palm up (the model's gravity, −z) while the hand closes: the object rests on the palm
     out.mkdir(parents=True, exist_ok=True)
-    _write_json(out / "meta.json", {"config": asdict(config), "object": asdict(obj)})
+    write_json(out / "meta.json", {"config": asdict(config), "object": asdict(obj)})
     board = EmulatedBoard(elf, realtime=False, seed=config.seed, plant=plant, exchange_period=1e-3)
     hit_columns = ["time_s", "jx_ns", "jy_ns", "jz_ns", "duration_s"]
     with (
@@ -164,7 +164,7 @@ def run(
     result["effort"] = effort
     result["closed_contact_forces_n"] = [float(x) for x in closed_forces]
     result["picture"] = str(picture) if picture else None
-    _write_json(out / "results.json", result)
+    write_json(out / "results.json", result)
     return result
 
 
