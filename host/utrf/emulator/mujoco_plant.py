@@ -60,7 +60,7 @@ def twin_layout(params: PlantParams) -> mjcf.Layout:
         moving_mass_kg=mot.moving_mass_kg,
         coulomb_friction_n=mot.coulomb_friction_n,
         viscous_friction_n_s_m=mot.viscous_friction_n_s_m,
-        stroke_m=tuple(mot.stroke_m),
+        stroke_m=(float(mot.stroke_m[0]), float(mot.stroke_m[1])),
     )
     return dataclasses.replace(mjcf.load_layout(), motor=motor)
 

@@ -25,6 +25,8 @@ from matplotlib.patches import FancyBboxPatch
 from utrf.models import kinematics
 from utrf.models.geometry import FingerGeometry, HandGeometry
 
+#: Joint-2 angles, one a finger (rad)
+Angles = Sequence[float] | np.ndarray
 MEASURED = "#1f5fa8"
 TARGET = "#d2691e"
 
@@ -100,9 +102,7 @@ def draw_pose(
     return path
 
 
-def _draw_front(
-    front: Any, hand: HandGeometry, measured: Sequence[float], target: Sequence[float]
-) -> None:
+def _draw_front(front: Any, hand: HandGeometry, measured: Angles, target: Angles) -> None:
     """The drawn front view (when the MuJoCo hand cannot be rendered)."""
     palm = FancyBboxPatch(
         (-62, -70), 112, 160, boxstyle="round,pad=2,rounding_size=18", fc="#f1e4d8", ec="#b09070"
@@ -129,9 +129,7 @@ def _draw_front(
     front.tick_params(labelsize=7)
 
 
-def _pose_panels(
-    fig: Any, grid: Any, hand: HandGeometry, measured: Sequence[float], target: Sequence[float]
-) -> None:
+def _pose_panels(fig: Any, grid: Any, hand: HandGeometry, measured: Angles, target: Angles) -> None:
     """The numbers, the key and each finger's side view."""
     n = len(hand.fingers)
     # the numbers, for people: degrees

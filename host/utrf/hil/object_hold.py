@@ -107,7 +107,8 @@ class ObjectHoldConfig:
         for t in slots:
             u = rng.normal(size=3)
             u /= np.linalg.norm(u)
-            out.append((float(t), tuple(float(x) for x in self.impulse_n_s * u)))
+            j = self.impulse_n_s * u
+            out.append((float(t), (float(j[0]), float(j[1]), float(j[2]))))
         return out
 
 
@@ -131,6 +132,7 @@ def run(
     from utrf.emulator import EmulatedBoard
     from utrf.emulator.mujoco_plant import MujocoPlant
     from utrf.hand import Hand
+    from utrf.hand.simlink import SimLink
 
     if (out / "object_samples.csv").exists():
         raise RunError(f"{out} already holds an object hold; give a new --out")
@@ -149,7 +151,8 @@ def run(
     ):
         # the board's output is read once a sample, not every millisecond (the samples' rate
         # is all this run needs; the telemetry still arrives whole)
-        hand.link.pump_interval_s = 1.0 / config.sample_hz
+        if isinstance(hand.link, SimLink):
+            hand.link.pump_interval_s = 1.0 / config.sample_hz
         s = _Sampler(hand, board, plant, config, log)
         closed_forces, effort = _close(hand, s, config, progress)
         picture = _picture(plant, out / "object_hold.png") if config.picture else None
