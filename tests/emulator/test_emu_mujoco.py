@@ -169,7 +169,7 @@ def test_a_tip_force_ramps_and_the_motors_are_the_plants() -> None:
     assert plant.applied_force[[0, 1, 3, 4]].max() == 0.0
     with pytest.raises(Exception, match="ramp_s"):
         plant.set_tip_force(2, (0.0, 0.0), ramp_s=-1.0)
-    from utrf.hil.bench import BENCH_ACTUATOR
+    from utrf.hil.rig import RIG_ACTUATOR as BENCH_ACTUATOR
 
     bench = MujocoPlant(params=PlantParams(motor=BENCH_ACTUATOR), timestep=1e-3)
     aid = bench.model.actuator("index_motor_a").id
