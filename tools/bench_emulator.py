@@ -143,9 +143,10 @@ def driven(elf: Path, seconds: float, telemetry_hz: int, plant: str = "analytic"
         }
 
 
-def grasp_hold_wall(seconds: float) -> dict:
+def grasp_hold_wall(seconds: float, obj: str | None = None) -> dict:
     """``utrf hil grasp-hold --emulated --duration-s SECONDS`` as a user runs it (a fresh
-    process: start-up, imports and the figure included): its wall time."""
+    process: start-up, imports and the figure included): its wall time. ``obj``: the object
+    hold on the MuJoCo hand (``--object OBJ``, its rendered picture included)."""
     import resource
     import subprocess
     import tempfile
@@ -154,13 +155,15 @@ def grasp_hold_wall(seconds: float) -> dict:
         out = str(Path(tmp) / "run")
         cmd = [sys.executable, "-m", "utrf", "hil", "grasp-hold", "--emulated",
                "--duration-s", f"{seconds:g}", "--out", out, "--quiet"]  # fmt: skip
+        if obj is not None:
+            cmd += ["--object", obj]
         t0 = time.perf_counter()
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         done = subprocess.run(cmd, capture_output=True, text=True, check=False)
         wall = time.perf_counter() - t0
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
-    return {"seconds": seconds, "wall": wall, "cpu": cpu, "ok": done.returncode == 0,
+    return {"seconds": seconds, "wall": wall, "cpu": cpu, "ok": done.returncode == 0, "obj": obj,
             "error": done.stderr.strip().splitlines()[-1:] if done.returncode else []}  # fmt: skip
 
 
@@ -284,7 +287,7 @@ def driven_rows(runs: list[dict], seconds: float) -> list[str]:
 def report(
     runs: list[dict],
     mj_runs: list[dict],
-    grasp: dict | None,
+    grasp: list[dict],
     ticks: list[dict],
     rt: dict,
     apart: dict,
@@ -307,18 +310,16 @@ def report(
         "|---|---|",
         *driven_rows(runs, seconds),
         *(driven_rows(mj_runs, seconds) if mj_runs else []),
-        *(
-            [
-                f"| `utrf hil grasp-hold --emulated --duration-s {grasp['seconds']:g}` (a fresh "
-                f"process: start-up and figure included) | **{grasp['wall']:.1f} s** wall "
-                f"({grasp['seconds'] / grasp['wall']:.1f}x real time); {grasp['cpu']:.1f} s of "
-                f"CPU time ({grasp['seconds'] / grasp['cpu']:.1f}x"
-                + ("" if grasp["ok"] else f"; FAILED: {' '.join(grasp['error'])}")
-                + ") |"
-            ]
-            if grasp
-            else []
-        ),
+        *[
+            f"| `utrf hil grasp-hold --emulated --duration-s {g['seconds']:g}"
+            + (f" --object {g['obj']}` (the MuJoCo hand" if g["obj"] else "` (analytic plant")
+            + f"; a fresh process: start-up and picture included) | **{g['wall']:.1f} s** wall "
+            f"({g['seconds'] / g['wall']:.1f}x real time); {g['cpu']:.1f} s of "
+            f"CPU time ({g['seconds'] / g['cpu']:.1f}x"
+            + ("" if g["ok"] else f"; FAILED: {' '.join(g['error'])}")
+            + ") |"
+            for g in grasp
+        ],
         f"| served (`realtime=True`), a `Link` client on TCP, 500 Hz telemetry, {seconds:g} s | "
         f"{rt['rtf']:.3f}x (paced to the wall clock) |",
         f"| ... how fast it could have run meanwhile (simulated s per busy s) | "
@@ -404,7 +405,11 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     runs = [driven(args.elf, args.seconds, 500) for _ in range(args.runs)]
     mj_runs = [driven(args.elf, args.seconds, 500, plant="mujoco") for _ in range(args.runs)]
-    grasp = grasp_hold_wall(args.grasp_seconds) if args.grasp_seconds > 0 else None
+    grasp = (
+        [grasp_hold_wall(args.grasp_seconds), grasp_hold_wall(args.grasp_seconds, "ball")]
+        if args.grasp_seconds > 0
+        else []
+    )
     ticks = [tick_load(args.elf, k, 500) for k in range(6)] + [tick_load(args.elf, 5, 0)]
     rt = realtime(args.elf, args.seconds)
     apart = served_apart(args.elf, args.seconds)

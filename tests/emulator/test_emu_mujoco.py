@@ -131,3 +131,46 @@ def test_fingers_closing_on_an_object_press_on_it(firmware_elf: Path) -> None:
         assert b.theta2[1:].max() < 1.6  # stopped by the ball, short of full flexion
         p1, _ = plant.object_pose()
         assert np.linalg.norm(p1 - p0) < 2e-3
+
+
+def _stretch(params: PlantParams, force_n: float) -> float:
+    """The index's coupling stretch (m) under a settled tip load: how far the joints leave the
+    rigid coupling (R1 θ1 = R2 θ2 = R3 θ3), which only the elastic coupling tendons allow."""
+    plant = MujocoPlant(params=params, timestep=1e-3)
+    plant.set_theta2(1, 0.6)
+    plant.model.opt.gravity[:] = 0.0
+    brake = np.zeros((5, 2, 4))
+    brake[:, :, 1:] = 1.0  # IN1, IN2 and STBY high: short brake
+    plant.set_tip_force(1, (0.0, -force_n), ramp_s=0.05)
+    for _ in range(600):
+        plant.step(1e-3, brake.reshape(-1))
+    q = plant.theta[1] * plant.R[1]  # each joint's tendon displacement
+    return float(np.abs(np.diff(q)).sum())
+
+
+def test_the_hidden_modulus_is_the_twins_tendon_stiffness() -> None:
+    """The emulated truth's coupling modulus builds the twin's elastic tendons: at half the
+    geometry's modulus, the same tip load stretches them twice as far."""
+    stiff = _stretch(PlantParams(coupling_modulus_pa=200e9, encoder=QUIET.encoder), 10.0)
+    soft = _stretch(PlantParams(coupling_modulus_pa=100e9, encoder=QUIET.encoder), 10.0)
+    assert stiff > 1e-7
+    assert soft / stiff == pytest.approx(2.0, rel=0.15)
+
+
+def test_a_tip_force_ramps_and_the_motors_are_the_plants() -> None:
+    plant = MujocoPlant(params=PlantParams(motor=PlantParams().motor), timestep=1e-3)
+    plant.set_tip_force(2, (3.0, -4.0), ramp_s=0.1)
+    for _ in range(50):
+        plant.step(1e-3)
+    np.testing.assert_allclose(plant.applied_force[2], (1.5, -2.0), atol=0.05)
+    for _ in range(60):
+        plant.step(1e-3)
+    np.testing.assert_allclose(plant.applied_force[2], (3.0, -4.0), atol=1e-9)
+    assert plant.applied_force[[0, 1, 3, 4]].max() == 0.0
+    with pytest.raises(Exception, match="ramp_s"):
+        plant.set_tip_force(2, (0.0, 0.0), ramp_s=-1.0)
+    from utrf.hil.rig import RIG_ACTUATOR as BENCH_ACTUATOR
+
+    bench = MujocoPlant(params=PlantParams(motor=BENCH_ACTUATOR), timestep=1e-3)
+    aid = bench.model.actuator("index_motor_a").id
+    assert bench.model.actuator_forcerange[aid, 1] == pytest.approx(BENCH_ACTUATOR.stall_force_n)

@@ -70,3 +70,48 @@ def test_bad_objects_are_named(tmp_path: Path) -> None:
         objects.add_object(xml, "ball", (0, 0, 0.3))
     with pytest.raises(objects.ObjectError, match="unit quaternion"):
         objects.add_object(mjcf.hand_xml(), "ball", (0, 0, 0.3), (1, 1, 0, 0))
+
+
+def test_each_object_says_how_the_hand_takes_it() -> None:
+    """Placement and grasp are data: every object of the library rests on the palm-up hand
+    (its lowest point on the palm's top face, z = 0) with a grasp pose of the pose library."""
+    from utrf.poses import PoseLibrary
+
+    poses = PoseLibrary.load(include_user=False)
+    for obj in objects.load_objects().values():
+        pose = poses.get(obj.grasp_pose or "")
+        assert pose is not None and pose.grasp is not None, obj.name
+        assert obj.rest_position_m is not None
+        xml = objects.add_object(mjcf.hand_xml(), obj, obj.rest_position_m, obj.rest_quat)
+        model = mujoco.MjModel.from_xml_string(xml)
+        data = mujoco.MjData(model)
+        mujoco.mj_forward(model, data)
+        lowest = data.geom(obj.name).xpos[2] - _half_height(model, data, obj.name)
+        assert lowest == pytest.approx(0.0, abs=5e-4), obj.name
+
+
+def _half_height(model: mujoco.MjModel, data: mujoco.MjData, name: str) -> float:
+    """The geom's half extent along world z (its axis-aligned box)."""
+    geom = model.geom(name)
+    rot = data.geom(name).xmat.reshape(3, 3)
+    size = np.array(geom.size)
+    if geom.type[0] == mujoco.mjtGeom.mjGEOM_SPHERE:
+        return float(size[0])
+    if geom.type[0] == mujoco.mjtGeom.mjGEOM_CYLINDER:
+        axis = rot[:, 2]
+        return float(size[1] * abs(axis[2]) + size[0] * np.hypot(axis[0], axis[1]))
+    return float(np.abs(rot[2]) @ size)
+
+
+def test_bad_grasp_data_is_named(tmp_path: Path) -> None:
+    path = tmp_path / "o.toml"
+    base = '[object.can]\nshape = "sphere"\nsize_m = [0.1]\nmass_kg = 1\nfriction = 1\n'
+    path.write_text(base + 'rest_axis = "w"\n')
+    with pytest.raises(objects.ObjectError, match=r"\[object.can\]: rest_axis must be one of"):
+        objects.load_objects(path)
+    path.write_text(base + "grasp_effort = 1.5\n")
+    with pytest.raises(objects.ObjectError, match=r"grasp_effort must lie in \(0, 1\]"):
+        objects.load_objects(path)
+    path.write_text(base + "rest_position_m = [0, 0]\n")
+    with pytest.raises(objects.ObjectError, match=r"rest_position_m must be 3 finite numbers"):
+        objects.load_objects(path)

@@ -92,7 +92,7 @@ def register(subparsers: Any) -> None:
         default=None,
         metavar="N_S",
         help="each emulated hammer hit's impulse in newton-seconds (N·s; default 0.3 on a "
-        "fingertip, 0.02 on an --object)",
+        "fingertip; on an --object, its mass x 0.025 m/s)",
     )
     g.add_argument(
         "--tracked-finger", default="index", help="the finger carrying the tracker's sensor"

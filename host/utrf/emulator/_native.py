@@ -204,6 +204,9 @@ MJ_STATE_FIELDS: tuple[tuple[str, tuple[int, ...]], ...] = (
     ("load_body", (MJ_LOADS,)),
     ("load_site", (MJ_LOADS,)),
     ("load_force", (MJ_LOADS, 3)),
+    ("load_from", (MJ_LOADS, 3)),
+    ("load_t0", (MJ_LOADS,)),
+    ("load_t1", (MJ_LOADS,)),
 )
 
 

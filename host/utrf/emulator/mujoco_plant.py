@@ -11,13 +11,14 @@ actuators' forces, and Joint 2's angle becomes the AS5600's analog voltage
 MuJoCo knows (poses, contacts, the object) is live in :attr:`MujocoPlant.data`.
 
 Gravity is the model's, −z in the world (for index..little, −y of the finger frame, as on the
-bench); ``PlantParams.gravity_m_s2 == (0, 0)`` turns it off. The analytic plant's coupling
-modulus (``PlantParams.coupling_modulus_pa``) has no meaning here: the coupling tendons'
-stiffness is the geometry's.
+bench); ``PlantParams.gravity_m_s2 == (0, 0)`` turns it off. The coupling tendons are
+elastic (stiffness from E, A and each segment's length): their modulus is the geometry's, or
+``PlantParams.coupling_modulus_pa`` (the emulated truth's hidden modulus, :func:`twin_geometry`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -29,16 +30,39 @@ from utrf.emulator.plant import FINGERS, PlantError, PlantParams, _finger_index,
 from utrf.models import mjcf, objects
 from utrf.models.geometry import HandGeometry
 
-#: where the object sits, in the world frame (m), by name: resting on the palm behind the
-#: knuckle line (x < 0; the palm's top face is z = 0), where the curling fingers close over
-#: it; long objects lie across the palm (their axis along y). ASSUMED placements.
-_ACROSS = (0.7071068, 0.7071068, 0.0, 0.0)  # the object's z axis along the world's y
-OBJECT_PLACEMENT = {
-    "bottle": ((-0.040, 0.0, 0.0951), (1.0, 0.0, 0.0, 0.0)),  # standing
-    "ball": ((-0.040, 0.0, 0.0326), (1.0, 0.0, 0.0, 0.0)),
-    "box": ((-0.035, 0.0, 0.0301), _ACROSS),
-    "egg": ((-0.030, 0.0, 0.0221), _ACROSS),
-}
+IMPRATIO = 10.0
+
+
+def twin_geometry(hand: HandGeometry, params: PlantParams) -> HandGeometry:
+    """The hand the twin is built from: the model's, with the coupling tendons' modulus of
+    ``params.coupling_modulus_pa`` where one is given (a hidden truth the model does not know:
+    stiffer or softer tendons stretch less or more under a tip load)."""
+    modulus = params.coupling_modulus_pa
+    if modulus is None:
+        return hand
+    fingers = tuple(
+        dataclasses.replace(
+            f, geometry=dataclasses.replace(f.geometry, tendon_youngs_modulus_pa=modulus)
+        )
+        for f in hand.fingers
+    )
+    return dataclasses.replace(hand, fingers=fingers)
+
+
+def twin_layout(params: PlantParams) -> mjcf.Layout:
+    """The MJCF layout with the plant's motors (``params.motor``: the hand's, or the static
+    loading bench's stronger actuator), so the model's force limits, speeds and friction are
+    the ones the motor model drives."""
+    mot = params.motor
+    motor = mjcf.MotorConstants(
+        stall_force_n=mot.stall_force_n,
+        no_load_speed_m_s=mot.no_load_speed_m_s,
+        moving_mass_kg=mot.moving_mass_kg,
+        coulomb_friction_n=mot.coulomb_friction_n,
+        viscous_friction_n_s_m=mot.viscous_friction_n_s_m,
+        stroke_m=(float(mot.stroke_m[0]), float(mot.stroke_m[1])),
+    )
+    return dataclasses.replace(mjcf.load_layout(), motor=motor)
 
 
 def libmujoco_path() -> str:
@@ -74,14 +98,19 @@ class MujocoPlant:
         self.R = np.array([g.guide_radii_m for g in self.geometries])
         self.L = np.array([g.link_lengths_m for g in self.geometries])
         self.q_limits = np.array([g.q_range_m for g in self.geometries])
-        xml = mjcf.hand_xml(self.hand, drive="force")
+        xml = mjcf.hand_xml(
+            twin_geometry(self.hand, self.params), twin_layout(self.params), drive="force"
+        )
         self.object: objects.GraspObject | None = None
         if obj is not None:
             self.object = objects.get_object(obj) if isinstance(obj, str) else obj
-            pose = object_pose or OBJECT_PLACEMENT.get(self.object.name)
+            pose = object_pose
+            if pose is None and self.object.rest_position_m is not None:
+                # where it rests on the palm, as data (objects.toml)
+                pose = (self.object.rest_position_m, self.object.rest_quat)
             if pose is None:
                 raise PlantError(
-                    f"no placement known for object {self.object.name!r}: give object_pose"
+                    f"object {self.object.name!r} has no rest_position_m: give object_pose"
                 )
             xml = objects.add_object(xml, self.object, pose[0], pose[1], name="object")
             # a weld to the world: an operator's hand keeping the object in place while the
@@ -94,6 +123,11 @@ class MujocoPlant:
         self.xml = xml
         self.model = mujoco.MjModel.from_xml_string(xml)
         self.model.opt.timestep = float(timestep)
+        if self.object is not None:
+            # a grasp's friction: elliptic cones and a high impratio keep the contacts from
+            # creeping under a steady load (MuJoCo's own advice for grasping)
+            self.model.opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+            self.model.opt.impratio = IMPRATIO
         if tuple(self.params.gravity_m_s2) == (0.0, 0.0):
             self.model.opt.gravity[:] = 0.0
         self.data = mujoco.MjData(self.model)
@@ -220,7 +254,14 @@ class MujocoPlant:
 
     @property
     def applied_force(self) -> np.ndarray:
-        return self.tip_force.copy()
+        """The tip forces (N, finger frame) applied now, a ramp's present value included."""
+        out = np.zeros((FINGERS, 2))
+        now = self._native.time
+        for f in range(FINGERS):
+            i = self._slots.get(f"tip{f}")
+            if i is not None:
+                out[f] = (self.frames[f][1].T @ self._load_now(i, now))[:2]
+        return out
 
     @property
     def blocks(self) -> np.ndarray:
@@ -293,18 +334,31 @@ class MujocoPlant:
         return self.frames[f][1] @ np.array([v[0], v[1], 0.0])
 
     def set_tip_force(self, finger: int, force_n: tuple[float, float], ramp_s: float = 0.0) -> None:
-        """A steady tip force (Fx, Fy) in N, finger frame, at the tip site. The MuJoCo plant
-        applies it at once (``ramp_s`` must be 0)."""
+        """A steady tip force (Fx, Fy) in N, finger frame, at the tip site, reached linearly
+        over ``ramp_s`` from the force there now."""
         f = _finger_index(finger)
         fv = _force_vector(force_n, "tip force")
-        if ramp_s:
-            raise PlantError("the MuJoCo plant applies tip forces at once: ramp_s must be 0")
+        if not (isinstance(ramp_s, int | float) and math.isfinite(ramp_s) and ramp_s >= 0):
+            raise PlantError(f"ramp_s must be a time >= 0 s, got {ramp_s!r}")
         i = self._slot(f"tip{f}")
         st = self._st
-        st["load_body"][i] = self._link3[f] if fv.any() else -1
+        now = self._native.time
+        was = self._load_now(i, now)
+        st["load_body"][i] = self._link3[f] if (fv.any() or was.any()) else -1
         st["load_site"][i] = self._tip_site[f]
+        st["load_from"][i] = was
         st["load_force"][i] = self._world(f, fv)
+        st["load_t0"][i], st["load_t1"][i] = now, now + float(ramp_s)
         self.tip_force[f] = fv
+
+    def _load_now(self, i: int, now: float) -> np.ndarray:
+        """The world-frame force slot ``i`` applies at time ``now`` (mid-ramp included)."""
+        st = self._st
+        if st["load_body"][i] < 0:
+            return np.zeros(3)
+        span = st["load_t1"][i] - st["load_t0"][i]
+        a = 1.0 if span <= 0 else min(max((now - st["load_t0"][i]) / span, 0.0), 1.0)
+        return st["load_from"][i] + a * (st["load_force"][i] - st["load_from"][i])
 
     def hit(self, finger: int, impulse_ns: tuple[float, float], duration_s: float = 5e-3) -> None:
         """A hammer hit at the fingertip: (Jx, Jy) N s in the finger frame over ``duration_s``."""

@@ -19,10 +19,10 @@ import numpy as np
 from utrf.datalog import read_log
 from utrf.hand.client import DEFAULT_TOLERANCE, Hand
 from utrf.hand.errors import FingerFaultError, NotControlledError, NotSettledError
-from utrf.hand.figures import Segment, draw_pose, plot_trajectories
 from utrf.hand.state import HandState
 from utrf.hand.telemetry_log import log_columns
 from utrf.hand.tracking import Tracking, tracking_from_log
+from utrf.models.geometry import HandGeometry
 from utrf.poses import PoseLibrary
 
 DEFAULT_SEQUENCE = ("open", "rock-and-roll", "shaka", "fist", "open")
@@ -83,6 +83,21 @@ class _Recorder:
             return [s for s in self.samples if s.board_time >= board_time]
 
 
+def _rendered(geometry: HandGeometry, theta2: np.ndarray) -> np.ndarray | None:
+    """The MuJoCo hand at these angles, rendered off-screen; None where this machine cannot
+    render (the picture then draws the hand) or an angle was never measured."""
+    if not np.all(np.isfinite(theta2)):
+        return None
+    try:
+        from utrf.models.render import RenderError, hand_at
+    except ImportError:  # no mujoco
+        return None
+    try:
+        return hand_at(list(theta2), geometry)
+    except RenderError:
+        return None
+
+
 def run_demo(
     out_dir: str | Path,
     sequence: Sequence[str] = DEFAULT_SEQUENCE,
@@ -92,6 +107,7 @@ def run_demo(
     move_s: float | None = None,
     hold_s: float = 0.5,
     seed: int = 0,
+    plant: str = "mujoco",
     poses: PoseLibrary | None = None,
     on_connect: Callable[[Hand, object], None] | None = None,
     on_step: Callable[[Step], None] | None = None,
@@ -114,7 +130,7 @@ def run_demo(
     steps = [Step(i + 1, name) for i, name in enumerate(sequence)]
     recorder = _Recorder()
     stretched: dict[str, tuple[str, ...]] = {}
-    with EmulatedBoard(elf, realtime=True, speed=speed, pty=False, seed=seed) as board:
+    with EmulatedBoard(elf, realtime=True, speed=speed, pty=False, seed=seed, plant=plant) as board:
         # The board is up (firmware and harness found): only now is the previous run replaced,
         # so a demo that cannot start leaves the last one's files as they were.
         out.mkdir(parents=True, exist_ok=True)
@@ -152,6 +168,8 @@ def run_demo(
                 if on_step is not None:
                     on_step(step)
         factor = board.realtime_factor
+    from utrf.hand.figures import Segment, draw_pose, plot_trajectories  # matplotlib: when drawn
+
     result = DemoResult(out, steps, csv, url=url, realtime_factor=factor, stretched=stretched)
     geometry = hand.geometry
     for step in steps:
@@ -163,6 +181,7 @@ def run_demo(
             title=f"pose {step.index} of {len(steps)}: {step.name}"
             + ("" if step.settled else "  (NOT SETTLED)"),
             note=library[step.name].description,
+            rendered=_rendered(geometry, step.measured),
         )
     data = read_log(csv, log_columns(hand.fingers))
     result.tracking = tracking_from_log(data, hand.fingers)

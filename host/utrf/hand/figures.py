@@ -13,6 +13,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -24,6 +25,8 @@ from matplotlib.patches import FancyBboxPatch
 from utrf.models import kinematics
 from utrf.models.geometry import FingerGeometry, HandGeometry
 
+#: Joint-2 angles, one a finger (rad)
+Angles = Sequence[float] | np.ndarray
 MEASURED = "#1f5fa8"
 TARGET = "#d2691e"
 
@@ -64,13 +67,43 @@ def draw_pose(
     *,
     title: str,
     note: str = "",
+    rendered: np.ndarray | None = None,
 ) -> Path:
-    """Front view of the hand (the gesture) and a side view of each finger's chain at the
-    measured Joint-2 angles (solid) and the targets (dashed). Writes a PNG."""
+    """The hand (the gesture) and a side view of each finger's chain at the measured Joint-2
+    angles (solid) and the targets (dashed). Writes a PNG. ``rendered``: an image of the
+    MuJoCo hand at the measured angles (``utrf.models.render.hand_at``), shown in place of the
+    drawn front view."""
     n = len(hand.fingers)
     fig = plt.figure(figsize=(13, 9.0))
     grid = fig.add_gridspec(2, n, height_ratios=(1.7, 1.0), hspace=0.3, wspace=0.35)
     front = fig.add_subplot(grid[0, 1 : n - 1])
+    if rendered is not None:
+        front.imshow(rendered)
+        front.axis("off")
+        front.set_title("the MuJoCo hand at the measured angles (rendered)", fontsize=10)
+    else:
+        _draw_front(front, hand, measured, target)
+    _pose_panels(fig, grid, hand, measured, target)
+    fig.suptitle(title, fontsize=13)
+    fig.text(
+        0.5,
+        0.015,
+        "Side views: each finger's Joints 1-3 and tip from the kinematics model "
+        "(θ_i = q / R_i) at the measured Joint-2 angle (solid) and the target (dashed); mm."
+        + (f"\n{note}" if note else ""),
+        ha="center",
+        fontsize=8,
+        color="#444444",
+    )
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _draw_front(front: Any, hand: HandGeometry, measured: Angles, target: Angles) -> None:
+    """The drawn front view (when the MuJoCo hand cannot be rendered)."""
     palm = FancyBboxPatch(
         (-62, -70), 112, 160, boxstyle="round,pad=2,rounding_size=18", fc="#f1e4d8", ec="#b09070"
     )
@@ -94,6 +127,11 @@ def draw_pose(
     front.set_title("front view: the gesture (a flexed finger shows short)", fontsize=10)
     front.set_xlabel("mm", fontsize=8)
     front.tick_params(labelsize=7)
+
+
+def _pose_panels(fig: Any, grid: Any, hand: HandGeometry, measured: Angles, target: Angles) -> None:
+    """The numbers, the key and each finger's side view."""
+    n = len(hand.fingers)
     # the numbers, for people: degrees
     info = fig.add_subplot(grid[0, 0])
     info.axis("off")
@@ -128,22 +166,6 @@ def draw_pose(
         ax.set_title(f"{f.name}\nθ2 {m_deg:.1f}° (target {t_deg:.1f}°)", fontsize=9)
         ax.tick_params(labelsize=7)
         ax.set_xlabel("mm", fontsize=8)
-    fig.suptitle(title, fontsize=13)
-    fig.text(
-        0.5,
-        0.015,
-        "Side views: each finger's Joints 1-3 and tip from the kinematics model "
-        "(θ_i = q / R_i) at the measured Joint-2 angle (solid) and the target (dashed); mm."
-        + (f"\n{note}" if note else ""),
-        ha="center",
-        fontsize=8,
-        color="#444444",
-    )
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
 
 
 @dataclass(frozen=True)

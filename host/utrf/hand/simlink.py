@@ -55,6 +55,7 @@ class SimLink(EngineDriver):
         heartbeat_period_s: float | None = m.HEARTBEAT_PERIOD_S,
         on_telemetry: Callable[[Telemetry], None] | None = None,
     ) -> None:
+        self.pump_interval_s = PUMP_INTERVAL_S  # a caller that samples slower may widen it
         if board.realtime:
             raise ValueError(
                 "SimLink needs a driven board (EmulatedBoard(realtime=False)); "
@@ -111,7 +112,7 @@ class SimLink(EngineDriver):
         period = self.board.exchange_period
         while self.now() < end - period / 2:
             now = self.now()
-            step = min(end - now, PUMP_INTERVAL_S)
+            step = min(end - now, self.pump_interval_s)
             heartbeat = self._engine.heartbeat(now)
             if heartbeat is not None:
                 self._send(heartbeat)

@@ -32,40 +32,37 @@ from utrf.datalog import CsvLog
 from utrf.hil.runs import RunError, write_json
 from utrf.models import objects
 
-#: the pose that grasps each object of the library (a grasp pose of poses.toml)
-OBJECT_POSES = {
-    "bottle": "grasp-bottle",
-    "ball": "grasp-ball",
-    "box": "grasp-bottle",
-    "egg": "grasp-egg",
-}
 G = 9.81
 
 
 @dataclass(frozen=True)
 class ObjectHoldConfig:
     object: str = "bottle"
-    pose: str | None = None  # default: OBJECT_POSES[object]
-    effort: float | None = None  # GRASP duty limit; default: the pose's
+    pose: str | None = None  # default: the object's grasp_pose (objects.toml)
+    effort: float | None = None  # GRASP duty limit; default: the object's, else the pose's
     duration_s: float = 120.0
     hits: int = 10
-    hit_impulse_n_s: float = 0.02  # each hit's impulse on the object (N s)
+    hit_impulse_n_s: float | None = None  # each hit's impulse on the object (N s)
+    hit_dv_m_s: float = 0.025  # default impulse: this speed change of the object (a tap)
     hit_duration_s: float = 5e-3
     sample_hz: float = 100.0
     baseline_s: float = 1.0
     close_s: float = 1.5  # the fingers' way to the object
+    close_timeout_s: float = 4.0  # after close_s, the longest wait for the fingers to stop
+    squeeze_s: float = 1.0  # once the fingers have stopped on it, before letting go
+    release_s: float = 0.3  # let go, palm up, before the turn-over
     settle_s: float = 1.0  # after the turn-over, before the hold's baseline
     drop_mm: float = 20.0
     rest_mm: float = 0.5
     rest_s: float = 0.2
     seed: int = 0
     picture: bool = True
+    library: str | None = None  # an objects TOML of one's own (default: the package's)
 
     def __post_init__(self) -> None:
-        if self.object not in objects.load_objects():
-            raise RunError(
-                f"unknown object {self.object!r}; the library has {sorted(objects.load_objects())}"
-            )
+        library = objects.load_objects(self.library)
+        if self.object not in library:
+            raise RunError(f"unknown object {self.object!r}; the library has {sorted(library)}")
         if not (math.isfinite(self.duration_s) and self.duration_s >= 2 * self.baseline_s):
             raise RunError(
                 f"duration_s must be at least {2 * self.baseline_s:g} s, got {self.duration_s}"
@@ -74,14 +71,28 @@ class ObjectHoldConfig:
             raise RunError(f"effort must lie in (0, 1], got {self.effort}")
         if not 0 <= self.hits <= 10_000:
             raise RunError(f"hits must be 0..10000, got {self.hits}")
-        if not (math.isfinite(self.hit_impulse_n_s) and 0 <= self.hit_impulse_n_s <= 5):
-            raise RunError(f"hit_impulse_n_s must lie in [0, 5] N s, got {self.hit_impulse_n_s}")
+        imp = self.hit_impulse_n_s
+        if imp is not None and not (math.isfinite(imp) and 0 <= imp <= 5):
+            raise RunError(f"hit_impulse_n_s must lie in [0, 5] N s, got {imp}")
+        if not (math.isfinite(self.hit_dv_m_s) and 0 <= self.hit_dv_m_s <= 5):
+            raise RunError(f"hit_dv_m_s must lie in [0, 5] m/s, got {self.hit_dv_m_s}")
         if not 5 <= self.sample_hz <= 1000:
             raise RunError(f"sample_hz must lie in [5, 1000], got {self.sample_hz}")
 
     @property
     def pose_name(self) -> str:
-        return self.pose or OBJECT_POSES.get(self.object, "grasp-bottle")
+        return self.pose or self.grasp_object.grasp_pose or "grasp-bottle"
+
+    @property
+    def grasp_object(self) -> objects.GraspObject:
+        return objects.get_object(self.object, self.library)
+
+    @property
+    def impulse_n_s(self) -> float:
+        """Each hit's impulse: given, or the object's mass times ``hit_dv_m_s``."""
+        if self.hit_impulse_n_s is not None:
+            return self.hit_impulse_n_s
+        return self.grasp_object.mass_kg * self.hit_dv_m_s
 
     def hit_plan(self) -> list[tuple[float, tuple[float, float, float]]]:
         """Seeded hits: (time into the hold, world-frame impulse), spread over the hold after
@@ -96,7 +107,8 @@ class ObjectHoldConfig:
         for t in slots:
             u = rng.normal(size=3)
             u /= np.linalg.norm(u)
-            out.append((float(t), tuple(float(x) for x in self.hit_impulse_n_s * u)))
+            j = self.impulse_n_s * u
+            out.append((float(t), (float(j[0]), float(j[1]), float(j[2]))))
         return out
 
 
@@ -114,46 +126,121 @@ def run(
     elf: Path | None = None,
     progress: Any = print,
 ) -> dict[str, Any]:
-    """Close on the object, turn the hand over, hold under hits, record, analyse."""
+    """Close on the object, let go, turn the hand over, hold under hits, record, analyse.
+    Every phase is sampled (``object_samples.csv``, time from the hold's start: the close,
+    release and turn-over come before 0)."""
     from utrf.emulator import EmulatedBoard
     from utrf.emulator.mujoco_plant import MujocoPlant
     from utrf.hand import Hand
+    from utrf.hand.simlink import SimLink
 
     if (out / "object_samples.csv").exists():
         raise RunError(f"{out} already holds an object hold; give a new --out")
-    obj = objects.get_object(config.object)
+    obj = config.grasp_object
     plant = MujocoPlant(obj=obj, seed=config.seed, timestep=1e-3)
     # palm up (the model's gravity, −z) while the hand closes: the object rests on the palm
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "meta.json", {"config": asdict(config), "object": asdict(obj)})
     board = EmulatedBoard(elf, realtime=False, seed=config.seed, plant=plant, exchange_period=1e-3)
-    with board, Hand.emulated(board) as hand:
-        closed_forces = _close(hand, plant, config, progress)
+    hit_columns = ["time_s", "jx_ns", "jy_ns", "jz_ns", "duration_s"]
+    with (
+        board,
+        Hand.emulated(board) as hand,
+        CsvLog(out / "object_samples.csv", SAMPLE_COLUMNS) as log,
+        CsvLog(out / "object_hits.csv", hit_columns) as hit_log,
+    ):
+        # the board's output is read once a sample, not every millisecond (the samples' rate
+        # is all this run needs; the telemetry still arrives whole)
+        if isinstance(hand.link, SimLink):
+            hand.link.pump_interval_s = 1.0 / config.sample_hz
+        s = _Sampler(hand, board, plant, config, log)
+        closed_forces, effort = _close(hand, s, config, progress)
         picture = _picture(plant, out / "object_hold.png") if config.picture else None
         plant.hold_object(False)
+        s.run_until(s.t0 + config.release_s, "release")
         progress("turning the hand over: palm down, the grasp alone holds the object")
         plant.model.opt.gravity[:] = (0.0, 0.0, G)
-        hand.clock.sleep(config.settle_s)
-        _hold(hand, board, plant, config, out, progress)
+        s.run_until(s.t0 + config.release_s + config.settle_s - 1e-9, "turn")
+        if not s.fell:
+            _hold(s, config, hit_log, progress)
     result = analyse(out)
+    result["effort"] = effort
     result["closed_contact_forces_n"] = [float(x) for x in closed_forces]
     result["picture"] = str(picture) if picture else None
     write_json(out / "results.json", result)
     return result
 
 
-def _close(hand: Any, plant: Any, config: ObjectHoldConfig, progress: Any) -> np.ndarray:
-    """The grasp pose's closing fingers close on the object in GRASP with its effort, each
+class _Sampler:
+    """Samples the object and the fingers at ``sample_hz`` on the board's clock, every phase
+    alike. A row's time is from the hold's start, known once the close has ended: the close's
+    rows wait in memory until then. ``fell``: the object is far out of the hand (no need to
+    go on)."""
+
+    def __init__(self, hand: Any, board: Any, plant: Any, config: ObjectHoldConfig, log: Any):
+        self.hand, self.board, self.plant, self.log = hand, board, plant, log
+        self.period = 1.0 / config.sample_hz
+        self.fall_m = 5 * config.drop_mm * 1e-3
+        self.t0 = hand.clock.now()  # the phase's start: sample k is due at t0 + k period
+        self.k = 0
+        self.hold_start: float | None = None
+        self.pending: list[tuple[float, list[object]]] = []
+        self.ref: np.ndarray | None = None  # the object's position when it was let go
+        self.fell = False
+        self.forces = np.zeros(5)
+
+    def restart(self, hold_start: float) -> None:
+        """A new phase from now; the hold starts at ``hold_start`` (board clock)."""
+        self.t0, self.k, self.hold_start = self.hand.clock.now(), 0, hold_start
+        for now, row in self.pending:
+            self.log.write([f"{now - hold_start:.6f}", *row])
+        self.pending.clear()
+
+    def sample(self, phase: str) -> float:
+        """Wait for the next sample time, then log one row; returns the time (board clock)."""
+        self.k += 1
+        clock = self.hand.clock
+        clock.sleep(self.t0 + self.k * self.period - clock.now())
+        now = clock.now()
+        pos, quat = self.plant.object_pose()
+        self.forces = self.plant.contact_forces()
+        row: list[object] = [phase]
+        row += [f"{v:.7f}" for v in (*pos, *quat)]
+        row += [f"{v:.4f}" for v in self.forces]
+        row += [f"{v:.5f}" for v in self.board.theta2]
+        if self.hold_start is None:
+            self.pending.append((now, row))
+        else:
+            self.log.write([f"{now - self.hold_start:.6f}", *row])
+        if phase != "close":
+            if self.ref is None:
+                self.ref = pos.copy()
+            self.fell = bool(np.linalg.norm(pos - self.ref) > self.fall_m)
+        return now
+
+    def run_until(self, until: float, phase: str) -> None:
+        while self.t0 + (self.k + 1) * self.period <= until + 1e-9 and not self.fell:
+            self.sample(phase)
+
+
+def _close(
+    hand: Any, s: _Sampler, config: ObjectHoldConfig, progress: Any
+) -> tuple[np.ndarray, float]:
+    """The grasp pose's closing fingers close on the object in GRASP with the effort, each
     heading for (almost) full flexion: it stops on the object. The thumb stays open: in the
     MJCF layout it does not oppose the fingers, and closing it pushes the object off the palm
-    (measured), so the four fingers pin the object against the palm. Returns the contact
-    forces once closed."""
+    (measured), so the four fingers cage the object against the palm. Waits until the fingers
+    have stopped (they reach the object after the path's time: measured). Returns the contact
+    forces once closed and the effort."""
     from utrf.protocol import messages as m
 
+    plant = s.plant
     pose = hand.poses.get(config.pose_name)
     if pose is None or pose.grasp is None:
         raise RunError(f"pose {config.pose_name!r} is not a grasp pose")
-    effort = config.effort if config.effort is not None else pose.grasp.effort
+    effort = config.effort
+    if effort is None:
+        effort = plant.object.grasp_effort or pose.grasp.effort
     goal = pose.theta2(hand.geometry)
     closing = [i for i in range(1, 5) if goal[i] > 0.2]
     hand.clear_faults()
@@ -163,55 +250,47 @@ def _close(hand: Any, plant: Any, config: ObjectHoldConfig, progress: Any) -> np
         f"({', '.join(hand.fingers[i] for i in closing)}; GRASP, effort {effort:g})"
     )
     targets = [0.95 if i in closing else 0.0 for i in range(5)]
+    s.t0, s.k = hand.clock.now(), 0
     hand.move(
         targets, config.close_s, kind="flexion", mode=m.ControlMode.GRASP, effort=effort,
         wait=False,
     )  # fmt: skip
-    hand.clock.sleep(0.5)
-    forces = plant.contact_forces()
-    progress("closed: contact forces " + " ".join(f"{f:.1f}" for f in forces) + " N")
-    return forces
+    s.run_until(s.t0 + config.close_s, "close")
+    window = max(1, round(0.2 / s.period))
+    last: list[np.ndarray] = []
+    while hand.clock.now() < s.t0 + config.close_s + config.close_timeout_s:
+        s.sample("close")
+        last = [*last, np.array(s.board.theta2)][-window - 1 :]
+        if len(last) > window and np.abs(last[-1] - last[0]).max() < 0.005:
+            break  # still for 0.2 s: on the object, or as far as it goes
+    s.run_until(hand.clock.now() + config.squeeze_s, "close")
+    progress("closed: contact forces " + " ".join(f"{f:.1f}" for f in s.forces) + " N")
+    s.restart(hand.clock.now() + config.release_s + config.settle_s)
+    return np.asarray(s.forces), float(effort)
 
 
-def _hold(
-    hand: Any, board: Any, plant: Any, config: ObjectHoldConfig, out: Path, progress: Any
-) -> None:
+def _hold(s: _Sampler, config: ObjectHoldConfig, hit_log: Any, progress: Any) -> None:
     """Sample the object and the fingers at sample_hz, hitting the object as planned; stop
     early once the object has fallen well clear of the hand."""
+    assert s.hold_start is not None  # set by the close
     hits = config.hit_plan()
-    period = 1.0 / config.sample_hz
-    t0 = hand.clock.now()
-    start = plant.object_pose()[0]
-    k = 0
-    hit_columns = ["time_s", "jx_ns", "jy_ns", "jz_ns", "duration_s"]
-    with (
-        CsvLog(out / "object_samples.csv", SAMPLE_COLUMNS) as log,
-        CsvLog(out / "object_hits.csv", hit_columns) as hit_log,
-    ):
-        while True:
-            k += 1
-            hand.clock.sleep(t0 + k * period - hand.clock.now())
-            t = hand.clock.now() - t0
-            if t > config.duration_s:
-                break
-            while hits and hits[0][0] <= t:
-                _, imp = hits.pop(0)
-                plant.hit_object(imp, config.hit_duration_s)
-                hit_log.write([f"{t:.6f}", *imp, config.hit_duration_s])
-            pos, quat = plant.object_pose()
-            row: list[object] = [f"{t:.6f}", "baseline" if t < config.baseline_s else "hold"]
-            row += [f"{v:.7f}" for v in (*pos, *quat)]
-            row += [f"{v:.4f}" for v in plant.contact_forces()]
-            row += [f"{v:.5f}" for v in board.theta2]
-            log.write(row)
-            if np.linalg.norm(pos - start) * 1e3 > 5 * config.drop_mm:
-                progress(f"the {plant.object.name} fell out of the hand at {t:.2f} s")
-                return
-            if k % max(1, round(config.sample_hz * max(config.duration_s / 10, 1.0))) == 0:
-                progress(
-                    f"hold {t:7.1f} / {config.duration_s:g} s  object moved "
-                    f"{np.linalg.norm(pos - start) * 1e3:.2f} mm"
-                )
+    start = s.hold_start
+    report = max(1, round(config.sample_hz * max(config.duration_s / 10, 1.0)))
+    s.t0, s.k = start, 0
+    while not s.fell:
+        t_next = (s.k + 1) * s.period
+        if t_next > config.duration_s + 1e-9:
+            break
+        t = s.sample("baseline" if t_next < config.baseline_s else "hold") - start
+        while hits and hits[0][0] <= t:
+            _, imp = hits.pop(0)
+            s.plant.hit_object(imp, config.hit_duration_s)
+            hit_log.write([f"{t:.6f}", *imp, config.hit_duration_s])
+        if s.k % report == 0:
+            moved = np.linalg.norm(s.plant.object_pose()[0] - s.ref) * 1e3
+            progress(f"hold {t:7.1f} / {config.duration_s:g} s  object moved {moved:.2f} mm")
+    if s.fell:
+        progress(f"the {s.plant.object.name} fell out of the hand")
 
 
 def _picture(plant: Any, path: Path) -> Path | None:
@@ -230,14 +309,21 @@ def analyse(out: Path) -> dict[str, Any]:
     """The object hold's figures, from its logs alone."""
     meta = json.loads((out / "meta.json").read_text())
     config = ObjectHoldConfig(**meta["config"])
-    obj = objects.get_object(config.object)
+    obj = config.grasp_object
     rows = _read(out / "object_samples.csv")
     t = rows["time_s"]
     pos = np.column_stack((rows["x_m"], rows["y_m"], rows["z_m"]))
     forces = np.column_stack([rows[f"force_{n}_n"] for n in FINGERS])
-    base = pos[t < config.baseline_s].mean(axis=0) if (t < config.baseline_s).any() else pos[0]
-    disp = np.linalg.norm(pos - base, axis=1) * 1e3  # mm
-    dropped_at = next((float(t[i]) for i in range(len(t)) if disp[i] > config.drop_mm), None)
+    # let go (after the close, whose object is held in place): a drop is measured from where
+    # the grasp had it then, slip from the hold's baseline
+    free = np.asarray(rows["phase"]) != "close"
+    ref = pos[free][0] if free.any() else pos[0]
+    fall = np.linalg.norm(pos - ref, axis=1) * 1e3
+    dropped_at = next((float(t[i]) for i in np.nonzero(free)[0] if fall[i] > config.drop_mm), None)
+    in_base = (t >= 0) & (t < config.baseline_s)
+    base = pos[in_base].mean(axis=0) if in_base.any() else ref
+    held = t >= 0
+    disp = np.linalg.norm(pos[held] - base, axis=1) * 1e3  # mm
     hits_t = _read(out / "object_hits.csv").get("time_s", np.zeros(0))
     hit_rows = []
     for j, th in enumerate(hits_t):
@@ -266,11 +352,12 @@ def analyse(out: Path) -> dict[str, Any]:
         "object": obj.name,
         "pose": config.pose_name,
         "effort": config.effort,
-        "duration_s": float(t[-1]) if len(t) else 0.0,
+        "duration_s": max(float(t[-1]), 0.0) if len(t) else 0.0,
         "dropped": dropped_at is not None,
         "dropped_at_s": dropped_at,
-        "slip_mm": float(disp[-1]) if len(disp) else math.nan,
-        "largest_displacement_mm": float(disp.max()) if len(disp) else math.nan,
+        # never held: how far it fell
+        "slip_mm": float(disp[-1]) if len(disp) else float(fall[free].max(initial=0.0)),
+        "largest_displacement_mm": float(max(disp.max(initial=0.0), fall[free].max(initial=0.0))),
         "hits": hit_rows,
         "largest_contact_force_n": {n: float(f) for n, f in zip(FINGERS, fmax, strict=True)},
         "breaking_force_n": obj.breaking_force_n,
@@ -313,9 +400,11 @@ def _read(path: Path) -> dict[str, np.ndarray]:
 
 
 def describe(result: dict[str, Any]) -> str:
+    early = result["dropped"] and result["dropped_at_s"] < 0
     lines = [
         f"object hold: the {result['object']} ({result['pose']}), {result['duration_s']:.1f} s, "
-        + (f"DROPPED at {result['dropped_at_s']:.2f} s" if result["dropped"] else "held"),
+        + (f"DROPPED at {result['dropped_at_s']:.2f} s" if result["dropped"] else "held")
+        + (" (before the hold: times are from its start)" if early else ""),
         f"object slip {result['slip_mm']:.2f} mm (largest displacement "
         f"{result['largest_displacement_mm']:.2f} mm)",
         "largest contact force per finger: "

@@ -9,6 +9,8 @@
   friction takes precedence over the hand's on its contacts (``priority``), and it collides
   with the fingers, the palm and other objects.
 
+Each object also says how the emulated grasp hold takes it (``grasp_pose``, ``grasp_effort``,
+``rest_position_m`` and ``rest_axis``: where it rests on the palm-up hand).
 A fragile object has a ``breaking_force_n``: the largest contact force it survives (the
 simulation reports breakage; MuJoCo does not break it).
 """
@@ -27,7 +29,24 @@ from utrf.models import mjcf
 from utrf.models.geometry import read_toml
 
 SHAPES = {"sphere": 1, "cylinder": 2, "box": 3, "ellipsoid": 3}  # number of sizes
-_KEYS = {"description", "shape", "size_m", "mass_kg", "friction", "breaking_force_n"}
+_KEYS = {
+    "description",
+    "shape",
+    "size_m",
+    "mass_kg",
+    "friction",
+    "breaking_force_n",
+    "grasp_pose",
+    "grasp_effort",
+    "rest_position_m",
+    "rest_axis",
+}
+#: the unit quaternion (w, x, y, z) that turns an object's own z axis onto a world axis
+AXIS_QUAT = {
+    "z": (1.0, 0.0, 0.0, 0.0),
+    "y": (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0),
+    "x": (math.sqrt(0.5), 0.0, math.sqrt(0.5), 0.0),
+}
 # Torsional and rolling friction with the object's sliding one (MuJoCo's defaults' scale).
 _TORSION_M, _ROLLING_M = 0.005, 0.0001
 
@@ -45,10 +64,19 @@ class GraspObject:
     mass_kg: float
     friction: float
     breaking_force_n: float | None = None  # None: not fragile
+    grasp_pose: str | None = None  # the pose library's grasp that holds it
+    grasp_effort: float | None = None  # None: the pose's own
+    rest_position_m: tuple[float, float, float] | None = None  # on the palm-up hand, world
+    rest_axis: str = "z"  # the world axis its own z axis points along there
 
     @property
     def fragile(self) -> bool:
         return self.breaking_force_n is not None
+
+    @property
+    def rest_quat(self) -> tuple[float, float, float, float]:
+        """Its orientation resting on the palm (w, x, y, z), world frame."""
+        return AXIS_QUAT[self.rest_axis]
 
 
 def _positive(table: Mapping[str, Any], key: str, where: str) -> float:
@@ -80,6 +108,20 @@ def parse_object(name: str, table: Mapping[str, Any], source: str = "<dict>") ->
             f"{where}: size_m of a {shape} must be {SHAPES[shape]} number(s) > 0, got {size!r}"
         )
     breaking = table.get("breaking_force_n")
+    pose = table.get("grasp_pose")
+    if pose is not None and not (isinstance(pose, str) and pose):
+        raise ObjectError(f"{where}: grasp_pose must be a pose name, got {pose!r}")
+    effort = table.get("grasp_effort")
+    if effort is not None and not (
+        isinstance(effort, int | float) and not isinstance(effort, bool) and 0 < effort <= 1
+    ):
+        raise ObjectError(f"{where}: grasp_effort must lie in (0, 1], got {effort!r}")
+    rest = table.get("rest_position_m")
+    if rest is not None:
+        rest = _vector(rest, 3, f"{where}: rest_position_m")
+    axis = table.get("rest_axis", "z")
+    if axis not in AXIS_QUAT:
+        raise ObjectError(f"{where}: rest_axis must be one of {sorted(AXIS_QUAT)}, got {axis!r}")
     return GraspObject(
         name=name,
         description=str(table.get("description", "")),
@@ -88,6 +130,10 @@ def parse_object(name: str, table: Mapping[str, Any], source: str = "<dict>") ->
         mass_kg=_positive(table, "mass_kg", where),
         friction=_positive(table, "friction", where),
         breaking_force_n=None if breaking is None else _positive(table, "breaking_force_n", where),
+        grasp_pose=pose,
+        grasp_effort=None if effort is None else float(effort),
+        rest_position_m=None if rest is None else (rest[0], rest[1], rest[2]),
+        rest_axis=str(axis),
     )
 
 
@@ -119,7 +165,12 @@ def get_object(name: str, path: str | Path | None = None) -> GraspObject:
 
 
 def _vector(value: Sequence[float], n: int, what: str) -> tuple[float, ...]:
-    v = tuple(float(x) for x in value)
+    if isinstance(value, str | bytes):
+        raise ObjectError(f"{what} must be {n} finite numbers, got {value!r}")
+    try:
+        v = tuple(float(x) for x in value)
+    except (TypeError, ValueError):
+        raise ObjectError(f"{what} must be {n} finite numbers, got {value!r}") from None
     if len(v) != n or not all(math.isfinite(x) for x in v):
         raise ObjectError(f"{what} must be {n} finite numbers, got {value!r}")
     return v

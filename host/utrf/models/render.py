@@ -12,12 +12,15 @@ returning (left to the interpreter's shutdown, MuJoCo's contexts print ctypes er
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import matplotlib.image
 import mujoco
 import numpy as np
+
+from utrf.models.geometry import HandGeometry
 
 DEFAULT_SIZE = (480, 640)  # height, width (pixels)
 
@@ -116,6 +119,37 @@ def render(
         if context is not None:
             context.free()
         gl.free()
+
+
+def hand_at(
+    theta2: Sequence[float],
+    hand: HandGeometry | None = None,
+    *,
+    height: int = DEFAULT_SIZE[0],
+    width: int = DEFAULT_SIZE[1],
+    camera: mujoco.MjvCamera | None = None,
+) -> np.ndarray:
+    """The MuJoCo hand (``mjcf.hand_xml``) with each finger at a Joint-2 angle (rad, on the
+    rigid coupling), rendered: an RGB image as ``render`` gives."""
+    from utrf.models import mjcf
+
+    hand = hand if hand is not None else HandGeometry.default()
+    if len(theta2) != len(hand.fingers):
+        raise ValueError(f"need {len(hand.fingers)} Joint-2 angles, got {len(theta2)}")
+    model = mujoco.MjModel.from_xml_string(mjcf.hand_xml(hand))
+    data = mujoco.MjData(model)
+    q = {}
+    for f, angle in zip(hand.fingers, theta2, strict=True):
+        lo, hi = f.geometry.q_range_m
+        q[f.name] = min(max(float(angle) * f.geometry.guide_radii_m[1], lo), hi)
+    mjcf.set_coupled_pose(model, data, q, hand)
+    return render(model, data, height=height, width=width, camera=camera or pose_camera())
+
+
+def pose_camera() -> mujoco.MjvCamera:
+    """A camera for a gesture: over the palm, on the thumb's side, the fingertips in front."""
+    return hand_camera(lookat=(0.02, 0.0, 0.05), distance_m=0.32, azimuth_deg=150.0,
+                       elevation_deg=-35.0)  # fmt: skip
 
 
 def render_png(

@@ -15,6 +15,29 @@
 #define CAPTURE_SIZE 1048576u  /* in-process output buffer (power of two) */
 #define LOG_SIZE 4096u
 
+/* ---- shared by the plants (drive.c) ----------------------------------------------------- */
+typedef struct {
+    uint64_t state;
+    double spare;
+    int have_spare;
+} utrf_rng_t;
+
+void utrf_rng_init(utrf_rng_t *r, uint64_t seed); /* any seed, 0 included */
+double utrf_rng_normal(utrf_rng_t *r);            /* standard Gaussian */
+
+enum { UTRF_DRIVE_COAST = 0, UTRF_DRIVE_BRAKE = 1, UTRF_DRIVE_FORWARD = 2, UTRF_DRIVE_REVERSE = 3 };
+/* The TB6612FNG's truth table for one channel's pin block (duty, IN1, IN2, STBY): the mode,
+ * and the signed duty the motor sees (0 when braking or coasting). */
+int utrf_tb6612(const double *block, double *signed_duty);
+
+typedef struct {
+    double supply, offset, band[2], noise_v;
+    int invert, bits;
+} utrf_as5600_t;
+/* The AS5600's analog output (V) for a Joint-2 angle: quantised to 2^bits a turn inside the
+ * band, plus seeded Gaussian noise. */
+double utrf_as5600_volts(const utrf_as5600_t *e, double theta2, utrf_rng_t *r);
+
 typedef struct {
     uint8_t byte;
     uint64_t due; /* cycle at which its stop bit ends */

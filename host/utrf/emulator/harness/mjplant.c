@@ -29,9 +29,7 @@
 
 #define F UTRF_PLANT_FINGERS
 #define MAX_PULSES 64
-#define TWO_PI 6.28318530717958647692
 
-enum { COAST = 0, BRAKE = 1, FORWARD = 2, REVERSE = 3 };
 
 typedef struct {
     int body, site;
@@ -51,38 +49,9 @@ struct utrf_mjplant {
     double decay, decay_dt;
     mj_pulse_t pulses[MAX_PULSES];
     int n_pulses;
-    uint64_t rng;
-    double spare;
-    int have_spare;
+    utrf_rng_t rng;
+    utrf_as5600_t enc;
 };
-
-static uint64_t next_u64(utrf_mjplant_t *mp)
-{
-    uint64_t x = mp->rng;
-    x ^= x >> 12;
-    x ^= x << 25;
-    x ^= x >> 27;
-    mp->rng = x;
-    return x * 0x2545F4914F6CDD1DULL;
-}
-
-static double normal(utrf_mjplant_t *mp)
-{
-    if (mp->have_spare) {
-        mp->have_spare = 0;
-        return mp->spare;
-    }
-    double u, v, s;
-    do {
-        u = 2.0 * ((double)(next_u64(mp) >> 11) * (1.0 / 9007199254740992.0)) - 1.0;
-        v = 2.0 * ((double)(next_u64(mp) >> 11) * (1.0 / 9007199254740992.0)) - 1.0;
-        s = u * u + v * v;
-    } while (s >= 1.0 || s == 0.0);
-    double k = sqrt(-2.0 * log(s) / s);
-    mp->spare = v * k;
-    mp->have_spare = 1;
-    return u * k;
-}
 
 utrf_mjplant_t *utrf_mjplant_new(const char *libmujoco, void *model, void *data,
                                  const utrf_mjplant_params_t *params, uint64_t seed, char *err,
@@ -125,11 +94,10 @@ utrf_mjplant_t *utrf_mjplant_new(const char *libmujoco, void *model, void *data,
         mp->st.plugged[f] = 1.0;
         mp->st.unplugged_v[f] = params->enc_unplugged_v;
     }
-    uint64_t z = seed + 0x9E3779B97F4A7C15ULL; /* splitmix64: never a zero state */
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-    z ^= z >> 31;
-    mp->rng = z ? z : 1;
+    utrf_rng_init(&mp->rng, seed);
+    mp->enc = (utrf_as5600_t){params->enc_supply, params->enc_offset,
+                              {params->enc_band[0], params->enc_band[1]}, params->enc_noise_v,
+                              params->enc_invert, params->enc_bits};
     return mp;
 #endif
 }
@@ -153,21 +121,15 @@ static void decode(utrf_mjplant_t *mp, const double *pins)
     for (int f = 0; f < F; f++) {
         for (int c = 0; c < 2; c++) {
             const double *b = &pins[(f * 2 + c) * UTRF_SIM_PIN_FIELDS];
-            double duty = b[0] < 0.0 ? 0.0 : b[0] > 1.0 ? 1.0 : b[0];
-            int in1 = b[1] > 0.5, in2 = b[2] > 0.5, on = b[3] > 0.5;
-            int mode = COAST;
-            if (on && in1 && !in2)
-                mode = FORWARD;
-            else if (on && !in1 && in2)
-                mode = REVERSE;
-            else if (on && in1 && in2)
-                mode = BRAKE;
-            if (mp->p.actuator[f][c] < 0)
-                mode = COAST; /* no such motor (a rotary finger's B) */
-            double sd = mode == FORWARD ? duty : mode == REVERSE ? -duty : 0.0;
+            double sd;
+            int mode = utrf_tb6612(b, &sd);
+            if (mp->p.actuator[f][c] < 0) {
+                mode = UTRF_DRIVE_COAST; /* no such motor (a rotary finger's B) */
+                sd = 0.0;
+            }
             mp->st.drive_mode[f][c] = mode;
             mp->st.drive_duty[f][c] = sd;
-            mp->connected[f][c] = mode != COAST;
+            mp->connected[f][c] = mode != UTRF_DRIVE_COAST;
             mp->voltage[f][c] = sd * mp->p.supply_v;
         }
     }
@@ -218,9 +180,18 @@ static void apply_loads(utrf_mjplant_t *mp, double dt)
             memset(mp->d->xfrc_applied + 6 * (int)st->load_body[i], 0, 6 * sizeof(double));
     for (int i = 0; i < mp->n_pulses; i++)
         memset(mp->d->xfrc_applied + 6 * mp->pulses[i].body, 0, 6 * sizeof(double));
-    for (int i = 0; i < UTRF_MJPLANT_LOADS; i++)
-        if (st->load_body[i] >= 0)
-            apply_at(mp, (int)st->load_body[i], (int)st->load_site[i], st->load_force[i], 1.0);
+    for (int i = 0; i < UTRF_MJPLANT_LOADS; i++) {
+        if (st->load_body[i] < 0)
+            continue;
+        double f[3], a = 1.0, span = st->load_t1[i] - st->load_t0[i];
+        if (span > 0.0) {
+            a = (st->time - st->load_t0[i]) / span;
+            a = a < 0.0 ? 0.0 : a > 1.0 ? 1.0 : a;
+        }
+        for (int k = 0; k < 3; k++)
+            f[k] = st->load_from[i][k] + a * (st->load_force[i][k] - st->load_from[i][k]);
+        apply_at(mp, (int)st->load_body[i], (int)st->load_site[i], f, 1.0);
+    }
     double t0 = st->time, t1 = st->time + dt;
     int keep = 0;
     for (int i = 0; i < mp->n_pulses; i++) {
@@ -273,17 +244,9 @@ void utrf_mjplant_step(utrf_mjplant_t *mp, double dt, const double *pins)
 void utrf_mjplant_encoder_volts(utrf_mjplant_t *mp, double *out)
 {
 #ifdef UTRF_WITH_MUJOCO
-    const utrf_mjplant_params_t *p = &mp->p;
-    double steps = (double)(1u << p->enc_bits);
     for (int f = 0; f < F; f++) {
-        double theta2 = mp->d->qpos[p->j2_qpos[f]] + mp->st.encoder_shift[f];
-        double turns = (p->enc_offset + (p->enc_invert ? -theta2 : theta2)) / TWO_PI;
-        turns -= floor(turns);
-        double counts = floor(turns * steps);
-        double v = p->enc_supply * p->enc_band[0] +
-                   (p->enc_supply * (p->enc_band[1] - p->enc_band[0]) / steps) * counts;
-        if (p->enc_noise_v > 0.0)
-            v += p->enc_noise_v * normal(mp);
+        double theta2 = mp->d->qpos[mp->p.j2_qpos[f]] + mp->st.encoder_shift[f];
+        double v = utrf_as5600_volts(&mp->enc, theta2, &mp->rng);
         out[f] = mp->st.plugged[f] > 0.5 ? v : mp->st.unplugged_v[f];
     }
 #else

@@ -12,10 +12,8 @@
 
 #define F UTRF_PLANT_FINGERS
 #define MAX_PULSES 64
-#define TWO_PI 6.28318530717958647692
 #define CPU_HZ 16e6
 
-enum { COAST = 0, BRAKE = 1, FORWARD = 2, REVERSE = 3 };
 static const double SIDE[2] = {-1.0, 1.0}; /* Tendon 1 shortens as q grows, Tendon 4 lengthens */
 
 typedef struct {
@@ -40,45 +38,10 @@ struct utrf_plant {
     double h, decay;
     pulse_t pulses[MAX_PULSES];
     int n_pulses;
-    uint64_t rng;
-    double spare_normal;
-    int have_spare;
+    utrf_rng_t rng;
+    utrf_as5600_t enc;
 };
 
-/* ---- random numbers: xorshift64*, Gaussian by Marsaglia's polar method ------------------ */
-
-static uint64_t next_u64(utrf_plant_t *pl)
-{
-    uint64_t x = pl->rng;
-    x ^= x >> 12;
-    x ^= x << 25;
-    x ^= x >> 27;
-    pl->rng = x;
-    return x * 0x2545F4914F6CDD1DULL;
-}
-
-static double uniform(utrf_plant_t *pl)
-{
-    return (double)(next_u64(pl) >> 11) * (1.0 / 9007199254740992.0);
-}
-
-static double normal(utrf_plant_t *pl)
-{
-    if (pl->have_spare) {
-        pl->have_spare = 0;
-        return pl->spare_normal;
-    }
-    double u, v, s;
-    do {
-        u = 2.0 * uniform(pl) - 1.0;
-        v = 2.0 * uniform(pl) - 1.0;
-        s = u * u + v * v;
-    } while (s >= 1.0 || s == 0.0);
-    double k = sqrt(-2.0 * log(s) / s);
-    pl->spare_normal = v * k;
-    pl->have_spare = 1;
-    return u * k;
-}
 
 /* ---- the slowly varying terms -------------------------------------------------------------- */
 
@@ -202,11 +165,10 @@ utrf_plant_t *utrf_plant_new(const utrf_plant_params_t *params, uint64_t seed)
     }
     pl->K = pl->p.supply_v / pl->p.no_load_speed;
     pl->res = pl->p.supply_v / (pl->p.stall_force / pl->K);
-    uint64_t z = seed + 0x9E3779B97F4A7C15ULL; /* splitmix64: never a zero state */
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-    z ^= z >> 31;
-    pl->rng = z ? z : 1;
+    utrf_rng_init(&pl->rng, seed);
+    pl->enc = (utrf_as5600_t){pl->p.enc_supply, pl->p.enc_offset,
+                              {pl->p.enc_band[0], pl->p.enc_band[1]}, pl->p.enc_noise_v,
+                              pl->p.enc_invert, pl->p.enc_bits};
     geometry_terms(pl);
     return pl;
 }
@@ -233,21 +195,15 @@ static void decode_drive(utrf_plant_t *pl, const double *pins)
     for (int f = 0; f < F; f++) {
         for (int c = 0; c < 2; c++) {
             const double *b = &pins[(f * 2 + c) * UTRF_SIM_PIN_FIELDS];
-            double duty = b[0] < 0.0 ? 0.0 : b[0] > 1.0 ? 1.0 : b[0];
-            int in1 = b[1] > 0.5, in2 = b[2] > 0.5, on = b[3] > 0.5;
-            int mode = COAST;
-            if (on && in1 && !in2)
-                mode = FORWARD;
-            else if (on && !in1 && in2)
-                mode = REVERSE;
-            else if (on && in1 && in2)
-                mode = BRAKE;
-            if (c == 1 && pl->p.rotary[f])
-                mode = COAST; /* a rotary finger has no motor B */
-            double signed_duty = mode == FORWARD ? duty : mode == REVERSE ? -duty : 0.0;
+            double signed_duty;
+            int mode = utrf_tb6612(b, &signed_duty);
+            if (c == 1 && pl->p.rotary[f]) {
+                mode = UTRF_DRIVE_COAST; /* a rotary finger has no motor B */
+                signed_duty = 0.0;
+            }
             pl->st.drive_mode[f][c] = mode;
             pl->st.drive_duty[f][c] = signed_duty;
-            pl->connected[f][c] = mode != COAST;
+            pl->connected[f][c] = mode != UTRF_DRIVE_COAST;
             pl->voltage[f][c] = signed_duty * pl->p.supply_v;
         }
     }
@@ -415,17 +371,10 @@ void utrf_plant_encoder_volts(utrf_plant_t *pl, double *out)
 {
     const utrf_plant_params_t *p = &pl->p;
     utrf_plant_state_t *st = &pl->st;
-    double steps = (double)(1u << p->enc_bits);
     for (int f = 0; f < F; f++) {
         double theta2 =
             (st->q[f] - st->coupling_stretch[f][0]) / p->R[f][1] + st->encoder_shift[f];
-        double turns = (p->enc_offset + (p->enc_invert ? -theta2 : theta2)) / TWO_PI;
-        turns -= floor(turns); /* the angle within one turn, as a fraction */
-        double counts = floor(turns * steps);
-        double v = p->enc_supply * p->enc_band[0] +
-                   (p->enc_supply * (p->enc_band[1] - p->enc_band[0]) / steps) * counts;
-        if (p->enc_noise_v > 0.0)
-            v += p->enc_noise_v * normal(pl);
+        double v = utrf_as5600_volts(&pl->enc, theta2, &pl->rng);
         out[f] = st->plugged[f] > 0.5 ? v : st->unplugged_v[f];
     }
 }

@@ -285,6 +285,10 @@ typedef struct {
      * body -1: the slot is free */
     double load_body[UTRF_MJPLANT_LOADS], load_site[UTRF_MJPLANT_LOADS];
     double load_force[UTRF_MJPLANT_LOADS][3];
+    /* a ramp: the force goes linearly from load_from at time load_t0 to load_force at load_t1
+     * (load_t1 <= load_t0: load_force at once) */
+    double load_from[UTRF_MJPLANT_LOADS][3];
+    double load_t0[UTRF_MJPLANT_LOADS], load_t1[UTRF_MJPLANT_LOADS];
 } utrf_mjplant_state_t;
 
 typedef struct utrf_mjplant utrf_mjplant_t;
