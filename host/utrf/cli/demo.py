@@ -3,15 +3,16 @@ firmware (``build/firmware/utrf.elf``, ``make firmware``) running on the emulate
 
 Starts the emulated board (simavr, paced to the wall clock so you can watch; the plant is the
 analytic finger model unless ``--plant mujoco``: in the MuJoCo twin the thumb, which does not
-yet oppose the fingers, strikes the flexed index in the fist and latches STALL), connects a Hand to it over its socket as to a real
-MEGA, moves through the poses (one move each: the board runs the minimum-jerk paths, the
-pose's duration; then settling) with a live table on a terminal (a line per pose elsewhere),
-and writes to ``--out`` (default ``out/demo``): a picture of each pose (the MuJoCo hand
-rendered at the measured angles, and each finger drawn from the kinematics model with its
-target), ``trajectories.png`` (the joint angles against their targets) and ``telemetry.csv``
-(every sample, SI). Then prints where they are, and each finger's tracking over the whole run
-(Joint 2 against the setpoint its controller used: RMS and worst). ``make demo`` runs this.
-Exit codes: 0 every pose settled; 1 one did not; 2 bad input (unknown pose, no firmware ELF).
+yet oppose the fingers, strikes the flexed index in the fist and latches STALL), connects a
+Hand to it over its socket as to a real MEGA, moves through the poses (one move each: the board
+runs the minimum-jerk paths, the pose's duration; then settling) with a live table on a
+terminal (a line per pose elsewhere), and writes to ``--out`` (default ``out/demo``): a picture
+of each pose (the MuJoCo hand rendered at the measured angles, and each finger drawn from the
+kinematics model with its target), ``trajectories.png`` (the joint angles against their
+targets) and ``telemetry.csv`` (every sample, SI). Then prints where they are, and each
+finger's tracking over the whole run (Joint 2 against the setpoint its controller used: RMS and
+worst). ``make demo`` runs this. Exit codes: 0 every pose settled; 1 one did not; 2 bad input
+(unknown pose, no firmware ELF).
 """
 
 from __future__ import annotations
