@@ -57,7 +57,7 @@ fuzz-build: $(REPLAY_BINS)
 -include $(FUZZ_LIB_OBJS:.o=.d) $(FUZZ_BINS:=.d) $(REPLAY_LIB_OBJS:.o=.d)
 
 fuzz: setup fuzz-build
-	$(PY) $(FUZZ_DIR)/runfuzz.py --seconds $(FUZZ_SECONDS) $(if $(FUZZ_RUNS),--runs $(FUZZ_RUNS))
+	$(PY) $(FUZZ_DIR)/runfuzz.py $(if $(FUZZ_RUNS),--runs $(FUZZ_RUNS),--seconds $(FUZZ_SECONDS))
 
 soak: setup firmware
 	$(PY) tools/soak.py --seconds $(SOAK_SECONDS)
