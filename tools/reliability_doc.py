@@ -212,7 +212,7 @@ def mutants_section(res: dict) -> str:
             "",
             f"`make mutants` (tools/mutants.py, {res.get('date', '')}): each safety rule "
             "disabled in turn by one edit of firmware/src in a copy of the checkout, then "
-            f"{' and '.join(res['tests'])} on it (host build and ELF on the emulated board). "
+            f"{', '.join(res['tests'])} on it (host build and ELF on the emulated board). "
             f"**Score: {res['caught']} of {res['total']} rule mutants caught.**",
             "",
             "| mutant | rule | result | first failing test |",
@@ -229,21 +229,26 @@ def soak_section(res: dict) -> str:
         f"{d.get('end', 0):.1f} | {d.get('peak', 0):.1f} | {res['rss_growth_mib'].get(n, 0):+.1f} |"
         for n, d in rss.items()
     ]
-    latched = {}
+    latched: dict[str, int] = {}
     for f in res["faults_latched"]:
         latched[f["faults"]] = latched.get(f["faults"], 0) + 1
-    injected = {}
+    injected: dict[str, int] = {}
     for f in res["faults_injected"]:
         injected[f["kind"]] = injected.get(f["kind"], 0) + 1
+    causes = res.get("lost_by_cause", {})
+    nice = res.get("nice", "?")
+    worst = res.get("board_tick_worst_s")
     return "\n".join(
         [
             "## Soak",
             "",
-            f"`make soak SOAK_SECONDS={res['seconds']:.0f}` (tools/soak.py, {res['date']}): "
-            "`utrf emulate` served at real time in its own process, a Hand over TCP in "
-            f"another, telemetry at {res['telemetry_hz']} Hz, set_targets at "
+            f"`make soak SOAK_SECONDS={res['seconds']:.0f}` (tools/soak.py, {res['date']}"
+            f"{', ' + res['commit'] if res.get('commit') else ''}): `utrf emulate` served at "
+            "real time in its own process, a Hand over TCP in another, both at nice "
+            f"{nice}; telemetry at {res['telemetry_hz']} Hz, set_targets at "
             f"{res['command_hz']} Hz, a fault injected every {res['seconds'] / 12:.0f} s in "
-            f"turn. Result: **{'passed' if res['passed'] else 'FAILED'}**"
+            f"turn. Counted after a warm-up of {res.get('counted_after_s', 0):.0f} s. "
+            f"Result: **{'passed' if res['passed'] else 'FAILED'}**"
             + (f" ({'; '.join(res['problems'])})" if res["problems"] else "")
             + ".",
             "",
@@ -253,14 +258,22 @@ def soak_section(res: dict) -> str:
             f"| commands sent / late (> 10 ms) / failed | {res['commands_sent']:,} / "
             f"{res['commands_late']:,} / {res['commands_failed']} |",
             f"| state frames received | {res['stream_frames']:,} |",
-            f"| frames lost (seq gaps) / dropped by the board | {res['stream_lost']} / "
-            f"{res['board_tx_dropped']} |",
-            f"| link retries / timeouts / CRC errors | {res['link_retries']} / "
-            f"{res['link_timeouts']} / {res['crc_errors']} |",
-            f"| board lag events / real-time factor | {res['lag_events']} / "
-            f"{res['realtime_factor']} |",
-            f"| board tick overruns / receive overruns | {res['board_tick_overruns']} / "
-            f"{res['board_rx_overruns']} |",
+            f"| **frames lost** (seq gaps) | **{res['stream_lost']}** |",
+            f"| of which dropped by the firmware (its tx_dropped) / lost between its UART and "
+            f"the Hand | {res['board_tx_dropped']} / {res.get('host_side_lost', '?')} |",
+            "| frames lost, by what else happened in the same second | "
+            + (", ".join(f"{k} {v}" for k, v in causes.items()) or "-")
+            + " |",
+            f"| host receive errors (CRC, framing, oversize) | {res.get('host_rx_errors', '?')} |",
+            f"| link resends / timeouts; resends the board answered from its cache | "
+            f"{res['link_retries']} / {res['link_timeouts']}; {res.get('board_rx_repeats', '?')} |",
+            f"| emulated board: real-time factor / could run at / lag events (> 100 ms behind) "
+            f"/ seconds below 0.95 real time | {res['realtime_factor']} / "
+            f"{res.get('capacity', '?')} / {res['lag_events']} / "
+            f"{res.get('seconds_lagging', '?')} of {res.get('seconds_counted', '?')} |",
+            f"| board tick worst / tick overruns / receive overruns | "
+            f"{'?' if worst is None else f'{worst * 1e6:.0f} µs'} / "
+            f"{res['board_tick_overruns']} / {res['board_rx_overruns']} |",
             f"| faults injected | {', '.join(f'{k} {v}' for k, v in injected.items())} |",
             f"| faults latched | {', '.join(f'{k} {v}' for k, v in latched.items()) or 'none'} "
             f"(unexpected: {len(res['faults_unexpected'])}) |",
@@ -270,8 +283,12 @@ def soak_section(res: dict) -> str:
             *rss_rows,
             "",
             f"Load average at the end: {', '.join(f'{x:.1f}' for x in res['load_average'])} "
-            "(the 2-core machine was shared: lag events are the board falling behind the wall "
-            "clock, not lost data).",
+            f"on {cpu_name()}, 2 cores shared with the other sessions. Every frame lost counts "
+            "against the soak whatever its cause; the causes column lays each beside what the "
+            "timeline saw in that second or the one before (build/reliability/soak.json keeps "
+            "the timeline): the emulated board lagging the wall clock (the host's requests then "
+            "reach it bunched in simulated time, a resend and a heartbeat behind the request "
+            "they chase), a resend, injected noise, or nothing.",
         ]
     )
 
