@@ -34,6 +34,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from utrf.emulator import EmulatedBoard
 from utrf.emulator.process import BoardProcess
 from utrf.hand import Hand
 from utrf.protocol import messages as M
@@ -59,41 +60,115 @@ def targets_at(t: float) -> dict[int, float]:
     return {f: 0.45 + 0.35 * math.sin(2 * math.pi * 0.25 * t + f) for f in range(5)}
 
 
+class Served:
+    """The faults as ``utrf emulate``'s stdin commands, on the wall clock."""
+
+    def __init__(self, board: BoardProcess) -> None:
+        self.board = board
+
+    def fault(self, command: str) -> None:
+        self.board.command(command)
+
+    def sleep(self, seconds: float) -> None:
+        time.sleep(seconds)
+
+
+class Driven:
+    """The same faults on a driven board, in simulated time (the soak's deterministic twin)."""
+
+    def __init__(self, board: EmulatedBoard, hand: Hand) -> None:
+        self.board, self.hand = board, hand
+
+    def fault(self, command: str) -> None:
+        verb, arg = command.split()
+        n = int(arg)
+        if verb == "noise":
+            self.board.inject_noise(n)
+        elif verb == "block":
+            self.board.block_finger(n, None, direction="both")
+        else:
+            {"unplug": self.board.unplug_encoder, "plug": self.board.plug_encoder,
+             "unblock": self.board.unblock_finger}[verb](n)  # fmt: skip
+
+    def sleep(self, seconds: float) -> None:
+        self.hand.clock.sleep(seconds)
+
+
 class Faults:
     """One fault in turn: what to do, which finger latches what, how to undo it."""
 
-    def __init__(self, board: BoardProcess) -> None:
+    def __init__(self, board: Served | Driven) -> None:
         self.board = board
         self.k = 0
         self.injected: list[dict[str, Any]] = []
 
-    def inject(self, hand: Hand) -> None:
+    def inject(self, hand: Hand, t: float) -> None:
         kind = ("unplug", "block", "noise")[self.k % 3]
         finger = self.k % 5
         self.k += 1
-        t0 = time.monotonic()
         expect: set[str] = set()
         if kind == "unplug":
-            self.board.command(f"unplug {finger}")
-            time.sleep(0.2)
-            self.board.command(f"plug {finger}")
+            self.board.fault(f"unplug {finger}")
+            self.board.sleep(0.2)
+            self.board.fault(f"plug {finger}")
             expect = {"ENCODER_RANGE"}
         elif kind == "block":
             # jammed where it is while the wave pushes it on: a stall, or nothing if the wave
             # happens to hold still long enough (then it is only the block)
-            self.board.command(f"block {finger}")
-            time.sleep(0.8)
-            self.board.command(f"unblock {finger}")
+            self.board.fault(f"block {finger}")
+            self.board.sleep(0.8)
+            self.board.fault(f"unblock {finger}")
             expect = {"STALL"}
         else:
-            self.board.command("noise 64")
-            time.sleep(0.05)
-        time.sleep(0.05)
+            self.board.fault("noise 64")
+            self.board.sleep(0.05)
+        self.board.sleep(0.05)
         self.injected.append(
-            {"kind": kind, "finger": finger, "may_latch": sorted(expect), "t": round(t0, 3)}
+            {"kind": kind, "finger": finger, "may_latch": sorted(expect), "t": round(t, 3)}
         )
+        # what a user's program does: clear, and drive again (set_targets puts the fingers
+        # back in POSITION: get_state and set_mode, round trips back to back)
         hand.clear_faults()
-        hand.set_targets(targets_at(time.monotonic()))  # back in POSITION
+        hand.set_targets(targets_at(t))
+
+
+def driven_twin(elf: str | None, seconds: float, fault_every: float) -> dict[str, Any]:
+    """The soak's load on a driven board in simulated time: the same wave of set_targets at
+    COMMAND_HZ, the stream at its top rate, the same faults and recovery. No machine in it
+    (deterministic): what the firmware drops here, it drops under this load anywhere."""
+    with (
+        EmulatedBoard(elf, realtime=False, seed=7) as board,
+        Hand.emulated(board, telemetry_hz=M.MAX_TELEMETRY_HZ) as hand,
+    ):
+        faults = Faults(Driven(board, hand))
+        hand.set_targets(targets_at(0.0))
+        hand.clock.sleep(0.5)
+        hand.reset_stats()
+        s0 = hand.link_stats()
+        t0 = board.sim_time
+        next_fault = fault_every
+        commands = 0
+        while (t := board.sim_time - t0) < seconds:
+            if t >= next_fault:
+                faults.inject(hand, t)
+                next_fault += fault_every
+                continue
+            hand.set_targets(targets_at(t), enable=False)
+            commands += 1
+            rest = 1.0 / COMMAND_HZ - (board.sim_time - t0 - t)
+            if rest > 0:
+                hand.clock.sleep(rest)
+        st = hand.stats()
+        s1 = hand.link_stats()
+        return {
+            "sim_seconds": round(board.sim_time - t0, 2),
+            "commands": commands,
+            "stream_frames": s1.stream_frames - s0.stream_frames,
+            "stream_lost": s1.stream_lost - s0.stream_lost,
+            "board_tx_dropped": st.tx_dropped,
+            "board_tick_worst_s": st.tick_worst,
+            "faults_injected": [f["kind"] for f in faults.injected],
+        }
 
 
 class Timeline:
@@ -190,6 +265,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--nice", type=int, default=-10, help="both processes' nice value (default -10)"
     )
+    ap.add_argument(
+        "--driven-seconds",
+        type=float,
+        default=60.0,
+        help="simulated seconds of the deterministic twin, after the soak (0: none)",
+    )
     a = ap.parse_args(argv)
     nice = set_priority(a.nice)
     fault_every = a.fault_every or max(a.seconds / 12, 10.0)
@@ -210,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
         hand = Hand.connect(board.url, telemetry_hz=M.MAX_TELEMETRY_HZ)
         out["telemetry_hz"] = hand.telemetry_hz
         hand.on_state(on_state)
-        faults = Faults(board)
+        faults = Faults(Served(board))
         pids = {"host (Hand)": os.getpid(), "board (utrf emulate)": board._proc.pid}
         rss: dict[str, dict[str, float]] = {n: {"start": rss_mib(p)} for n, p in pids.items()}
         hand.set_targets(targets_at(time.monotonic()))
@@ -239,7 +320,7 @@ def main(argv: list[str] | None = None) -> int:
                 timeline.sample(now - t_start, late, warmed)
                 next_sample += 1.0
             if now >= next_fault:
-                faults.inject(hand)
+                faults.inject(hand, time.monotonic())
                 timeline.injected(faults.injected[-1]["kind"])
                 next_fault += fault_every
                 next_cmd = time.monotonic()
@@ -324,6 +405,9 @@ def main(argv: list[str] | None = None) -> int:
             "final": final,
         }
     )
+    if a.driven_seconds > 0:
+        twin_faults = min(fault_every, a.driven_seconds / 6)
+        out["driven"] = driven_twin(a.elf, a.driven_seconds, twin_faults)
     growth = {
         n: d["end"] - d["after_warmup"] for n, d in out["rss_mib"].items() if "after_warmup" in d
     }
@@ -336,6 +420,12 @@ def main(argv: list[str] | None = None) -> int:
         problems.append(
             f"{lost} stream frames lost: the firmware dropped {dropped}, "
             f"{lost - dropped} lost between its UART and the Hand"
+        )
+    twin = out.get("driven")
+    if twin and (twin["stream_lost"] or twin["board_tx_dropped"]):
+        problems.append(
+            f"in the driven twin ({twin['sim_seconds']:.0f} s simulated, no machine load) the "
+            f"firmware dropped {twin['board_tx_dropped']} and {twin['stream_lost']} were lost"
         )
     if failed:
         problems.append(f"{failed} commands failed: {errors[:3]}")
@@ -358,6 +448,8 @@ def main(argv: list[str] | None = None) -> int:
         f"{len(seen)} faults latched ({len(unexpected)} unexpected) of "
         f"{len(faults.injected)} injected"
     )
+    if twin:
+        print(f"  driven twin: {twin}")
     for n, d in out["rss_mib"].items():
         print(f"  RSS {n}: " + ", ".join(f"{k} {v:.1f} MiB" for k, v in d.items()))
     for p in problems:
