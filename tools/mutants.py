@@ -10,9 +10,9 @@ kept, so make rebuilds only what the mutation touched) under build/mutants/<name
 exact edit to firmware/src: a rule's condition made false, its action removed. The tests run
 there, on the mutated firmware, both as the host build (tests/firmware/test_fw_safety.py and
 test_fw_moves.py) and as the ELF on the emulated board (tests/reliability/test_safety_matrix.py),
-and stop at the first failure: the mutant is caught. An edit whose text is no longer in the source is an
-error (the list must follow the code). The score goes to build/reliability/mutants.json for
-docs/reliability.md.
+and stop at the first failure: the mutant is caught. An edit whose text is no longer in the
+source is an error (the list must follow the code). The score goes to
+build/reliability/mutants.json for docs/reliability.md.
 """
 
 from __future__ import annotations

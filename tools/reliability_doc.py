@@ -238,6 +238,7 @@ def soak_section(res: dict) -> str:
     causes = res.get("lost_by_cause", {})
     nice = res.get("nice", "?")
     worst = res.get("board_tick_worst_s")
+    twin = res.get("driven")
     return "\n".join(
         [
             "## Soak",
@@ -261,7 +262,7 @@ def soak_section(res: dict) -> str:
             f"| **frames lost** (seq gaps) | **{res['stream_lost']}** |",
             f"| of which dropped by the firmware (its tx_dropped) / lost between its UART and "
             f"the Hand | {res['board_tx_dropped']} / {res.get('host_side_lost', '?')} |",
-            "| frames lost, by what else happened in the same second | "
+            "| frames lost, by what happened then (that second or the two before) | "
             + (", ".join(f"{k} {v}" for k, v in causes.items()) or "-")
             + " |",
             f"| host receive errors (CRC, framing, oversize) | {res.get('host_rx_errors', '?')} |",
@@ -275,6 +276,15 @@ def soak_section(res: dict) -> str:
             f"{'?' if worst is None else f'{worst * 1e6:.0f} µs'} / "
             f"{res['board_tick_overruns']} / {res['board_rx_overruns']} |",
             f"| faults injected | {', '.join(f'{k} {v}' for k, v in injected.items())} |",
+            *(
+                [
+                    f"| the driven twin ({twin['sim_seconds']:.0f} s simulated, "
+                    f"{len(twin['faults_injected'])} faults): frames lost / dropped by the "
+                    f"firmware | {twin['stream_lost']} / {twin['board_tx_dropped']} |"
+                ]
+                if twin
+                else []
+            ),
             f"| faults latched | {', '.join(f'{k} {v}' for k, v in latched.items()) or 'none'} "
             f"(unexpected: {len(res['faults_unexpected'])}) |",
             "",
@@ -284,11 +294,15 @@ def soak_section(res: dict) -> str:
             "",
             f"Load average at the end: {', '.join(f'{x:.1f}' for x in res['load_average'])} "
             f"on {cpu_name()}, 2 cores shared with the other sessions. Every frame lost counts "
-            "against the soak whatever its cause; the causes column lays each beside what the "
-            "timeline saw in that second or the one before (build/reliability/soak.json keeps "
-            "the timeline): the emulated board lagging the wall clock (the host's requests then "
-            "reach it bunched in simulated time, a resend and a heartbeat behind the request "
-            "they chase), a resend, injected noise, or nothing.",
+            "against the soak whatever its cause; the causes row lays each beside what the "
+            "timeline saw in that second or the two before (build/reliability/soak.json keeps "
+            "the timeline): a fault injected and the recovery after it (clear_faults, then "
+            "set_targets, which puts the fingers back in POSITION with get_state and set_mode: "
+            "round trips back to back), a resend, the emulated board lagging the wall clock "
+            "(the host's requests then reach it bunched in simulated time), or nothing. The "
+            "driven twin runs the same wave, faults and recovery on a driven board in simulated "
+            "time, deterministic and "
+            "free of the machine's load: what it loses, the firmware loses under this load.",
         ]
     )
 

@@ -227,22 +227,24 @@ class Timeline:
             self.rows.append(row)
 
     def causes(self) -> dict[str, int]:
-        """Frames lost (after the warm-up) by what else happened in that second or the one
-        before: the board lagging, a resend, injected noise, or nothing seen."""
-        out = {"board lagging": 0, "a resend": 0, "injected noise": 0, "nothing seen": 0}
-        prev: dict[str, Any] | None = None
-        for row in self.rows:
-            if row["lost"] and row["counted"]:
-                near = [r for r in (prev, row) if r is not None and r["t"] >= row["t"] - 1.5]
-                if any(r["lag_events"] or r["realtime"] < LAGGING_BELOW for r in near):
-                    out["board lagging"] += row["lost"]
-                elif any(r["resends"] for r in near):
-                    out["a resend"] += row["lost"]
-                elif any("noise" in r["injected"] for r in near):
-                    out["injected noise"] += row["lost"]
-                else:
-                    out["nothing seen"] += row["lost"]
-            prev = row
+        """Frames lost (after the warm-up) by what else happened in that second or the two
+        before: a fault injected (and the recovery after it), a resend, the board lagging,
+        or nothing seen."""
+        out: dict[str, int] = {}
+        for i, row in enumerate(self.rows):
+            if not (row["lost"] and row["counted"]):
+                continue
+            near = [r for r in self.rows[max(0, i - 3) : i + 1] if r["t"] >= row["t"] - 2.5]
+            kinds = [k for r in near for k in r["injected"]]
+            if kinds:
+                cause = f"after {kinds[-1]} and its recovery"
+            elif any(r["resends"] for r in near):
+                cause = "a resend"
+            elif any(r["lag_events"] or r["realtime"] < LAGGING_BELOW for r in near):
+                cause = "board lagging"
+            else:
+                cause = "nothing seen"
+            out[cause] = out.get(cause, 0) + row["lost"]
         return out
 
 
