@@ -54,8 +54,9 @@ bench-after-setup: $(BENCH_TARGETS)
 # fails when it is stale).
 .PHONY: hil-readme
 hil-readme: setup
-	@$(SUBMAKE) firmware emulator
-	$(PY) -m utrf.hil.readme_table --update hil/README.md
+	@$(SUBMAKE) emulator
+	@$(SUBMAKE) BUILD=$(BUILD)/id0 FW_GIT_ID= $(BUILD)/id0/firmware/utrf.elf
+	$(PY) -m utrf.hil.readme_table --elf $(BUILD)/id0/firmware/utrf.elf --update hil/README.md
 
 lint: setup
 	$(PY) -m ruff check $(wildcard host tests hil tools protocol)

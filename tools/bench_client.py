@@ -146,7 +146,7 @@ def report(lat: dict[int, dict], sweep: list[dict], args: argparse.Namespace, to
         "fingers under position control. Resolution: the board's exchange period with the "
         f"host, {args.exchange_us:g} µs. *Line* is the two frames' bytes at 10 bits a byte at "
         "1 Mbaud; the rest is the firmware: its `loop()` takes the request and dispatches it, "
-        "the tick holds both the loop and the UART's transmitter while it runs, and the reply "
+        "the tick holds the loop while it runs (the UART's transmitter runs on), and the reply "
         "waits for at most the one state frame on the line (the board hands its own frames to "
         "the UART only when its transmit buffer is empty).",
         "",

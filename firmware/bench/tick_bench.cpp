@@ -24,6 +24,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <algorithm>
 #include <deque>
 #include <vector>
 #include <string>
@@ -95,6 +96,26 @@ struct Bench {
     // Optional profile (UTRF_TICK_PROFILE=file): own cycles per instruction address, of the
     // tick and of the timer interrupt around it.
     std::vector<uint64_t> profile;
+    // loop()'s passes (UTRF_LOOP_ENTRY=<hex byte address of app::loop()>): cycles from one
+    // entry to the next, the worst and when it began; with UTRF_LOOP_PROFILE=file, cycles per
+    // instruction address of the worst pass (interrupts included).
+    uint32_t loop_entry = 0;
+    uint64_t loop_start = 0;
+    uint64_t loop_worst = 0;
+    uint64_t loop_worst_at = 0;
+    uint64_t loop_passes = 0;
+    bool profile_all = false;  // UTRF_LOOP_PROFILE_ALL: every cycle of the run, not one pass
+    bool measuring = false;
+    std::vector<uint64_t> pass_profile;
+    std::vector<uint32_t> pass_touched;  // addresses of pass_profile to clear at the next pass
+    std::vector<std::pair<uint32_t, uint64_t>> worst_profile;
+    // Round trips (the latency scenario): from the request's first byte on the line to its
+    // reply's last byte off it, in cycles, per message id.
+    int rt_seq = -1;          // the request waiting for its reply
+    uint8_t rt_id = 0;
+    uint64_t rt_start = 0;
+    bool rt_started = false;  // its first byte went out
+    std::vector<uint64_t> rt_ping, rt_targets;
 };
 
 Bench g;
@@ -125,10 +146,17 @@ void adc_trigger(avr_irq_t*, uint32_t value, void*) {
     avr_raise_irq(avr_io_getirq(g.avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + ch), mv);
 }
 
+bool g_trace = false;
 void uart_out(avr_irq_t*, uint32_t value, void*) {
+    if (g_trace && g.rt_seq >= 0) fprintf(stderr, "  out %02x at %llu\n", value, (unsigned long long)(g.avr->cycle - g.rt_start));
     const framing::RxEvent ev = g.decoder.feed((uint8_t)value);
     if (ev != framing::RxEvent::FRAME) return;
     const uint8_t id = g.decoder.msg_id();
+    if (g.rt_seq >= 0 && g.decoder.seq() == (uint8_t)g.rt_seq && g.rt_started) {
+        const uint64_t c = g.avr->cycle - g.rt_start;
+        (g.rt_id == proto::Ping::kId ? g.rt_ping : g.rt_targets).push_back(c);
+        g.rt_seq = -1;
+    }
     if (id == proto::MsgId::STATE && (g.decoder.seq() & proto::kBoardSeqFlag)) {
         ++g.state_frames;
         if (g.last_state_seq >= 0 && g.decoder.seq() != proto::next_board_seq((uint8_t)g.last_state_seq)) {
@@ -211,6 +239,10 @@ void run_until(double t_end) {
                 pc0 < g.profile.size()) {
                 g.profile[pc0] += g.avr->cycle - c0;
             }
+            if (g_trace && g.rt_seq >= 0 && g.rt_started && g.avr->pc == g.tick_entry && !g.in_tick)
+                fprintf(stderr, " tick at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
+            if (g_trace && g.rt_seq >= 0 && g.rt_started && g.avr->pc == g.tick_return && g.in_tick && g.nest_depth == 0)
+                fprintf(stderr, " tickend at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
             if (g.avr->pc == g.tick_entry && !g.in_tick) {
                 g.in_tick = true;
                 g.tick_start = g.avr->cycle;
@@ -229,7 +261,36 @@ void run_until(double t_end) {
                 if (g.tick_nested > g.sim_nested_worst) g.sim_nested_worst = g.tick_nested;
             }
         }
+        if (g.loop_entry) {
+            if (!g.pass_profile.empty() && pc0 < g.pass_profile.size()) {
+                if (g.pass_profile[pc0] == 0) g.pass_touched.push_back(pc0);
+                g.pass_profile[pc0] += g.avr->cycle - c0;
+            }
+            if (g.avr->pc == g.loop_entry) {
+                if (g_trace && g.rt_seq >= 0 && g.rt_started) fprintf(stderr, " loop at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
+                const uint64_t c = g.avr->cycle - g.loop_start;
+                if (g.measuring && g.loop_start) {
+                    ++g.loop_passes;
+                    if (c > g.loop_worst) {
+                        g.loop_worst = c;
+                        g.loop_worst_at = g.loop_start;
+                        g.worst_profile.clear();
+                        for (uint32_t a : g.pass_touched) g.worst_profile.push_back({a, g.pass_profile[a]});
+                    }
+                }
+                if (!g.profile_all) {
+                    for (uint32_t a : g.pass_touched) g.pass_profile[a] = 0;
+                    g.pass_touched.clear();
+                }
+                g.loop_start = g.avr->cycle;
+            }
+        }
         if (!g.to_board.empty() && g.xon && g.avr->cycle >= g.next_byte_cycle) {
+            if (g_trace && g.rt_seq >= 0) fprintf(stderr, "  in at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
+            if (g.rt_seq >= 0 && !g.rt_started) {
+                g.rt_started = true;
+                g.rt_start = g.avr->cycle;
+            }
             avr_raise_irq(in, g.to_board.front());
             g.to_board.pop_front();
             g.next_byte_cycle = g.avr->cycle + kByteCycles;
@@ -355,7 +416,8 @@ int main(int argc, char** argv) {
     const std::string scenario = argv[2];
     const double seconds = atof(argv[3]);
     if (scenario != "idle" && scenario != "typical" && scenario != "stress" &&
-        scenario != "silent" && scenario != "pins") {
+        scenario != "silent" && scenario != "pins" && scenario != "moves" &&
+        scenario != "latency") {
         fprintf(stderr, "tick_bench: unknown scenario %s\n", scenario.c_str());
         return 2;
     }
@@ -401,7 +463,7 @@ int main(int argc, char** argv) {
     }
     send(mode);
     proto::SetTelemetry tel;
-    tel.rate_hz = 500;
+    tel.rate_hz = (scenario == "moves" || scenario == "latency") ? 1000 : 500;
     send(tel);
     run_until(0.3);
     send(proto::ResetStats());
@@ -412,6 +474,14 @@ int main(int argc, char** argv) {
     g.isr_count = g.isr_sum = g.isr_worst = 0;
     const char* profile_path = getenv("UTRF_TICK_PROFILE");
     if (profile_path && *profile_path) g.profile.assign(256 * 1024, 0);
+    const char* loop_entry = getenv("UTRF_LOOP_ENTRY");
+    if (loop_entry && *loop_entry) g.loop_entry = (uint32_t)strtoul(loop_entry, nullptr, 16);
+    const char* loop_profile = getenv("UTRF_LOOP_PROFILE");
+    if (g.loop_entry && loop_profile && *loop_profile) g.pass_profile.assign(256 * 1024, 0);
+    g.profile_all = getenv("UTRF_LOOP_PROFILE_ALL") != nullptr;
+    g_trace = getenv("UTRF_TRACE") != nullptr;
+    g.measuring = true;
+    uint16_t move_id = 0;
     const uint32_t frames_before = g.state_frames;
     const uint32_t gaps_before = g.state_gaps;
     const double t0 = g.avr->cycle / kCpuHz;
@@ -422,6 +492,47 @@ int main(int argc, char** argv) {
         if (scenario == "stress") {
             if (g.to_board.size() < 64) send(targets(t));
             run_until(t + 0.0005);
+        } else if (scenario == "moves") {
+            // A move of all five fingers every 0.4 s (0.3 s paths, ends alternating), set_targets
+            // at 100 Hz in between would end them: heartbeats at 20 Hz instead.
+            if (t >= next_send) {
+                const int k = (int)lround((next_send - t0) / 0.05 + 40e-6);
+                if (k % 8 == 0) {
+                    proto::Move m;
+                    m.move_id = ++move_id;
+                    m.kind = (uint8_t)proto::TargetKind::JOINT2_ANGLE;
+                    m.mask = 0x1F;
+                    for (int f = 0; f < 5; ++f) {
+                        m.value[f] = (move_id & 1) ? 600000 : -300000;
+                        m.duration[f] = 300;
+                    }
+                    send(m);
+                } else {
+                    send(proto::Heartbeat());
+                }
+                next_send += 0.05 + 40e-6;
+            }
+            run_until(next_send < t + 0.0005 ? next_send : t + 0.0005);
+        } else if (scenario == "latency") {
+            // One request at a time, ping and set_targets in turn, each sent when the last one
+            // was answered plus 0.5-3 ms (a fixed irrational-ish step: every phase of the
+            // tick and of the stream comes round).
+            if (g.rt_seq < 0 && t >= next_send) {
+                g.rt_started = false;
+                if ((g.rt_ping.size() + g.rt_targets.size()) % 2 == 0) {
+                    send(proto::Ping());
+                    g.rt_id = proto::Ping::kId;
+                } else {
+                    send(targets(t));
+                    g.rt_id = proto::SetTargets::kId;
+                }
+                g.rt_seq = g.seq;
+                static double phase = 0.0;
+                phase = fmod(phase + 0.6180339887, 1.0);
+                next_send = t + 0.0005 + 0.0025 * phase;
+            }
+            if (g.rt_seq >= 0) next_send = g.avr->cycle / kCpuHz + 0.0005;
+            run_until(g.avr->cycle / kCpuHz + 0.00002);
         } else if (scenario == "silent") {
             run_until(t + 0.0005);
         } else {
@@ -465,6 +576,40 @@ int main(int argc, char** argv) {
         fclose(pf);
         g.profile.clear();
     }
+    g.measuring = false;
+    if (g.profile_all) {
+        g.worst_profile.clear();
+        for (uint32_t a : g.pass_touched) g.worst_profile.push_back({a, g.pass_profile[a]});
+    }
+    auto pct = [](std::vector<uint64_t> v, double q) -> double {
+        if (v.empty()) return 0.0;
+        std::sort(v.begin(), v.end());
+        const size_t i = (size_t)std::min<double>(v.size() - 1, floor(q * (v.size() - 1) + 0.5));
+        return v[i] / kCpuHz * 1e6;
+    };
+    char rt[512] = "";
+    if (scenario == "latency") {
+        snprintf(rt, sizeof rt,
+                 ", \"ping_n\": %zu, \"ping_median_us\": %.1f, \"ping_p99_us\": %.1f, "
+                 "\"ping_max_us\": %.1f, \"targets_n\": %zu, \"targets_median_us\": %.1f, "
+                 "\"targets_p99_us\": %.1f, \"targets_max_us\": %.1f",
+                 g.rt_ping.size(), pct(g.rt_ping, 0.5), pct(g.rt_ping, 0.99), pct(g.rt_ping, 1.0),
+                 g.rt_targets.size(), pct(g.rt_targets, 0.5), pct(g.rt_targets, 0.99),
+                 pct(g.rt_targets, 1.0));
+    }
+    if (!g.worst_profile.empty()) {
+        FILE* pf = fopen(loop_profile, "w");
+        if (!pf) {
+            fprintf(stderr, "tick_bench: cannot write %s\n", loop_profile);
+            return 1;
+        }
+        fprintf(pf, "# byte address, cycles in loop()'s longest pass (%llu cycles)\n",
+                (unsigned long long)g.loop_worst);
+        for (const auto& e : g.worst_profile) {
+            fprintf(pf, "%x %llu\n", e.first, (unsigned long long)e.second);
+        }
+        fclose(pf);
+    }
     // Let the board work off what it has received, then ask for its counters. A lone 0x00
     // first ends whatever partial frame the board holds (the queue was cut mid-frame).
     g.to_board.clear();
@@ -486,7 +631,8 @@ int main(int argc, char** argv) {
            "\"sim_own_mean_cycles\": %.1f, \"sim_nested_worst_cycles\": %llu, "
            "\"sim_nested_mean_cycles\": %.1f, \"sim_nested_interrupts\": %llu, "
            "\"sim_isr_mean_cycles\": %.1f, \"sim_isr_worst_cycles\": %llu, "
-           "\"sim_isr_ticks\": %llu}\n",
+           "\"sim_isr_ticks\": %llu, \"loop_passes\": %llu, \"loop_worst_cycles\": %llu, "
+           "\"loop_worst_at_s\": %.6f%s}\n",
            scenario.c_str(), seconds, (unsigned)s.ticks, (unsigned)s.tick_overruns,
            (unsigned)s.tick_worst, (unsigned)s.tick_mean, (unsigned)s.rx_frames,
            (unsigned)s.rx_crc_errors, (unsigned)s.rx_framing_errors, (unsigned)s.rx_overruns,
@@ -495,6 +641,7 @@ int main(int argc, char** argv) {
            sim_mean, (unsigned long long)sim_own_worst, sim_own_mean,
            (unsigned long long)sim_nested_worst, sim_nested_mean,
            (unsigned long long)sim_nested_count, isr_mean, (unsigned long long)isr_worst,
-           (unsigned long long)isr_ticks);
+           (unsigned long long)isr_ticks, (unsigned long long)g.loop_passes,
+           (unsigned long long)g.loop_worst, g.loop_worst_at / kCpuHz, rt);
     return 0;
 }

@@ -177,6 +177,8 @@ void fw_finger(uint8_t f, FwFinger* out) {
 // A move's path (core/path.h): its feedforward duty (Q15) and the ticks it has to go.
 int16_t fw_path_ff(uint8_t f) { return app::board().hand.finger(f).path().feedforward(); }
 uint16_t fw_path_left(uint8_t f) { return app::board().hand.finger(f).path().left(); }
+// The state stream's ring (core/hand.h): samples that may wait for loop().
+uint8_t fw_stream_slots() { return hand::kStreamSlots; }
 
 struct FwStatus {
     uint32_t lock_errors;

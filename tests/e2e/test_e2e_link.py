@@ -183,14 +183,18 @@ def test_simulated_sleeps_of_any_length_end_on_time(board: EmulatedBoard, hand: 
 
 
 def test_back_to_back_requests_do_not_cost_stream_frames(board: EmulatedBoard, hand: Hand) -> None:
-    # A stream frame is lost when one loop() pass outlasts the frame period (2 ms at 500 Hz).
-    # Answering get_state then set_targets made passes of 1.7 ms plus the tick's share; with
-    # the faster tick the worst pass here is 1.34 ms (simavr, the emulator's function profile).
-    hand.set_telemetry(M.MAX_TELEMETRY_HZ)
+    # At 1 kHz, back to back, twice the pairs that used to cost a frame at some build ids: the
+    # tick samples the stream into a ring of eight (core/hand.h), so a loop() pass that
+    # answers get_state then set_targets (about 1.3 ms) only delays frames, each with its own
+    # tick's board time, and the replies' traffic never starves the stream (once two samples
+    # wait, the next goes out whenever the buffer has room).
+    hand.set_telemetry(1000)
     hand.move([0.3] * 5, 0.2)
     hand.reset_stats()
-    for _ in range(60):
+    lost = hand.link_stats().stream_lost
+    for _ in range(240):
         hand.link.request(M.GetState())
         hand.link.request(M.SetTargets(M.TargetKind.JOINT2_ANGLE, 0b11111, (0.3,) * 5))
         hand.clock.sleep(0.0077)
+    assert hand.link_stats().stream_lost == lost
     assert hand.stats().tx_dropped == 0

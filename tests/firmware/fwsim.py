@@ -110,6 +110,7 @@ def load_library(path: Path = LIB_PATH) -> ctypes.CDLL:
         "fw_finger": (None, [c.c_uint8, c.POINTER(FwFinger)]),
         "fw_path_ff": (c.c_int16, [c.c_uint8]),
         "fw_path_left": (c.c_uint16, [c.c_uint8]),
+        "fw_stream_slots": (c.c_uint8, []),
         "fw_status": (None, [c.POINTER(FwStatus)]),
         "fw_pid_config": (
             None,

@@ -352,17 +352,27 @@ def test_telemetry_stream_rate_and_seq(sim: Sim, rate: int) -> None:
 def test_a_full_transmit_buffer_drops_stream_frames_and_counts_them(sim: Sim) -> None:
     sim.ok(m.SetTelemetry(rate_hz=500))
     sim.run(20)
-    last_before = sim.take(m.State)[-1].seq
+    last_before = sim.take(m.State)[-1]
     sim.lib.fw_set_tx_room(40)  # less than a state frame: nothing fits for 100 ms
     sim.run(100)
     sim.lib.fw_set_tx_room(0xFFFF)
     sim.run(10)
-    first_after = sim.take(m.State)[0].seq
+    after = sim.take(m.State)
     dropped = sim.ok(m.GetStats()).tx_dropped
-    assert 49 <= dropped <= 51
-    # The seq counted the dropped frames too: the host sees a gap of exactly that size.
-    gap = ((first_after & 0x7F) - (last_before & 0x7F)) % 128 - 1
-    assert gap == dropped
+    slots = sim.lib.fw_stream_slots()
+    assert slots >= 2
+    # 50 samples fell due; the first slots waited in the board's ring and went out
+    # late, with their own board time; the rest were dropped.
+    assert 49 - slots <= dropped <= 51 - slots
+    frames = [last_before, *after]
+    steps = [((b.seq & 0x7F) - (a.seq & 0x7F)) % 128 for a, b in itertools.pairwise(frames)]
+    # The seq counted the dropped frames too: the host sees one gap of exactly that size,
+    # after the samples that waited.
+    assert steps[:slots] == [1] * slots
+    assert steps[slots] == dropped + 1
+    assert set(steps[slots + 1 :]) == {1}
+    late = [f.msg.board_time - last_before.msg.board_time for f in after[:slots]]
+    assert late == pytest.approx([0.002 * (k + 1) for k in range(slots)], abs=1e-9)
 
 
 def test_state_reports_angles_targets_and_the_host_derives_the_tip(sim: Sim) -> None:

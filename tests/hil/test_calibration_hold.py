@@ -79,6 +79,7 @@ def _held_data(rng: np.random.Generator, theta_sd: float, tracker_sd: float):
     return replace(stub, theta2_rad=theta2, tip_m=tip, tip_cov_m2=cov)
 
 
+@pytest.mark.slow
 def test_row_covariances_weigh_the_fit_and_state_its_error() -> None:
     """Rows whose held angle is read with an error (0.3 mrad: about 0.1 mm at the tip, along
     the tip's Jacobian) and a tracker of 0.02 mm: over 30 draws, the weighted fit's stated

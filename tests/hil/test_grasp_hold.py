@@ -17,6 +17,7 @@ from utrf.hil.bench import EmulatedTruth, open_emulated
 from utrf.hil.static_loading import RunError
 
 
+@pytest.mark.slow
 def test_hits_are_found_and_the_grasp_recovers(
     firmware_elf: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -64,6 +64,7 @@ def _csv(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow
 def test_reported_figures_follow_from_the_logged_samples(finished) -> None:
     out, result, _, lines = finished
     assert result["complete"] and result["steps_completed"] == 8
@@ -110,6 +111,7 @@ def test_reported_figures_follow_from_the_logged_samples(finished) -> None:
     assert json.loads((out / "results.json").read_text())["error"] == result["error"]
 
 
+@pytest.mark.slow
 def test_calibration_finds_the_emulated_truth(finished) -> None:
     """The fit lands on the hidden modulus within its stated uncertainty, and that
     uncertainty is the Joint-2 reading's as much as the tracker's (hil/README.md: over 20
@@ -143,6 +145,7 @@ def test_calibration_finds_the_emulated_truth(finished) -> None:
     assert any("statistical" in ln for ln in sl.describe(result).splitlines())
 
 
+@pytest.mark.slow
 def test_an_undithered_encoder_carries_its_resolution(firmware_elf: Path, tmp_path: Path) -> None:
     """Without encoder noise the quantiser is not dithered and the hold parks a loaded
     finger at a count's edge: the fit is biased low (hil/README.md: -8 % over 12 seeds),
@@ -169,6 +172,7 @@ def _cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "utrf", "hil", "static-loading", *args]
 
 
+@pytest.mark.slow
 def test_a_killed_run_keeps_its_samples_and_resume_finishes_it(
     firmware_elf: Path, tmp_path: Path
 ) -> None:
@@ -207,6 +211,7 @@ def test_a_killed_run_keeps_its_samples_and_resume_finishes_it(
     assert len(_csv(steps)) == 6
 
 
+@pytest.mark.slow
 def test_a_fault_stops_the_run_and_keeps_its_data(firmware_elf: Path, tmp_path: Path) -> None:
     out = tmp_path / "fault"
     truth = EmulatedTruth()

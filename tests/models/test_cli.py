@@ -163,7 +163,7 @@ def test_plan_safe_refused_and_named(capsys: pytest.CaptureFixture[str]) -> None
     )
     assert out["safe"] and out["q_command_m"] == pytest.approx(ref.q_command_m, abs=1e-12)
     code, text, _ = run(capsys, "plan", "--flexion", "0", "--load-kg", "2")
-    assert code == 3 and "REFUSED" in text and "motor A would pull" in text
+    assert code == 3 and "REFUSED" in text and "motor A (Tendon 1) must pull" in text
     code, _, err = run(capsys, "plan", "fsit", "--load-kg", "0.1")
     assert code == 2 and "no pose named 'fsit'" in err
 

@@ -151,50 +151,50 @@ bool report_faults(Board& b) {
     return false;
 }
 
-// The state stream's phase: true when a state frame is due. A frame waits for an idle
-// transmitter; one more may fall due meanwhile (a long loop() pass: a request's floats and
-// the ticks deferred by its lock), and the two go out back to back. A third due drops the
-// oldest: counted, and its seq skipped so the host sees the gap.
-bool state_due(Board& b) {
-    const uint32_t now = b.hand.ticks();
-    const uint32_t elapsed = now - b.telemetry_tick;
-    b.telemetry_tick = now;
-    if (b.telemetry_hz == 0) return false;
-    // Phase accumulator: rate per tick, one frame per 1000 (kTickHz).
-    uint32_t acc = b.telemetry_acc + elapsed * b.telemetry_hz;
-    while (acc >= 3UL * hand::kTickHz) {
-        acc -= hand::kTickHz;
-        ++b.link.tx_dropped;
-        b.board_seq = proto::next_board_seq(b.board_seq);
-    }
-    b.telemetry_acc = (uint16_t)acc;
-    return acc >= hand::kTickHz;
-}
-
-// The board's own frames, one per pass and only into an idle transmitter, in priority order.
+// The board's own frames, in priority order: faults, the status, the state stream's samples.
+// A frame starts only into an empty transmit buffer, so a reply waits behind at most one; once
+// two samples wait (loop() or the line fell a period behind), the waiting samples go out in
+// this pass, back to back, as far as the buffer has room.
 void board_frames(Board& b) {
-    const bool due = state_due(b);
     poll_status(b);
-    if (!tx_idle(b)) return;
-    if (report_faults(b)) return;
-    if (b.status_pending) {
+    const bool idle = tx_idle(b);
+    if (idle && report_faults(b)) return;
+    if (idle && b.status_pending) {
         proto::Status m;
         dispatch::fill_status(b, m);
         send_board_message(b, m);
         b.status_pending = false;
         return;
     }
-    // A request is coming in: its reply goes first, onto a free line. The state waits (it
-    // may: one more period falls due before a frame is dropped).
-    const bool request_coming =
-        b.decoder.in_frame() && b.hand.ticks() - b.rx_frame_tick < kRequestHoldTicks;
-    if (due && !request_coming) {
-        b.telemetry_acc = (uint16_t)(b.telemetry_acc - hand::kTickHz);
+    uint8_t pending = b.hand.stream_pending();
+    if (pending == 0) return;
+    if (pending < 2) {
+        // A request is coming in: its reply goes first, onto a free line. The state waits (it
+        // may: the samples wait in the ring).
+        const bool request_coming =
+            b.decoder.in_frame() && b.hand.ticks() - b.rx_frame_tick < kRequestHoldTicks;
+        if (!idle || request_coming) return;
+    }
+    while (pending != 0 && b.reply_len == 0 &&
+           hal::serial_tx_room() >= framing::kMaxFrameBytes) {
+        const hand::StateSample& s = b.hand.stream_oldest();
+        for (uint8_t k = 0; k < s.skipped; ++k) {  // dropped samples: their seqs skipped
+            ++b.link.tx_dropped;
+            b.board_seq = proto::next_board_seq(b.board_seq);
+        }
         uint8_t frame[framing::kMaxFrameBytes];
-        const uint8_t n = dispatch::write_state_frame(b, b.board_seq, frame);
+        const uint8_t n = dispatch::write_state_frame(b, b.board_seq, s, frame);
+        b.hand.stream_pop();
         send_board_frame(b, frame, n);
+        --pending;
     }
 }
+
+}  // namespace
+
+void keep_stream() { board_frames(g_board); }
+
+namespace {
 
 void save_progress(Board& b) {
     if (!b.writer.busy() || b.reply_len != 0) return;
@@ -282,8 +282,15 @@ void apply_finger_config(uint8_t f) {
     }
 }
 
+void apply_motion(uint8_t f) {
+    g_board.motion[f] = path::compile(g_board.cfg.finger[f].motion, hand::kDt);
+}
+
 void apply_all_config() {
-    for (uint8_t f = 0; f < hand::kFingers; ++f) apply_finger_config(f);
+    for (uint8_t f = 0; f < hand::kFingers; ++f) {
+        apply_finger_config(f);
+        apply_motion(f);
+    }
     Lock lock;
     g_board.hand.set_safety(g_board.cfg.safety.heartbeat_timeout, g_board.cfg.safety.safe_action);
 }
@@ -304,9 +311,6 @@ void setup() {
     static const uint8_t kDelimiter = 0;
     hal::serial_write(&kDelimiter, 1);
     b.reply_len = 0;
-    b.telemetry_hz = 0;
-    b.telemetry_acc = 0;
-    b.telemetry_tick = 0;
     b.link = LinkStats();
     b.reset_cause = hal::reset_cause();
     kin::init();
@@ -344,6 +348,7 @@ void loop() {
 
 void tick() {
     g_board.hand.tick(hal::encoders_read());
+    g_board.hand.stream_tick();
     hal::encoders_sample();
 }
 

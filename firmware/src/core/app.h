@@ -80,9 +80,6 @@ struct Board {
     uint8_t status_faults[hand::kFingers];
     bool status_pending;  // changed, the status frame not yet sent
 
-    uint16_t telemetry_hz;
-    uint16_t telemetry_acc;  // frames due, in 1/1000: += rate per tick, a frame per 1000
-    uint32_t telemetry_tick;
 
     uint32_t watch_ticks;  // loop()'s view of the tick, for the watchdog
     uint32_t watch_ms;
@@ -93,6 +90,7 @@ struct Board {
     uint8_t move_seq;
     uint8_t move_body[34];   // proto::Move::kSize
     uint8_t move_reply[13];  // proto::Moving::kSize
+    path::Limits motion[hand::kFingers];  // cfg's motion, compiled for path::plan()
 };
 
 Board& board();
@@ -110,8 +108,13 @@ void tick();   // the control tick (timer interrupt context)
 // whether the next period began before it ended (an overrun).
 void tick_done(uint16_t cycles, bool overran);
 
+// A long request (a move's plans) calls this between its parts: the board's own frames that
+// fell due meanwhile go out (the state stream drops a frame after two periods without one).
+void keep_stream();
+
 // Apply a finger's configuration (compile in loop() context, swap under the tick lock).
 void apply_finger_config(uint8_t f);
+void apply_motion(uint8_t f);  // set_motion's block: loop() alone reads it
 void apply_all_config();
 
 // Queue one frame for the host (the reply slot). False when the slot is taken.

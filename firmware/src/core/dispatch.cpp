@@ -38,15 +38,7 @@ int16_t q15_from_milli(int32_t milli) {
     return fx::sat16((milli * fx::kOne15 + (milli < 0 ? -500 : 500)) / 1000);
 }
 
-// Q15 duty to the state message's 1/128 counts, rounded: the high byte (a byte move on the
-// AVR), +1 when the low byte is half or more, saturated at 127.
-int8_t duty_counts(int16_t q15) {
-    const uint8_t hi = (uint8_t)((uint16_t)q15 >> 8);
-    const uint8_t lo = (uint8_t)q15;
-    if ((lo & 0x80) && hi != 0x7F) return (int8_t)(hi + 1);
-    return (int8_t)hi;
-}
-
+using fx::duty_counts;
 using app::Lock;
 
 template <typename T>
@@ -138,24 +130,25 @@ int32_t bu_from_urad(int32_t urad) {
     return (int32_t)((urad * kM + 0x80000000LL) >> 32);
 }
 
+// A target in the unit of `kind` to BU (not yet clamped to the finger's limits); kNoTarget
+// when it has none. JOINT2_ANGLE in integers, the others through the kinematics (floats).
+const int32_t kNoTarget = 0x7FFFFFFF;
+int32_t target_bu(uint8_t kind, uint8_t f, int32_t raw) {
+    if (kind == (uint8_t)TargetKind::JOINT2_ANGLE) {
+        return raw >= -kMaxUrad && raw <= kMaxUrad ? bu_from_urad(raw) : kNoTarget;
+    }
+    float th;
+    return target_angle(kind, f, raw, th) ? fx::round_sat(th * fx::kBuPerRad) : kNoTarget;
+}
+
 void set_targets(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     SetTargets m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
     int16_t bu[kFingerCount];
-    const bool angle = m.kind == (uint8_t)TargetKind::JOINT2_ANGLE;
     for (uint8_t f = 0; f < kFingerCount; ++f) {
         if (!(m.mask & (1u << f))) continue;
         const finger::Params& p = b.hand.finger(f).params();
-        int32_t a;
-        float th;
-        if (angle && m.value[f] >= -kMaxUrad && m.value[f] <= kMaxUrad) {
-            a = bu_from_urad(m.value[f]);
-        } else if (!angle && target_angle(m.kind, f, m.value[f], th)) {
-            a = fx::round_sat(th * fx::kBuPerRad);
-        } else {
-            nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
-            return;
-        }
+        const int32_t a = target_bu(m.kind, f, m.value[f]);
         // The exact limit is allowed: the float round trip may land a count beyond it.
         if (a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1) {
             nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
@@ -191,10 +184,8 @@ void move(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     int16_t end[kFingerCount];
     for (uint8_t f = 0; f < kFingerCount; ++f) {
         if (!(m.mask & (1u << f))) continue;
-        float th;
         const finger::Params& p = b.hand.finger(f).params();
-        const int32_t a =
-            target_angle(m.kind, f, m.value[f], th) ? fx::round_sat(th * fx::kBuPerRad) : 0x7FFFFFFF;
+        const int32_t a = target_bu(m.kind, f, m.value[f]);
         if (a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1) {
             nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
             return;
@@ -217,9 +208,9 @@ void move(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
         r.duration[f] = 0;
         if (!(m.mask & (1u << f))) continue;
         const float d = (float)(int16_t)(end[f] - from[f]) * (1.0f / fx::kBuPerRad);
-        plan[f] = path::plan(d, (float)m.duration[f] * Move::kDurationScale, end[f],
-                             b.cfg.finger[f].motion, hand::kDt);
+        plan[f] = path::plan(d, (float)m.duration[f] * Move::kDurationScale, end[f], b.motion[f]);
         r.duration[f] = plan[f].ticks;  // ms: one tick is 1 ms
+        app::keep_stream();
         if (plan[f].stretched) r.stretched |= (uint8_t)(1u << f);
     }
     static_assert(hand::kTickHz == 1000, "moving.duration counts ticks as ms");
@@ -298,9 +289,10 @@ void set_mode(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
 void set_telemetry(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     SetTelemetry m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
-    b.telemetry_hz = m.rate_hz;
-    b.telemetry_acc = 0;
-    b.telemetry_tick = b.hand.ticks();
+    {
+        Lock lock;
+        b.hand.set_stream(m.rate_hz);
+    }
     ack(b, seq, m.kId);
 }
 
@@ -320,7 +312,7 @@ bool may_set(app::Board& b, uint8_t seq, const SetFingerConfig& m) {
 void applied(app::Board&, const SetGains& m) { app::apply_finger_config(m.finger); }
 void applied(app::Board&, const SetLimits& m) { app::apply_finger_config(m.finger); }
 void applied(app::Board&, const SetFingerConfig& m) { app::apply_finger_config(m.finger); }
-void applied(app::Board&, const SetMotion&) {}  // read by the next move
+void applied(app::Board&, const SetMotion& m) { app::apply_motion(m.finger); }
 void applied(app::Board& b, const SetSafety&) {
     Lock lock;
     b.hand.set_safety(b.cfg.safety.heartbeat_timeout, b.cfg.safety.safe_action);
@@ -432,7 +424,27 @@ void get_state(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     GetState m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
     uint8_t* slot = app::reply_slot();
-    if (slot != 0) app::reply_written(seq, write_state_frame(b, seq, slot));
+    if (slot == 0) return;
+    hand::StateSample s;
+    uint8_t mode[kFingerCount];
+    uint8_t faults[kFingerCount];
+    {
+        // Copy under the lock (the tick waits meanwhile), write after it.
+        Lock lock;
+        s.tick = (uint16_t)b.hand.ticks();
+        for (uint8_t f = 0; f < kFingerCount; ++f) {
+            const finger::Finger& fg = b.hand.finger(f);
+            s.theta[f] = fg.theta();
+            s.target[f] = fg.target();
+            s.duty_a[f] = duty_counts(fg.duty_a());
+            s.duty_b[f] = duty_counts(fg.duty_b());
+            mode[f] = fg.mode();
+            faults[f] = fg.faults();
+        }
+    }
+    // The status the sample belongs to: a change seen here is numbered before the reply.
+    app::note_status(b, mode, faults);
+    app::reply_written(seq, write_state_frame(b, seq, s, slot));
 }
 
 void get_status(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
@@ -500,38 +512,16 @@ void ack(app::Board& b, uint8_t seq, uint8_t msg_id) {
     reply(b, seq, m);
 }
 
-uint8_t write_state_frame(app::Board& b, uint8_t seq, uint8_t* out) {
-    // Copy under the lock (the tick waits meanwhile), write after it. The angles go out in
-    // the board's own units and the duties as their high bytes: no arithmetic per field.
-    int16_t theta[kFingerCount];
-    int16_t target[kFingerCount];
-    int16_t duty_a[kFingerCount];
-    int16_t duty_b[kFingerCount];
-    uint8_t mode[kFingerCount];
-    uint8_t faults[kFingerCount];
-    uint16_t t;
-    {
-        Lock lock;
-        t = (uint16_t)b.hand.ticks();
-        for (uint8_t f = 0; f < kFingerCount; ++f) {
-            const finger::Finger& fg = b.hand.finger(f);
-            theta[f] = fg.theta();
-            target[f] = fg.target();
-            duty_a[f] = fg.duty_a();
-            duty_b[f] = fg.duty_b();
-            mode[f] = fg.mode();
-            faults[f] = fg.faults();
-        }
-    }
-    // The status the sample belongs to: a change seen here is numbered before the frame.
-    app::note_status(b, mode, faults);
+uint8_t write_state_frame(app::Board& b, uint8_t seq, const hand::StateSample& s, uint8_t* out) {
+    // The angles go out in the board's own units and the duties as their rounded high bytes
+    // (taken by the tick): no arithmetic per field.
     framing::FrameWriter w(out, seq, State::kId);
-    put_u16(w, t);
+    put_u16(w, s.tick);
     w.put(b.status_change);
-    for (uint8_t f = 0; f < kFingerCount; ++f) put_i16(w, theta[f]);
-    for (uint8_t f = 0; f < kFingerCount; ++f) put_i16(w, target[f]);
-    for (uint8_t f = 0; f < kFingerCount; ++f) w.put((uint8_t)duty_counts(duty_a[f]));
-    for (uint8_t f = 0; f < kFingerCount; ++f) w.put((uint8_t)duty_counts(duty_b[f]));
+    for (uint8_t f = 0; f < kFingerCount; ++f) put_i16(w, s.theta[f]);
+    for (uint8_t f = 0; f < kFingerCount; ++f) put_i16(w, s.target[f]);
+    for (uint8_t f = 0; f < kFingerCount; ++f) w.put((uint8_t)s.duty_a[f]);
+    for (uint8_t f = 0; f < kFingerCount; ++f) w.put((uint8_t)s.duty_b[f]);
     return w.finish();
 }
 

@@ -19,7 +19,7 @@ void ack(app::Board& b, uint8_t seq, uint8_t msg_id);
 
 // Board-initiated messages (used by app for the stream and reports).
 // The state frame with this seq, sampled now, written into `out` (kMaxFrameBytes); its length.
-uint8_t write_state_frame(app::Board& b, uint8_t seq, uint8_t* out);
+uint8_t write_state_frame(app::Board& b, uint8_t seq, const hand::StateSample& s, uint8_t* out);
 void fill_status(const app::Board& b, proto::Status& m);
 void fill_boot(const app::Board& b, proto::Boot& m);
 

@@ -108,6 +108,15 @@ __attribute__((always_inline)) inline int32_t mul_q16(int32_t x, uint16_t c) {
 }
 
 // Float to the nearest integer, saturating to int32; NaN gives 0.
+// Q15 duty to the state message's 1/128 counts, rounded: the high byte (a byte move on the
+// AVR), +1 when the low byte is half or more, saturated at 127.
+inline int8_t duty_counts(int16_t q15) {
+    const uint8_t hi = (uint8_t)((uint16_t)q15 >> 8);
+    const uint8_t lo = (uint8_t)q15;
+    if ((lo & 0x80) && hi != 0x7F) return (int8_t)(hi + 1);
+    return (int8_t)hi;
+}
+
 int32_t round_sat(float v);
 // Radians to BU, clamped to +-pi.
 int16_t bu(float rad);

@@ -19,7 +19,12 @@ Hand::Hand()
       worst_cycles_(0),
       timing_base_(0),
       window_sum_(0),
-      window_n_(0) {
+      window_n_(0),
+      stream_hz_(0),
+      stream_acc_(0),
+      stream_head_(0),
+      stream_tail_(0),
+      stream_skip_(0) {
     timing_.ticks = 0;
     timing_.overruns = 0;
     timing_.worst_cycles = 0;

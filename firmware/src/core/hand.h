@@ -31,6 +31,21 @@ struct TickTiming {
     uint32_t mean_cycles;  // over the last complete window of 1024 ticks (0 before one)
 };
 
+// One state-stream sample, taken by the tick when a frame falls due (the stream's phase runs
+// on the tick), so a frame carries its own tick's values however late loop() sends it.
+struct StateSample {
+    uint16_t tick;  // board time, ms (wraps)
+    uint8_t skipped;  // samples dropped just before this one (the ring was full)
+    int16_t theta[kFingers];
+    int16_t target[kFingers];
+    int8_t duty_a[kFingers];  // the state message's 1/128 counts (fx::duty_counts)
+    int8_t duty_b[kFingers];
+};
+// Samples waiting for loop(): loop() may fall this many periods behind (a long request, a
+// busy line) before one is dropped. Measured: a move's request holds loop() up to 5 ms at
+// 1 kHz with five paths running (docs/benchmarks.md); 8 slots of 33 bytes.
+static const uint8_t kStreamSlots = 8;
+
 class Hand {
    public:
     Hand();
@@ -70,6 +85,21 @@ class Hand {
     }
     uint32_t ticks() const;  // atomic read
 
+    // ---- the state stream's samples ----
+    // loop() context, under the tick lock: the rate (0: off); clears the samples waiting.
+    void set_stream(uint16_t hz) {
+        stream_hz_ = hz;
+        stream_acc_ = 0;
+        stream_head_ = stream_tail_ = 0;
+        stream_skip_ = 0;
+    }
+    // loop() context, no lock: the samples waiting, the oldest, and its release.
+    uint8_t stream_pending() const { return (uint8_t)(stream_head_ - stream_tail_); }
+    const StateSample& stream_oldest() const { return stream_[stream_tail_ % kStreamSlots]; }
+    void stream_pop() { stream_tail_ = (uint8_t)(stream_tail_ + 1); }
+    // The tick, after the fingers: a sample when one falls due.
+    inline void stream_tick();
+
     // The control tick (interrupt context), and its timing, measured by the caller at its end
     // (in cycles: a tick lasts at most two periods, 32,000 cycles, so 16 bits hold it).
     // Inline (below): app::tick() and tick_done() call them on the one Hand, a static object,
@@ -96,6 +126,12 @@ class Hand {
     uint32_t timing_base_;  // ticks_ at reset_timing()
     uint32_t window_sum_;
     uint16_t window_n_;
+    StateSample stream_[kStreamSlots];
+    uint16_t stream_hz_;
+    uint16_t stream_acc_;  // += rate a tick; a sample per kTickHz
+    volatile uint8_t stream_head_;  // written by the tick
+    volatile uint8_t stream_tail_;  // written by loop()
+    uint8_t stream_skip_;
 };
 
 UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
@@ -149,6 +185,33 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
     // 6.6 KB of flash, which the board's moves (core/path.h) need to stay in the budget.
     for (uint8_t f = 0; f < kFingers; ++f) fingers_[f].tick(enc[f], out[f], turn == f);
     hal::motors_write(out);
+}
+
+UTRF_HOT void Hand::stream_tick() {
+    if (stream_hz_ == 0) return;
+    uint16_t acc = (uint16_t)(stream_acc_ + stream_hz_);
+    if (acc < kTickHz) {
+        stream_acc_ = acc;
+        return;
+    }
+    stream_acc_ = (uint16_t)(acc - kTickHz);
+    const uint8_t head = stream_head_;
+    if (UTRF_UNLIKELY((uint8_t)(head - stream_tail_) >= kStreamSlots)) {
+        if (stream_skip_ != 0xFF) ++stream_skip_;  // full: this sample is dropped
+        return;
+    }
+    StateSample& s = stream_[head % kStreamSlots];
+    s.tick = (uint16_t)ticks_;
+    s.skipped = stream_skip_;
+    stream_skip_ = 0;
+    for (uint8_t f = 0; f < kFingers; ++f) {
+        const finger::Finger& fg = fingers_[f];
+        s.theta[f] = fg.theta();
+        s.target[f] = fg.target();
+        s.duty_a[f] = fx::duty_counts(fg.duty_a());
+        s.duty_b[f] = fx::duty_counts(fg.duty_b());
+    }
+    stream_head_ = (uint8_t)(head + 1);
 }
 
 UTRF_HOT void Hand::record_timing(uint16_t cycles, bool overran) {

@@ -10,12 +10,18 @@ namespace path {
 const uint16_t kRecip[kEvery + 1] = {0, 65535u, 32768u, 21845u, 16384u, 13107u};
 
 namespace {
-int16_t q15(float duty) {
-    return fx::sat16(fx::round_sat(duty * 32768.0f));
-}
-
 inline uint16_t hi16(uint32_t v) { return (uint16_t)(v >> 16); }
 }  // namespace
+
+Limits compile(const config::Motion& m, float dt_s) {
+    Limits k;
+    k.ticks_per_s = 1.0f / dt_s;
+    k.speed_ticks = kPeakSpeed / (m.max_speed * dt_s);
+    k.accel_ticks = kPeakAccel / (m.max_accel * dt_s * dt_s);
+    k.cv = m.kv * kPeakSpeed * 32768.0f / dt_s;
+    k.ca = m.ka * kPeakAccel * 32768.0f / (dt_s * dt_s);
+    return k;
+}
 
 float min_duration(float distance_rad, const config::Motion& m) {
     const float d = fabsf(distance_rad);
@@ -24,27 +30,32 @@ float min_duration(float distance_rad, const config::Motion& m) {
     return tv > ta ? tv : ta;
 }
 
-Plan plan(float distance_rad, float duration_s, int16_t end_bu, const config::Motion& m,
-          float dt_s) {
+Plan plan(float distance_rad, float duration_s, int16_t end_bu, const Limits& k) {
     Plan p;
     p.end = end_bu;
-    const float t_min = min_duration(distance_rad, m);
-    float t = duration_s;
+    // The shortest path in ticks: max(speed_ticks d, sqrt(accel_ticks d)), the square root
+    // only when the acceleration is the bound.
+    const float d = fabsf(distance_rad);
+    const float nv = k.speed_ticks * d;
+    const float na2 = k.accel_ticks * d;
+    const float n_min = nv * nv >= na2 ? nv : sqrtf(na2);
+    float n = duration_s * k.ticks_per_s;
     p.stretched = false;
-    if (!(t > 0.0f)) {
-        t = t_min;
-    } else if (t_min > t + 0.5f * dt_s) {  // within half a tick of the request is no stretch
-        t = t_min;
+    if (!(n > 0.0f)) {
+        n = n_min;
+    } else if (n_min > n + 0.5f) {  // within half a tick of the request is no stretch
+        n = n_min;
         p.stretched = true;
     }
-    float n = ceilf(t / dt_s - 1e-3f);
+    n = ceilf(n - 1e-3f);
     if (n < 1.0f) n = 1.0f;
     if (n > 65535.0f) n = 65535.0f;
     p.ticks = (uint16_t)n;
     p.inc = 0xFFFFFFFFUL / p.ticks;
-    const float tr = (float)p.ticks * dt_s;
-    p.cv = q15(m.kv * distance_rad * kPeakSpeed / tr);
-    p.ca = q15(m.ka * distance_rad * kPeakAccel / (tr * tr));
+    const float inv = 1.0f / n;  // the one division
+    const float r = distance_rad * inv;
+    p.cv = fx::sat16(fx::round_sat(k.cv * r));
+    p.ca = fx::sat16(fx::round_sat(k.ca * r * inv));
     return p;
 }
 
@@ -86,10 +97,16 @@ void Path::next_segment() {
 void Path::plan_next() {
     // Only loop() writes the planning fields and sets next_ready_; the tick clears it and
     // stop() ends the path: read the flag and the path's state under the lock.
+    // Without the lock first: plan_left_ is loop()'s own and next_ready_ a byte, and most
+    // passes have nothing to do.
+    if (plan_left_ == 0 || next_ready_) return;
     hal::tick_lock();
-    const bool todo = left_ != 0 && !next_ready_ && plan_left_ != 0;
+    const bool todo = left_ != 0 && !next_ready_;
     hal::tick_unlock();
-    if (!todo) return;
+    if (!todo) {
+        plan_left_ = 0;  // the path ended early (a stop): nothing more to plan
+        return;
+    }
     const uint8_t n = plan_left_ < plan_n_ ? (uint8_t)plan_left_ : plan_n_;
     const uint32_t acc = plan_acc_ + inc_ * n;
     const uint16_t after = (uint16_t)(plan_left_ - n);

@@ -50,16 +50,27 @@ struct Plan {
     bool stretched;    // the requested duration was below what the limits allow
 };
 
+// A finger's motion limits and feedforward gains, compiled from config::Motion when its
+// configuration changes (loop() context), so that planning a move takes one float division
+// and at most one square root a finger (about 0.3 ms on the AVR for five: a longer loop()
+// pass would hold the state stream up).
+struct Limits {
+    float speed_ticks;  // ticks a radian needs at the peak speed: 1.875 / (max_speed dt)
+    float accel_ticks;  // ticks^2 a radian needs at the peak acceleration: 5.7735 / (max_accel dt^2)
+    float cv;           // feedforward Q15 at the peak speed of a path of D rad in N ticks: cv D / N
+    float ca;           // ... at its peak acceleration: ca D / N^2
+    float ticks_per_s;  // 1 / dt
+};
+Limits compile(const config::Motion& m, float dt_s);
 // The shortest duration the limits allow for a distance (rad, either sign), s.
 float min_duration(float distance_rad, const config::Motion& m);
 // Plan a move of `distance_rad` (end - start) to `end_bu` in `duration_s` (0: the shortest
-// the limits allow), ticks of `dt_s`.
-Plan plan(float distance_rad, float duration_s, int16_t end_bu, const config::Motion& m,
-          float dt_s);
+// the limits allow).
+Plan plan(float distance_rad, float duration_s, int16_t end_bu, const Limits& k);
 
 class Path {
    public:
-    Path() : left_(0), seg_left_(0), next_ready_(0) {}
+    Path() : left_(0), seg_left_(0), next_ready_(0), plan_left_(0) {}
     bool active() const { return left_ != 0; }
     uint16_t left() const { return left_; }  // ticks to go
     int16_t feedforward() const { return ff_; }

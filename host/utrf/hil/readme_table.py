@@ -7,6 +7,10 @@ Runs the static loading on the emulated bench as ``utrf hil static-loading --emu
 time, so the same code gives the same figures on every machine, and writes the section
 between its markers (``utrf.benchdoc``). ``tests/hil/test_readme_table.py`` runs it again
 and fails when the committed section is not what the run gives.
+
+The firmware it runs is built with build id 0 (``make hil-readme`` builds it so): the id is
+the git commit, and its bytes in the identify reply shift the simulated run's timing, so a
+table from a firmware carrying the commit would go stale with every commit.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ END = "<!-- END hil-static-seed0 -->"
 COMMAND = "utrf hil static-loading --emulated --seed 0 --out out/static --force"
 
 
-def run_seed0(out: Path) -> dict[str, Any]:
+def run_seed0(out: Path, elf: str | None = None) -> dict[str, Any]:
     """The seed-0 run of the paper's schedule on the emulated bench; its results."""
     from utrf.hil import static_loading as sl
     from utrf.hil.bench import BENCH_ACTUATOR, EmulatedTruth, open_emulated
@@ -36,7 +40,7 @@ def run_seed0(out: Path) -> dict[str, Any]:
     )
     truth = EmulatedTruth()
     geometry = HandGeometry.default().fingers[config.finger].geometry
-    bench = open_emulated(seed=0, tracked_finger=config.finger, truth=truth)
+    bench = open_emulated(seed=0, tracked_finger=config.finger, truth=truth, elf=elf)
     try:
         sl.prepare_output(out, config, resume=False, extra_meta={"emulated_truth": truth.to_json()})
         return sl.run(bench, config, out, geometry=geometry, progress=lambda _s: None)
@@ -102,9 +106,10 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m utrf.hil.readme_table", description=__doc__)
     p.add_argument("--update", type=Path, metavar="README", help="write the section here")
     p.add_argument("--out", type=Path, help="keep the run here (default: a temporary folder)")
+    p.add_argument("--elf", help="the firmware to run (make hil-readme: one with build id 0)")
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
-        result = run_seed0(args.out or Path(tmp) / "static")
+        result = run_seed0(args.out or Path(tmp) / "static", elf=args.elf)
     text = section(result)
     if not math.isfinite(result["error"]["mean_m"]):
         print("readme_table: the run gave no figures", file=sys.stderr)

@@ -338,7 +338,7 @@ def fit(
 ) -> CalibrationResult:
     """Least-squares fit of ``fit_params`` (default: modulus and q_offset for positions, the
     modulus for deflections), starting from ``initial`` (default: ``geom`` as it is)."""
-    statics._check_model(model)
+    statics.require_model(model)
     names = tuple(fit_params) if fit_params is not None else None
     if names is None:
         if data.kind == "deflection":

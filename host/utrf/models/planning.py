@@ -15,12 +15,13 @@ angle through the rigid coupling (θ2 = q / R2). So the plan also gives the Join
 encoder reads when the loaded finger is on target, and the TENDON_Q and FLEXION values that
 the firmware maps to that same angle (``firmware_targets``).
 
-A plan is refused (``safe`` False, with the reasons) when a tendon's safety factor falls below
-the limit, a motor would pull more than its rating, Joint 1 would leave its range, the statics
-do not converge, or the loaded finger cannot reach the target within ``tolerance_m``.
+A plan is refused (``safe`` False, with the reasons) when the statics' own limit checks
+(``statics.limit_violations``: a tendon's safety factor below the limit, a motor over its
+rating, Joint 1 out of range, no convergence) find anything, or the loaded finger cannot reach
+the target within ``tolerance_m``.
 
-Named poses (``"fist"``, ...) come from the pose library (``utrf.poses``) through
-``named_pose_target``.
+Named poses (``"fist"``, ...) come from the pose library (``utrf.poses``), which the caller
+loads and hands to ``named_pose_target``: the models import nothing above them.
 """
 
 from __future__ import annotations
@@ -112,13 +113,11 @@ class Target:
 
 
 # -- named poses -------------------------------------------------------------------------------
-def named_pose_target(name: str, finger: str, library: Mapping[str, Any] | None = None) -> Target:
-    """Finger ``finger``'s target in the named pose of the pose library (utrf.poses)."""
-    from utrf.poses import PoseLibrary  # the library imports the models: import it late
-
-    poses = library if library is not None else PoseLibrary.load()
+def named_pose_target(name: str, finger: str, library: Mapping[str, Any]) -> Target:
+    """Finger ``finger``'s target in the named pose of ``library`` (a ``utrf.poses.PoseLibrary``,
+    which the caller loads: the pose library sits above the models, which import nothing above)."""
     try:
-        pose = poses[name]
+        pose = library[name]
     except KeyError as exc:
         raise PlanError(exc.args[0]) from None
     if finger not in pose.targets:
@@ -193,7 +192,7 @@ def plan(
     """The q to command so that the finger under ``load`` lands on ``target`` (see module doc)."""
     load = load if load is not None else Load()
     limits = limits if limits is not None else Limits()
-    statics._check_model(model)
+    statics.require_model(model)
     if match not in MATCHES:
         raise PlanError(f"match must be one of {MATCHES}, got {match!r}")
     if not (math.isfinite(tolerance_m) and tolerance_m > 0):
@@ -264,37 +263,14 @@ def plan(
         "FLEXION": float(kinematics.flexion_from_q(geometry, r2 * theta2_sp)),
     }
 
-    reasons: list[str] = []
-    if not result.converged:
-        reasons.append("the statics did not converge: the finger may not hold this load here")
-    for tendon, t, sf in zip(
-        result.loaded_tendons, result.tensions_n, result.safety_factor, strict=True
-    ):
-        if sf < limits.min_safety_factor:
-            reasons.append(
-                f"Tendon {tendon} would carry {t:.1f} N, safety factor {sf:.2f} < "
-                f"{limits.min_safety_factor:g} (breaking stress "
-                f"{limits.tendon_breaking_stress_pa / 1e6:.0f} MPa)"
-            )
-    for motor, force in zip("AB", result.motor_force_n, strict=True):
-        if force > limits.actuator_rated_force_n:
-            reasons.append(
-                f"motor {motor} would pull {force:.1f} N, above its rated "
-                f"{limits.actuator_rated_force_n:g} N"
-            )
-    th1_lo, th1_hi = geometry.theta1_range_rad
-    if not th1_lo <= result.theta_rad[0] <= th1_hi:
-        reasons.append(
-            f"theta1 would be {math.degrees(result.theta_rad[0]):.1f} deg, outside "
-            f"[{math.degrees(th1_lo):g}, {math.degrees(th1_hi):g}] deg"
-        )
+    # One home for each rule: the statics' limits refuse the plan, its validity warnings warn.
+    reasons = statics.limit_violations(result)
     if match == "tip" and tip_error > tolerance_m:
         reasons.append(
             f"the loaded finger's tip comes no nearer than {tip_error * 1e3:.2f} mm to the "
             f"target (tolerance {tolerance_m * 1e3:g} mm)"
         )
-    # The statics' own warnings that are not already reasons (e.g. a strand leaving its guide).
-    warnings += [w for w in result.warnings if "leave" in w]
+    warnings += statics.wrap_warnings(result)
     return Plan(
         target=target,
         match=match,

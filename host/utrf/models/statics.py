@@ -58,7 +58,8 @@ class StaticsError(ValueError):
     """A statics request that cannot be answered (bad input, or no convergence)."""
 
 
-def _check_model(model: str) -> str:
+def require_model(model: str) -> str:
+    """``model`` if it names one of ``MODELS``; a ``StaticsError`` naming the choices if not."""
     if model not in MODELS:
         raise StaticsError(f"model must be one of {MODELS}, got {model!r}")
     return model
@@ -221,7 +222,7 @@ def configuration(
 
     ``serial``: R_k θ_k = q − (e1 + ... + e_k); ``printed`` (Eq. 16): R_k θ_k = q − e_k.
     """
-    _check_model(model)
+    require_model(model)
     e = np.asarray(stretch, dtype=float)
     if model == "serial":
         e = np.cumsum(e, axis=-1)
@@ -278,7 +279,7 @@ def solve_batch(
     ``max_iterations`` come back with ``converged`` False (and their last iterate); ``solve``
     turns that into a warning.
     """
-    _check_model(model)
+    require_model(model)
     if relaxation not in RELAXATIONS:
         raise StaticsError(f"relaxation must be one of {RELAXATIONS}, got {relaxation!r}")
     if not (math.isfinite(threshold_m) and threshold_m > 0):
@@ -476,19 +477,40 @@ class StaticsResult:
         }
 
 
+def _plain(v: np.ndarray) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
 def check(result: StaticsResult) -> list[str]:
     """Warnings for an equilibrium: no convergence, overstress, actuator overload, validity."""
-    net = result.net_tensions_n
-    th = result.theta_rad
     return _warnings(
         result.geometry,
         result.limits,
-        (float(net[0]), float(net[1]), float(net[2])),
-        (float(th[0]), float(th[1]), float(th[2])),
+        _plain(result.net_tensions_n),
+        _plain(result.theta_rad),
         result.converged,
         result.iterations,
         result.threshold_m,
     )
+
+
+def limit_violations(result: StaticsResult) -> list[str]:
+    """The part of ``check`` that makes an equilibrium unsafe to command: no convergence, a
+    tendon under its minimum safety factor, a motor over its rating, theta1 out of range."""
+    return _limit_violations(
+        result.geometry,
+        result.limits,
+        _plain(result.net_tensions_n),
+        float(result.theta_rad[0]),
+        result.converged,
+        result.iterations,
+        result.threshold_m,
+    )
+
+
+def wrap_warnings(result: StaticsResult) -> list[str]:
+    """The part of ``check`` on the model's validity: a strand leaving its guide."""
+    return _wrap_warnings(result.geometry, _plain(result.theta_rad))
 
 
 _WRAP_NAMES = (
@@ -539,6 +561,25 @@ def _warnings(
         and abs(th3) <= a3
     ):
         return []
+    return _limit_violations(geom, lim, net, th1, converged, iterations, threshold_m) + (
+        _wrap_warnings(geom, theta)
+    )
+
+
+def _limit_violations(
+    geom: FingerGeometry,
+    lim: Limits,
+    net: tuple[float, float, float],
+    th1: float,
+    converged: bool,
+    iterations: int,
+    threshold_m: float,
+) -> list[str]:
+    """``limit_violations`` on plain floats."""
+    n1 = net[0]
+    lo, hi = geom.theta1_range_rad
+    area = float(geom.tendon_area_m2)
+    breaking = float(lim.tendon_breaking_stress_pa)
     out: list[str] = []
     if not converged:
         out.append(
@@ -565,6 +606,14 @@ def _warnings(
             f"theta1 = {math.degrees(th1):.1f} deg is outside theta1_range "
             f"[{math.degrees(lo):g}, {math.degrees(hi):g}] deg"
         )
+    return out
+
+
+def _wrap_warnings(geom: FingerGeometry, theta: tuple[float, float, float]) -> list[str]:
+    """``wrap_warnings`` on plain floats."""
+    th1, th2, th3 = theta
+    a2, a3 = _constants(geom).wraps
+    out: list[str] = []
     if abs(th1) <= a2 and abs(th2) <= min(a2, a3) and abs(th3) <= a3:
         return out  # every strand still wraps its guides
     wraps = ((a2 + th1, a2 - th2, a3 + th2, a3 - th3), (a2 - th1, a2 + th2, a3 - th2, a3 + th3))
@@ -735,7 +784,7 @@ def solve(
     limits = limits if limits is not None else _DEFAULT_LIMITS
     if not (isinstance(q, int | float) and math.isfinite(q)):
         raise StaticsError(f"q must be a finite number of metres, got {q!r}")
-    _check_model(model)
+    require_model(model)
     if relaxation not in RELAXATIONS:
         raise StaticsError(f"relaxation must be one of {RELAXATIONS}, got {relaxation!r}")
     if not (math.isfinite(threshold_m) and threshold_m > 0):
