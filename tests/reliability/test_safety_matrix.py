@@ -205,8 +205,9 @@ def test_loop_alive_then_the_watchdog(board: EmulatedBoard, hand: Hand) -> None:
     # and one for the hang to begin (at loop()'s next start)
     row("loop alive (motors off)", t, (LOOP_HANG_TICKS + 2) * TICK)
     t_reset = run_until(board, lambda: board.reset_cause == "watchdog", 0.5)
-    # the watchdog counts from loop()'s last feed: before the hang
-    row("loop alive (watchdog reset)", t + t_reset, WATCHDOG_S + RESOLUTION)
+    # the watchdog counts from loop()'s last feed: in the pass under way when the hang was
+    # asked at the latest (it begins at loop()'s next start), so up to a pass after it
+    row("loop alive (watchdog reset)", t + t_reset, WATCHDOG_S + TICK + RESOLUTION)
     hand.clock.sleep(0.2)
     with pytest.raises(BoardResetError):
         hand.state()
@@ -220,7 +221,7 @@ def test_hard_hang_is_reset_by_the_watchdog(board: EmulatedBoard, hand: Hand) ->
     row(
         "hard hang, interrupts off (watchdog reset)",
         t,
-        WATCHDOG_S + RESOLUTION,
+        WATCHDOG_S + RESOLUTION,  # the CPU stops where it stands: the last feed came before
         "the motors keep their last duty until then",
     )
     hand.clock.sleep(0.2)
