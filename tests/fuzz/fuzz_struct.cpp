@@ -46,6 +46,8 @@ int reply_id(uint8_t req) {
     switch (req) {
         case proto::Identify::kId: return proto::Identity::kId;
         case proto::Ping::kId: return proto::Pong::kId;
+        case proto::Move::kId: return proto::Moving::kId;
+        case proto::GetMotion::kId: return proto::Motion::kId;
         case proto::GetGains::kId: return proto::Gains::kId;
         case proto::GetLimits::kId: return proto::Limits::kId;
         case proto::GetSafety::kId: return proto::Safety::kId;
