@@ -19,9 +19,8 @@ BENCH_TARGETS :=
 -include protocol/protocol.mk
 -include firmware/firmware.mk
 -include host/utrf/emulator/harness/harness.mk
--include host/utrf/models/models.mk
--include host/utrf/hand/hand.mk
 -include tests/fuzz/fuzz.mk
+-include tools/tools.mk
 
 .PHONY: help setup test demo bench lint clean test-after-setup demo-after-setup \
         bench-after-setup
@@ -31,7 +30,8 @@ help:
 	@echo "make demo    set up, build the firmware, run the pose demo on the emulated board"
 	@echo "make test    set up, build, run the whole suite (pytest drives the C++ tests too)"
 	@echo "make bench   benchmarks; results in docs/benchmarks.md"
-	@echo "make firmware | flash PORT=/dev/ttyACM0 | lint | generate | hil-readme | clean"
+	@echo "make generate  every generated file, rewritten (tests fail when one is stale)"
+	@echo "make firmware | flash PORT=/dev/ttyACM0 | lint | hil-readme | figures | clean"
 
 setup:
 	@tools/setup.sh
@@ -49,14 +49,6 @@ demo-after-setup: $(DEMO_DEPS)
 bench: setup
 	@$(SUBMAKE) bench-after-setup
 bench-after-setup: $(BENCH_TARGETS)
-
-# hil/README.md's seed-0 section, from the run it reports (tests/hil/test_readme_table.py
-# fails when it is stale).
-.PHONY: hil-readme
-hil-readme: setup
-	@$(SUBMAKE) emulator
-	@$(SUBMAKE) BUILD=$(BUILD)/id0 FW_GIT_ID= $(BUILD)/id0/firmware/utrf.elf
-	$(PY) -m utrf.hil.readme_table --elf $(BUILD)/id0/firmware/utrf.elf --update hil/README.md
 
 lint: setup
 	$(PY) -m ruff check $(wildcard host tests hil tools protocol)

@@ -170,7 +170,7 @@ DEMO_DEPS     += firmware
 BENCH_TARGETS += bench-firmware
 
 bench-firmware: firmware firmware-host firmware-check
-	$(PY) tools/bench_firmware.py --update docs/benchmarks.md
+	$(PY) -m tools.bench_firmware --update docs/benchmarks.md
 
 # ---- the PlatformIO build, reproduced with Debian's toolchain (make firmware-pio) -------------
 # `pio run` cannot fetch its platform here, so this builds what it would: PlatformIO's atmelavr

@@ -1,7 +1,7 @@
 """Write the golden vectors in protocol/vectors/ from the spec and the Python codec.
 
-    python protocol/make_vectors.py            # write messages.json and streams.json
-    python protocol/make_vectors.py --check    # exit 1 and name the files that are stale
+    python -m protocol.make_vectors            # write messages.json and streams.json
+    python -m protocol.make_vectors --check    # exit 1 and name the files that are stale
 
 messages.json: for every message, frames with their decoded meaning (SI and raw), and bodies
 that must be refused (bad length, each checked field out of range) with the field to blame.
@@ -26,6 +26,7 @@ from enum import IntEnum, IntFlag
 from pathlib import Path
 from typing import Any
 
+from tools.generated import write_or_check
 from utrf.protocol import messages as M
 from utrf.protocol.codec import WIRE_TYPES, Field, Message, Request, to_f32
 from utrf.protocol.framing import (
@@ -515,26 +516,13 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--check", action="store_true", help="exit 1 if a vector file is stale")
     args = parser.parse_args(argv)
-    stale = []
-    for path, text in render().items():
-        current = path.read_text(encoding="utf-8") if path.exists() else None
-        if current == text:
-            continue
-        rel = path.relative_to(REPO_ROOT)
-        if args.check:
-            stale.append(str(rel))
-        else:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(text, encoding="utf-8")
-            print(f"make_vectors: wrote {rel}")
-    if stale:
-        print(
-            "make_vectors: stale (run `.venv/bin/python protocol/make_vectors.py`): "
-            + ", ".join(stale),
-            file=sys.stderr,
-        )
-        return 1
-    return 0
+    return write_or_check(
+        render(),
+        check=args.check,
+        tool="make_vectors",
+        command=".venv/bin/python -m protocol.make_vectors",
+        root=REPO_ROOT,
+    )
 
 
 if __name__ == "__main__":

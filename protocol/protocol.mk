@@ -14,13 +14,13 @@ $(PROTO_HOST_LIB): $(PROTO_LIB_SRCS) $(PROTO_LIB_HDRS) protocol/protocol.mk
 TEST_DEPS += $(PROTO_HOST_LIB)
 BENCH_TARGETS += protocol-bench
 
-.PHONY: generate protocol-generate protocol-bench
-generate: protocol-generate
+.PHONY: protocol-generate protocol-bench
 
-# Regenerate the bindings, the README tables and the golden vectors from protocol/spec.toml.
+# Regenerate the bindings, the README tables and the golden vectors from protocol/spec.toml
+# (part of `make generate`, tools/tools.mk).
 protocol-generate: setup
-	$(PY) protocol/generate.py
-	$(PY) protocol/make_vectors.py
+	$(PY) -m protocol.generate
+	$(PY) -m protocol.make_vectors
 
 protocol-bench: setup $(PROTO_HOST_LIB)
-	$(PY) tools/bench_protocol.py
+	$(PY) -m tools.bench_protocol

@@ -25,11 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-from utrf.benchdoc import cpu_name, write_section
+from tools.doc_sections import cpu_name, write_section
 from utrf.emulator import DEFAULT_ELF, EmulatedBoard
 from utrf.hand import Hand
 from utrf.protocol import messages as m
 from utrf.protocol.framing import encode_frame
+from utrf.trajectory import sample_min_jerk
 
 REPO = Path(__file__).resolve().parents[1]
 BENCH_DOC = REPO / "docs" / "benchmarks.md"
@@ -99,12 +100,18 @@ def telemetry(elf: Path, rate: int, seconds: float, command_hz: float, seed: int
         s0 = hand.link_stats()
         t0 = board.sim_time
         wall0 = time.perf_counter()
-        goal = FIST
+        start, goal = [0.3] * 5, FIST
         while board.sim_time - t0 < seconds:
-            if command_hz:
-                hand.move(goal, 0.8, wait=False, rate_hz=command_hz)
-                goal = [0.3] * 5 if goal is FIST else FIST
-            hand.clock.sleep(0.2)  # holding: heartbeats only when no command rate
+            if not command_hz:
+                hand.clock.sleep(0.2)  # holding: heartbeats only
+                continue
+            # Command traffic beside the stream: minimum-jerk moves sent from the host as
+            # set_targets at command_hz (the board's own moves would put one command on the line).
+            begin = hand.clock.now()
+            for t, targets in sample_min_jerk(start, goal, 0.8, command_hz):
+                hand.set_targets([float(v) for v in targets])
+                hand.clock.sleep(max(0.0, begin + t - hand.clock.now()))
+            start, goal = goal, start
         elapsed = board.sim_time - t0
         s1 = hand.link_stats()
         fw = hand.stats()
@@ -134,7 +141,7 @@ def report(lat: dict[int, dict], sweep: list[dict], args: argparse.Namespace, to
         BEGIN,
         "## Client",
         "",
-        f"Measured with `make bench-client` (`python tools/bench_client.py`) on {cpu_name()}, "
+        f"Measured with `make bench-client` (`python -m tools.bench_client`) on {cpu_name()}, "
         f"Python {platform.python_version()}, {date.today().isoformat()}: the real firmware "
         "(`build/firmware/utrf.elf`) on the driven emulated board, a `Hand` over a `SimLink`, "
         f"times in simulated seconds; {took:.0f} s of wall time in all.",

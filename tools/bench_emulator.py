@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from utrf.benchdoc import cpu_name, write_section
+from tools.doc_sections import cpu_name, write_section
 from utrf.emulator import DEFAULT_ELF, BoardProcess, EmulatedBoard
 from utrf.hand.simlink import SimLink
 from utrf.protocol import Link
@@ -295,7 +295,7 @@ def report(
         BEGIN,
         "## Emulator",
         "",
-        f"Measured with `make bench-emulator` (`python tools/bench_emulator.py`) on {cpu_name()}, "
+        f"Measured with `make bench-emulator` (`python -m tools.bench_emulator`) on {cpu_name()}, "
         f"Python {platform.python_version()}, simavr 1.6 (Debian), {date.today().isoformat()}, "
         "with the real firmware (`build/firmware/utrf.elf`): fingers under position control "
         "track targets sweeping 0.3–1.3 rad at 0.5 Hz, heartbeats every 100 ms, the state "

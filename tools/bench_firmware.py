@@ -1,6 +1,6 @@
 """Firmware benchmark: memory, the control tick's CPU load, and the PID's step figures.
 
-    python tools/bench_firmware.py [--update docs/benchmarks.md] [--seconds 2]
+    python -m tools.bench_firmware [--update docs/benchmarks.md] [--seconds 2]
 
 Run by `make bench-firmware`, which builds the ELF, the host library and the simavr harness
 first. Every figure is measured here:
@@ -25,7 +25,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from utrf.benchdoc import cpu_name, write_section
+from tools.doc_sections import cpu_name, write_section
 
 REPO = Path(__file__).resolve().parents[1]
 ELF = REPO / "build" / "firmware" / "utrf.elf"
@@ -36,8 +36,6 @@ END = "<!-- END firmware -->"
 CPU_HZ = 16_000_000
 TICK_CYCLES = CPU_HZ // 1000
 TARGET = 0.15  # issue 11 goal 4: the tick at most 15 % of the CPU at its worst
-
-sys.path.insert(0, str(REPO / "tests" / "firmware"))
 
 
 def run(cmd: list[str]) -> str:
@@ -61,7 +59,7 @@ def memory() -> dict[str, int]:
 
 
 def table() -> list[str]:
-    out = run([sys.executable, "-m", "utrf.firmware_table", "--check"])
+    out = run([sys.executable, "-m", "tools.kinematics_table", "--check"])
     return [ln for ln in out.splitlines() if ln.startswith(("geometry", "total"))]
 
 
@@ -95,7 +93,7 @@ def tick_load(scenario: str, seconds: float) -> dict:
 def step_figures() -> list[tuple[float, dict[str, float]]]:
     import ctypes
 
-    import fwsim
+    from tests.firmware import fwsim  # the host build's driver, shared with the firmware tests
 
     lib = fwsim.load_library(fwsim.build_library())
     rows = []
@@ -235,7 +233,7 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         BEGIN,
         "## Firmware",
         "",
-        f"Measured with `make bench-firmware` (`python tools/bench_firmware.py`) on "
+        f"Measured with `make bench-firmware` (`python -m tools.bench_firmware`) on "
         f"{cpu_name()}, avr-gcc 5.4 (Debian), simavr 1.6, {now}.",
         "",
         "### Memory (`avr-size -A build/firmware/utrf.elf`)",

@@ -25,7 +25,7 @@ import time
 from datetime import date
 from pathlib import Path
 
-from utrf.benchdoc import cpu_name, write_section
+from tools.doc_sections import cpu_name, write_section
 from utrf.emulator import DEFAULT_ELF, EmulatedBoard
 from utrf.hand import Hand
 from utrf.hand.demo import DEFAULT_SEQUENCE, run_demo

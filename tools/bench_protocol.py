@@ -2,7 +2,7 @@
 ATmega2560 in simavr), the AVR footprint of framing and the generated codec, and Link's round
 trip over TCP loopback.
 
-    make protocol-bench          # or: .venv/bin/python tools/bench_protocol.py
+    make protocol-bench          # or: .venv/bin/python -m tools.bench_protocol
 
 Prints a Markdown section and writes it into docs/benchmarks.md between the protocol markers
 (the rest of that file is left alone).
@@ -10,7 +10,6 @@ Prints a Markdown section and writes it into docs/benchmarks.md between the prot
 
 from __future__ import annotations
 
-import ctypes
 import platform
 import re
 import socket
@@ -23,18 +22,18 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from utrf.benchdoc import cpu_name, write_section
+from tests.protocol.proto_helpers import LIB_PATH as LIB
+from tests.protocol.proto_helpers import CppCodec, RxRecord
+from tools.doc_sections import cpu_name, write_section
 from utrf.protocol import Link
 from utrf.protocol import messages as M
-from utrf.protocol.framing import MAX_BODY_BYTES, Frame, FrameDecoder, encode_frame
+from utrf.protocol.framing import Frame, FrameDecoder, encode_frame
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-LIB = REPO_ROOT / "build" / "host" / "libutrf_proto.so"
 BENCH_DOC = REPO_ROOT / "docs" / "benchmarks.md"
 BEGIN = "<!-- BEGIN protocol (make protocol-bench) -->"
 END = "<!-- END protocol -->"
 COMMAND = "make protocol-bench"
-RECORD_BYTES = 4 + MAX_BODY_BYTES  # tests/protocol/cpp/shim.cpp's UtrfRxRecord
 
 
 def per_call_us(fn: Callable[[], object], min_time_s: float = 0.3) -> float:
@@ -94,19 +93,10 @@ def python_codec() -> list[tuple[str, str]]:
 def cpp_host() -> list[tuple[str, str]]:
     if not LIB.exists():
         return [("C++ on the host", f"skipped: {LIB.relative_to(REPO_ROOT)} not built")]
-    lib = ctypes.CDLL(str(LIB))
-    lib.utrf_decoder_new.restype = ctypes.c_void_p
-    lib.utrf_decoder_free.argtypes = [ctypes.c_void_p]
-    lib.utrf_decoder_feed.argtypes = [
-        ctypes.c_void_p,
-        ctypes.c_char_p,
-        ctypes.c_uint32,
-        ctypes.c_void_p,
-        ctypes.c_uint32,
-    ]
+    lib = CppCodec(LIB).lib  # the C ABI of tests/protocol/cpp/shim.cpp, declared there
     frame = encode_frame(0x80, M.State.ID, sample_state().encode())
     stream = frame * 2000
-    records = ctypes.create_string_buffer(RECORD_BYTES * 2001)
+    records = (RxRecord * 2001)()
     decoder = lib.utrf_decoder_new()
     t = per_call_us(lambda: lib.utrf_decoder_feed(decoder, stream, len(stream), records, 2001))
     lib.utrf_decoder_free(decoder)

@@ -1,4 +1,4 @@
-"""docs/reliability.md from the reliability runs' results, a section each (utrf.benchdoc):
+"""docs/reliability.md from the reliability runs' results, a section each (tools.doc_sections):
 
 - fuzzing:      build/fuzz/results.json          (make fuzz, tests/fuzz/runfuzz.py)
 - noisy line:   build/reliability/noise.json     (tests/reliability/test_noise.py)
@@ -20,7 +20,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from utrf.benchdoc import cpu_name, write_section
+from tools.doc_sections import cpu_name, write_section
 
 REPO = Path(__file__).resolve().parents[1]
 DOC = REPO / "docs" / "reliability.md"

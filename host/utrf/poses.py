@@ -22,7 +22,7 @@ from utrf.models import kinematics
 from utrf.models.geometry import HandGeometry, read_toml
 
 TargetKind = Literal["flexion", "theta2", "q"]
-_OVERRIDE_KEYS = {
+_OVERRIDE_KEYS: dict[str, tuple[TargetKind, float]] = {
     "theta2_rad": ("theta2", 1.0),
     "theta2_deg": ("theta2", math.pi / 180),
     "q_m": ("q", 1.0),
@@ -132,7 +132,7 @@ def parse_pose(
         key, value = next(iter(spec.items()))
         kind, scale = _OVERRIDE_KEYS[key]
         value_si = _number(value, f"{where}: override.{finger}.{key}") * scale
-        targets[finger] = FingerTarget(kind, value_si)  # type: ignore[arg-type]
+        targets[finger] = FingerTarget(kind, value_si)
     grasp = None
     if "grasp" in table:
         g = table["grasp"]

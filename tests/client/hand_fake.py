@@ -9,14 +9,9 @@ holds it (``stuck``). Tests script the rest: refuse, drop or delay any request.
 from __future__ import annotations
 
 import math
-import sys
 import threading
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "protocol"))
-
-from fake_board import FakeBoard, Reply, identity
-
+from tests.protocol.fake_board import FakeBoard, Reply, identity
 from utrf.models import kinematics
 from utrf.models.geometry import HandGeometry
 from utrf.protocol import messages as M

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from fwsim import BU, REPO
 
-from utrf import firmware_table
+from tools import kinematics_table as firmware_table
 from utrf.models import kinematics
 from utrf.models.geometry import HandGeometry
 
@@ -33,7 +33,7 @@ def lookup(lib: ctypes.CDLL, g: int, theta2: float) -> tuple[bool, np.ndarray]:
 
 def test_generated_table_is_up_to_date() -> None:
     r = subprocess.run(
-        [sys.executable, "-m", "utrf.firmware_table", "--check"],
+        [sys.executable, "-m", "tools.kinematics_table", "--check"],
         cwd=REPO,
         capture_output=True,
         text=True,

@@ -70,6 +70,6 @@ mutants: setup firmware firmware-host
 	$(PY) tools/mutants.py
 
 reliability-doc: setup
-	$(PY) tools/reliability_doc.py
+	$(PY) -m tools.reliability_doc
 
 TEST_DEPS += fuzz-build

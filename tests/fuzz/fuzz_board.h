@@ -48,9 +48,14 @@ using namespace utrf;
 
 // Every message the board may send, with its body size (the board never sends a request).
 inline int board_msg_size(uint8_t id) {
-    // the spec numbers its board-to-host messages from 0x81 (bit 7 set), and the generated
-    // table knows every size: a message the spec adds needs no change here
-    return (id & 0x80) ? proto::message_size(id) : -1;
+    switch (id) {
+#define UTRF_FUZZ_SIZE(Msg, ID) \
+    case proto::Msg::kId:       \
+        return proto::Msg::kSize;
+        UTRF_PROTO_BOARD_MESSAGES(UTRF_FUZZ_SIZE)
+#undef UTRF_FUZZ_SIZE
+        default: return -1;
+    }
 }
 
 // What the host side of the line saw since the last take_replies().

@@ -44,17 +44,11 @@ struct Script {
 // The reply a request calls for besides ack and nack (0: ack only).
 int reply_id(uint8_t req) {
     switch (req) {
-        case proto::Identify::kId: return proto::Identity::kId;
-        case proto::Ping::kId: return proto::Pong::kId;
-        case proto::Move::kId: return proto::Moving::kId;
-        case proto::GetMotion::kId: return proto::Motion::kId;
-        case proto::GetGains::kId: return proto::Gains::kId;
-        case proto::GetLimits::kId: return proto::Limits::kId;
-        case proto::GetSafety::kId: return proto::Safety::kId;
-        case proto::GetFingerConfig::kId: return proto::FingerConfig::kId;
-        case proto::GetState::kId: return proto::State::kId;
-        case proto::GetStats::kId: return proto::Stats::kId;
-        case proto::GetStatus::kId: return proto::Status::kId;
+#define UTRF_FUZZ_REPLY(Msg, ID)                                             \
+    case proto::Msg::kId:                                                    \
+        return proto::Msg::kReplyId == proto::Ack::kId ? 0 : proto::Msg::kReplyId;
+        UTRF_PROTO_REQUESTS(UTRF_FUZZ_REPLY)
+#undef UTRF_FUZZ_REPLY
         default: return 0;
     }
 }

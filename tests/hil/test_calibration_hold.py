@@ -61,7 +61,7 @@ def test_csv_carries_the_held_angle(tmp_path: Path) -> None:
 
 def _held_data(rng: np.random.Generator, theta_sd: float, tracker_sd: float):
     """Joint-2-held rows whose measured angle is off by N(0, theta_sd) and whose tip is seen
-    with N(0, tracker_sd) per axis; with each row's tip covariance, as a bench run gives it."""
+    with N(0, tracker_sd) per axis; with each row's tip covariance, as a rig run gives it."""
     truth = replace(GEOM, tendon_youngs_modulus_pa=150e9)
     theta2 = np.zeros(LOADS.size)
     true_theta2 = theta2 + rng.normal(0.0, theta_sd, LOADS.size)

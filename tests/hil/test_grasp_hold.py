@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 
 from utrf.cli import main
-from utrf.hil import grasp_hold as gh
-from utrf.hil.bench import EmulatedTruth, open_emulated
-from utrf.hil.static_loading import RunError
+from utrf.hil.grasp_hold import analysis, report, run
+from utrf.hil.grasp_hold import config as gh
+from utrf.hil.rig import EmulatedTruth, open_emulated
+from utrf.hil.runs import RunError
 
 
 @pytest.mark.slow
@@ -23,11 +24,12 @@ def test_hits_are_found_and_the_grasp_recovers(
 ) -> None:
     out = tmp_path / "grasp"
     config = gh.GraspHoldConfig(duration_s=5.0, hits=2, seed=4, sample_hz=100.0)
-    bench = open_emulated(seed=4, tracked_finger=1, truth=EmulatedTruth(actuator=None))
+    rig = open_emulated(seed=4, tracked_finger=1, truth=EmulatedTruth(actuator=None))
     try:
-        result = gh.run(bench, config, out, progress=lambda _s: None)
+        run.run(rig, config, out, progress=lambda _s: None)
     finally:
-        bench.close()
+        rig.close()
+    result = report.write(out)
     assert result["complete"] and not result["faults"]
     hits = result["hits_applied"]
     assert len(hits) == 2
@@ -60,7 +62,7 @@ def test_hits_are_found_and_the_grasp_recovers(
 
     drawn: dict[str, object] = {}
     monkeypatch.setattr(plt.Figure, "savefig", lambda fig, *_a, **_k: drawn.update(fig=fig))
-    gh.plot(result, rows, list(result["fingers"]), tmp_path / "again.png")
+    report.plot(result, rows, list(result["fingers"]), tmp_path / "again.png")
     drift_ax, dist_ax, tip_ax = drawn["fig"].axes  # type: ignore[attr-defined]
     labels = [line.get_label() for line in drift_ax.get_lines()]
     for name, p in result["fingers"].items():
@@ -88,14 +90,14 @@ def test_hits_are_found_and_the_grasp_recovers(
 def test_a_pose_that_is_not_a_grasp_is_refused(
     firmware_elf: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    bench = open_emulated(seed=0, tracked_finger=1, truth=EmulatedTruth(actuator=None))
+    rig = open_emulated(seed=0, tracked_finger=1, truth=EmulatedTruth(actuator=None))
     try:
         with pytest.raises(RunError, match=r"not a grasp pose; grasp poses: .*grasp-bottle"):
-            gh.run(bench, gh.GraspHoldConfig(pose="fist", duration_s=3.0), tmp_path / "g")
+            run.run(rig, gh.GraspHoldConfig(pose="fist", duration_s=3.0), tmp_path / "g")
         with pytest.raises(RunError, match="'nope' is not a grasp pose"):
-            gh.run(bench, gh.GraspHoldConfig(pose="nope", duration_s=3.0), tmp_path / "g")
+            run.run(rig, gh.GraspHoldConfig(pose="nope", duration_s=3.0), tmp_path / "g")
     finally:
-        bench.close()
+        rig.close()
     assert not (tmp_path / "g").exists()  # refused before anything was written
     # the command says so and exits 2 (bad input), with nothing left behind
     cli = ["hil", "grasp-hold", "--emulated", "--out", str(tmp_path / "c"), "--quiet"]
@@ -111,7 +113,7 @@ def test_disturbance_detection_on_a_known_trace() -> None:
     dev = np.zeros_like(t)
     dev[(t >= 1.0) & (t < 1.3)] = -0.05  # knocked off, back after 0.3 s
     dev[t >= 2.5] = 0.03  # and never back
-    ev = gh._events(t, dev, detect=0.02, recover=0.01)
+    ev = analysis._events(t, dev, detect=0.02, recover=0.01)
     assert len(ev) == 2
     assert ev[0]["start_s"] == pytest.approx(1.0) and ev[0]["recovery_s"] == pytest.approx(0.3)
     assert ev[0]["largest_deviation_rad"] == pytest.approx(-0.05)

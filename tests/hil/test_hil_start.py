@@ -1,4 +1,4 @@
-"""A bench run that cannot start writes nothing, so the same command can simply be run again;
+"""A rig run that cannot start writes nothing, so the same command can simply be run again;
 the reason is one line on stderr and exit 2 (no traceback)."""
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ def test_missing_tracker_package_writes_nothing(
     for _ in range(2):
         assert main(argv) == 2
         err = capsys.readouterr().err
-        assert "pip install -e '.[bench]'" in err and "already holds" not in err
+        assert "pip install -e '.[rig]'" in err and "already holds" not in err
         assert not out.exists()
 
 

@@ -1,4 +1,4 @@
-"""The Joint-2 reading's statistics for the bench runs (utrf.hil.joint2), on synthetic
+"""The Joint-2 reading's statistics for the rig runs (utrf.hil.joint2), on synthetic
 readings of a rounding 10-bit quantiser."""
 
 from __future__ import annotations

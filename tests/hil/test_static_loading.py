@@ -19,8 +19,10 @@ import numpy as np
 import pytest
 
 from utrf.cli import main
-from utrf.hil import static_loading as sl
-from utrf.hil.bench import EmulatedTruth, open_emulated
+from utrf.hil.rig import EmulatedTruth, open_emulated
+from utrf.hil.runs import RunError, RunStopped
+from utrf.hil.static_loading import analysis, report, run
+from utrf.hil.static_loading import config as sl
 from utrf.models import statics
 from utrf.models.geometry import HandGeometry
 from utrf.models.planning import Target, plan
@@ -39,7 +41,7 @@ QUICK = {
 
 
 def _start(out: Path, config: sl.StaticLoadingConfig, truth: EmulatedTruth) -> None:
-    sl.prepare_output(out, config, resume=False, extra_meta={"emulated_truth": truth.to_json()})
+    run.prepare_output(out, config, resume=False, extra_meta={"emulated_truth": truth.to_json()})
 
 
 @pytest.fixture(scope="module")
@@ -50,13 +52,13 @@ def finished(firmware_elf: Path, tmp_path_factory: pytest.TempPathFactory):
         finger=FINGER, loads_kg=(1.0, 2.0, 3.0), repeats=2, seed=11, **QUICK
     )
     _start(out, config, truth)
-    bench = open_emulated(seed=11, tracked_finger=FINGER, truth=truth)
+    rig = open_emulated(seed=11, tracked_finger=FINGER, truth=truth)
     lines: list[str] = []
     try:
-        result = sl.run(bench, config, out, geometry=GEOM, progress=lines.append)
+        run.run(rig, config, out, geometry=GEOM, progress=lines.append)
     finally:
-        bench.close()
-    return out, result, truth, lines
+        rig.close()
+    return out, report.write(out, GEOM), truth, lines
 
 
 def _csv(path: Path) -> list[dict[str, str]]:
@@ -142,10 +144,23 @@ def test_calibration_finds_the_emulated_truth(finished) -> None:
     assert j2["step_se_rad"] < 0.05 * j2["count_rad"]  # 250 frames a step
     assert not cal["warnings"]
     assert 0.2 < cal["chi2_per_dof"] < 3
-    assert any("statistical" in ln for ln in sl.describe(result).splitlines())
+    assert any("statistical" in ln for ln in report.describe(result).splitlines())
 
 
 @pytest.mark.slow
+def test_analyse_gives_the_runs_results_from_the_files_alone(finished, capsys) -> None:
+    """``utrf hil analyse`` shares the run's analysis: from the logs it writes the same results
+    and the figure again, and prints the table."""
+    out, _, _, _ = finished
+    before = json.loads((out / "results.json").read_text())
+    (out / "results.json").unlink()
+    (out / report.FIGURE).unlink()
+    assert main(["hil", "analyse", str(out)]) == 0
+    assert json.loads((out / "results.json").read_text()) == before
+    assert (out / report.FIGURE).exists()
+    assert "calibration: effective tendon modulus" in capsys.readouterr().out
+
+
 def test_an_undithered_encoder_carries_its_resolution(firmware_elf: Path, tmp_path: Path) -> None:
     """Without encoder noise the quantiser is not dithered and the hold parks a loaded
     finger at a count's edge: the fit is biased low (hil/README.md: -8 % over 12 seeds),
@@ -154,18 +169,19 @@ def test_an_undithered_encoder_carries_its_resolution(firmware_elf: Path, tmp_pa
     truth = EmulatedTruth(encoder_noise_v=0.0)
     config = sl.StaticLoadingConfig(finger=FINGER, loads_kg=(1.0, 3.0), repeats=2, seed=12, **QUICK)
     _start(tmp_path, config, truth)
-    bench = open_emulated(seed=12, tracked_finger=FINGER, truth=truth)
+    rig = open_emulated(seed=12, tracked_finger=FINGER, truth=truth)
     try:
-        result = sl.run(bench, config, tmp_path, geometry=GEOM, progress=lambda _s: None)
+        run.run(rig, config, tmp_path, geometry=GEOM, progress=lambda _s: None)
     finally:
-        bench.close()
+        rig.close()
+    result = analysis.analyse(tmp_path, geometry=GEOM)
     cal = result["calibration"]
     assert cal["joint2"]["encoder_noise_counts"] < 0.1
     assert cal["joint2"]["dither_bias_bound_rad"] == pytest.approx(0.5 * cal["joint2"]["count_rad"])
     assert any("hardly dithered" in w for w in cal["warnings"])
     assert cal["modulus_sd_joint2_resolution_pa"] > 2 * cal["modulus_sd_statistical_pa"]
     assert abs(cal["modulus_pa"] - truth.coupling_modulus_pa) < 3 * cal["modulus_sd_pa"]
-    assert "WARNING" in sl.describe(result)
+    assert "WARNING" in report.describe(result)
 
 
 def _cli(*args: str) -> list[str]:
@@ -217,25 +233,26 @@ def test_a_fault_stops_the_run_and_keeps_its_data(firmware_elf: Path, tmp_path: 
     truth = EmulatedTruth()
     config = sl.StaticLoadingConfig(finger=FINGER, loads_kg=(1.0,), repeats=2, seed=5, **QUICK)
     _start(out, config, truth)
-    bench = open_emulated(seed=5, tracked_finger=FINGER, truth=truth)
+    rig = open_emulated(seed=5, tracked_finger=FINGER, truth=truth)
 
     def pull_the_cable(line: str) -> None:
         if line.startswith("[ 2/"):  # after the first loaded step: the encoder comes off
-            bench.board.unplug_encoder(FINGER)
+            rig.board.unplug_encoder(FINGER)
 
     try:
-        with pytest.raises(sl.RunStopped, match="ENCODER_RANGE"):
-            sl.run(bench, config, out, geometry=GEOM, progress=pull_the_cable)
-        assert not bench.board.tip_force[FINGER].any()  # the payload came off
+        with pytest.raises(RunStopped, match="ENCODER_RANGE"):
+            run.run(rig, config, out, geometry=GEOM, progress=pull_the_cable)
+        assert not rig.board.tip_force[FINGER].any()  # the payload came off
     finally:
-        bench.close()
+        rig.close()
     assert [int(r["step"]) for r in _csv(out / "steps.csv")] == [0, 1]
     rows = _csv(out / "samples.csv")
     assert {int(r["step"]) for r in rows} >= {0, 1}
     telemetry = _csv(out / "telemetry.csv")  # the board's stream up to the fault, and after
     assert any(int(r["index_faults"]) for r in telemetry)
     assert len(telemetry) > 100
-    result = sl.analyse(out, geometry=GEOM, figure=False)
+    result = analysis.analyse(out, geometry=GEOM)
+    assert not (out / report.FIGURE).exists()  # the analysis draws nothing
     assert not result["complete"] and result["steps_completed"] == 2
 
 
@@ -250,11 +267,11 @@ def test_unsafe_payloads_are_refused_without_force(tmp_path: Path, capsys) -> No
 
 
 def test_bad_schedules_are_named() -> None:
-    with pytest.raises(sl.RunError, match="loads_kg"):
+    with pytest.raises(RunError, match="loads_kg"):
         sl.StaticLoadingConfig(loads_kg=(1.0, -2.0))
-    with pytest.raises(sl.RunError, match="twice"):
+    with pytest.raises(RunError, match="twice"):
         sl.StaticLoadingConfig(loads_kg=(1.0, 1.0))
-    with pytest.raises(sl.RunError, match="finger"):
+    with pytest.raises(RunError, match="finger"):
         sl.StaticLoadingConfig(finger=5)
     cfg = sl.StaticLoadingConfig(loads_kg=(2.0, 1.0), repeats=2)
     assert [w for _, _, w in cfg.schedule()] == [0.0, 1.0, 2.0] * 2
@@ -263,11 +280,11 @@ def test_bad_schedules_are_named() -> None:
 
 def test_resume_needs_a_run_and_a_new_run_needs_a_new_directory(tmp_path: Path) -> None:
     cfg = sl.StaticLoadingConfig()
-    with pytest.raises(sl.RunError, match="no run"):
-        sl.prepare_output(tmp_path / "empty", cfg, resume=True, extra_meta={})
-    sl.prepare_output(tmp_path / "r", cfg, resume=False, extra_meta={})
-    with pytest.raises(sl.RunError, match="--resume"):
-        sl.prepare_output(tmp_path / "r", cfg, resume=False, extra_meta={})
+    with pytest.raises(RunError, match="no run"):
+        run.prepare_output(tmp_path / "empty", cfg, resume=True, extra_meta={})
+    run.prepare_output(tmp_path / "r", cfg, resume=False, extra_meta={})
+    with pytest.raises(RunError, match="--resume"):
+        run.prepare_output(tmp_path / "r", cfg, resume=False, extra_meta={})
 
 
 def test_the_figure_draws_the_calibrated_model_where_its_points_are(
@@ -284,7 +301,7 @@ def test_the_figure_draws_the_calibrated_model_where_its_points_are(
     geometry = replace(GEOM, tendon_youngs_modulus_pa=result["calibration"]["modulus_pa"])
     loads = np.array([p["load_kg"] for p in per])
     th = np.full(len(per), result["hold"]["theta2_setpoint_rad"])
-    at_setpoint = np.hypot(*sl._model_deflection(geometry, loads, th, th).T)
+    at_setpoint = np.hypot(*analysis.model_deflection(geometry, loads, th, th).T)
     assert np.abs(at_setpoint - measured).mean() > 2 * np.abs(drawn - measured).mean()
     assert result["finger_name"] == "index"
     import matplotlib.pyplot as plt
@@ -298,7 +315,7 @@ def test_the_figure_draws_the_calibrated_model_where_its_points_are(
         return real_savefig(fig, path, **kw)
 
     monkeypatch.setattr(plt.Figure, "savefig", capture)
-    sl.plot(result, out / "again.png", GEOM)
+    report.plot(result, out / "again.png", GEOM)
     assert seen["title"].startswith("Static loading, index:")
     assert "calibrated model (E = " in seen["labels"]
     assert "measured Joint-2 angles" in seen["labels"]

@@ -117,7 +117,7 @@ def test_ndi_tracker_without_its_package_says_how_to_install(monkeypatch) -> Non
         tr.NDIAuroraTracker("/dev/ttyUSB0")
     text = str(info.value)
     assert "scikit-surgerynditracker" in text
-    assert "pip install 'utrf[bench]'" in text and "pip install -e '.[bench]'" in text
+    assert "pip install 'utrf[rig]'" in text and "pip install -e '.[rig]'" in text
 
 
 def test_ndi_tracker_reads_through_the_package(monkeypatch) -> None:

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from utrf.cli.hil import _warn_rate
-from utrf.hil import static_loading as sl
+from utrf.hil.static_loading import config as sl
+from utrf.hil.static_loading import run
 from utrf.hil.tracker import NewFrames, Registration, SimulatedTracker
 
 
@@ -56,7 +57,7 @@ def test_static_loading_records_new_frames_only() -> None:
         clock.t += dt
 
     hand = SimpleNamespace(latest=None, faults_seen=[])
-    bench = SimpleNamespace(sleep=sleep, hand=hand)
+    rig = SimpleNamespace(sleep=sleep, hand=hand)
     config = sl.StaticLoadingConfig(tracker_hz=100.0)
     new = NewFrames()
 
@@ -64,7 +65,7 @@ def test_static_loading_records_new_frames_only() -> None:
         s = tracker.read()
         return {"frame": s.frame} if new.new(s) else None
 
-    rows = sl._record(bench, config, 10, write, 0, "test")  # type: ignore[arg-type]
+    rows = run._record(rig, config, 10, write, 0, "test")  # type: ignore[arg-type]
     frames = [r["frame"] for r in rows]
     assert len(frames) == 10 and len(set(frames)) == 10
     assert new.repeated > 0  # it did read repeats, and did not count them

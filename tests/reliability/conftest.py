@@ -4,7 +4,6 @@ tools/reliability_doc.py turns into docs/reliability.md)."""
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -12,9 +11,6 @@ import pytest
 
 from utrf.emulator import EmulatedBoard
 from utrf.hand import Hand
-
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
 
 
 @pytest.fixture

@@ -9,7 +9,7 @@ value the board shows can be traced to the command that sent it.
 - **wrong applied**: the board shows (in the state stream, or in a read-back) a target, a mode
   or a kp that was never sent;
 - **silent loss**: a command returned without error, but the board does not show its value
-  (the first state frame after it, or set_gains' own read-back);
+  (``get_state`` and ``get_status`` read back after it, or set_gains' own read-back);
 - **errors**: a command raised (each is counted, with whether its value was applied after all);
 - latency: simulated time from the call to its return (p50, p99, max).
 
@@ -98,12 +98,6 @@ def _mode_cycle(k: int) -> M.ControlMode:
     return M.ControlMode.BRAKE if (k // 3) % 2 == 0 else M.ControlMode.COAST
 
 
-def _sampled_after(frames: list[HandState], start: int, board_time: float) -> HandState | None:
-    """The first frame from ``start`` on whose sample the board took at ``board_time`` or
-    later."""
-    return next((s for s in frames[start:] if s.board_time >= board_time), None)
-
-
 def run_campaign(
     board: EmulatedBoard, hand: Hand, rate: float, commands: int, seed: int = 0
 ) -> NoiseResult:
@@ -117,19 +111,12 @@ def run_campaign(
     sent_targets: list[set[float]] = [{0.0} for _ in range(4)]
     sent_modes = {M.ControlMode.COAST}
     sent_kp = {kp0}
-    frames: list[HandState] = []
     timed_out: list[float] = []  # when the stream first showed HOST_TIMEOUT, until cleared
 
     def trace(v: float, sent: set[float], tol: float) -> bool:
         return any(abs(v - s) <= tol for s in sent)
 
-    # the least (arrival - board_time) seen: the board's clock on the host's, to tell a frame
-    # sampled after a command from one sampled before it and sent late (the stream's ring)
-    lag = [math.inf]
-
     def on_state(st: HandState) -> None:
-        frames.append(st)
-        lag[0] = min(lag[0], hand.clock.now() - st.board_time)
         res.stream_frames += 1
         for i in range(4):
             if trace(st[i].target, sent_targets[i], TARGET_TOL):
@@ -216,27 +203,10 @@ def run_campaign(
                 timed_out.clear()
             if want is None:
                 continue
-            # A target shows in the first state frame sampled after the command returned (the
-            # board samples the stream in its tick and may send a sample late, so the first
-            # frame to arrive can be older); a mode in the status, which get_state reads back.
+            # The board's state read back (get_state is answered after the command was
+            # applied; a stream frame may carry a sample its tick took before).
             what, f, v = want
-            if what == "target":
-                n_after = len(frames)
-                # on the board's clock, at the latest: lag[0] holds a state frame's time on the
-                # line, longer than the reply's, and the pump's step; two ticks cover both
-                returned = hand.clock.now() - lag[0] + 0.002
-                deadline = hand.clock.now() + 2.0
-
-                while (found := _sampled_after(frames, n_after, returned)) is None:
-                    if hand.clock.now() >= deadline:
-                        break
-                    hand.clock.sleep(0.002)
-                if found is None:
-                    res.notes.append(f"command {k}: no state frame sampled after it within 2 s")
-                    continue
-                st = found
-            else:
-                st = _retry(hand.state)
+            st = _retry(hand.state)
             now_v = st[f].target if what == "target" else st[f].mode
             applied = abs(now_v - v) <= TARGET_TOL if what == "target" else now_v == v
             if failed is None and not applied:

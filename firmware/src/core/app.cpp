@@ -119,8 +119,6 @@ void note_status(Board& b, const uint8_t* mode, const uint8_t* faults) {
     b.status_pending = true;
 }
 
-namespace {
-
 void poll_status(Board& b) {
     uint8_t mode[hand::kFingers];
     uint8_t faults[hand::kFingers];
@@ -133,6 +131,8 @@ void poll_status(Board& b) {
     }
     note_status(b, mode, faults);
 }
+
+namespace {
 
 bool report_faults(Board& b) {
     for (uint8_t f = 0; f < hand::kFingers; ++f) {

@@ -124,6 +124,8 @@ bool queue_reply(uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len);
 uint8_t* reply_slot();
 // A sample's modes and faults against the status last reported: a change is a new status.
 void note_status(Board& b, const uint8_t* mode, const uint8_t* faults);
+// The status snapshot brought up to the fingers' modes and faults now (noted if changed).
+void poll_status(Board& b);
 void reply_written(uint8_t seq, uint8_t len);
 // Board time in microseconds (the tick count, refined by the tick timer).
 uint32_t board_time_us();

@@ -450,6 +450,7 @@ void get_state(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
 void get_status(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     GetStatus m;
     if (!decode_or_nack(b, seq, body, len, m)) return;
+    app::poll_status(b);  // a fault the tick latched since this pass began is in the reply
     Status r;
     fill_status(b, r);
     reply(b, seq, r);

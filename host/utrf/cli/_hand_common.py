@@ -15,7 +15,8 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from utrf.hand import Hand, HandError, TargetError
+from utrf.hand import DEFAULT_TELEMETRY_HZ, Hand, HandError, TargetError
+from utrf.hand.client import OnClose
 from utrf.hand.errors import FingerFaultError, NotControlledError, NotSettledError
 from utrf.models.geometry import GeometryError
 from utrf.poses import PoseError, PoseLibrary, user_pose_file
@@ -83,13 +84,24 @@ def load_poses(args: argparse.Namespace) -> PoseLibrary:
     return PoseLibrary.load(extra=args.poses)
 
 
-def connect(args: argparse.Namespace, **kwargs: object) -> Hand:
+def connect(
+    args: argparse.Namespace,
+    *,
+    poses: PoseLibrary | None = None,
+    telemetry_hz: int = DEFAULT_TELEMETRY_HZ,
+    on_close: OnClose = "brake",
+    log_path: str | Path | None = None,
+) -> Hand:
+    """:meth:`Hand.connect` on ``--port`` with the common options."""
     return Hand.connect(
         args.port,
         baudrate=args.baud,
         boot_wait_s=args.boot_wait,
         reset=getattr(args, "reset", True),
-        **kwargs,  # type: ignore[arg-type]
+        poses=poses,
+        telemetry_hz=telemetry_hz,
+        on_close=on_close,
+        log_path=log_path,
     )
 
 

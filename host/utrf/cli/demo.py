@@ -20,9 +20,10 @@ import math
 import sys
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
-from rich.console import Console
+from rich.console import Console, RenderableType
 from rich.live import Live
 
 from utrf.cli._hand_common import (
@@ -40,6 +41,14 @@ from utrf.hand.tracking import format_tracking
 from utrf.hand.view import state_table
 
 DEFAULT_OUT = Path("out/demo")
+
+
+@dataclass
+class _Shown:
+    """What the live view shows, set from the demo's callbacks."""
+
+    hand: Hand | None = None
+    step: Step | None = None
 
 
 def _step_line(step: Step, total: int) -> str:
@@ -62,14 +71,13 @@ def run(args: argparse.Namespace) -> int:
     library = load_poses(args)
     console = Console()
     live_view = console.is_terminal and not args.no_live
-    state: dict[str, object] = {"hand": None, "step": None}
+    state = _Shown()
     lock = threading.Lock()
     live: Live | None = None
 
-    def render():  # type: ignore[no-untyped-def]
+    def render() -> RenderableType:
         with lock:
-            hand: Hand | None = state["hand"]  # type: ignore[assignment]
-            step: Step | None = state["step"]  # type: ignore[assignment]
+            hand, step = state.hand, state.step
         if hand is None:
             return "starting the emulated board..."
         title = "UTRF-RoboHand demo"
@@ -80,12 +88,12 @@ def run(args: argparse.Namespace) -> int:
 
     def on_connect(hand: Hand, _board: object) -> None:
         with lock:
-            state["hand"] = hand
+            state.hand = hand
         print(f"emulated board up, the Hand connected to it at {hand.url}", flush=True)
 
     def on_step(step: Step) -> None:
         with lock:
-            state["step"] = step
+            state.step = step
         line = _step_line(step, len(sequence))
         if live is not None:
             if not math.isnan(step.end):

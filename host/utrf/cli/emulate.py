@@ -14,6 +14,7 @@ Angles on the command line are in degrees (Joint-2 angle), and say so; the API i
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -25,10 +26,9 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from utrf.emulator import EmulatedBoard, EmulatorError, HarnessError, PlantError
-from utrf.models.geometry import GeometryError
+from utrf.models.geometry import GeometryError, HandGeometry
 
 EXIT_BAD_INPUT = 2
-FINGER_NAMES = ("thumb", "index", "middle", "ring", "little")
 
 COMMANDS_HELP = """\
 commands (angles in degrees, fingers 0..4 or thumb/index/middle/ring/little):
@@ -48,17 +48,24 @@ commands (angles in degrees, fingers 0..4 or thumb/index/middle/ring/little):
   help, quit"""
 
 
+@functools.cache
+def _finger_names() -> tuple[str, ...]:
+    """The fingers' names as the shipped hand file gives them (their one home)."""
+    return tuple(f.name for f in HandGeometry.default().fingers)
+
+
 def _finger(text: str) -> int:
-    if text in FINGER_NAMES:
-        return FINGER_NAMES.index(text)
+    names = _finger_names()
+    if text in names:
+        return names.index(text)
     try:
         f = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(
-            f"finger must be 0..4 or one of {', '.join(FINGER_NAMES)}, got {text!r}"
+            f"finger must be 0..{len(names) - 1} or one of {', '.join(names)}, got {text!r}"
         ) from None
-    if not 0 <= f <= 4:
-        raise argparse.ArgumentTypeError(f"finger must be 0..4, got {f}")
+    if not 0 <= f < len(names):
+        raise argparse.ArgumentTypeError(f"finger must be 0..{len(names) - 1}, got {f}")
     return f
 
 
@@ -363,7 +370,13 @@ def _command(board: EmulatedBoard, line: str, say: _Printer) -> bool:
             kind, p = rest[0], _probability(rest[1])
             if kind not in ("drop", "corrupt", "insert"):
                 raise ValueError(f"line fault must be drop, corrupt or insert, got {kind!r}")
-            board.set_line_faults(rest[2] if len(rest) > 2 else "both", **{kind: p})
+            rates = {"drop": 0.0, "corrupt": 0.0, "insert": 0.0} | {kind: p}
+            board.set_line_faults(
+                rest[2] if len(rest) > 2 else "both",
+                drop=rates["drop"],
+                corrupt=rates["corrupt"],
+                insert=rates["insert"],
+            )
             say.say(f"line: {kind} {p}")
         elif cmd == "clean":
             board.set_line_faults("both")
@@ -371,7 +384,7 @@ def _command(board: EmulatedBoard, line: str, say: _Printer) -> bool:
         else:
             say.say(f"error: unknown command {cmd!r} (try 'help')")
     except (IndexError, ValueError, argparse.ArgumentTypeError, EmulatorError, PlantError) as exc:
-        say.say(f"error: {cmd}: {exc or 'missing argument'} (try 'help')")
+        say.say(f"error: {cmd}: {str(exc) or 'missing argument'} (try 'help')")
     return True
 
 

@@ -1,4 +1,4 @@
-"""``utrf hil``: the bench runs (``hil/README.md``).
+"""``utrf hil``: the rig runs (``hil/README.md``).
 
     utrf hil static-loading --emulated --out out/static [--seed N] [--force]
     utrf hil static-loading --port /dev/ttyACM0 --tracker-port /dev/ttyUSB0 --out out/static
@@ -24,7 +24,7 @@ from utrf.cli._hand_common import EXIT_BAD_INPUT, EXIT_LINK, EXIT_NOT_DONE, EXIT
 def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "hil",
-        help="bench runs: static loading (paper Sec. IV-A), grasp hold (Sec. IV-C)",
+        help="rig runs: static loading (paper Sec. IV-A), grasp hold (Sec. IV-C)",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -59,7 +59,7 @@ def register(subparsers: Any) -> None:
         default=None,
         metavar="N",
         help="the driving actuator's rated pull for the planner's check (default: the "
-        "planner's 150 N; emulated: the bench actuator's stall force)",
+        "planner's 150 N; emulated: the rig actuator's stall force)",
     )
     s.add_argument("--settle-s", type=float, default=1.5, help="wait after a load (s)")
     s.add_argument("--record-s", type=float, default=1.0, help="recording per step (s)")
@@ -110,8 +110,8 @@ def register(subparsers: Any) -> None:
 def _analyse(args: argparse.Namespace) -> int:
     import json
 
-    from utrf.hil import grasp_hold as gh
-    from utrf.hil import static_loading as sl
+    from utrf.hil.grasp_hold import report as grasp_report
+    from utrf.hil.static_loading import report as static_report
     from utrf.models.geometry import HandGeometry
 
     meta_path = args.out / "meta.json"
@@ -121,9 +121,9 @@ def _analyse(args: argparse.Namespace) -> int:
     config = json.loads(meta_path.read_text())["config"]
     if "loads_kg" in config:
         geometry = HandGeometry.default().fingers[int(config["finger"])].geometry
-        print(sl.describe(sl.analyse(args.out, geometry=geometry)))
+        print(static_report.describe(static_report.write(args.out, geometry)))
     else:
-        print(gh.describe(gh.analyse(args.out)))
+        print(grasp_report.describe(grasp_report.write(args.out)))
     print(f"results: {args.out / 'results.json'}")
     return EXIT_OK
 
@@ -149,7 +149,7 @@ def _common(p: argparse.ArgumentParser) -> None:
         "--tracker-port",
         default=None,
         metavar="PORT",
-        help="NDI Aurora's serial port (bench; default: probe)",
+        help="NDI Aurora's serial port (real rig; default: probe)",
     )
     p.add_argument("--tracker-sensor", type=int, default=0, help="the tip sensor's tool (0)")
     p.add_argument("--boot-wait", type=float, default=2.5, help="s to wait for the board's boot")
@@ -168,17 +168,15 @@ def _finger(name: str) -> int:
 
 
 def _open(args: argparse.Namespace, tracked: int, truth: Any = None) -> Any:
-    from utrf.hil import bench as bench_mod
+    from utrf.hil import rig
 
     if args.emulated:
-        return bench_mod.open_emulated(
-            seed=args.seed, tracked_finger=tracked, truth=truth, elf=args.elf
-        )
+        return rig.open_emulated(seed=args.seed, tracked_finger=tracked, truth=truth, elf=args.elf)
     from utrf.hil.tracker import NDIAuroraTracker
 
     tracker = NDIAuroraTracker(args.tracker_port, sensor=args.tracker_sensor)
     try:
-        return bench_mod.open_real(args.port, tracker, boot_wait_s=args.boot_wait)
+        return rig.open_real(args.port, tracker, boot_wait_s=args.boot_wait)
     except BaseException:
         tracker.close()
         raise
@@ -199,7 +197,7 @@ def _warn_rate(tracker: Any, hz: float, option: str) -> None:
 def _run_guarded(command: str, body: Any) -> int:
     from utrf.emulator import EmulatorError, HarnessError
     from utrf.hand.errors import HandError
-    from utrf.hil.static_loading import RunError, RunStopped
+    from utrf.hil.runs import RunError, RunStopped
     from utrf.hil.tracker import TrackerError
     from utrf.protocol.errors import ProtocolError
 
@@ -223,8 +221,10 @@ def _run_guarded(command: str, body: Any) -> int:
 
 
 def _static_loading(args: argparse.Namespace) -> int:
-    from utrf.hil import static_loading as sl
-    from utrf.hil.bench import BENCH_ACTUATOR, EmulatedTruth
+    from utrf.hil.rig import RIG_ACTUATOR, EmulatedTruth
+    from utrf.hil.runs import default_time
+    from utrf.hil.static_loading import config as sl
+    from utrf.hil.static_loading import report, run
     from utrf.models.geometry import HandGeometry
 
     command = "hil static-loading"
@@ -234,7 +234,7 @@ def _static_loading(args: argparse.Namespace) -> int:
         finger = _finger(args.finger)
         rating = args.actuator_rating_n
         if rating is None and args.emulated:
-            rating = BENCH_ACTUATOR.stall_force_n
+            rating = RIG_ACTUATOR.stall_force_n
         config = sl.StaticLoadingConfig(
             finger=finger,
             loads_kg=tuple(args.loads_kg) if args.loads_kg else sl.PAPER_LOADS_KG,
@@ -249,10 +249,10 @@ def _static_loading(args: argparse.Namespace) -> int:
         )
         geometry = HandGeometry.default().fingers[config.finger].geometry
         if args.resume:  # the stored configuration wins (finger, loads, seed...)
-            config = sl.prepare_output(args.out, config, resume=True, extra_meta={})
+            config = run.prepare_output(args.out, config, resume=True, extra_meta={})
             geometry = HandGeometry.default().fingers[config.finger].geometry
             args.seed = config.seed
-        checks, limits = sl.check_loads(geometry, config)
+        checks, limits = run.check_loads(geometry, config)
         unsafe = [c for c in checks if not c.safe]
         for c in checks:
             progress(
@@ -275,27 +275,28 @@ def _static_loading(args: argparse.Namespace) -> int:
             )
         truth = EmulatedTruth() if config.emulated else None
         if not args.resume:
-            sl.check_new_output(args.out)
+            run.check_new_output(args.out)
         # Everything that can fail to start (the firmware, the harness, the tracker and its
         # package, the board) before anything is written: a failed start does not block its
         # own retry.
-        bench = _open(args, config.finger, truth)
+        rig = _open(args, config.finger, truth)
         try:
-            _warn_rate(bench.tracker, config.tracker_hz, "--tracker-hz")
+            _warn_rate(rig.tracker, config.tracker_hz, "--tracker-hz")
             if not args.resume:
-                meta: dict[str, Any] = {"started": sl.default_time(), "port": args.port}
+                meta: dict[str, Any] = {"started": default_time(), "port": args.port}
                 if truth is not None:
                     meta["emulated_truth"] = truth.to_json()
                 meta["planner"] = [
                     {"load_kg": c.load_kg, "safe": c.safe, "reasons": list(c.reasons)}
                     for c in checks
                 ]
-                sl.prepare_output(args.out, config, resume=False, extra_meta=meta)
-            result = sl.run(bench, config, args.out, geometry=geometry, progress=progress)
+                run.prepare_output(args.out, config, resume=False, extra_meta=meta)
+            run.run(rig, config, args.out, geometry=geometry, progress=progress)
         finally:
-            bench.close()
-        print(sl.describe(result))
-        print(f"results: {args.out / 'results.json'}, figure: {args.out / 'static_loading.png'}")
+            rig.close()
+        result = report.write(args.out, geometry)
+        print(report.describe(result))
+        print(f"results: {args.out / 'results.json'}, figure: {args.out / report.FIGURE}")
         return EXIT_OK if result.get("complete") else EXIT_NOT_DONE
 
     return _run_guarded(command, body)
@@ -326,9 +327,10 @@ def _object_hold(args: argparse.Namespace, progress: Any) -> int:
 
 
 def _grasp_hold(args: argparse.Namespace) -> int:
-    from utrf.hil import grasp_hold as gh
-    from utrf.hil.bench import EmulatedTruth
-    from utrf.hil.static_loading import default_time
+    from utrf.hil.grasp_hold import config as gh
+    from utrf.hil.grasp_hold import report, run
+    from utrf.hil.rig import EmulatedTruth
+    from utrf.hil.runs import default_time
 
     command = "hil grasp-hold"
     progress = (lambda _s: None) if args.quiet else (lambda s: print(s, flush=True))
@@ -348,21 +350,23 @@ def _grasp_hold(args: argparse.Namespace) -> int:
             emulated=bool(args.emulated),
             seed=args.seed,
         )
-        # The grasp hold uses the hand's own motors (no bench actuator).
-        bench = _open(args, tracked, EmulatedTruth(actuator=None))
+        # The grasp hold uses the hand's own motors (no rig actuator).
+        rig = _open(args, tracked, EmulatedTruth(actuator=None))
         try:
-            _warn_rate(bench.tracker, config.sample_hz, "--sample-hz")
-            result = gh.run(
-                bench,
+            _warn_rate(rig.tracker, config.sample_hz, "--sample-hz")
+            geometry = rig.hand.geometry
+            run.run(
+                rig,
                 config,
                 args.out,
                 progress=progress,
                 meta={"started": default_time(), "port": args.port},
             )
         finally:
-            bench.close()
-        print(gh.describe(result))
-        print(f"results: {args.out / 'results.json'}, figure: {args.out / 'grasp_hold.png'}")
+            rig.close()
+        result = report.write(args.out, geometry)
+        print(report.describe(result))
+        print(f"results: {args.out / 'results.json'}, figure: {args.out / report.FIGURE}")
         return EXIT_OK if result.get("complete") and not result.get("faults") else EXIT_NOT_DONE
 
     return _run_guarded(command, body)

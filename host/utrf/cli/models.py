@@ -9,15 +9,26 @@ mm, degrees and N, and say so. Exit codes: 0 done, 2 bad input, 3 a plan refused
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import sys
-from collections.abc import Callable
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from utrf.cli._model_options import (
+    EXIT_NOT_CONVERGED,
+    EXIT_REFUSED,
+    add_common,
+    add_limits,
+    add_loads,
+    add_pose,
+    deg,
+    emit,
+    geometry_from,
+    guarded,
+    limits_from,
+    load_from,
+    mm,
+    q_from_pose,
+)
 from utrf.models import (
     calibration,
     kinematics,
@@ -27,152 +38,13 @@ from utrf.models import (
     tendons,
     workspace,
 )
-from utrf.models.geometry import FingerGeometry, GeometryError, HandGeometry
-
-EXIT_BAD_INPUT = 2
-EXIT_REFUSED = 3
-EXIT_NOT_CONVERGED = 1
-
-
-# -- shared options ---------------------------------------------------------------------------
-def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--finger",
-        metavar="FILE",
-        help="finger geometry TOML, or a finger name of the default hand (default: "
-        "host/utrf/data/geometry/finger.toml)",
-    )
-    p.add_argument("--json", action="store_true", help="print JSON (SI units) instead of a table")
-
-
-def _pose(p: argparse.ArgumentParser, required: bool) -> None:
-    g = p.add_mutually_exclusive_group(required=required)
-    g.add_argument("--q", type=float, metavar="Q", help="tendon displacement q, m")
-    g.add_argument("--q-mm", type=float, metavar="Q", help="tendon displacement q, mm")
-    g.add_argument("--theta2-deg", type=float, metavar="DEG", help="Joint-2 angle, degrees")
-    g.add_argument("--flexion", type=float, metavar="F", help="normalised flexion (1: theta1 max)")
-    g.add_argument(
-        "--tip-mm", type=float, nargs=2, metavar=("X", "Y"), help="nearest reachable tip point, mm"
-    )
-
-
-def _loads(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--load-kg", type=float, default=0.0, metavar="KG", help="payload at the tip")
-    p.add_argument(
-        "--force-n",
-        type=float,
-        nargs=2,
-        default=(0.0, 0.0),
-        metavar=("FX", "FY"),
-        help="tip force in the finger frame, N",
-    )
-    p.add_argument("--moment-nm", type=float, default=0.0, metavar="M", help="tip moment, N m")
-    p.add_argument(
-        "--grasp-n",
-        type=float,
-        default=0.0,
-        metavar="F",
-        help="object's push on the fingertip, normal to Link 3 against flexion, N",
-    )
-    p.add_argument("--no-gravity", action="store_true", help="ignore the links' own weight")
-    p.add_argument("--model", choices=statics.MODELS, default=statics.DEFAULT_MODEL)
-
-
-def _limits(p: argparse.ArgumentParser) -> None:
-    d = tendons.Limits()
-    p.add_argument(
-        "--breaking-stress-mpa",
-        type=float,
-        default=d.tendon_breaking_stress_pa / 1e6,
-        metavar="MPA",
-        help="tendon breaking stress (assumed, see docs/models.md)",
-    )
-    p.add_argument("--min-safety-factor", type=float, default=d.min_safety_factor, metavar="SF")
-    p.add_argument(
-        "--rated-force-n",
-        type=float,
-        default=d.actuator_rated_force_n,
-        metavar="N",
-        help="actuator rated pull (assumed, see docs/models.md)",
-    )
-
-
-def _geometry(args: argparse.Namespace) -> FingerGeometry:
-    if not args.finger:
-        return FingerGeometry.default()
-    path = Path(args.finger)
-    if path.suffix != ".toml" and not path.exists():
-        hand = HandGeometry.default()
-        try:
-            return hand.fingers[hand.index(args.finger)].geometry
-        except KeyError as exc:
-            raise GeometryError(
-                f"--finger {args.finger!r}: no such file, and {exc.args[0]}"
-            ) from None
-    return FingerGeometry.from_toml(path)
-
-
-def _q_from_pose(args: argparse.Namespace, geom: FingerGeometry) -> tuple[float, float | None]:
-    """The pose's q (m) and, for a tip request, its distance to the nearest reachable point."""
-    if args.q is not None:
-        return args.q, None
-    if args.q_mm is not None:
-        return args.q_mm * 1e-3, None
-    if args.theta2_deg is not None:
-        return float(kinematics.q_from_theta2(geom, math.radians(args.theta2_deg))), None
-    if args.flexion is not None:
-        return float(kinematics.q_from_flexion(geom, args.flexion)), None
-    if args.tip_mm is not None:
-        near = kinematics.q_for_tip(geom, np.asarray(args.tip_mm) * 1e-3)
-        return float(near.q), float(near.distance_m)
-    return 0.0, None
-
-
-def _load(args: argparse.Namespace) -> statics.Load:
-    return statics.Load(
-        payload_kg=args.load_kg,
-        tip_force_n=tuple(args.force_n),
-        tip_moment_nm=args.moment_nm,
-        grasp_force_n=args.grasp_n,
-        gravity=not args.no_gravity,
-    )
-
-
-def _limits_from(args: argparse.Namespace) -> tendons.Limits:
-    return tendons.Limits(
-        tendon_breaking_stress_pa=args.breaking_stress_mpa * 1e6,
-        min_safety_factor=args.min_safety_factor,
-        actuator_rated_force_n=args.rated_force_n,
-    )
-
-
-def _emit(obj: dict[str, Any]) -> None:
-    print(json.dumps(obj, indent=2, allow_nan=False))
-
-
-def _guarded(fn: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
-    def run(args: argparse.Namespace) -> int:
-        try:
-            return fn(args)
-        except (GeometryError, ValueError, OSError) as exc:
-            print(f"utrf {args.command}: error: {exc}", file=sys.stderr)
-            return EXIT_BAD_INPUT
-
-    return run
-
-
-def _deg(a: float) -> str:
-    return f"{math.degrees(a):8.2f}"
-
-
-def _mm(v: float) -> str:
-    return f"{v * 1e3:9.3f}"
+from utrf.models.geometry import FingerGeometry, HandGeometry
 
 
 # -- kinematics -------------------------------------------------------------------------------
 def _kinematics(args: argparse.Namespace) -> int:
-    geom = _geometry(args)
-    q, tip_distance = _q_from_pose(args, geom)
+    geom = geometry_from(args)
+    q, tip_distance = q_from_pose(args, geom)
     fk = kinematics.forward(geom, q)
     joints = kinematics.joint_positions(geom, q)
     wraps = tendons.wrap_angles(geom, fk.theta)
@@ -192,11 +64,11 @@ def _kinematics(args: argparse.Namespace) -> int:
         out["requested_tip_m"] = [v * 1e-3 for v in args.tip_mm]
         out["tip_distance_m"] = tip_distance
     if args.json:
-        _emit(out)
+        emit(out)
         return 0
     print(f"finger {geom.source}")
     print(f"q = {q * 1e3:.4f} mm, flexion {out['flexion']:.4f}")
-    print("joint angles theta1..3 (deg, relative):", " ".join(_deg(t) for t in fk.theta))
+    print("joint angles theta1..3 (deg, relative):", " ".join(deg(t) for t in fk.theta))
     print(f"tip (mm): x {fk.tip[0] * 1e3:.3f}  y {fk.tip[1] * 1e3:.3f}")
     print(f"jacobian d(tip)/dq (mm/mm): [{fk.jacobian[0]:.4f}, {fk.jacobian[1]:.4f}]")
     if tip_distance is not None:
@@ -213,10 +85,10 @@ def _kinematics(args: argparse.Namespace) -> int:
 
 # -- statics ----------------------------------------------------------------------------------
 def _statics(args: argparse.Namespace) -> int:
-    geom = _geometry(args)
-    q, _ = _q_from_pose(args, geom)
-    load = _load(args)
-    limits = _limits_from(args)
+    geom = geometry_from(args)
+    q, _ = q_from_pose(args, geom)
+    load = load_from(args)
+    limits = limits_from(args)
 
     def solve(model: str) -> statics.StaticsResult:
         return statics.solve(
@@ -257,7 +129,7 @@ def _statics(args: argparse.Namespace) -> int:
             "tension_difference_n": float(np.abs(sol.net_tensions_n - res.net_tensions_n).max()),
         }
     if args.json:
-        _emit(out)
+        emit(out)
     else:
         print(f"finger {geom.source}; model {res.model}; q = {q * 1e3:.4f} mm")
         print(
@@ -265,7 +137,7 @@ def _statics(args: argparse.Namespace) -> int:
             f"{load.tip_force_n[1]:g}) N, moment {load.tip_moment_nm:g} N m, grasp "
             f"{load.grasp_force_n:g} N, link gravity {'on' if load.gravity else 'off'}"
         )
-        print("joint angles (deg, relative):", " ".join(_deg(t) for t in res.theta_rad))
+        print("joint angles (deg, relative):", " ".join(deg(t) for t in res.theta_rad))
         print(
             f"tip (mm): x {res.tip_m[0] * 1e3:.3f}  y {res.tip_m[1] * 1e3:.3f}; "
             f"deflection from the unloaded tip {res.tip_deflection_m * 1e3:.3f} mm"
@@ -297,14 +169,14 @@ def _statics(args: argparse.Namespace) -> int:
 
 # -- workspace --------------------------------------------------------------------------------
 def _workspace(args: argparse.Namespace) -> int:
-    geom = _geometry(args)
+    geom = geometry_from(args)
     ws = workspace.swept(geom, args.resolution_mm * 1e-3)
     areas = workspace.areas(geom, fine=ws)
     if args.out:
         workspace.plot(ws, geom, args.out, extrapolated=areas)
     out = {"areas": areas.to_json(), "figure": str(args.out) if args.out else None}
     if args.json:
-        _emit(out)
+        emit(out)
         return 0
     a = areas.link_areas_m2 * 1e6
     print(f"finger {geom.source}; raster {args.resolution_mm:g} mm, areas extrapolated (mm²):")
@@ -320,9 +192,9 @@ def _workspace(args: argparse.Namespace) -> int:
 
 # -- stiffness --------------------------------------------------------------------------------
 def _stiffness(args: argparse.Namespace) -> int:
-    geom = _geometry(args)
+    geom = geometry_from(args)
     models = statics.MODELS if args.model == "both" else (args.model,)
-    q, _ = _q_from_pose(args, geom)
+    q, _ = q_from_pose(args, geom)
     curves = [
         stiffness.deflection_curve(geom, args.loads_kg, q=q, model=m, gravity=not args.no_gravity)
         for m in models
@@ -340,12 +212,12 @@ def _stiffness(args: argparse.Namespace) -> int:
         "figure": str(args.out) if args.out else None,
     }
     if args.json:
-        _emit(out)
+        emit(out)
         return 0
     print(f"finger {geom.source}; q = {q * 1e3:.3f} mm; deflection from the zero-payload tip (mm)")
     print(f"{'load kg':>8} " + " ".join(f"{c.model:>9}" for c in curves))
     for i, w in enumerate(curves[0].loads_kg):
-        print(f"{w:8.2f} " + " ".join(_mm(c.deflection_m[i]) for c in curves))
+        print(f"{w:8.2f} " + " ".join(mm(c.deflection_m[i]) for c in curves))
     for c in curves:
         print(
             f"{c.model}: stiffness {c.secant_stiffness_n_per_m:.4g} N/m at "
@@ -362,14 +234,14 @@ def _stiffness(args: argparse.Namespace) -> int:
 
 # -- calibrate --------------------------------------------------------------------------------
 def _calibrate(args: argparse.Namespace) -> int:
-    geom = _geometry(args)
+    geom = geometry_from(args)
     data = calibration.read_csv(args.data)
     names = [n.strip() for n in args.fit.split(",") if n.strip()] if args.fit else None
     res = calibration.fit(data, geom, fit_params=names, model=args.model)
     out = res.to_json()
     out["data"] = str(args.data)
     if args.json:
-        _emit(out)
+        emit(out)
         return 0
     p = out["parameters"]
     print(f"{data.source}: {len(data)} rows of {data.kind} data; model {res.model}")
@@ -407,13 +279,15 @@ def _calibrate(args: argparse.Namespace) -> int:
 
 
 # -- plan -------------------------------------------------------------------------------------
-def _plan_one(args: argparse.Namespace, geom: FingerGeometry, target: planning.Target):
+def _plan_one(
+    args: argparse.Namespace, geom: FingerGeometry, target: planning.Target
+) -> planning.Plan:
     return planning.plan(
         geom,
         target,
-        _load(args),
+        load_from(args),
         model=args.model,
-        limits=_limits_from(args),
+        limits=limits_from(args),
         match=args.match,
         tolerance_m=args.tolerance_mm * 1e-3,
     )
@@ -468,11 +342,11 @@ def _plan_named_pose(args: argparse.Namespace) -> int:
         )
     plans = {}
     for f in fingers:
-        geom = _geometry(args) if args.finger else f.geometry
+        geom = geometry_from(args) if args.finger else f.geometry
         target = planning.named_pose_target(args.pose, f.name, poses)
         plans[f.name] = (target, _plan_one(args, geom, target))
     if args.json:
-        _emit({"pose": args.pose, "fingers": {n: p.to_json() for n, (_, p) in plans.items()}})
+        emit({"pose": args.pose, "fingers": {n: p.to_json() for n, (_, p) in plans.items()}})
     else:
         for name, (target, p) in plans.items():
             _print_plan(p, target, f"pose {args.pose}, finger {name}")
@@ -488,7 +362,7 @@ def _plan(args: argparse.Namespace) -> int:
         raise planning.PlanError("give either a named POSE or one of --flexion/--theta2-deg/...")
     if args.pose:
         return _plan_named_pose(args)
-    geom = _geometry(args)
+    geom = geometry_from(args)
     if args.q is not None:
         target = planning.Target.q(args.q)
     elif args.q_mm is not None:
@@ -503,7 +377,7 @@ def _plan(args: argparse.Namespace) -> int:
         raise planning.PlanError("give a pose: POSE, --flexion F, --theta2-deg DEG, --q Q ...")
     p = _plan_one(args, geom, target)
     if args.json:
-        _emit(p.to_json())
+        emit(p.to_json())
     else:
         _print_plan(p, target, f"finger {geom.source}")
     return 0 if p.safe else EXIT_REFUSED
@@ -513,16 +387,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "kinematics", help="joint angles, tip and Jacobian of the coupled finger (Eq. 1-5)"
     )
-    _pose(p, required=True)
-    _common(p)
-    p.set_defaults(handler=_guarded(_kinematics))
+    add_pose(p, required=True)
+    add_common(p)
+    p.set_defaults(handler=guarded(_kinematics))
 
     p = subparsers.add_parser(
         "statics", help="loaded equilibrium with elastic tendons (Sec. III, Algorithm 1)"
     )
-    _pose(p, required=False)
-    _loads(p)
-    _limits(p)
+    add_pose(p, required=False)
+    add_loads(p)
+    add_limits(p)
     p.add_argument("--threshold-m", type=float, default=statics.DEFAULT_THRESHOLD_M)
     p.add_argument("--max-iterations", type=int, default=statics.DEFAULT_MAX_ITERATIONS)
     p.add_argument(
@@ -535,8 +409,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--verify", action="store_true", help="check against the energy minimum (serial model)"
     )
-    _common(p)
-    p.set_defaults(handler=_guarded(_statics))
+    add_common(p)
+    p.set_defaults(handler=guarded(_statics))
 
     p = subparsers.add_parser("workspace", help="areas swept by Links 1-3 (Sec. II-C, Fig. 3)")
     p.add_argument("--out", metavar="FIG.png", help="write the figure here")
@@ -546,8 +420,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=workspace.DEFAULT_RESOLUTION_M * 1e3,
         help="raster cell width, mm",
     )
-    _common(p)
-    p.set_defaults(handler=_guarded(_workspace))
+    add_common(p)
+    p.set_defaults(handler=guarded(_workspace))
 
     p = subparsers.add_parser(
         "stiffness", help="tip deflection against payload at the straight pose (Sec. IV-A)"
@@ -558,9 +432,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--model", choices=(*statics.MODELS, "both"), default="both")
     p.add_argument("--no-gravity", action="store_true", help="ignore the links' own weight")
-    _pose(p, required=False)
-    _common(p)
-    p.set_defaults(handler=_guarded(_stiffness))
+    add_pose(p, required=False)
+    add_common(p)
+    p.set_defaults(handler=guarded(_stiffness))
 
     p = subparsers.add_parser(
         "calibrate", help="fit effective parameters to measured (load, tip) data"
@@ -578,8 +452,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "modulus for deflection data)",
     )
     p.add_argument("--model", choices=statics.MODELS, default=statics.DEFAULT_MODEL)
-    _common(p)
-    p.set_defaults(handler=_guarded(_calibrate))
+    add_common(p)
+    p.set_defaults(handler=guarded(_calibrate))
 
     p = subparsers.add_parser(
         "plan", help="the setpoint that lands a loaded finger on a target pose, or a refusal"
@@ -596,9 +470,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--poses", action="append", metavar="FILE", help="an extra pose file (repeatable)"
     )
-    _pose(p, required=False)
-    _loads(p)
-    _limits(p)
+    add_pose(p, required=False)
+    add_loads(p)
+    add_limits(p)
     p.add_argument("--match", choices=planning.MATCHES, default="tip")
     p.add_argument(
         "--tolerance-mm",
@@ -606,5 +480,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=planning.DEFAULT_TOLERANCE_M * 1e3,
         help="largest acceptable loaded tip error, mm",
     )
-    _common(p)
-    p.set_defaults(handler=_guarded(_plan))
+    add_common(p)
+    p.set_defaults(handler=guarded(_plan))

@@ -27,6 +27,7 @@ from collections import deque
 
 from rich.console import Console
 from rich.live import Live
+from rich.table import Table
 
 from utrf.cli._hand_common import EXIT_OK, add_port, connect, guarded
 from utrf.hand import FaultEvent, Hand, HandState
@@ -39,7 +40,6 @@ class _Watch:
 
     def __init__(self) -> None:
         self.lock = threading.Lock()
-        self.latest: HandState | None = None
         self.times: deque[float] = deque(maxlen=1000)
         self.events: list[str] = []
         self.samples: list[HandState] = []  # for --json, printed by the display loop
@@ -47,7 +47,6 @@ class _Watch:
 
     def on_state(self, st: HandState) -> None:
         with self.lock:
-            self.latest = st
             self.times.append(time.monotonic())
             if self.as_json:
                 self.samples.append(st)
@@ -122,10 +121,10 @@ def run(args: argparse.Namespace) -> int:
         if not args.json:
             print(header, flush=True)
 
-        def render():  # type: ignore[no-untyped-def]
-            with watch.lock:
-                st = watch.latest
-            return state_table(st, title="UTRF-RoboHand monitor", footer=_footer(hand, watch))
+        def render() -> Table:
+            return state_table(
+                hand.latest, title="UTRF-RoboHand monitor", footer=_footer(hand, watch)
+            )
 
         live = Live(get_renderable=render, console=console, refresh_per_second=10)
         if live_view:
@@ -139,19 +138,16 @@ def run(args: argparse.Namespace) -> int:
                 for st in samples:
                     print(_json_line(st))
                 if hand.last_boot is not boot:  # the board reset: say so, handshake again
-                    boot = hand.last_boot
-                    with watch.lock:
-                        watch.latest = None  # its state is gone
+                    boot = hand.last_boot  # its state is gone: hand.latest is None
                     cause = boot.reset_cause.name if boot is not None else "?"
                     msg = f"the board reset ({cause}): handshaking again"
                     (live.console.print if live_view else print)(msg)
                     hand.reconnect()
                 if not live_view and not args.json and time.monotonic() >= next_line:
                     next_line += args.every
-                    with watch.lock:
-                        st = watch.latest
-                    if st is not None:
-                        print(f"{state_line(st)}  [{watch.rate():.0f} Hz]", flush=True)
+                    now = hand.latest
+                    if now is not None:
+                        print(f"{state_line(now)}  [{watch.rate():.0f} Hz]", flush=True)
         except KeyboardInterrupt:
             pass
         finally:

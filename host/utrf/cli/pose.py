@@ -20,10 +20,10 @@ import contextlib
 import json
 import math
 import sys
-import threading
 
 from rich.console import Console
 from rich.live import Live
+from rich.table import Table
 
 from utrf.cli._hand_common import (
     EXIT_NOT_DONE,
@@ -63,21 +63,11 @@ def run(args: argparse.Namespace) -> int:
     live_view = console.is_terminal and not args.json
     with connect(args, poses=library, on_close=args.then, log_path=args.log) as hand:
         goal = pose.theta2(hand.geometry)
-        latest: dict[str, HandState | None] = {"st": None}
-        lock = threading.Lock()
-
-        def on_state(st: HandState) -> None:
-            with lock:
-                latest["st"] = st
-
-        hand.on_state(on_state)
         title = f"{pose.name}: {pose.description}"
         outcome: BaseException | None = None
 
-        def render():  # type: ignore[no-untyped-def]
-            with lock:
-                st = latest["st"]
-            return state_table(st, title=title, goal=goal, tolerance=tolerance)
+        def render() -> Table:
+            return state_table(hand.latest, title=title, goal=goal, tolerance=tolerance)
 
         display: contextlib.AbstractContextManager[object]
         if live_view:

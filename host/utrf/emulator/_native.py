@@ -11,6 +11,7 @@ from __future__ import annotations
 import ctypes
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -97,7 +98,7 @@ _I32 = ctypes.c_int32
 
 
 def _arr(kind: type, *shape: int) -> type:
-    t = kind
+    t: Any = kind  # ctypes array types are made by multiplying a type: no static type
     for n in reversed(shape):
         t = t * n
     return t
@@ -264,7 +265,7 @@ def load_library() -> ctypes.CDLL:
             "run `make emulator`"
         )
     p, u8p = ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint8)
-    sigs: dict[str, tuple[object, list[object]]] = {
+    sigs: dict[str, tuple[Any, list[Any]]] = {
         "utrf_sim_open": (p, [ctypes.c_char_p, ctypes.c_uint64, ctypes.c_char_p, ctypes.c_size_t]),
         "utrf_sim_close": (None, [p]),
         "utrf_sim_run_to": (ctypes.c_int, [p, ctypes.c_uint64]),

@@ -14,7 +14,7 @@ import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -23,6 +23,9 @@ from utrf.emulator import _native
 from utrf.emulator._native import F_CPU_HZ, HarnessError, NativeBoard
 from utrf.emulator.plant import DRIVE_NAMES, HandPlant, PlantParams
 from utrf.models.geometry import HandGeometry
+
+if TYPE_CHECKING:
+    from utrf.emulator.mujoco_plant import MujocoPlant
 
 # A checkout's `make firmware` output (relative: found from the working directory); with no
 # ELF given, the board takes utrf.artifacts.firmware_elf() (this, or a cached build).
@@ -234,6 +237,7 @@ class EmulatedBoard:
         self.speed = None if speed is None else float(speed)
         self.seed = int(seed)
         self.eeprom_path = Path(eeprom_path) if eeprom_path is not None else None
+        self.plant: HandPlant | MujocoPlant
         if plant == "analytic":
             self.plant = HandPlant(hand, plant_params, seed)
         elif plant == "mujoco":
@@ -604,7 +608,10 @@ class EmulatedBoard:
         the bytes after it, ``burst_length`` = (min, max) bytes in all, uniformly. ``direction``:
         "to_board", "to_host", "both". All zero: a clean line. Counted in ``stats``
         (``rx_dropped``, ``tx_duplicated``, ``rx_burst_bytes``, ...)."""
-        dirs = {"to_board": (_native.TO_BOARD,), "to_host": (_native.TO_HOST,)}
+        dirs: dict[str, tuple[int, ...]] = {
+            "to_board": (_native.TO_BOARD,),
+            "to_host": (_native.TO_HOST,),
+        }
         dirs["both"] = dirs["to_board"] + dirs["to_host"]
         if direction not in dirs:
             raise EmulatorError(f"direction must be one of {list(dirs)}, got {direction!r}")
@@ -736,7 +743,10 @@ class EmulatedBoard:
                     f"_exit at {exit_:#x} is not 'cli; rjmp .' (words {words[0]:#06x} "
                     f"{words[1]:#06x})"
                 )
-            done = board.jump_at(loop, exit_ + 2, 1) if interrupts else board.jump(exit_, -1)
+            if interrupts and loop is not None:  # (loop is known when interrupts: see above)
+                done = board.jump_at(loop, exit_ + 2, 1)
+            else:
+                done = board.jump(exit_, -1)
             if not done:
                 raise EmulatorError(f"_exit at {exit_:#x} or loop is not a flash address")
 
@@ -795,7 +805,10 @@ class EmulatedBoard:
         """Per finger, (mode, signed duty) of motors A and B as the plant applies them."""
         with self._lock:
             return [
-                tuple((DRIVE_NAMES[int(m)], float(d)) for m, d in zip(modes, duties, strict=True))  # type: ignore[misc]
+                (
+                    (DRIVE_NAMES[int(modes[0])], float(duties[0])),
+                    (DRIVE_NAMES[int(modes[1])], float(duties[1])),
+                )
                 for modes, duties in zip(self.plant.drive_mode, self.plant.drive_duty, strict=True)
             ]
 

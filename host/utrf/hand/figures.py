@@ -44,7 +44,9 @@ _FRONT_BASE = {
 _FRONT_ANGLE = {0: 40.0}  # the thumb leans out; the others point up
 
 
-def _front_segments(geom: FingerGeometry, theta2: float, base: tuple[float, float], lean: float):
+def _front_segments(
+    geom: FingerGeometry, theta2: float, base: tuple[float, float], lean: float
+) -> np.ndarray:
     """The front view: looking at the palm, a finger shows the x-extent of its chain (flexion
     happens toward the viewer). Returns the joints' points (mm)."""
     pts = finger_chain(geom, theta2) * 1e3
@@ -56,8 +58,8 @@ def _front_segments(geom: FingerGeometry, theta2: float, base: tuple[float, floa
 
 def draw_pose(
     hand: HandGeometry,
-    measured: Sequence[float],
-    target: Sequence[float],
+    measured: Sequence[float] | np.ndarray,
+    target: Sequence[float] | np.ndarray,
     path: str | Path,
     *,
     title: str,

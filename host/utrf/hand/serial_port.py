@@ -22,16 +22,22 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
+from typing import TypeVar
 
 try:
     import termios
+
+    HAS_TERMIOS = True
 except ImportError:  # Windows: no termios, no HUPCL; pyserial drives DTR itself
-    termios = None  # type: ignore[assignment]
+    HAS_TERMIOS = False
 
 from utrf.protocol.errors import DisconnectedError
 
 #: how long DTR stays down before the open that raises it again (the reset edge)
 DTR_LOW_S = 0.1
+
+
+T = TypeVar("T")
 
 
 class ResetModeError(ValueError):
@@ -40,7 +46,7 @@ class ResetModeError(ValueError):
 
 def is_tty_path(url: str) -> bool:
     """A POSIX device path (``/dev/ttyACM0``, a pty), not a pyserial URL."""
-    return termios is not None and "://" not in url and os.path.exists(url)
+    return HAS_TERMIOS and "://" not in url and os.path.exists(url)
 
 
 def _set_hupcl(path: str, on: bool) -> None:
@@ -58,7 +64,7 @@ def _set_hupcl(path: str, on: bool) -> None:
         os.close(fd)
 
 
-def open_line(url: str, reset: bool, opener: Callable[[], object]) -> object:
+def open_line(url: str, reset: bool, opener: Callable[[], T]) -> T:
     """Open the line with ``opener()`` (which builds the transport), resetting the board or
     not as described above; returns what ``opener`` returned."""
     tty = is_tty_path(url)

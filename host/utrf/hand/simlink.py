@@ -88,7 +88,7 @@ class SimLink(EngineDriver):
         """As :meth:`Link.request <utrf.protocol.link.Link.request>`, timeouts in simulated s."""
         self._engine.start_request(msg, timeout_s=timeout_s, retries=retries)
         frame = self._drive()
-        return type(msg).REPLY.decode(frame.body)  # type: ignore[return-value]
+        return msg.decode_reply(frame.body)
 
     def handshake(self, timeout_s: float = 3.0) -> m.Identity:
         """As :meth:`Link.handshake <utrf.protocol.link.Link.handshake>`, in simulated s."""

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Literal
 
+import numpy as np
 from rich.table import Table
 from rich.text import Text
 
@@ -25,14 +27,14 @@ def state_table(
     state: HandState | None,
     *,
     title: str = "UTRF-RoboHand",
-    goal: Sequence[float] | None = None,
+    goal: Sequence[float] | np.ndarray | None = None,
     tolerance: float | None = None,
     footer: str = "",
 ) -> Table:
     """One row per finger. ``goal``: the host's targets (rad) when they differ from the
     board's (during a trajectory); ``tolerance`` colours the error."""
     table = Table(title=title, caption=(footer + "\n" if footer else "") + UNITS_NOTE)
-    for name, justify in (
+    columns: tuple[tuple[str, Literal["left", "right"]], ...] = (
         ("finger", "left"),
         ("mode", "left"),
         ("θ2 °", "right"),
@@ -41,8 +43,9 @@ def state_table(
         ("A/B %", "right"),
         ("tip mm", "right"),
         ("faults", "left"),
-    ):
-        table.add_column(name, justify=justify, no_wrap=True)  # type: ignore[arg-type]
+    )
+    for name, justify in columns:
+        table.add_column(name, justify=justify, no_wrap=True)
     if state is None:
         table.add_row("(waiting)", *[""] * 7)
         return table

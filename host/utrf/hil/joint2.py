@@ -1,4 +1,4 @@
-"""The Joint-2 angle as a bench run measures it, and how well.
+"""The Joint-2 angle as a rig run measures it, and how well.
 
 The firmware reads each finger's AS5600 (analog, 10-90 % of 5 V a turn) with the MEGA's
 10-bit ADC: one count is ``COUNT_RAD`` = 2π / (0.8 · 1024) = 7.67 mrad of Joint-2 angle,

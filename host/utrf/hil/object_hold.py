@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from utrf.datalog import CsvLog
-from utrf.hil.static_loading import RunError, _write_json
+from utrf.hil.runs import RunError, write_json
 from utrf.models import objects
 
 #: the pose that grasps each object of the library (a grasp pose of poses.toml)
@@ -125,7 +125,7 @@ def run(
     plant = MujocoPlant(obj=obj, seed=config.seed, timestep=1e-3)
     # palm up (the model's gravity, −z) while the hand closes: the object rests on the palm
     out.mkdir(parents=True, exist_ok=True)
-    _write_json(out / "meta.json", {"config": asdict(config), "object": asdict(obj)})
+    write_json(out / "meta.json", {"config": asdict(config), "object": asdict(obj)})
     board = EmulatedBoard(elf, realtime=False, seed=config.seed, plant=plant, exchange_period=1e-3)
     with board, Hand.emulated(board) as hand:
         closed_forces = _close(hand, plant, config, progress)
@@ -138,7 +138,7 @@ def run(
     result = analyse(out)
     result["closed_contact_forces_n"] = [float(x) for x in closed_forces]
     result["picture"] = str(picture) if picture else None
-    _write_json(out / "results.json", result)
+    write_json(out / "results.json", result)
     return result
 
 

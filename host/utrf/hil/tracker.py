@@ -1,4 +1,4 @@
-"""Tip tracking for the bench runs: an electromagnetic tracker's sensor on the fingertip.
+"""Tip tracking for the rig runs: an electromagnetic tracker's sensor on the fingertip.
 
 A :class:`Tracker` gives :class:`TrackerSample` s: the sensor's position in the tracker's own
 frame (3D, m), a timestamp and whether the sensor was seen (``visible``) with the tracker's
@@ -7,8 +7,8 @@ the straight finger, y toward flexion, origin at Joint 1; ``docs/architecture.md
 fitted by :func:`register` from the sensor's positions at known finger poses.
 
 - :class:`NDIAuroraTracker`: an NDI Aurora (or Polaris) through ``scikit-surgerynditracker``,
-  an optional dependency (``pip install 'utrf[bench]'``; in a checkout
-  ``pip install -e '.[bench]'``) imported only when one is opened.
+  an optional dependency (``pip install 'utrf[rig]'``; in a checkout
+  ``pip install -e '.[rig]'``) imported only when one is opened.
 - :class:`SimulatedTracker`: for the emulated board. It reads the plant's true fingertip,
   places it in a tracker frame of its own (a rotation and an offset the run does not know),
   and adds seeded Gaussian noise, so registration and calibration have something to find.
@@ -26,7 +26,7 @@ import numpy as np
 
 NDI_PACKAGE = "scikit-surgerynditracker"
 NDI_INSTALL = (
-    "pip install 'utrf[bench]' (an installed utrf), or pip install -e '.[bench]' "
+    "pip install 'utrf[rig]' (an installed utrf), or pip install -e '.[rig]' "
     "(in a checkout of the repository)"
 )
 
@@ -69,7 +69,7 @@ class NewFrames:
 
 
 class Tracker(Protocol):
-    """What a bench run needs of a tracker. ``rate_hz``: how many frames a second it
+    """What a rig run needs of a tracker. ``rate_hz``: how many frames a second it
     measures (None: a new one at every read)."""
 
     rate_hz: float | None
@@ -253,7 +253,7 @@ class SimulatedTracker:
 # -- NDI -------------------------------------------------------------------------------------
 def _import_ndi() -> Any:
     try:
-        from sksurgerynditracker.nditracker import NDITracker  # type: ignore[import-not-found]
+        from sksurgerynditracker.nditracker import NDITracker
     except ImportError as exc:
         raise TrackerError(
             f"the NDI tracker needs the optional package {NDI_PACKAGE}, which is not "

@@ -49,7 +49,9 @@ def read_toml(path: Path, what: str, error: type[ValueError] = GeometryError) ->
         raise error(f"{path}: not valid TOML: {exc}") from None
 
 
-def _triple(data: Mapping[str, Any], key: str, where: str, *, positive: bool) -> tuple[float, ...]:
+def _triple(
+    data: Mapping[str, Any], key: str, where: str, *, positive: bool
+) -> tuple[float, float, float]:
     value = data.get(key)
     if not isinstance(value, Sequence) or isinstance(value, str) or len(value) != 3:
         raise GeometryError(f"{where}: {key} must be a list of 3 numbers, got {value!r}")
@@ -62,7 +64,7 @@ def _triple(data: Mapping[str, Any], key: str, where: str, *, positive: bool) ->
         if not positive and v < 0:
             raise GeometryError(f"{where}: {key}[{i}] must be >= 0, got {v!r}")
         out.append(float(v))
-    return tuple(out)
+    return (out[0], out[1], out[2])
 
 
 def _positive(data: Mapping[str, Any], key: str, where: str) -> float:
@@ -106,13 +108,13 @@ class FingerGeometry:
         if not all(isinstance(v, int | float) and math.isfinite(v) for v in rng):
             raise GeometryError(f"{where}: theta1_range_deg must hold numbers, got {rng!r}")
         return cls(
-            link_lengths_m=_triple(data, "link_lengths_m", where, positive=True),  # type: ignore[arg-type]
-            guide_radii_m=_triple(data, "guide_radii_m", where, positive=True),  # type: ignore[arg-type]
+            link_lengths_m=_triple(data, "link_lengths_m", where, positive=True),
+            guide_radii_m=_triple(data, "guide_radii_m", where, positive=True),
             tendon_diameter_m=_positive(data, "tendon_diameter_m", where),
             tendon_youngs_modulus_pa=_positive(data, "tendon_youngs_modulus_pa", where),
             actuating_tendon_length_m=_positive(data, "actuating_tendon_length_m", where),
-            link_masses_kg=_triple(data, "link_masses_kg", where, positive=False),  # type: ignore[arg-type]
-            link_com_fraction=_triple(data, "link_com_fraction", where, positive=False),  # type: ignore[arg-type]
+            link_masses_kg=_triple(data, "link_masses_kg", where, positive=False),
+            link_com_fraction=_triple(data, "link_com_fraction", where, positive=False),
             theta1_range_rad=(math.radians(rng[0]), math.radians(rng[1])),
             source=source,
         )

@@ -191,7 +191,7 @@ def load_layout(path: str | Path | None = None) -> Layout:
         if not isinstance(t, dict):
             raise MjcfError(f"{where}: must be a table")
         placements[name] = FingerPlacement(
-            position_m=_vec(t, "position_m", where, 3),  # type: ignore[arg-type]
+            position_m=_vec(t, "position_m", where, 3),  # type: ignore[arg-type]  # _vec checked the length
             yaw_rad=math.radians(_num(t, "yaw_deg", where, bound="any")),
             roll_rad=math.radians(_num(t, "roll_deg", where, bound="any")),
         )
@@ -212,10 +212,10 @@ def load_layout(path: str | Path | None = None) -> Layout:
     w = f"{src} [motor]"
     d = f"{src} [dynamics]"
     return Layout(
-        palm_size_m=size,  # type: ignore[arg-type]
+        palm_size_m=size,  # type: ignore[arg-type]  # _vec checked the length
         palm_mass_kg=_num(palm, "mass_kg", f"{src} [palm]"),
         link_radius_fraction=_num(links, "radius_fraction", f"{src} [links]"),
-        friction=friction,  # type: ignore[arg-type]
+        friction=friction,  # type: ignore[arg-type]  # _vec checked the length
         fingers=placements,
         motor=MotorConstants(
             stall_force_n=_num(motor, "stall_force_n", w),
@@ -223,7 +223,7 @@ def load_layout(path: str | Path | None = None) -> Layout:
             moving_mass_kg=_num(motor, "moving_mass_kg", w),
             coulomb_friction_n=_num(motor, "coulomb_friction_n", w, bound="nonnegative"),
             viscous_friction_n_s_m=_num(motor, "viscous_friction_n_s_m", w, bound="nonnegative"),
-            stroke_m=stroke,  # type: ignore[arg-type]
+            stroke_m=stroke,  # type: ignore[arg-type]  # _vec checked the length
         ),
         pulley_radius_m=_num(rotary, "pulley_radius_m", f"{src} [rotary]"),
         dynamics=Dynamics(

@@ -91,8 +91,10 @@ class Target:
         if self.kind == "tip":
             near = kinematics.q_for_tip(geom, np.asarray(self.value, dtype=float))
             return float(near.q), float(near.distance_m)
+        if isinstance(self.value, tuple | list):  # only a tip target holds (x, y)
+            raise PlanError(f"a {self.kind} target needs a number, got {self.value!r}")
         if self.kind == "q":
-            q = float(self.value)  # type: ignore[arg-type]
+            q = float(self.value)
         elif self.kind == "theta2":
             q = float(kinematics.q_from_theta2(geom, self.value))
         else:

@@ -10,13 +10,15 @@ not a valid message. A body that fails a check never becomes a message.
 
 from __future__ import annotations
 
+import builtins
+import dataclasses
 import math
 import numbers
 import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum, IntFlag, StrEnum
-from typing import Any, ClassVar, Generic, Self, TypeVar
+from typing import Any, ClassVar, Generic, Self, TypeVar, cast
 
 from utrf.protocol.errors import DecodeError
 
@@ -64,8 +66,9 @@ class Field:
     raw_max: int | None = None
     min: float | None = None
     max: float | None = None
-    enum: type[IntEnum] | None = None
-    flags: type[IntFlag] | None = None
+    # `type` is also a field of Field: the builtin by its full name
+    enum: builtins.type[IntEnum] | None = None
+    flags: builtins.type[IntFlag] | None = None
     unit: str = ""
     _lo: float = field(init=False, repr=False, compare=False)
     _hi: float = field(init=False, repr=False, compare=False)
@@ -148,9 +151,9 @@ class Field:
     def from_raw(self, raw: RawValue) -> Value:
         """The value of a checked raw wire value (SI for scaled fields)."""
         if self.enum is not None:
-            return self.enum(raw)
+            return self.enum(int(raw))  # enum and flag fields are integer types
         if self.flags is not None:
-            return self.flags(raw)
+            return self.flags(int(raw))
         if self.scale is not None:
             return self._scale_up(int(raw))
         return raw
@@ -229,6 +232,9 @@ class Message:
     #: arrays only for the fingers it selects, and so does :meth:`decode`.
     MASKED_BY: ClassVar[str | None] = None
     _STRUCT: ClassVar[struct.Struct] = struct.Struct("<")
+    # Every message class is a dataclass (the generator decorates each): declared here so
+    # that dataclasses.replace() takes any Message.
+    __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -285,11 +291,11 @@ class Message:
     def encode(self) -> bytes:
         """The message body (without seq, id and CRC)."""
         flat: list[RawValue] = []
-        for f, value in zip(self.FIELDS, self.to_raw().values(), strict=True):
-            if f.count is None:
-                flat.append(value)  # type: ignore[arg-type]
+        for value in self.to_raw().values():
+            if isinstance(value, tuple):  # an array field
+                flat.extend(value)
             else:
-                flat.extend(value)  # type: ignore[arg-type]
+                flat.append(value)
         return self._STRUCT.pack(*flat)
 
     @classmethod
@@ -352,3 +358,8 @@ class Request(Message, Generic[R]):
     IDEMPOTENT: ClassVar[bool] = False
     REPLY_TIMEOUT_S: ClassVar[float] = 0.1
     REPLY: ClassVar[type[Message]]
+
+    def decode_reply(self, body: bytes) -> R:
+        """The reply's body decoded as this request's ``REPLY`` (an ``R``)."""
+        # a ClassVar cannot name R; the generator writes REPLY and R from the same spec entry
+        return cast(R, type(self).REPLY.decode(body))

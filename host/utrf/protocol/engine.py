@@ -29,10 +29,10 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, fields
 from enum import Enum
-from typing import Any, Self
+from typing import Any, Self, cast
 
 from utrf.protocol import messages as m
-from utrf.protocol.codec import Message, Request
+from utrf.protocol.codec import Request
 from utrf.protocol.errors import (
     BoardResetError,
     DecodeError,
@@ -143,7 +143,7 @@ class _Hint:
 class _Pending:
     """The request in flight, one attempt after another."""
 
-    request: Request[Message]
+    request: Request[Any]
     seq: int
     frame: bytes
     timeout_s: float
@@ -233,7 +233,7 @@ class Engine:
     # --- starting a request or the handshake ------------------------------------------------
 
     def start_request(
-        self, msg: Request[Message], *, timeout_s: float | None = None, retries: int | None = None
+        self, msg: Request[Any], *, timeout_s: float | None = None, retries: int | None = None
     ) -> None:
         """Make ``msg`` the request in flight; :meth:`poll` drives it.
 
@@ -262,7 +262,7 @@ class Engine:
             raise RuntimeError("a request is already in flight: one at a time")
 
     def _new_pending(
-        self, msg: Request[Message], body: bytes, timeout_s: float, retries: int | None
+        self, msg: Request[Any], body: bytes, timeout_s: float, retries: int | None
     ) -> _Pending:
         allowed = 1 + ((self.retries if retries is None else retries) if msg.IDEMPOTENT else 0)
         seq = self._next_seq()
@@ -322,8 +322,8 @@ class Engine:
         if p.attempt < p.allowed:
             return self._transmit(p)
         self._counts["timeouts"] += 1
-        outcome = Outcome.UNKNOWN if p.maybe_applied else Outcome.NOT_APPLIED
-        return self._done(error=ReplyTimeout(p.request, p.timeout_s, p.attempt, outcome))
+        applied = Outcome.UNKNOWN if p.maybe_applied else Outcome.NOT_APPLIED
+        return self._done(error=ReplyTimeout(p.request, p.timeout_s, p.attempt, applied))
 
     def _transmit(self, p: _Pending) -> Transmit:
         p.attempt += 1
@@ -502,7 +502,8 @@ class Engine:
             log.warning("utrf link: dropped a %s frame: %s", cls.NAME, exc)
             self._counts["decode_errors"] += 1
             return None
-        return Telemetry(message, frame.seq, now)  # type: ignore[arg-type]
+        # only the stream's ids reach here (the dispatch on msg_id): the cast says so
+        return Telemetry(cast(StreamMessage, message), frame.seq, now)
 
     def _on_boot(self, frame: Frame, now: float) -> Telemetry | None:
         self._last_stream_seq = frame.seq

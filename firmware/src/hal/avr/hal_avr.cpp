@@ -199,11 +199,15 @@ extern "C" void utrf_read_reset_flags(void) {
 
 // The tick lock is a flag, not the interrupt mask: a compare that arrives while loop() holds
 // the lock, or while a tick still runs, is remembered and its tick runs as soon as the lock is
-// released or the running tick ends (late, never lost). Masking OCIE2A would do the same on
+// released or the running tick ends (late; a second one meanwhile is a lost period, reported
+// as an overrun: g_tick_lost). Masking OCIE2A would do the same on
 // the chip, but simavr drops an interrupt raised while its enable bit is clear.
 static volatile uint8_t g_tick_locked;
 static volatile uint8_t g_tick_running;
 static volatile uint8_t g_tick_deferred;
+// A compare that came while one was already deferred: a whole period passed without its tick
+// (the lock held, or the interrupt itself held up, that long). The next tick reports an overrun.
+static volatile uint8_t g_tick_lost;
 
 namespace {
 __attribute__((always_inline)) inline Stamp read_stamp() {
@@ -248,6 +252,8 @@ __attribute__((always_inline)) inline uint16_t cycles_from(const Stamp& start) {
 // same reason.
 Stamp g_tick_start;
 __attribute__((noinline)) void run_one_tick() {
+    const uint8_t lost = g_tick_lost;  // interrupts are off here: read and cleared as one
+    g_tick_lost = 0;
     g_tick_deferred = 0;
     g_tick_running = 1;
     TIMSK0 &= (uint8_t)~_BV(TOIE0);
@@ -255,7 +261,7 @@ __attribute__((noinline)) void run_one_tick() {
     sei();
     app::tick();
     const uint16_t cycles = cycles_from(g_tick_start);
-    const bool overran = g_tick_deferred != 0;
+    const bool overran = g_tick_deferred != 0 || lost != 0;
     app::tick_done(cycles, overran);
     cli();
     TIMSK0 |= _BV(TOIE0);
@@ -271,6 +277,7 @@ inline __attribute__((always_inline)) void run_due_ticks() {
 
 ISR(TIMER2_COMPA_vect) {
     if (g_tick_running || g_tick_locked) {
+        if (g_tick_deferred) g_tick_lost = 1;
         g_tick_deferred = 1;
         return;
     }
@@ -491,6 +498,7 @@ void tick_start() {
     g_tick_locked = 0;
     g_tick_running = 0;
     g_tick_deferred = 0;
+    g_tick_lost = 0;
     TCNT2 = 0;
     TIFR2 = _BV(OCF2A);
     TIMSK2 = _BV(OCIE2A);

@@ -43,4 +43,4 @@ $(EMU_FIXTURE): tests/emulator/fixtures/fixture.c firmware/src/board_pins.h $(EM
 # The real-time factor and the control tick's CPU load, on the real firmware (firmware.mk's
 # `firmware` target builds it); results into docs/benchmarks.md, between the emulator markers.
 bench-emulator: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
-	$(PY) tools/bench_emulator.py $(BENCH_EMULATOR_ARGS)
+	$(PY) -m tools.bench_emulator $(BENCH_EMULATOR_ARGS)

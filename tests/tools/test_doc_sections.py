@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from utrf.benchdoc import replace_section, write_section
+from tools.doc_sections import replace_section, write_section
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "benchmarks.md"
 MARKED = re.compile(r"^(<!-- BEGIN (\w+) .*? -->)\n.*?^(<!-- END \2 -->)$", re.S | re.M)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from utrf import firmware_table as ft
+from tools import kinematics_table as ft
 from utrf.models import kinematics
 from utrf.models.geometry import FingerGeometry, HandGeometry
 
@@ -19,7 +19,7 @@ def built() -> tuple[list[ft.GeometryTable], list[int]]:
 
 
 def test_committed_header_is_current(capsys: pytest.CaptureFixture[str]) -> None:
-    assert ft.main(["--check"]) == 0, "run `python -m utrf.firmware_table` and commit the header"
+    assert ft.main(["--check"]) == 0, "run `python -m tools.kinematics_table` and commit the header"
 
 
 def test_check_notices_a_stale_header(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

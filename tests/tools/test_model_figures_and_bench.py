@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from utrf.models import bench, figures
+from tools import bench_models as bench
+from tools import model_figures as figures
 
 
 def test_figures_command_writes_the_three_pngs(

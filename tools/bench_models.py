@@ -1,6 +1,6 @@
 """Benchmark of the statics solver (Algorithm 1): speed and iterations against threshold.
 
-    python -m utrf.models.bench --update docs/benchmarks.md --json build/bench/models.json
+    python -m tools.bench_models --update docs/benchmarks.md --json build/bench/models.json
 
 Measures, on the default finger: one scalar ``statics.solve`` (3 kg at the straight pose;
 target at most 20 µs, issue 11 goal 6), one vectorised ``statics.solve_batch`` of 10,000
@@ -26,12 +26,12 @@ from typing import Any
 import numpy as np
 import scipy
 
-from utrf.benchdoc import cpu_name, write_section
+from tools.doc_sections import cpu_name, write_section
 from utrf.models import statics, tendons
 from utrf.models.geometry import FingerGeometry, HandGeometry
 from utrf.models.statics import Load
 
-COMMAND = "make bench-models  # python -m utrf.models.bench --update docs/benchmarks.md"
+COMMAND = "make bench-models  # python -m tools.bench_models --update docs/benchmarks.md"
 THRESHOLDS_M = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12)
 
 
@@ -367,7 +367,7 @@ def update_section(path: Path, section: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m utrf.models.bench", description=(__doc__ or "").split("\n")[0]
+        prog="python -m tools.bench_models", description=(__doc__ or "").split("\n")[0]
     )
     parser.add_argument("--update", type=Path, help="Markdown file whose Models section to write")
     parser.add_argument("--json", type=Path, help="write the raw results here")

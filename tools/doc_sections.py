@@ -1,4 +1,5 @@
-"""Each benchmark writes its own section of ``docs/benchmarks.md`` and leaves the rest alone.
+"""A doc writer writes its own section of a Markdown file (``docs/benchmarks.md``,
+``docs/reliability.md``, ``hil/README.md``) and leaves the rest alone.
 
 A section is found by its markers (``<!-- BEGIN x -->`` … ``<!-- END x -->``, both part of
 the section's text), or, without an end marker, by its heading: from that line up to the next
@@ -7,6 +8,9 @@ stands, or appended to the file when it is not there yet.
 
     write_section(Path("docs/benchmarks.md"), section, BEGIN, END)
     write_section(Path("docs/benchmarks.md"), "## Models\\n\\n...", "## Models")
+
+The file is written through :func:`tools.generated.write_or_check`, so a writer can also check
+that the committed section is current (``updated`` gives the file's text with it).
 """
 
 from __future__ import annotations
@@ -14,6 +18,8 @@ from __future__ import annotations
 import platform
 import re
 from pathlib import Path
+
+from tools.generated import write_or_check
 
 NEW_FILE = "# Benchmarks\n"
 # where a section without an end marker ends: the next heading or marker line
@@ -42,12 +48,21 @@ def replace_section(text: str, section: str, begin: str, end: str | None = None)
     return text[:start] + section + text[stop:]
 
 
-def write_section(path: Path, section: str, begin: str, end: str | None = None) -> None:
-    """Write ``section`` into the Markdown file at ``path`` (see :func:`replace_section`);
-    a missing file starts as ``# Benchmarks``."""
+def updated(path: Path, section: str, begin: str, end: str | None = None) -> str:
+    """The text of the Markdown file at ``path`` with ``section`` in it (see
+    :func:`replace_section`); a missing file starts as ``# Benchmarks``."""
     text = path.read_text(encoding="utf-8") if path.exists() else NEW_FILE
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(replace_section(text, section, begin, end), encoding="utf-8")
+    return replace_section(text, section, begin, end)
+
+
+def write_section(path: Path, section: str, begin: str, end: str | None = None) -> None:
+    """Write ``section`` into the Markdown file at ``path`` (see :func:`updated`)."""
+    write_or_check(
+        {path: updated(path, section, begin, end)},
+        check=False,
+        tool="doc_sections",
+        command=f"the command that writes {path.name}",
+    )
 
 
 def _find(text: str, begin: str, end: str | None) -> tuple[int, int] | None:

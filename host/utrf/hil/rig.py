@@ -1,10 +1,12 @@
-"""The bench a run talks to: the hand, the tracker, and whoever applies the loads.
+"""The rig a run talks to: the hand, the tracker, and whoever applies the loads.
 
-On the real bench (``--port``) an operator hangs the weights and hits the fingers; the run
-prompts and waits for a confirmation, and records. On the emulated bench (``--emulated``) the
-run drives an :class:`~utrf.emulator.EmulatedBoard` in simulated time (as fast as the machine
-goes, the same for a seed) and applies the loads itself; a :class:`SimulatedTracker` reads the
-plant's fingertip.
+"Rig" is the physical set-up of a hardware-in-the-loop run (the hand, its board, the tracker,
+the weights); "bench" in this project means a benchmark (``make bench``). On the real rig
+(``--port``) an operator hangs the weights and hits the fingers; the run prompts and waits for
+a confirmation, and records. On the emulated rig (``--emulated``) the run drives an
+:class:`~utrf.emulator.EmulatedBoard` in simulated time (as fast as the machine goes, the same
+for a seed) and applies the loads itself; a :class:`SimulatedTracker` reads the plant's
+fingertip.
 
 **The emulated truth is not the analysis model.** :class:`EmulatedTruth` holds what the runs
 must find out without being told: the coupling tendons' effective modulus (a stranded rope is
@@ -13,19 +15,17 @@ relative to the finger (found by the registration), and the tracker's noise. The
 closed loop on the 10-bit ADC reading of the Joint-2 encoder (7.7 mrad a count, about 2.4 mm
 at the straight finger's tip) adds the hold error a real hand has.
 
-**The emulated bench's actuator.** The paper's static loading experiment drove the finger with
+**The emulated rig's actuator.** The paper's static loading experiment drove the finger with
 a linear slide stage, not with the hand's 12 W motors: holding 3 kg straight needs about
 1 kN on the actuating tendon (``docs/models.md``), ten times the hand's assumed 100 N motors.
-The emulated bench therefore puts a slide-stage-like actuator on the tested finger's motor A
-and B channels (:data:`BENCH_ACTUATOR`: 2.5 kN at stall, 50 mm/s, a heavy carriage) and
-raises the controller's integral gain for it (:data:`BENCH_GAINS`).
+The emulated rig therefore puts a slide-stage-like actuator on the tested finger's motor A
+and B channels (:data:`RIG_ACTUATOR`: 2.5 kN at stall, 50 mm/s, a heavy carriage) and
+raises the controller's integral gain for it (:data:`RIG_GAINS`).
 """
 
 from __future__ import annotations
 
-import math
 import sys
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -34,21 +34,21 @@ import numpy as np
 from utrf.emulator.plant import EncoderParams, MotorParams, PlantParams
 from utrf.hil.tracker import Registration, SimulatedTracker, Tracker, rotation_from_euler
 
-#: the emulated static-loading bench's actuator (a linear slide stage; ASSUMED values)
-BENCH_ACTUATOR = MotorParams(stall_force_n=2500.0, moving_mass_kg=100.0)
-#: controller gains the emulated bench sets on the tested finger (the rest stay default)
-BENCH_GAINS: dict[str, float] = {"ki": 20.0}
+#: the emulated static-loading rig's actuator (a linear slide stage; ASSUMED values)
+RIG_ACTUATOR = MotorParams(stall_force_n=2500.0, moving_mass_kg=100.0)
+#: controller gains the emulated rig sets on the tested finger (the rest stay default)
+RIG_GAINS: dict[str, float] = {"ki": 20.0}
 
 
 @dataclass(frozen=True)
 class EmulatedTruth:
-    """What the emulated bench knows and the analysis must find: SI units."""
+    """What the emulated rig knows and the analysis must find: SI units."""
 
     coupling_modulus_pa: float = 160e9
     tracker_euler_rad: tuple[float, float, float] = (0.6, -0.25, 0.15)
     tracker_translation_m: tuple[float, float, float] = (-0.080, 0.210, -0.045)
     tracker_noise_m: float = 1e-4
-    actuator: MotorParams | None = field(default_factory=lambda: BENCH_ACTUATOR)
+    actuator: MotorParams | None = field(default_factory=lambda: RIG_ACTUATOR)
     #: the Joint-2 encoders' output noise (V RMS; the plant's default, 0.41 ADC count)
     encoder_noise_v: float = EncoderParams().noise_v
 
@@ -79,7 +79,7 @@ class EmulatedTruth:
 
 
 class Operator(Protocol):
-    """The person at the real bench."""
+    """The person at the real rig."""
 
     def confirm(self, text: str) -> None:
         """Show an instruction and wait until it is done."""
@@ -96,13 +96,13 @@ class ConsoleOperator:
         )
         line = sys.stdin.readline()
         if line == "":
-            raise EOFError("no operator: stdin is closed, nobody can confirm the bench step")
+            raise EOFError("no operator: stdin is closed, nobody can confirm the rig step")
 
     def say(self, text: str) -> None:
         print(text, flush=True)
 
 
-class Bench:
+class Rig:
     """A hand, a tracker and the loads on one finger, real or emulated."""
 
     def __init__(
@@ -116,7 +116,7 @@ class Bench:
         ramp_s: float = 0.5,
     ) -> None:
         if board is None and operator is None:
-            raise ValueError("a real bench needs an operator to apply the loads")
+            raise ValueError("a real rig needs an operator to apply the loads")
         self.hand = hand
         self.tracker = tracker
         self.board = board
@@ -153,7 +153,9 @@ class Bench:
 
     def hit(self, finger: int, impulse_ns: tuple[float, float], duration_s: float) -> None:
         if self.board is None:
-            raise RuntimeError("only the emulated bench hits by itself; on the bench, the operator")
+            raise RuntimeError(
+                "only the emulated rig hits by itself; on the real one, the operator"
+            )
         self.board.hit_tip(finger, impulse_ns, duration_s)
 
     def currents(self) -> np.ndarray:
@@ -181,7 +183,7 @@ def open_emulated(
     telemetry_hz: int = 100,
     ramp_s: float = 0.5,
     elf: str | None = None,
-) -> Bench:
+) -> Rig:
     """A driven emulated board with the emulated truth, a Hand over it, a simulated tracker
     on ``tracked_finger``'s tip."""
     from utrf.emulator import EmulatedBoard
@@ -201,7 +203,7 @@ def open_emulated(
         noise_m=truth.tracker_noise_m,
         seed=seed + 7919,
     )
-    return Bench(hand, tracker, board=board, truth=truth, ramp_s=ramp_s)
+    return Rig(hand, tracker, board=board, truth=truth, ramp_s=ramp_s)
 
 
 def open_real(
@@ -211,17 +213,8 @@ def open_real(
     operator: Operator | None = None,
     telemetry_hz: int = 100,
     boot_wait_s: float = 2.5,
-) -> Bench:
+) -> Rig:
     from utrf.hand import Hand
 
     hand = Hand.connect(port, telemetry_hz=telemetry_hz, boot_wait_s=boot_wait_s)
-    return Bench(hand, tracker, operator=operator or ConsoleOperator())
-
-
-def finite_mean(values: list[float] | np.ndarray) -> float:
-    a = np.asarray(values, dtype=float)
-    a = a[np.isfinite(a)]
-    return float(a.mean()) if a.size else math.nan
-
-
-ProgressFn = Callable[[str], None]
+    return Rig(hand, tracker, operator=operator or ConsoleOperator())

@@ -1,6 +1,6 @@
 """Make the models page's figures and print the numbers quoted beside them.
 
-    python -m utrf.models.figures docs/figures      # make figures-models
+    python -m tools.model_figures docs/figures      # make figures-models
 
 Writes ``workspace.png`` (Fig. 3), ``stiffness.png`` (Fig. 8, with the paper's 3 kg point and
 the serial model calibrated to it) and ``model_gap.png`` (serial against printed over the
@@ -172,7 +172,7 @@ def make(outdir: str | Path, geom: FingerGeometry | None = None) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m utrf.models.figures", description=(__doc__ or "").split("\n")[0]
+        prog="python -m tools.model_figures", description=(__doc__ or "").split("\n")[0]
     )
     parser.add_argument("outdir", type=Path, help="directory for the PNG files")
     args = parser.parse_args(argv)

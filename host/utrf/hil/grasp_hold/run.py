@@ -1,0 +1,116 @@
+"""Taking a grasp hold's data: close on the object, hold, record every sample as it is taken
+(``utrf.hil.grasp_hold``); the results are :mod:`utrf.hil.grasp_hold.analysis`'s."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from utrf.datalog import CsvLog
+from utrf.hil.grasp_hold.config import FINGER_FIELDS, HIT_COLUMNS, GraspHoldConfig, sample_columns
+from utrf.hil.rig import Rig
+from utrf.hil.runs import ProgressFn, RunError, RunStopped, write_json
+from utrf.models import kinematics
+
+
+def run(
+    rig: Rig,
+    config: GraspHoldConfig,
+    out: Path,
+    *,
+    progress: ProgressFn = print,
+    meta: dict[str, Any] | None = None,
+) -> None:
+    """Close on the object, hold, record every sample as it is taken (the results:
+    ``report.write``, from the files); RunStopped on a fault (the data stay)."""
+    hand = rig.hand
+    names = list(hand.fingers)
+    if (out / "samples.csv").exists():
+        raise RunError(f"{out} already holds a grasp hold; give a new --out")
+    pose = hand.poses.get(config.pose)
+    if pose is None or pose.grasp is None:  # refused before anything is written
+        grasps = [p for p in hand.poses if hand.poses[p].grasp is not None]
+        raise RunError(f"pose {config.pose!r} is not a grasp pose; grasp poses: {grasps}")
+    out.mkdir(parents=True, exist_ok=True)
+    goal = pose.theta2(hand.geometry)
+    write_json(out / "meta.json", {"config": config.to_json(), **(meta or {})})
+    hand.start_log(out / "telemetry.csv")
+    hand.clear_faults()
+    hand.pose("open", duration=0.5)
+    closing = [i for i in range(len(names)) if goal[i] > 0.2]
+    if rig.board is not None:
+        for i in closing:
+            rig.board.block_finger(i, config.contact_fraction * goal[i], direction="flexion")
+    elif rig.operator is not None:
+        rig.operator.confirm(f"Place the object for {config.pose!r} in the open hand")
+    progress(f"closing on the object: {config.pose} (GRASP, effort {pose.grasp.effort:g})")
+    hand.pose(config.pose, duration=1.0, timeout=5.0)
+    hand.clock.sleep(0.5)
+    opening = {}
+    for i in closing:
+        g = hand.geometry.fingers[i].geometry
+        jac = kinematics.jacobian(g, kinematics.q_from_theta2(g, config.contact_fraction * goal[i]))
+        opening[i] = -np.asarray(jac) / np.linalg.norm(jac)  # the tip's way when q shrinks
+    hits = config.hit_plan(closing, opening) if rig.board is not None else []
+    if rig.board is None and rig.operator is not None:
+        rig.operator.say(
+            f"holding for {config.duration_s:g} s: hit the fingers with the hammer as you like; "
+            "the run records (Ctrl-C stops it, the data stay)"
+        )
+    seen = len(hand.faults_seen)
+    period = 1.0 / config.sample_hz
+    t0 = rig.now()
+    next_report = 0.0
+    k = 0
+    with (
+        CsvLog(out / "samples.csv", sample_columns(names)) as samples,
+        CsvLog(out / "hits.csv", HIT_COLUMNS) as hit_log,
+    ):
+        while True:
+            k += 1
+            due = t0 + k * period
+            rig.sleep(due - rig.now())
+            t = rig.now() - t0
+            if t > config.duration_s:
+                break
+            while hits and hits[0][0] <= t:
+                _, f, imp = hits.pop(0)
+                rig.hit(f, imp, config.hit_duration_s)
+                hit_log.write([f"{rig.now() - t0:.6f}", f, imp[0], imp[1],
+                               config.hit_duration_s])  # fmt: skip
+            s = rig.tracker.read()
+            st = hand.latest
+            cur = rig.currents()
+            row: list[object] = [
+                f"{t:.6f}",
+                "baseline" if t < config.baseline_s else "hold",
+                *(f"{v:.7f}" for v in s.position_m),
+                int(s.visible),
+                s.frame,
+            ]
+            for i in range(len(names)):
+                if st is None:
+                    row += ["nan"] * len(FINGER_FIELDS)
+                    continue
+                fs = st.fingers[i]
+                row += [f"{fs.theta2:.5f}", f"{fs.target:.5f}", f"{fs.duty_a:.3f}",
+                        f"{fs.duty_b:.3f}", fs.mode.name, int(fs.faults),
+                        f"{cur[i, 0]:.4f}"]  # fmt: skip
+            samples.write(row)
+            new = hand.faults_seen[seen:]
+            if new:
+                raise RunStopped(f"grasp hold at {t:.2f} s: {new[0]}")
+            if t >= next_report:
+                progress(
+                    f"hold {t:7.1f} / {config.duration_s:g} s  "
+                    + "  ".join(
+                        f"{n} {math.degrees(st.fingers[i].theta2):6.1f} deg"
+                        for i, n in enumerate(names)
+                    )
+                    if st is not None
+                    else f"hold {t:.1f} s"
+                )
+                next_report += max(config.duration_s / 20, 1.0)

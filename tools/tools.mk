@@ -1,0 +1,53 @@
+# Repository maintenance (tools/): what `make generate` regenerates, the benchmarks run from
+# here, the docs' figures. Included by the top-level Makefile after the area fragments (the
+# client benchmarks use the firmware's and the harness's build products). Every tool runs from
+# the repository's root as `python -m tools.NAME`.
+#
+#   make generate          every generated file: the protocol bindings and README tables, the
+#                          golden vectors, the kinematics table, hil/README.md's seed-0 section
+#                          (tests fail when any of them is stale)
+#   make kinematics-table  firmware/src/generated/kinematics_table.h from the hand file
+#   make hil-readme        hil/README.md's seed-0 section, from the emulated run it reports
+#   make figures           the models page's figures in docs/figures/ (committed)
+#   make bench-models | bench-client | bench-moves   their sections of docs/benchmarks.md
+
+.PHONY: generate kinematics-table hil-readme figures figures-models bench-models \
+        bench-client bench-moves
+
+# One after the other: the vectors need the regenerated bindings, the hil section the rebuilt
+# firmware.
+generate: setup
+	@$(SUBMAKE) protocol-generate
+	@$(SUBMAKE) kinematics-table
+	@$(SUBMAKE) hil-readme
+
+kinematics-table: setup
+	$(PY) -m tools.kinematics_table
+
+# The firmware it runs has build id 0: the id (the git commit) is in the identify reply, whose
+# bytes shift the simulated run's timing, so the table would otherwise change with every commit.
+hil-readme: setup
+	@$(SUBMAKE) emulator
+	@$(SUBMAKE) BUILD=$(BUILD)/id0 FW_GIT_ID= $(BUILD)/id0/firmware/utrf.elf
+	$(PY) -m tools.hil_readme --elf $(BUILD)/id0/firmware/utrf.elf
+
+# Pictures, not text: their bytes follow the matplotlib version, so no test compares them and
+# `make generate` leaves them alone.
+figures: figures-models
+figures-models: setup
+	$(PY) -m tools.model_figures docs/figures
+
+BENCH_TARGETS += bench-models bench-client bench-moves
+
+# The statics solver and the MuJoCo hand: the "## Models" section.
+bench-models: setup
+	$(PY) -m tools.bench_models --update docs/benchmarks.md --json $(BUILD)/bench/models.json
+
+# The Hand client: round-trip latency of commands in simulated time, the highest telemetry
+# rate with no drops, on the real firmware and the emulated board.
+bench-client: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
+	$(PY) -m tools.bench_client $(BENCH_CLIENT_ARGS)
+
+# Moves on the board's clock: tracking over the whole demo and the tick with paths running.
+bench-moves: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
+	$(PY) -m tools.bench_moves $(BENCH_MOVES_ARGS)
