@@ -8,7 +8,7 @@
 
 A section whose results are missing is left as it stands.
 
-    python tools/reliability_doc.py [--only fuzz|noise|safety|mutants|soak]
+    python -m tools.reliability_doc [--only fuzz|noise|safety|mutants|soak]
 """
 
 from __future__ import annotations

@@ -63,8 +63,8 @@ fuzz: setup fuzz-build
 # The soak's section of docs/reliability.md is written whether it passed or not; make then
 # fails with the soak.
 soak: setup firmware
-	$(PY) tools/soak.py --seconds $(SOAK_SECONDS); status=$$?; \
-	$(PY) tools/reliability_doc.py --only soak && exit $$status
+	$(PY) -m tools.soak --seconds $(SOAK_SECONDS); status=$$?; \
+	$(PY) -m tools.reliability_doc --only soak && exit $$status
 
 mutants: setup firmware firmware-host
 	$(PY) tools/mutants.py
