@@ -130,7 +130,9 @@ def test_the_platformio_flag_build_runs_on_the_emulated_board(
         hand.set_targets({"index": 0.6})  # into POSITION
         hand.clock.sleep(1.0)
         index = hand.state()["index"]
-        assert abs(index.theta2 - 0.6) < 0.02
+        # held within four encoder counts (7.7 mrad each): against the plant's static friction
+        # the default gains rest one to three counts off, depending on the build's timing
+        assert abs(index.theta2 - 0.6) < 0.03
         assert index.faults == 0
 
 
