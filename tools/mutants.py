@@ -8,11 +8,11 @@ safety tests run against it; a test must fail for every mutant.
 Each mutant is a copy of the checkout (its sources, tests and build products, timestamps
 kept, so make rebuilds only what the mutation touched) under build/mutants/<name>/, with one
 exact edit to firmware/src: a rule's condition made false, its action removed. The tests run
-there, on the mutated firmware, both as the host build (tests/firmware/test_fw_safety.py) and
-as the ELF on the emulated board (tests/reliability/test_safety_matrix.py), and stop at the
-first failure: the mutant is caught. An edit whose text is no longer in the source is an
-error (the list must follow the code). The score goes to build/reliability/mutants.json for
-docs/reliability.md.
+there, on the mutated firmware, both as the host build (tests/firmware/test_fw_safety.py and
+test_fw_moves.py) and as the ELF on the emulated board (tests/reliability/test_safety_matrix.py),
+and stop at the first failure: the mutant is caught. An edit whose text is no longer in the
+source is an error (the list must follow the code). The score goes to
+build/reliability/mutants.json for docs/reliability.md.
 """
 
 from __future__ import annotations
@@ -28,7 +28,11 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 WORK = REPO / "build" / "mutants"
-TESTS = ["tests/firmware/test_fw_safety.py", "tests/reliability/test_safety_matrix.py"]
+TESTS = [
+    "tests/firmware/test_fw_safety.py",
+    "tests/firmware/test_fw_moves.py",
+    "tests/reliability/test_safety_matrix.py",
+]
 COPY = ["Makefile", "pyproject.toml", "firmware", "protocol", "tests", "tools", "host"]
 COPY_BUILD = ["firmware", "emulator"]
 
@@ -41,6 +45,18 @@ class Mutant:
     old: str
     new: str
 
+
+# set_targets and move check their targets with the same lines: each mutant names its own by
+# the line after them
+_LIMIT_CHECK = (
+    "        if (a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1) {\n"
+    "            nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));\n"
+    "            return;\n"
+    "        }\n"
+)
+_NO_LIMIT_CHECK = _LIMIT_CHECK.replace(
+    "a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1", "false"
+)
 
 MUTANTS = [
     Mutant(
@@ -138,8 +154,15 @@ MUTANTS = [
         "targets-beyond-limits",
         "joint limit (targets outside the limits refused)",
         "firmware/src/core/dispatch.cpp",
-        "        if (a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1) {",
-        "        if (false) {",
+        _LIMIT_CHECK + "        bu[f] =",
+        _NO_LIMIT_CHECK + "        bu[f] =",
+    ),
+    Mutant(
+        "move-beyond-limits",
+        "joint limit (a move's end outside the limits refused)",
+        "firmware/src/core/dispatch.cpp",
+        _LIMIT_CHECK + "        end[f] =",
+        _NO_LIMIT_CHECK + "        end[f] =",
     ),
     Mutant(
         "duty-past-limit",

@@ -4,7 +4,8 @@
 #   make fuzz            each harness for FUZZ_SECONDS (default 600) -> build/fuzz/results.json
 #   make fuzz FUZZ_RUNS=1000000   each to that many executions instead
 #   make fuzz-build      the libFuzzer binaries (Debian's clang, ASan + UBSan)
-#   make soak            the served emulator at real time for SOAK_SECONDS (default 1800)
+#   make soak            the served emulator at real time for SOAK_SECONDS (default 1800),
+#                        then its section of docs/reliability.md
 #   make mutants         each safety rule disabled in turn: a test must fail
 #   make reliability-doc docs/reliability.md from the runs' results
 
@@ -57,10 +58,13 @@ fuzz-build: $(REPLAY_BINS)
 -include $(FUZZ_LIB_OBJS:.o=.d) $(FUZZ_BINS:=.d) $(REPLAY_LIB_OBJS:.o=.d)
 
 fuzz: setup fuzz-build
-	$(PY) $(FUZZ_DIR)/runfuzz.py --seconds $(FUZZ_SECONDS) $(if $(FUZZ_RUNS),--runs $(FUZZ_RUNS))
+	$(PY) $(FUZZ_DIR)/runfuzz.py $(if $(FUZZ_RUNS),--runs $(FUZZ_RUNS),--seconds $(FUZZ_SECONDS))
 
+# The soak's section of docs/reliability.md is written whether it passed or not; make then
+# fails with the soak.
 soak: setup firmware
-	$(PY) tools/soak.py --seconds $(SOAK_SECONDS)
+	$(PY) -m tools.soak --seconds $(SOAK_SECONDS); status=$$?; \
+	$(PY) -m tools.reliability_doc --only soak && exit $$status
 
 mutants: setup firmware firmware-host
 	$(PY) tools/mutants.py

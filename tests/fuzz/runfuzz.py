@@ -121,7 +121,13 @@ def replay(name: str) -> tuple[int, str]:
     if name == "python":
         runs = [[*command(name), "--replay", *dirs]]
     else:
-        runs = [[*command(name), "-runs=0", *dirs], [str(BUILD / f"replay_{name}"), *dirs]]
+        # a crash goes where a campaign's go, not into the working directory
+        art = f"-artifact_prefix={(BUILD / 'artifacts' / name).relative_to(REPO)}/"
+        (BUILD / "artifacts" / name).mkdir(parents=True, exist_ok=True)
+        runs = [
+            [*command(name), "-runs=0", art, *dirs],
+            [str(BUILD / f"replay_{name}"), *dirs],
+        ]
     out = ""
     for args in runs:
         proc = subprocess.run(args, cwd=REPO, capture_output=True, text=True, check=False)

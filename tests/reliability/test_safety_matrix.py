@@ -205,8 +205,9 @@ def test_loop_alive_then_the_watchdog(board: EmulatedBoard, hand: Hand) -> None:
     # and one for the hang to begin (at loop()'s next start)
     row("loop alive (motors off)", t, (LOOP_HANG_TICKS + 2) * TICK)
     t_reset = run_until(board, lambda: board.reset_cause == "watchdog", 0.5)
-    # the watchdog counts from loop()'s last feed: before the hang
-    row("loop alive (watchdog reset)", t + t_reset, WATCHDOG_S + RESOLUTION)
+    # the watchdog counts from loop()'s last feed: in the pass under way when the hang was
+    # asked at the latest (it begins at loop()'s next start), so up to a pass after it
+    row("loop alive (watchdog reset)", t + t_reset, WATCHDOG_S + TICK + RESOLUTION)
     hand.clock.sleep(0.2)
     with pytest.raises(BoardResetError):
         hand.state()
@@ -220,7 +221,7 @@ def test_hard_hang_is_reset_by_the_watchdog(board: EmulatedBoard, hand: Hand) ->
     row(
         "hard hang, interrupts off (watchdog reset)",
         t,
-        WATCHDOG_S + RESOLUTION,
+        WATCHDOG_S + RESOLUTION,  # the CPU stops where it stands: the last feed came before
         "the motors keep their last duty until then",
     )
     hand.clock.sleep(0.2)
@@ -231,11 +232,15 @@ def test_hard_hang_is_reset_by_the_watchdog(board: EmulatedBoard, hand: Hand) ->
 
 
 def _image(board: EmulatedBoard) -> bytearray:
-    return bytearray(board.eeprom[:308])
+    """The saved image: its 8-byte header (magic, version, the configuration's length), the
+    configuration, its CRC. The length comes from the header: the layout grows with the spec."""
+    length = int.from_bytes(board.eeprom[6:8], "little")
+    return bytearray(board.eeprom[: 8 + length + 2])
 
 
 def _with_crc(image: bytearray) -> bytearray:
-    image[306:308] = struct.pack("<H", crc16_ccitt(bytes(image[:306])))
+    at = len(image) - 2
+    image[at:] = struct.pack("<H", crc16_ccitt(bytes(image[:at])))
     return image
 
 
@@ -262,7 +267,11 @@ def test_eeprom_image_checks_at_boot(
 ) -> None:  # type: ignore[no-untyped-def]
     hand.set_safety(heartbeat_timeout=0.8, safe_action="coast")
     hand.save_config()
-    image = change(_image(board))
+    saved = _image(board)
+    # the image's layout as the test reads it: its CRC recomputed is the one stored (else a
+    # "range" image would be refused by its CRC and prove nothing about the range check)
+    assert _with_crc(bytearray(saved)) == saved
+    image = change(saved)
     full = bytearray(board.eeprom)
     full[: len(image)] = image
     (tmp_path / "e.bin").write_bytes(bytes(full))
@@ -324,10 +333,11 @@ def test_tick_alive_then_the_watchdog(board: EmulatedBoard, hand: Hand) -> None:
     driving(hand)
     board.stop_tick_timer()
     t = run_until(board, lambda: all_off(board), 0.2)
-    # 20 ms from the last tick, which came up to a tick before the timer stopped
-    row("tick alive (motors off)", t, (TICK_DEAD_MS + 1) * TICK + RESOLUTION)
+    # 20 ms from the last tick, which came up to a tick before the timer stopped, seen by
+    # loop(): up to a pass later (the pass under way when the 20 ms ran out)
+    row("tick alive (motors off)", t, (TICK_DEAD_MS + 2) * TICK + RESOLUTION)
     t_reset = run_until(board, lambda: board.reset_cause == "watchdog", 0.5)
-    row("tick alive (watchdog reset)", t + t_reset, (TICK_DEAD_MS + 1) * TICK + WATCHDOG_S)
+    row("tick alive (watchdog reset)", t + t_reset, (TICK_DEAD_MS + 2) * TICK + WATCHDOG_S)
     hand.clock.sleep(0.2)
     with pytest.raises(BoardResetError):
         hand.state()
