@@ -1,9 +1,7 @@
-"""ctypes binding of the C harness (``harness/utrf_sim.h``); one :class:`NativeBoard` per board.
-
-The library is found by :func:`utrf.artifacts.harness_library`: ``UTRF_SIM_LIB``, a checkout's
-``build/emulator/libutrf_sim.so`` (``make emulator``), or built on first use into the user's
-cache from the harness sources the package ships. Nothing here is thread-safe: the caller
-serialises calls on one board (``EmulatedBoard`` holds a lock).
+"""Python objects over the C harness: :class:`NativeBoard` (one per board), :class:`NativePlant`
+and :class:`NativeMjPlant`. The ABI they call (constants, structs, signatures, loading the
+library) is in ``harness_abi``; its names are importable from here too. Nothing here is
+thread-safe: the caller serialises calls on one board (``EmulatedBoard`` holds a lock).
 """
 
 from __future__ import annotations
@@ -11,355 +9,36 @@ from __future__ import annotations
 import ctypes
 import os
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from utrf import artifacts
-
-ABI = 10
-F_CPU_HZ = 16_000_000
-FINGERS = 5
-PIN_FIELDS = 4  # duty, IN1, IN2, STBY
-ADC_CHANNELS = 8
-
-
-STATUS_NAMES = {0: "running", 1: "crashed", 2: "done"}
-RESET_POWER_ON, RESET_PIN = 0, 1
-TO_BOARD, TO_HOST = 0, 1
-
-STAT_FIELDS = (
-    "rx_host_bytes",
-    "rx_uart_bytes",
-    "rx_lost_disabled",
-    "rx_dropped",
-    "rx_corrupted",
-    "rx_inserted",
-    "rx_held",
-    "tx_uart_bytes",
-    "tx_dropped",
-    "tx_corrupted",
-    "tx_inserted",
-    "tx_unheard",
-    "tx_cut",
-    "resets",
-    "watchdog_resets",
-    "last_reset_flags",
-    "clients",
-    "eeprom_writes",
-    "frame_cycles",
-    "adc_conversions",
-    "late_interrupts",
-    "rx_duplicated",
-    "rx_burst_bytes",
-    "tx_duplicated",
-    "tx_burst_bytes",
-    "stalls",
-    "sleep_cycles",
-    "quieted_timer_events",
+from utrf.emulator.harness_abi import (
+    ABI,
+    ADC_CHANNELS,
+    F_CPU_HZ,
+    FINGERS,
+    MJ_LOADS,
+    MJ_STATE_FIELDS,
+    PIN_FIELDS,
+    PLANT_STATE_FIELDS,
+    PROFILE_FIELDS,
+    RESET_PIN,
+    RESET_POWER_ON,
+    STAT_FIELDS,
+    STATUS_NAMES,
+    TO_BOARD,
+    TO_HOST,
+    HarnessError,
+    LineFaultsC,
+    MjPlantParamsC,
+    MjPlantStateC,
+    PlantParamsC,
+    PlantStateC,
+    ProfileC,
+    StatsC,
+    library_path,
+    load_library,
 )
-PROFILE_FIELDS = (
-    "count",
-    "total",
-    "worst",
-    "best",
-    "total_incl",
-    "worst_incl",
-    "last_entry",
-    "period_sum",
-    "intervals",
-    "latency_sum",
-    "latency_worst",
-)
-
-
-class HarnessError(RuntimeError):
-    """The C harness is missing, stale, or refused a request."""
-
-
-class _Stats(ctypes.Structure):
-    _fields_ = [(name, ctypes.c_uint64) for name in STAT_FIELDS]
-
-
-class _LineFaults(ctypes.Structure):
-    _fields_ = [
-        ("drop", ctypes.c_double),
-        ("corrupt", ctypes.c_double),
-        ("insert", ctypes.c_double),
-        ("duplicate", ctypes.c_double),
-        ("burst", ctypes.c_double),
-        ("burst_min", ctypes.c_uint32),
-        ("burst_max", ctypes.c_uint32),
-    ]
-
-
-_D = ctypes.c_double
-_I32 = ctypes.c_int32
-
-
-def _arr(kind: type, *shape: int) -> type:
-    t: Any = kind  # ctypes array types are made by multiplying a type: no static type
-    for n in reversed(shape):
-        t = t * n
-    return t
-
-
-class PlantParamsC(ctypes.Structure):
-    """``utrf_plant_params_t``: the plant's constants (utrf.emulator.plant fills it)."""
-
-    _fields_ = [
-        ("R", _arr(_D, 5, 3)),
-        ("L", _arr(_D, 5, 3)),
-        ("link_mass", _arr(_D, 5, 3)),
-        ("com", _arr(_D, 5, 3)),
-        ("tendon_stiffness", _arr(_D, 5)),
-        ("coupling_compliance", _arr(_D, 5, 2)),
-        ("rotary", _arr(_I32, 5)),
-        ("q_limits", _arr(_D, 5, 2)),
-        ("supply_v", _D),
-        ("stall_force", _D),
-        ("no_load_speed", _D),
-        ("electrical_time_constant", _D),
-        ("moving_mass", _D),
-        ("coulomb_friction", _D),
-        ("viscous_friction", _D),
-        ("stroke", _arr(_D, 2)),
-        ("enc_supply", _D),
-        ("enc_offset", _D),
-        ("enc_band", _arr(_D, 2)),
-        ("enc_noise_v", _D),
-        ("enc_unplugged_v", _D),
-        ("enc_invert", _I32),
-        ("enc_bits", _I32),
-        ("joint_damping", _D),
-        ("tendon_damping", _D),
-        ("gravity", _arr(_D, 2)),
-        ("max_substep", _D),
-    ]
-
-
-PLANT_STATE_FIELDS: tuple[tuple[str, tuple[int, ...]], ...] = (
-    ("time", ()),
-    ("q", (5,)),
-    ("qd", (5,)),
-    ("x", (5, 2)),
-    ("xd", (5, 2)),
-    ("current", (5, 2)),
-    ("tension", (5, 2)),
-    ("drive_mode", (5, 2)),
-    ("drive_duty", (5, 2)),
-    ("tip_force", (5, 2)),
-    ("tip_goal", (5, 2)),
-    ("tip_rate", (5,)),
-    ("applied_force", (5, 2)),
-    ("coupling_stretch", (5, 2)),
-    ("q_ext", (5,)),
-    ("block", (5, 2)),
-    ("plugged", (5,)),
-    ("unplugged_v", (5,)),
-    ("encoder_shift", (5,)),
-)
-
-
-class PlantStateC(ctypes.Structure):
-    """``utrf_plant_state_t``: the plant's state, read and written in place."""
-
-    _fields_ = [(name, _arr(_D, *shape) if shape else _D) for name, shape in PLANT_STATE_FIELDS]
-
-
-MJ_LOADS = 16
-
-
-class MjPlantParamsC(ctypes.Structure):
-    """``utrf_mjplant_params_t``: indices into the MuJoCo model and the motors' constants."""
-
-    _fields_ = [
-        ("actuator", _arr(_I32, 5, 2)),
-        ("dof", _arr(_I32, 5, 2)),
-        ("gear", _arr(_D, 5, 2)),
-        ("j2_qpos", _arr(_I32, 5)),
-        ("supply_v", _D),
-        ("force_constant", _D),
-        ("resistance", _D),
-        ("electrical_time_constant", _D),
-        ("stall_force", _D),
-        ("enc_supply", _D),
-        ("enc_offset", _D),
-        ("enc_band", _arr(_D, 2)),
-        ("enc_noise_v", _D),
-        ("enc_unplugged_v", _D),
-        ("enc_invert", _I32),
-        ("enc_bits", _I32),
-    ]
-
-
-MJ_STATE_FIELDS: tuple[tuple[str, tuple[int, ...]], ...] = (
-    ("time", ()),
-    ("current", (5, 2)),
-    ("drive_mode", (5, 2)),
-    ("drive_duty", (5, 2)),
-    ("plugged", (5,)),
-    ("unplugged_v", (5,)),
-    ("encoder_shift", (5,)),
-    ("load_body", (MJ_LOADS,)),
-    ("load_site", (MJ_LOADS,)),
-    ("load_force", (MJ_LOADS, 3)),
-    ("load_from", (MJ_LOADS, 3)),
-    ("load_t0", (MJ_LOADS,)),
-    ("load_t1", (MJ_LOADS,)),
-)
-
-
-class MjPlantStateC(ctypes.Structure):
-    _fields_ = [(name, _arr(_D, *shape) if shape else _D) for name, shape in MJ_STATE_FIELDS]
-
-
-class _Profile(ctypes.Structure):
-    _fields_ = [(name, ctypes.c_uint64) for name in PROFILE_FIELDS]
-
-
-_lib: ctypes.CDLL | None = None
-
-
-def library_path() -> Path:
-    try:
-        return artifacts.harness_library()
-    except artifacts.ArtifactError as exc:
-        raise HarnessError(str(exc)) from None
-
-
-def _check_fresh(path: Path) -> None:
-    if not path.is_file():
-        raise HarnessError(
-            f"the emulator's harness library {path} is missing: run `make emulator` "
-            "(or `make test`) in the repository"
-        )
-    root = artifacts.checkout_root()
-    if os.environ.get("UTRF_SIM_LIB") or root is None or not path.is_relative_to(root):
-        return  # the cache is keyed by its sources' hash: never stale
-    harness = root / "host" / "utrf" / "emulator" / "harness"
-    sources = [*harness.glob("*.c"), *harness.glob("*.h")]
-    pins = root / "firmware" / "src" / "board_pins.h"
-    if pins.is_file():
-        sources.append(pins)
-    newest = max((p.stat().st_mtime for p in sources), default=0.0)
-    if newest > path.stat().st_mtime:
-        raise HarnessError(
-            f"the emulator's harness library {path} is older than its sources: run `make emulator`"
-        )
-
-
-def load_library() -> ctypes.CDLL:
-    """Load (once) and type the harness library."""
-    global _lib
-    if _lib is not None:
-        return _lib
-    path = library_path()
-    _check_fresh(path)
-    try:
-        lib = ctypes.CDLL(str(path))
-    except OSError as exc:
-        raise HarnessError(
-            f"cannot load {path}: {exc} (is libsimavr installed? `make setup`)"
-        ) from exc
-    if lib.utrf_sim_abi() != ABI:
-        raise HarnessError(
-            f"{path} speaks harness ABI {lib.utrf_sim_abi()}, this package {ABI}: "
-            "run `make emulator`"
-        )
-    p, u8p = ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint8)
-    sigs: dict[str, tuple[Any, list[Any]]] = {
-        "utrf_sim_open": (p, [ctypes.c_char_p, ctypes.c_uint64, ctypes.c_char_p, ctypes.c_size_t]),
-        "utrf_sim_close": (None, [p]),
-        "utrf_sim_run_to": (ctypes.c_int, [p, ctypes.c_uint64]),
-        "utrf_sim_cycle": (ctypes.c_uint64, [p]),
-        "utrf_sim_status": (ctypes.c_int, [p]),
-        "utrf_sim_pc": (ctypes.c_uint32, [p]),
-        "utrf_sim_jump": (ctypes.c_int, [p, ctypes.c_uint32, ctypes.c_int]),
-        "utrf_sim_flash_word": (ctypes.c_int32, [p, ctypes.c_uint32]),
-        "utrf_sim_jump_at": (ctypes.c_int, [p, ctypes.c_uint32, ctypes.c_uint32, ctypes.c_int]),
-        "utrf_sim_adc_volts": (ctypes.POINTER(ctypes.c_double), [p]),
-        "utrf_sim_pins": (ctypes.POINTER(ctypes.c_double), [p]),
-        "utrf_sim_refresh_pins": (None, [p]),
-        "utrf_sim_read_data": (ctypes.c_int, [p, ctypes.c_uint32, u8p, ctypes.c_size_t]),
-        "utrf_sim_symbol": (ctypes.c_int64, [p, ctypes.c_char_p]),
-        "utrf_sim_uart_write": (ctypes.c_size_t, [p, ctypes.c_char_p, ctypes.c_size_t]),
-        "utrf_sim_uart_read": (ctypes.c_size_t, [p, u8p, ctypes.c_size_t]),
-        "utrf_sim_uart_pending": (ctypes.c_size_t, [p]),
-        "utrf_sim_set_capture": (None, [p, ctypes.c_int]),
-        "utrf_sim_serve_pty": (ctypes.c_int, [p, ctypes.c_char_p, ctypes.c_size_t]),
-        "utrf_sim_serve_tcp": (ctypes.c_int, [p, ctypes.c_char_p, ctypes.c_int]),
-        "utrf_sim_set_auto_reset": (None, [p, ctypes.c_int]),
-        "utrf_sim_clients": (ctypes.c_int, [p]),
-        "utrf_sim_drop_client": (None, [p]),
-        "utrf_sim_set_line_faults": (
-            ctypes.c_int,
-            [p, ctypes.c_int, ctypes.POINTER(_LineFaults)],
-        ),
-        "utrf_sim_stall_vector": (
-            ctypes.c_int,
-            [p, ctypes.c_int, ctypes.c_uint64, ctypes.c_int64],
-        ),
-        "utrf_sim_stalls_left": (ctypes.c_int64, [p]),
-        "utrf_sim_write_io": (ctypes.c_int, [p, ctypes.c_uint32, ctypes.c_uint8]),
-        "utrf_sim_poke": (ctypes.c_int, [p, ctypes.c_uint32, ctypes.c_uint8]),
-        "utrf_sim_set_quiet_timers": (None, [p, ctypes.c_int]),
-        "utrf_sim_inject": (ctypes.c_size_t, [p, ctypes.c_int, ctypes.c_char_p, ctypes.c_size_t]),
-        "utrf_sim_reset": (None, [p, ctypes.c_int, ctypes.c_uint64]),
-        "utrf_sim_set_auto_reset_hold": (None, [p, ctypes.c_uint64]),
-        "utrf_sim_eeprom_size": (ctypes.c_size_t, [p]),
-        "utrf_sim_eeprom_get": (ctypes.c_int, [p, u8p, ctypes.c_size_t]),
-        "utrf_sim_eeprom_set": (ctypes.c_int, [p, ctypes.c_char_p, ctypes.c_size_t]),
-        "utrf_sim_stats": (None, [p, ctypes.POINTER(_Stats)]),
-        "utrf_sim_profile_vector": (ctypes.c_int, [p, ctypes.c_int]),
-        "utrf_sim_profile_function": (ctypes.c_int, [p, ctypes.c_int64]),
-        "utrf_sim_profile_get": (None, [p, ctypes.c_int, ctypes.POINTER(_Profile)]),
-        "utrf_sim_log": (ctypes.c_size_t, [p, ctypes.c_char_p, ctypes.c_size_t]),
-        "utrf_plant_new": (p, [ctypes.POINTER(PlantParamsC), ctypes.c_uint64]),
-        "utrf_plant_free": (None, [p]),
-        "utrf_plant_state": (ctypes.POINTER(PlantStateC), [p]),
-        "utrf_plant_refresh": (None, [p]),
-        "utrf_plant_inertia": (ctypes.c_double, [p, ctypes.c_int]),
-        "utrf_plant_step": (None, [p, ctypes.c_double, ctypes.POINTER(ctypes.c_double)]),
-        "utrf_plant_encoder_volts": (None, [p, ctypes.POINTER(ctypes.c_double)]),
-        "utrf_plant_decode": (None, [p, ctypes.POINTER(ctypes.c_double)]),
-        "utrf_plant_hit": (
-            ctypes.c_int,
-            [p, ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double],
-        ),
-        "utrf_plant_pulses": (ctypes.c_int, [p]),
-        "utrf_sim_attach_plant": (None, [p, p]),
-        "utrf_mjplant_new": (
-            p,
-            [
-                ctypes.c_char_p,
-                p,
-                p,
-                ctypes.POINTER(MjPlantParamsC),
-                ctypes.c_uint64,
-                ctypes.c_char_p,
-                ctypes.c_size_t,
-            ],
-        ),
-        "utrf_mjplant_free": (None, [p]),
-        "utrf_mjplant_state": (ctypes.POINTER(MjPlantStateC), [p]),
-        "utrf_mjplant_step": (None, [p, ctypes.c_double, ctypes.POINTER(ctypes.c_double)]),
-        "utrf_mjplant_encoder_volts": (None, [p, ctypes.POINTER(ctypes.c_double)]),
-        "utrf_mjplant_hit": (
-            ctypes.c_int,
-            [p, ctypes.c_int, ctypes.c_int] + [ctypes.c_double] * 4,
-        ),
-        "utrf_mjplant_pulses": (ctypes.c_int, [p]),
-        "utrf_sim_attach_mjplant": (None, [p, p]),
-        "utrf_sim_run_plant": (ctypes.c_int, [p, ctypes.c_uint64, ctypes.c_uint64]),
-    }
-    for name, (restype, argtypes) in sigs.items():
-        fn = getattr(lib, name)
-        fn.restype = restype
-        fn.argtypes = argtypes
-    _lib = lib
-    return lib
-
 
 _DP = ctypes.POINTER(ctypes.c_double)
 
@@ -606,7 +285,7 @@ class NativeBoard:
         burst: float = 0.0,
         burst_length: tuple[int, int] = (8, 32),
     ) -> None:
-        f = _LineFaults(drop, corrupt, insert, duplicate, burst, *burst_length)
+        f = LineFaultsC(drop, corrupt, insert, duplicate, burst, *burst_length)
         if self._lib.utrf_sim_set_line_faults(self.handle, direction, ctypes.byref(f)):
             raise HarnessError(
                 "line fault probabilities must lie in [0, 1] (insert and duplicate < 1), "
@@ -657,7 +336,7 @@ class NativeBoard:
         return self._lib.utrf_sim_eeprom_size(self.handle)
 
     def stats(self) -> dict[str, int]:
-        s = _Stats()
+        s = StatsC()
         self._lib.utrf_sim_stats(self.handle, ctypes.byref(s))
         return {name: int(getattr(s, name)) for name in STAT_FIELDS}
 
@@ -670,7 +349,7 @@ class NativeBoard:
             raise HarnessError(f"{address:#x} is not a code address")
 
     def profile(self, which: int) -> dict[str, int]:
-        p = _Profile()
+        p = ProfileC()
         self._lib.utrf_sim_profile_get(self.handle, which, ctypes.byref(p))
         return {name: int(getattr(p, name)) for name in PROFILE_FIELDS}
 
@@ -688,3 +367,35 @@ class NativeBoard:
         if self._lib.utrf_sim_read_data(self.handle, address, buf, size):
             raise HarnessError(f"data space {address:#x}+{size} is outside the ATmega2560's")
         return bytes(buf)
+
+
+__all__ = [
+    "ABI",
+    "ADC_CHANNELS",
+    "FINGERS",
+    "F_CPU_HZ",
+    "MJ_LOADS",
+    "MJ_STATE_FIELDS",
+    "PIN_FIELDS",
+    "PLANT_STATE_FIELDS",
+    "PROFILE_FIELDS",
+    "RESET_PIN",
+    "RESET_POWER_ON",
+    "STATUS_NAMES",
+    "STAT_FIELDS",
+    "TO_BOARD",
+    "TO_HOST",
+    "HarnessError",
+    "LineFaultsC",
+    "MjPlantParamsC",
+    "MjPlantStateC",
+    "NativeBoard",
+    "NativeMjPlant",
+    "NativePlant",
+    "PlantParamsC",
+    "PlantStateC",
+    "ProfileC",
+    "StatsC",
+    "library_path",
+    "load_library",
+]

@@ -1,6 +1,10 @@
 """The emulated board: the real firmware ELF on simavr, wired to the plant, served to clients.
 
-See ``README.md`` in this package for the API and the time modes.
+This module holds the board's lifecycle (open, serve, close), its time (the lockstep with the
+plant, driven or paced to the wall clock), UART0, reset and the EEPROM. Its faults
+(``board_faults``), plant knobs (``board_plant``) and views into the MCU (``board_probes``)
+are mixins in their own modules; ``SimSerial`` is in ``sim_serial``. Every public name is
+importable from here. See ``README.md`` in this package for the API and the time modes.
 """
 
 from __future__ import annotations
@@ -12,16 +16,25 @@ import threading
 import time
 import weakref
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
-
-import numpy as np
 
 from utrf import artifacts
 from utrf.emulator import _native
 from utrf.emulator._native import F_CPU_HZ, HarnessError, NativeBoard
-from utrf.emulator.plant import DRIVE_NAMES, HandPlant, PlantParams
+from utrf.emulator.board_faults import BoardFaults
+from utrf.emulator.board_plant import BoardPlant
+from utrf.emulator.board_probes import BoardProbes
+from utrf.emulator.board_types import (
+    EEPROM_SIZE,
+    RESET_FLAGS,
+    VECTORS,
+    CycleProfile,
+    EmulatorError,
+    PinState,
+)
+from utrf.emulator.plant import HandPlant, PlantParams
+from utrf.emulator.sim_serial import SimSerial
 from utrf.models.geometry import HandGeometry
 
 if TYPE_CHECKING:
@@ -34,110 +47,6 @@ EXCHANGE_PERIOD_S = 250e-6
 MUJOCO_EXCHANGE_PERIOD_S = 1e-3  # the MJCF's own timestep: one mj_step per exchange
 #: real time: simulated time the board thread runs per hold of the lock (sim_time moves by it)
 SERVE_BATCH_S = 1e-3
-EEPROM_SIZE = 4096
-
-# MCUSR bits, and the order in which the protocol's ResetCause reports them.
-RESET_FLAGS = {
-    "power_on": 0x01,
-    "reset_pin": 0x02,
-    "brown_out": 0x04,
-    "watchdog": 0x08,
-    "jtag": 0x10,
-}
-
-# Interrupt vectors of the ATmega2560 (datasheet Table 14-1, numbering from 0 = RESET).
-VECTORS = {
-    "INT4": 5,
-    "INT5": 6,
-    "WDT": 12,
-    "TIMER2_COMPA": 13,
-    "TIMER2_COMPB": 14,
-    "TIMER2_OVF": 15,
-    "TIMER1_COMPA": 17,
-    "TIMER1_OVF": 20,
-    "TIMER0_COMPA": 21,
-    "TIMER0_OVF": 23,
-    "USART0_RX": 25,
-    "USART0_UDRE": 26,
-    "USART0_TX": 27,
-    "ADC": 29,
-    "EE_READY": 30,
-}
-
-
-# Registers the board's faults touch (ATmega2560 datasheet, data-space addresses).
-_TCCR2B, _CS2_MASK = 0xB1, 0x07
-_ADCSRA, _ADEN, _ADSC = 0x7A, 0x80, 0x40
-
-_CLI = 0x94F8  # cli
-_RJMP_SELF = 0xCFFF  # rjmp . (to itself)
-
-
-class EmulatorError(RuntimeError):
-    """A request the emulated board cannot honour; the message says what to do."""
-
-
-@dataclass(frozen=True)
-class CycleProfile:
-    """Cycles spent in an interrupt handler or a function, per call.
-
-    ``mean``/``worst``/``best`` leave out interrupts that nest inside; ``*_incl`` count them.
-    ``period`` is the mean interval between entries; ``load`` and ``worst_load`` divide by it
-    (the fraction of the CPU the code takes). For an interrupt, ``latency`` and
-    ``worst_latency`` count the cycles from its flag being raised to its handler's entry (long
-    when the firmware masks it)."""
-
-    calls: int
-    mean: float
-    worst: int
-    best: int
-    mean_incl: float
-    worst_incl: int
-    period: float
-    latency: float = math.nan  # interrupt: mean cycles from its flag to its entry
-    worst_latency: int = 0
-
-    @property
-    def load(self) -> float:
-        return self.mean / self.period if self.period else math.nan
-
-    @property
-    def worst_load(self) -> float:
-        return self.worst / self.period if self.period else math.nan
-
-    @classmethod
-    def from_native(cls, p: dict[str, int]) -> CycleProfile:
-        n = p["count"]
-        return cls(
-            calls=n,
-            mean=p["total"] / n if n else math.nan,
-            worst=p["worst"],
-            best=p["best"],
-            mean_incl=p["total_incl"] / n if n else math.nan,
-            worst_incl=p["worst_incl"],
-            period=p["period_sum"] / p["intervals"] if p["intervals"] else math.nan,
-            latency=p["latency_sum"] / n if n else math.nan,
-            worst_latency=p["latency_worst"],
-        )
-
-
-@dataclass(frozen=True)
-class PinState:
-    """What the TB6612FNGs see, per finger (axis 0) and channel (axis 1: motor A, motor B)."""
-
-    duty: np.ndarray  # PWM duty at the driver's PWM input, 0..1
-    in1: np.ndarray  # bool
-    in2: np.ndarray  # bool
-    stby: np.ndarray  # bool, per finger
-
-    @classmethod
-    def from_block(cls, block: np.ndarray) -> PinState:
-        return cls(
-            duty=block[..., 0].copy(),
-            in1=block[..., 1] > 0.5,
-            in2=block[..., 2] > 0.5,
-            stby=block[:, 0, 3] > 0.5,
-        )
 
 
 def check_elf(path: Path) -> None:
@@ -177,7 +86,7 @@ def _shutdown(stop: threading.Event, holder: dict) -> None:
         plant.close()
 
 
-class EmulatedBoard:
+class EmulatedBoard(BoardFaults, BoardPlant, BoardProbes):
     """The firmware ELF on an emulated ATmega2560 driving the plant model of the hand.
 
     ``realtime=True`` (the default) starts a thread that runs the board paced to the wall
@@ -522,234 +431,7 @@ class EmulatedBoard:
             raise EmulatorError("serial() needs capture=True")
         return SimSerial(self, timeout)
 
-    # -- faults ----------------------------------------------------------------------------------
-    def unplug_encoder(self, finger: int, volts: float | None = None) -> None:
-        """Finger's Joint-2 encoder disconnected: its ADC input reads ``volts`` (default 0 V)."""
-        with self._lock:
-            self.plant.unplug_encoder(finger, volts)
-
-    def plug_encoder(self, finger: int) -> None:
-        with self._lock:
-            self.plant.plug_encoder(finger)
-
-    def block_finger(
-        self, finger: int, theta2: float | None = None, direction: str = "both"
-    ) -> None:
-        """Block a finger at a Joint-2 angle (rad; default where it is): ``both`` jams it,
-        ``flexion`` puts an obstacle in its way. Its motor stalls against the block."""
-        with self._lock:
-            self.plant.block(finger, theta2, direction)
-
-    def unblock_finger(self, finger: int) -> None:
-        with self._lock:
-            self.plant.unblock(finger)
-
-    def shift_encoder(self, finger: int, radians: float) -> None:
-        """The finger's encoder magnet slips: from now its reading is off by ``radians`` (a
-        sudden jump of the measured Joint-2 angle; 0 puts it back)."""
-        with self._lock:
-            self.plant.shift_encoder(finger, radians)
-
-    def set_tip_force(self, finger: int, force_n: tuple[float, float], ramp_s: float = 0.0) -> None:
-        """A steady force (Fx, Fy) in N at a fingertip, finger frame (y toward flexion; the
-        bench's gravity is −y), reached over ``ramp_s`` s; (0, 0) removes it. The motor and the
-        controller feel it through the coupling (``HandPlant.set_tip_force``)."""
-        with self._lock:
-            self.plant.set_tip_force(finger, force_n, ramp_s)
-
-    def hang_payload(self, finger: int, mass_kg: float, ramp_s: float = 0.0) -> None:
-        """Hang ``mass_kg`` from a fingertip (its weight along −y of the finger frame, the
-        bench's gravity), lowered in over ``ramp_s`` s; 0 removes it."""
-        if not (isinstance(mass_kg, int | float) and math.isfinite(mass_kg) and mass_kg >= 0):
-            raise EmulatorError(f"a payload must be a mass >= 0 kg, got {mass_kg!r}")
-        g = -self.plant.params.gravity_m_s2[1] if self.plant.params.gravity_m_s2[1] else 9.81
-        self.set_tip_force(finger, (0.0, -float(mass_kg) * g), ramp_s)
-
-    def hit_tip(
-        self, finger: int, impulse_ns: tuple[float, float], duration_s: float = 5e-3
-    ) -> None:
-        """A hammer hit: a force pulse at the tip carrying ``impulse_ns`` (Jx, Jy) in N s,
-        finger frame, over ``duration_s`` from now."""
-        with self._lock:
-            self.plant.hit(finger, impulse_ns, duration_s)
-
-    @property
-    def tip(self) -> np.ndarray:
-        """True fingertips (m), shape (5, 2), each in its finger's frame, with the coupling
-        tendons' stretch under tip loads: what a perfect tracker would read."""
-        with self._lock:
-            return self.plant.tip
-
-    @property
-    def tip_force(self) -> np.ndarray:
-        """The tip force applied over the last step (N), shape (5, 2), pulses included."""
-        with self._lock:
-            return self.plant.applied_force.copy()
-
-    def drop_client(self) -> None:
-        """Hang up on the TCP client, as a pulled USB cable would (it reads end-of-file)."""
-        with self._lock:
-            self._board().drop_client()
-
-    def set_line_faults(
-        self,
-        direction: str = "both",
-        *,
-        drop: float = 0.0,
-        corrupt: float = 0.0,
-        insert: float = 0.0,
-        duplicate: float = 0.0,
-        burst: float = 0.0,
-        burst_length: tuple[int, int] = (8, 32),
-    ) -> None:
-        """Serial line faults, as probabilities per byte, seeded (reproducible when driven):
-        ``drop`` it, ``corrupt`` it (one bit flipped), ``insert`` a random byte before it,
-        ``duplicate`` it (sent twice), or start a ``burst`` of noise there that replaces it and
-        the bytes after it, ``burst_length`` = (min, max) bytes in all, uniformly. ``direction``:
-        "to_board", "to_host", "both". All zero: a clean line. Counted in ``stats``
-        (``rx_dropped``, ``tx_duplicated``, ``rx_burst_bytes``, ...)."""
-        dirs: dict[str, tuple[int, ...]] = {
-            "to_board": (_native.TO_BOARD,),
-            "to_host": (_native.TO_HOST,),
-        }
-        dirs["both"] = dirs["to_board"] + dirs["to_host"]
-        if direction not in dirs:
-            raise EmulatorError(f"direction must be one of {list(dirs)}, got {direction!r}")
-        probs = (
-            ("drop", drop),
-            ("corrupt", corrupt),
-            ("insert", insert),
-            ("duplicate", duplicate),
-            ("burst", burst),
-        )
-        for name, p in probs:
-            below_one = name in ("insert", "duplicate")
-            if not (isinstance(p, int | float) and 0.0 <= p <= 1.0) or (below_one and p >= 1):
-                bound = "[0, 1)" if below_one else "[0, 1]"
-                raise EmulatorError(f"{name} must be a probability in {bound}, got {p!r}")
-        try:
-            lo, hi = (int(n) for n in burst_length)
-        except (TypeError, ValueError):
-            raise EmulatorError(
-                f"burst_length must be (min, max) bytes, got {burst_length!r}"
-            ) from None
-        if not 1 <= lo <= hi <= 65536:
-            raise EmulatorError(
-                f"burst_length must be (min, max) with 1 <= min <= max, got {burst_length!r}"
-            )
-        with self._lock:
-            for d in dirs[direction]:
-                self._board().set_line_faults(
-                    d, float(drop), float(corrupt), float(insert), float(duplicate),
-                    float(burst), (lo, hi),
-                )  # fmt: skip
-
-    def inject_noise(self, data: bytes | int, direction: str = "to_board") -> None:
-        """Put a burst of bytes on the line (an int: that many random bytes from the seed)."""
-        if isinstance(data, int):
-            if data < 0:
-                raise EmulatorError(f"noise burst length must be >= 0, got {data}")
-            data = (
-                np.random.default_rng([self.seed, int(self._cycle)])
-                .integers(0, 256, data, dtype=np.uint8)
-                .tobytes()
-            )
-        d = {"to_board": _native.TO_BOARD, "to_host": _native.TO_HOST}.get(direction)
-        if d is None:
-            raise EmulatorError(f"direction must be 'to_board' or 'to_host', got {direction!r}")
-        with self._lock:
-            self._board().inject(d, bytes(data))
-
-    def slow_tick(self, extra_s: float, count: int | None = 1) -> None:
-        """A slow control tick: each of the next ``count`` timer-2 compare interrupts (the 1 kHz
-        tick; None: every one until called again with 0) takes ``extra_s`` seconds longer, as
-        if the handler ran that many more cycles (the timers run on meanwhile). Past one tick
-        period (1 ms) the next compare comes before the tick ends: the firmware latches
-        OVERRUN. ``extra_s`` 0 or ``count`` 0 ends it. ``stats["stalls"]`` counts the slow
-        ticks."""
-        self.stall_interrupt("TIMER2_COMPA", extra_s, count)
-
-    def stall_interrupt(self, vector: int | str, extra_s: float, count: int | None = 1) -> None:
-        """Make ``count`` entries of an interrupt handler (name as in :data:`VECTORS` or number;
-        None: every entry) last ``extra_s`` seconds longer. See :meth:`slow_tick`."""
-        if isinstance(vector, str):
-            if vector not in VECTORS:
-                raise EmulatorError(f"unknown vector {vector!r}; known: {sorted(VECTORS)}")
-            vector = VECTORS[vector]
-        if not (isinstance(extra_s, int | float) and math.isfinite(extra_s) and 0 <= extra_s <= 10):
-            raise EmulatorError(f"extra_s must be a duration in [0, 10] s, got {extra_s!r}")
-        if count is not None and (
-            isinstance(count, bool) or not isinstance(count, int) or count < 0
-        ):
-            raise EmulatorError(f"count must be an int >= 0 or None (every entry), got {count!r}")
-        cycles = round(extra_s * F_CPU_HZ)
-        with self._lock:
-            self._board().stall_vector(int(vector), cycles, -1 if count is None else count)
-
-    @property
-    def slow_ticks_left(self) -> int | None:
-        """Slow ticks still to come (None: every tick is slow; 0: none)."""
-        with self._lock:
-            left = self._board().stalls_left()
-        return None if left < 0 else left
-
-    def stop_tick_timer(self) -> None:
-        """The tick's timer stops: timer 2's clock select is cleared (TCCR2B's CS22..CS20, as a
-        glitch on the register would), so no compare interrupt comes; everything else runs,
-        ``loop()`` included, which finds no tick for 20 ms (the tick-alive rule: every motor
-        off, the watchdog resets the board). The firmware's own set-up after the reset
-        starts the timer again; nothing else does."""
-        with self._lock:
-            board = self._board()
-            tccr2b = board.read_data(_TCCR2B, 1)[0]
-            board.write_io(_TCCR2B, tccr2b & ~_CS2_MASK)
-
-    def stop_adc(self) -> None:
-        """The ADC stops: ADEN is cleared under the conversion in progress, which then never
-        completes; the firmware's sampling round waits for it, the encoder readings go stale
-        (after 3 ticks: ENCODER_RANGE on every finger, motors off). It stays stopped until
-        :meth:`restart_adc` or a reset (the firmware enables the ADC at start)."""
-        with self._lock:
-            board = self._board()
-            adcsra = board.read_data(_ADCSRA, 1)[0]
-            board.poke(_ADCSRA, adcsra & ~_ADEN)
-
-    def restart_adc(self) -> None:
-        """Undo :meth:`stop_adc`: enable the ADC and redo the conversion it lost, so the
-        firmware's round goes on."""
-        with self._lock:
-            board = self._board()
-            adcsra = board.read_data(_ADCSRA, 1)[0]
-            if adcsra & _ADEN:
-                return
-            board.poke(_ADCSRA, (adcsra | _ADEN) & ~_ADSC)
-            board.write_io(_ADCSRA, adcsra | _ADEN | _ADSC)
-
-    def hang_firmware(self, interrupts: bool = True) -> None:
-        """Hang the firmware in a self-loop, as a bug that never returns would. With
-        ``interrupts`` on, ``loop()`` hangs at its next start (no lock held, no interrupt
-        under way) and the timer interrupts go on, so the firmware's own tick sees ``loop()``
-        stop; off, the CPU stops where it stands with interrupts disabled. Either way only the
-        watchdog gets the board back. The self-loop is libgcc's ``_exit``: ``cli``, then
-        ``__stop_program: rjmp .``."""
-        with self._lock:
-            board = self._board()
-            exit_, loop = board.symbol("_exit"), board.symbol("loop")
-            if exit_ is None or (interrupts and loop is None):
-                raise EmulatorError("the ELF lacks the _exit or loop symbol to hang it with")
-            words = (board.flash_word(exit_), board.flash_word(exit_ + 2))
-            if words != (_CLI, _RJMP_SELF):
-                raise EmulatorError(
-                    f"_exit at {exit_:#x} is not 'cli; rjmp .' (words {words[0]:#06x} "
-                    f"{words[1]:#06x})"
-                )
-            if interrupts and loop is not None:  # (loop is known when interrupts: see above)
-                done = board.jump_at(loop, exit_ + 2, 1)
-            else:
-                done = board.jump(exit_, -1)
-            if not done:
-                raise EmulatorError(f"_exit at {exit_:#x} or loop is not a flash address")
-
+    # -- reset -----------------------------------------------------------------------------------
     def reset(self, cause: str = "reset_pin", hold: float = 0.0) -> None:
         """Reset the board: ``reset_pin`` (EXTRF, as the USB-serial auto-reset or the button;
         SRAM kept) or ``power_on`` (PORF;
@@ -770,77 +452,6 @@ class EmulatedBoard:
     def status(self) -> str:
         """``running``, ``crashed`` (simavr stopped the core; ``reset()`` recovers) or ``done``."""
         return _native.STATUS_NAMES[self._status]
-
-    @property
-    def theta(self) -> np.ndarray:
-        """True relative joint angles θ1..θ3 (rad), shape (5, 3)."""
-        with self._lock:
-            return self.plant.theta
-
-    @property
-    def theta2(self) -> np.ndarray:
-        with self._lock:
-            return self.plant.theta2
-
-    @property
-    def tendon_tension(self) -> np.ndarray:
-        """Tendon 1 (flexor) and Tendon 4 (extensor) tensions (N), shape (5, 2)."""
-        with self._lock:
-            return self.plant.tension.copy()
-
-    @property
-    def motor_current(self) -> np.ndarray:
-        """Motor A and B currents (A), shape (5, 2)."""
-        with self._lock:
-            return self.plant.current.copy()
-
-    @property
-    def pins(self) -> PinState:
-        """The driver inputs as the firmware has set them, now."""
-        with self._lock:
-            return PinState.from_block(self._board().pins)
-
-    @property
-    def drive(self) -> list[tuple[tuple[str, float], tuple[str, float]]]:
-        """Per finger, (mode, signed duty) of motors A and B as the plant applies them."""
-        with self._lock:
-            return [
-                (
-                    (DRIVE_NAMES[int(modes[0])], float(duties[0])),
-                    (DRIVE_NAMES[int(modes[1])], float(duties[1])),
-                )
-                for modes, duties in zip(self.plant.drive_mode, self.plant.drive_duty, strict=True)
-            ]
-
-    @property
-    def adc_volts(self) -> np.ndarray:
-        """The voltages on ADC0..4 (the encoders' outputs) as the firmware samples them now."""
-        with self._lock:
-            return self._board().adc_volts[:5].copy()
-
-    @property
-    def stats(self) -> dict[str, int]:
-        """Harness counters (bytes each way, line faults, resets, clients, EEPROM writes...)."""
-        with self._lock:
-            return self._board().stats()
-
-    @property
-    def reset_flags(self) -> set[str]:
-        """MCUSR's reset flags as the firmware finds them after the last reset."""
-        flags = self.stats["last_reset_flags"]
-        return {name for name, bit in RESET_FLAGS.items() if flags & bit}
-
-    @property
-    def reset_cause(self) -> str:
-        """The highest-priority reset flag (the protocol's ResetCause order), or ``unknown``."""
-        flags = self.reset_flags
-        return next((name for name in RESET_FLAGS if name in flags), "unknown")
-
-    @property
-    def log(self) -> str:
-        """simavr's recent errors and warnings for this board."""
-        with self._lock:
-            return self._board().log()
 
     # -- EEPROM ----------------------------------------------------------------------------------
     @property
@@ -873,143 +484,11 @@ class EmulatedBoard:
         os.replace(tmp, target)
         return target
 
-    # -- profiling -------------------------------------------------------------------------------
-    def profile_interrupt(self, vector: int | str | None) -> None:
-        """Start counting cycles in an interrupt handler (number or name, e.g. TIMER2_COMPA;
-        None stops). Figures restart from zero."""
-        if isinstance(vector, str):
-            if vector not in VECTORS:
-                raise EmulatorError(f"unknown vector {vector!r}; known: {sorted(VECTORS)}")
-            vector = VECTORS[vector]
-        with self._lock:
-            self._board().profile_vector(0 if vector is None else int(vector))
-
-    def profile_function(self, function: str | int | None) -> None:
-        """Start counting cycles in a function (ELF symbol or byte address; None stops)."""
-        with self._lock:
-            if function is None:
-                self._board().profile_function(-1)
-                return
-            addr = self.symbol(function) if isinstance(function, str) else int(function)
-            if addr is None:
-                raise EmulatorError(f"no symbol {function!r} in {self.elf}")
-            self._board().profile_function(addr)
-
-    def profile(self) -> dict[str, CycleProfile]:
-        """The running profiles: ``interrupt`` and ``function``."""
-        with self._lock:
-            b = self._board()
-            return {
-                "interrupt": CycleProfile.from_native(b.profile(0)),
-                "function": CycleProfile.from_native(b.profile(1)),
-            }
-
-    def symbol(self, name: str) -> int | None:
-        """An ELF symbol's address (data symbols: SRAM address, without avr-gcc's 0x800000)."""
-        with self._lock:
-            addr = self._board().symbol(name)
-        if addr is not None and addr >= 0x800000:
-            addr -= 0x800000
-        return addr
-
-    def read_ram(self, address: int | str, size: int) -> bytes:
-        """Bytes of the data space (registers and SRAM) at an address or a data symbol."""
-        if isinstance(address, str):
-            addr = self.symbol(address)
-            if addr is None:
-                raise EmulatorError(f"no symbol {address!r} in {self.elf}")
-            address = addr
-        with self._lock:
-            return self._board().read_data(int(address), int(size))
-
-
-class SimSerial:
-    """A pyserial-like port into a driven :class:`EmulatedBoard`: ``read`` runs the simulation
-    until the bytes arrive or ``timeout`` *simulated* seconds pass (None: no limit).
-
-    Implements what a protocol client uses: ``read``, ``read_until``, ``write``, ``flush``,
-    ``in_waiting``, ``reset_input_buffer``, ``timeout``, ``is_open``, ``close``."""
-
-    def __init__(self, board: EmulatedBoard, timeout: float | None = 1.0) -> None:
-        self.board = board
-        self.timeout = timeout
-        self._buffer = bytearray()
-        self.is_open = True
-
-    def _pull(self) -> None:
-        self._buffer += self.board.read()
-
-    def _run_until(self, done: Callable[[], bool]) -> None:
-        """Run one exchange period at a time (the finest step the board has) until done or
-        the deadline. Within half a cycle of it counts as there: when time lands on the
-        deadline, float rounding can leave a sliver no exchange runs, and the read would spin."""
-        deadline = math.inf if self.timeout is None else self.board.sim_time + self.timeout
-        step = self.board.exchange_period
-        self._pull()
-        while not done() and deadline - self.board.sim_time > 0.5 / F_CPU_HZ:
-            self.board.run_for(step)
-            self._pull()
-
-    def read(self, size: int = 1) -> bytes:
-        self._check_open()
-        self._run_until(lambda: len(self._buffer) >= size)
-        out = bytes(self._buffer[:size])
-        del self._buffer[:size]
-        return out
-
-    def read_until(self, expected: bytes = b"\n", size: int | None = None) -> bytes:
-        self._check_open()
-
-        def found() -> bool:
-            return expected in self._buffer or (size is not None and len(self._buffer) >= size)
-
-        self._run_until(found)
-        i = self._buffer.find(expected)
-        end = len(self._buffer) if i < 0 else i + len(expected)
-        if size is not None:
-            end = min(end, size)
-        out = bytes(self._buffer[:end])
-        del self._buffer[:end]
-        return out
-
-    def write(self, data: bytes) -> int:
-        self._check_open()
-        return self.board.write(bytes(data))
-
-    def flush(self) -> None:
-        """Run until every byte written has gone out on the wire."""
-        self._check_open()
-        while self.board.uart_pending:
-            self.board.run_for(1e-3)
-
-    @property
-    def in_waiting(self) -> int:
-        self._pull()
-        return len(self._buffer)
-
-    def reset_input_buffer(self) -> None:
-        self._pull()
-        self._buffer.clear()
-
-    def reset_output_buffer(self) -> None:
-        """Bytes already queued are on the wire; nothing to drop."""
-
-    def close(self) -> None:
-        self.is_open = False
-
-    def _check_open(self) -> None:
-        if not self.is_open:
-            raise EmulatorError("the port is closed")
-
-    def __enter__(self) -> SimSerial:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
 
 __all__ = [
     "DEFAULT_ELF",
+    "EEPROM_SIZE",
+    "RESET_FLAGS",
     "SERVE_BATCH_S",
     "VECTORS",
     "CycleProfile",

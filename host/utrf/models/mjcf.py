@@ -5,7 +5,8 @@ Public API (kept stable for the emulator and for users):
 - ``hand_xml(hand=None, layout=None, *, drive="duty") -> str``: the MJCF document.
 - ``hand_model(hand=None, layout=None, *, drive="duty") -> mujoco.MjModel``.
 - ``load_layout(path=None) -> Layout``: ``utrf/data/mjcf.toml`` (palm, finger placement,
-  motors, contact, dynamics constants), errors naming the field.
+  motors, contact, dynamics constants), errors naming the field (in ``mjcf_layout``).
+- ``xml_numbers(*values) -> str``: numbers as an MJCF attribute (for writers of more MJCF).
 - ``set_coupled_pose(model, data, q_by_finger, hand=None)``: put fingers at tendon
   displacements q (m) on the rigid coupling (θ_i = q / R_i), the motors where they hold them
   with every tendon just taut, velocities zero; runs ``mj_forward``.
@@ -51,23 +52,27 @@ an assumption in docs/mujoco.md.
 
 from __future__ import annotations
 
-import math
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from importlib import resources
-from pathlib import Path
+from collections.abc import Mapping
 from typing import Any
 
 import mujoco
 import numpy as np
 
 from utrf.models import tendons
-from utrf.models.geometry import FingerGeometry, HandGeometry, read_toml
+from utrf.models.geometry import FingerGeometry, HandGeometry
+from utrf.models.mjcf_layout import (
+    INTEGRATORS,
+    Dynamics,
+    FingerPlacement,
+    Layout,
+    MjcfError,
+    MotorConstants,
+    load_layout,
+)
 
 FINGER_NAMES = ("thumb", "index", "middle", "ring", "little")
 DRIVES = ("duty", "force")
-INTEGRATORS = ("Euler", "RK4", "implicit", "implicitfast")
 FINGER_CONTYPE = 1  # finger i: FINGER_CONTYPE << i
 _FINGER_BITS = 0b11111
 PALM_CONTYPE = 1 << 5
@@ -76,174 +81,14 @@ OBJECT_CONAFFINITY = _FINGER_BITS | PALM_CONTYPE | OBJECT_CONTYPE
 _SLACK_M = -10.0  # lower end of a tendon's dead band: slack at any negative stretch
 
 
-class MjcfError(ValueError):
-    """A layout or hand that cannot be turned into a MuJoCo model; the message names it."""
-
-
-@dataclass(frozen=True)
-class FingerPlacement:
-    """Where a finger's Joint 1 sits on the palm and how its frame is turned."""
-
-    position_m: tuple[float, float, float]
-    yaw_rad: float
-    roll_rad: float
-
-    def rotation(self) -> np.ndarray:
-        """Finger frame axes (columns x, y, z) in the palm frame."""
-        cy, sy = math.cos(self.yaw_rad), math.sin(self.yaw_rad)
-        cr, sr = math.cos(self.roll_rad), math.sin(self.roll_rad)
-        yaw = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
-        # The finger's (x, y, z) at yaw = roll = 0 is (x, z, −y) of the palm: it flexes up.
-        base = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-        roll = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
-        return yaw @ base @ roll
-
-    def quat(self) -> np.ndarray:
-        q = np.zeros(4)
-        mujoco.mju_mat2Quat(q, self.rotation().flatten())
-        return q
-
-
-@dataclass(frozen=True)
-class MotorConstants:
-    stall_force_n: float
-    no_load_speed_m_s: float
-    moving_mass_kg: float
-    coulomb_friction_n: float
-    viscous_friction_n_s_m: float
-    stroke_m: tuple[float, float]
-
-
-@dataclass(frozen=True)
-class Dynamics:
-    timestep_s: float
-    integrator: str
-    gravity_m_s2: float
-    joint_damping_n_m_s: float
-    coupling_damping_n_s_m: float
-
-
-@dataclass(frozen=True)
-class Layout:
-    """``utrf/data/mjcf.toml``: everything the MJCF needs beyond the geometry files."""
-
-    palm_size_m: tuple[float, float, float]
-    palm_mass_kg: float
-    link_radius_fraction: float
-    friction: tuple[float, float, float]
-    fingers: Mapping[str, FingerPlacement]
-    motor: MotorConstants
-    pulley_radius_m: float
-    dynamics: Dynamics
-    source: str = "<layout>"
-
-
-def _num(table: Mapping[str, Any], key: str, where: str, *, bound: str = "positive") -> float:
-    """A finite number; ``bound``: "positive" (> 0), "nonnegative" (>= 0) or "any"."""
-    v = table.get(key)
-    if not isinstance(v, int | float) or isinstance(v, bool) or not math.isfinite(v):
-        raise MjcfError(f"{where}: {key} must be a finite number, got {v!r}")
-    if bound == "positive" and v <= 0:
-        raise MjcfError(f"{where}: {key} must be > 0, got {v!r}")
-    if bound == "nonnegative" and v < 0:
-        raise MjcfError(f"{where}: {key} must be >= 0, got {v!r}")
-    return float(v)
-
-
-def _vec(table: Mapping[str, Any], key: str, where: str, n: int) -> tuple[float, ...]:
-    v = table.get(key)
-    if (
-        not isinstance(v, Sequence)
-        or isinstance(v, str)
-        or len(v) != n
-        or not all(isinstance(x, int | float) and math.isfinite(x) for x in v)
-    ):
-        raise MjcfError(f"{where}: {key} must be a list of {n} finite numbers, got {v!r}")
-    return tuple(float(x) for x in v)
-
-
-def _table(doc: Mapping[str, Any], key: str, where: str) -> Mapping[str, Any]:
-    t = doc.get(key)
-    if not isinstance(t, dict):
-        raise MjcfError(f"{where}: needs a [{key}] table")
-    return t
-
-
-def load_layout(path: str | Path | None = None) -> Layout:
-    """Read a layout TOML (default: the package's ``data/mjcf.toml``)."""
-    if path is None:
-        ref = resources.files("utrf") / "data" / "mjcf.toml"
-        with resources.as_file(ref) as p:
-            return load_layout(p)
-    path = Path(path)
-    doc = read_toml(path, "MJCF layout", MjcfError)
-    src = str(path)
-    palm = _table(doc, "palm", src)
-    links = _table(doc, "links", src)
-    contact = _table(doc, "contact", src)
-    fingers = _table(doc, "fingers", src)
-    motor = _table(doc, "motor", src)
-    rotary = _table(doc, "rotary", src)
-    dyn = _table(doc, "dynamics", src)
-    placements = {}
-    for name, t in fingers.items():
-        where = f"{src} [fingers.{name}]"
-        if not isinstance(t, dict):
-            raise MjcfError(f"{where}: must be a table")
-        placements[name] = FingerPlacement(
-            position_m=_vec(t, "position_m", where, 3),  # type: ignore[arg-type]  # _vec checked the length
-            yaw_rad=math.radians(_num(t, "yaw_deg", where, bound="any")),
-            roll_rad=math.radians(_num(t, "roll_deg", where, bound="any")),
-        )
-    size = _vec(palm, "size_m", f"{src} [palm]", 3)
-    if min(size) <= 0:
-        raise MjcfError(f"{src} [palm]: size_m must be > 0, got {list(size)}")
-    friction = _vec(contact, "friction", f"{src} [contact]", 3)
-    if min(friction) < 0:
-        raise MjcfError(f"{src} [contact]: friction must be >= 0, got {list(friction)}")
-    stroke = _vec(motor, "stroke_m", f"{src} [motor]", 2)
-    if not stroke[0] < 0 < stroke[1]:
-        raise MjcfError(f"{src} [motor]: stroke_m must be [min < 0, max > 0], got {list(stroke)}")
-    integrator = dyn.get("integrator")
-    if integrator not in INTEGRATORS:
-        raise MjcfError(
-            f"{src} [dynamics]: integrator must be one of {INTEGRATORS}, got {integrator!r}"
-        )
-    w = f"{src} [motor]"
-    d = f"{src} [dynamics]"
-    return Layout(
-        palm_size_m=size,  # type: ignore[arg-type]  # _vec checked the length
-        palm_mass_kg=_num(palm, "mass_kg", f"{src} [palm]"),
-        link_radius_fraction=_num(links, "radius_fraction", f"{src} [links]"),
-        friction=friction,  # type: ignore[arg-type]  # _vec checked the length
-        fingers=placements,
-        motor=MotorConstants(
-            stall_force_n=_num(motor, "stall_force_n", w),
-            no_load_speed_m_s=_num(motor, "no_load_speed_m_s", w),
-            moving_mass_kg=_num(motor, "moving_mass_kg", w),
-            coulomb_friction_n=_num(motor, "coulomb_friction_n", w, bound="nonnegative"),
-            viscous_friction_n_s_m=_num(motor, "viscous_friction_n_s_m", w, bound="nonnegative"),
-            stroke_m=stroke,  # type: ignore[arg-type]  # _vec checked the length
-        ),
-        pulley_radius_m=_num(rotary, "pulley_radius_m", f"{src} [rotary]"),
-        dynamics=Dynamics(
-            timestep_s=_num(dyn, "timestep_s", d),
-            integrator=str(integrator),
-            gravity_m_s2=_num(dyn, "gravity_m_s2", d),
-            joint_damping_n_m_s=_num(dyn, "joint_damping_n_m_s", d, bound="nonnegative"),
-            coupling_damping_n_s_m=_num(dyn, "coupling_damping_n_s_m", d),
-        ),
-        source=src,
-    )
-
-
 # -- XML ----------------------------------------------------------------------------------------
 def _num_text(v: float) -> str:
     text = repr(float(v))  # the shortest text that reads back as the same double
     return text[:-2] if text.endswith(".0") else text
 
 
-def _f(*values: float) -> str:
+def xml_numbers(*values: float) -> str:
+    """Numbers as an MJCF attribute: space-separated, each the shortest text of its double."""
     return " ".join(_num_text(v) for v in values)
 
 
@@ -294,8 +139,8 @@ def _add_finger(
         world_palm,
         "site",
         name=f"{name}_frame",
-        pos=_f(*place.position_m),
-        quat=_f(*quat),
+        pos=xml_numbers(*place.position_m),
+        quat=xml_numbers(*quat),
         size="0.003",
         rgba="0.2 0.6 0.2 0.5",
         group="4",
@@ -305,17 +150,17 @@ def _add_finger(
         radius = layout.link_radius_fraction * R[k]
         attrs: dict[str, Any] = {"name": f"{name}_link{k + 1}"}
         if k == 0:
-            attrs.update(pos=_f(*place.position_m), quat=_f(*quat))
+            attrs.update(pos=xml_numbers(*place.position_m), quat=xml_numbers(*quat))
         else:
-            attrs.update(pos=_f(L[k - 1], 0.0, 0.0))
+            attrs.update(pos=xml_numbers(L[k - 1], 0.0, 0.0))
         body = _sub(parent, "body", **attrs)
         m = geom.link_masses_kg[k]
         _sub(
             body,
             "inertial",
-            pos=_f(geom.link_com_fraction[k] * L[k], 0.0, 0.0),
-            mass=_f(m),
-            diaginertia=_f(*_link_inertia(m, L[k], radius)),
+            pos=xml_numbers(geom.link_com_fraction[k] * L[k], 0.0, 0.0),
+            mass=xml_numbers(m),
+            diaginertia=xml_numbers(*_link_inertia(m, L[k], radius)),
         )
         _sub(
             body,
@@ -323,9 +168,9 @@ def _add_finger(
             name=f"{name}_j{k + 1}",
             type="hinge",
             axis="0 0 1",
-            range=_f(*ranges[k]),
-            solreflimit=_f(2.0 * dyn.timestep_s, 1.0),
-            damping=_f(dyn.joint_damping_n_m_s),
+            range=xml_numbers(*ranges[k]),
+            solreflimit=xml_numbers(2.0 * dyn.timestep_s, 1.0),
+            damping=xml_numbers(dyn.joint_damping_n_m_s),
         )
         # Link 3's capsule ends at the fingertip; the others reach the next joint.
         end = L[k] - radius if k == 2 else L[k]
@@ -334,12 +179,12 @@ def _add_finger(
             "geom",
             name=f"{name}_link{k + 1}",
             type="capsule",
-            fromto=_f(0, 0, 0, max(end, 1e-4), 0, 0),
-            size=_f(radius),
+            fromto=xml_numbers(0, 0, 0, max(end, 1e-4), 0, 0),
+            size=xml_numbers(radius),
             mass="0",
             contype=contype,
             conaffinity=conaffinity,
-            friction=_f(*layout.friction),
+            friction=xml_numbers(*layout.friction),
             rgba="0.75 0.78 0.82 1" if k % 2 == 0 else "0.62 0.66 0.72 1",
         )
         if k == 2:
@@ -347,7 +192,7 @@ def _add_finger(
                 body,
                 "site",
                 name=f"{name}_tip",
-                pos=_f(L[2], 0.0, 0.0),
+                pos=xml_numbers(L[2], 0.0, 0.0),
                 size="0.004",
                 rgba="0.85 0.2 0.2 1",
             )
@@ -377,7 +222,7 @@ def _add_finger(
                 world_palm,
                 "body",
                 name=f"{name}_motor_{side}",
-                pos=_f(-0.5 * layout.palm_size_m[0], y, -0.5 * layout.palm_size_m[2]),
+                pos=xml_numbers(-0.5 * layout.palm_size_m[0], y, -0.5 * layout.palm_size_m[2]),
             )
             _sub(
                 body,
@@ -385,13 +230,19 @@ def _add_finger(
                 name=joint,
                 type="slide",
                 axis="1 0 0",
-                range=_f(*mot.stroke_m),
-                solreflimit=_f(2.0 * dyn.timestep_s, 1.0),
-                damping=_f(mot.viscous_friction_n_s_m),
-                frictionloss=_f(mot.coulomb_friction_n),
+                range=xml_numbers(*mot.stroke_m),
+                solreflimit=xml_numbers(2.0 * dyn.timestep_s, 1.0),
+                damping=xml_numbers(mot.viscous_friction_n_s_m),
+                frictionloss=xml_numbers(mot.coulomb_friction_n),
             )
             m = mot.moving_mass_kg
-            _sub(body, "inertial", pos="0 0 0", mass=_f(m), diaginertia=_f(1e-6, 1e-6, 1e-6))
+            _sub(
+                body,
+                "inertial",
+                pos="0 0 0",
+                mass=xml_numbers(m),
+                diaginertia=xml_numbers(1e-6, 1e-6, 1e-6),
+            )
             _sub(body, "geom", **carriage)
             _actuator(actuator_root, f"{name}_motor_{side}", joint, 1.0, mot, drive)
     else:
@@ -402,7 +253,7 @@ def _add_finger(
             world_palm,
             "body",
             name=joint,
-            pos=_f(-0.5 * layout.palm_size_m[0], p[1], -0.5 * layout.palm_size_m[2]),
+            pos=xml_numbers(-0.5 * layout.palm_size_m[0], p[1], -0.5 * layout.palm_size_m[2]),
         )
         _sub(
             body,
@@ -410,18 +261,18 @@ def _add_finger(
             name=joint,
             type="hinge",
             axis="0 1 0",
-            range=_f(mot.stroke_m[0] / r, mot.stroke_m[1] / r),
-            solreflimit=_f(2.0 * dyn.timestep_s, 1.0),
-            damping=_f(mot.viscous_friction_n_s_m * r * r),
-            frictionloss=_f(mot.coulomb_friction_n * r),
+            range=xml_numbers(mot.stroke_m[0] / r, mot.stroke_m[1] / r),
+            solreflimit=xml_numbers(2.0 * dyn.timestep_s, 1.0),
+            damping=xml_numbers(mot.viscous_friction_n_s_m * r * r),
+            frictionloss=xml_numbers(mot.coulomb_friction_n * r),
         )
         inertia = mot.moving_mass_kg * r * r  # the moving mass at the pulley's rim
         _sub(
             body,
             "inertial",
             pos="0 0 0",
-            mass=_f(mot.moving_mass_kg),
-            diaginertia=_f(inertia / 2, inertia, inertia / 2),
+            mass=xml_numbers(mot.moving_mass_kg),
+            diaginertia=xml_numbers(inertia / 2, inertia, inertia / 2),
         )
         _sub(body, "geom", **carriage)
         _actuator(actuator_root, f"{name}_motor", joint, r, mot, drive)
@@ -441,12 +292,12 @@ def _add_finger(
             tendon_root,
             "fixed",
             name=f"{name}_t{number}",
-            stiffness=_f(k),
-            springlength=_f(_SLACK_M, 0.0),
-            damping=_f(c),
+            stiffness=xml_numbers(k),
+            springlength=xml_numbers(_SLACK_M, 0.0),
+            damping=xml_numbers(c),
         )
         for joint_name, coef in coefs:
-            _sub(t, "joint", joint=joint_name, coef=_f(coef))
+            _sub(t, "joint", joint=joint_name, coef=xml_numbers(coef))
 
 
 def _actuator(
@@ -460,12 +311,12 @@ def _actuator(
             "general",
             name=name,
             joint=joint,
-            gear=_f(gear),
+            gear=xml_numbers(gear),
             ctrlrange="-1 1",
-            forcerange=_f(-f, f),
-            gainprm=_f(f),
+            forcerange=xml_numbers(-f, f),
+            gainprm=xml_numbers(f),
             biastype="affine",
-            biasprm=_f(0.0, 0.0, -f / mot.no_load_speed_m_s),
+            biasprm=xml_numbers(0.0, 0.0, -f / mot.no_load_speed_m_s),
         )
     else:
         _sub(
@@ -473,9 +324,9 @@ def _actuator(
             "motor",
             name=name,
             joint=joint,
-            gear=_f(gear),
-            ctrlrange=_f(-f, f),
-            forcerange=_f(-f, f),
+            gear=xml_numbers(gear),
+            ctrlrange=xml_numbers(-f, f),
+            forcerange=xml_numbers(-f, f),
         )
 
 
@@ -502,9 +353,9 @@ def hand_xml(
     _sub(
         root,
         "option",
-        timestep=_f(dyn.timestep_s),
+        timestep=xml_numbers(dyn.timestep_s),
         integrator=dyn.integrator,
-        gravity=_f(0.0, 0.0, -dyn.gravity_m_s2),
+        gravity=xml_numbers(0.0, 0.0, -dyn.gravity_m_s2),
     )
     visual = _sub(root, "visual")
     _sub(visual, "global", offwidth="1280", offheight="960")
@@ -529,12 +380,12 @@ def hand_xml(
         "geom",
         name="palm",
         type="box",
-        pos=_f(-lp / 2, 0.0, -tp / 2),
-        size=_f(lp / 2, wp / 2, tp / 2),
-        mass=_f(layout.palm_mass_kg),
+        pos=xml_numbers(-lp / 2, 0.0, -tp / 2),
+        size=xml_numbers(lp / 2, wp / 2, tp / 2),
+        mass=xml_numbers(layout.palm_mass_kg),
         contype=PALM_CONTYPE,
         conaffinity=_FINGER_BITS | OBJECT_CONTYPE,
-        friction=_f(*layout.friction),
+        friction=xml_numbers(*layout.friction),
         rgba="0.35 0.38 0.45 1",
     )
     # The palm is welded to the world, so MuJoCo's parent-child filter does not apply to it.
@@ -611,3 +462,26 @@ def finger_frame(
     """The finger's model frame in world coordinates: origin (Joint 1) and rotation (3, 3)."""
     site = data.site(f"{finger}_frame")
     return site.xpos.copy(), site.xmat.reshape(3, 3).copy()
+
+
+__all__ = [
+    "DRIVES",
+    "FINGER_CONTYPE",
+    "FINGER_NAMES",
+    "INTEGRATORS",
+    "OBJECT_CONAFFINITY",
+    "OBJECT_CONTYPE",
+    "PALM_CONTYPE",
+    "Dynamics",
+    "FingerPlacement",
+    "Layout",
+    "MjcfError",
+    "MotorConstants",
+    "finger_frame",
+    "hand_model",
+    "hand_xml",
+    "joint_ranges_rad",
+    "load_layout",
+    "set_coupled_pose",
+    "xml_numbers",
+]

@@ -201,7 +201,7 @@ def add_object(
         raise ObjectError("the MJCF has no <worldbody>")
     if any(e.get("name") in (name, f"{name}_free") for e in root.iter()):
         raise ObjectError(f"the MJCF already has an element named {name!r}")
-    f = mjcf._f
+    f = mjcf.xml_numbers
     b = ET.SubElement(world, "body", name=name, pos=f(*pos), quat=f(*q))
     ET.SubElement(b, "freejoint", name=f"{name}_free")
     ET.SubElement(
