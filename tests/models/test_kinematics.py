@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from utrf.models import kinematics
@@ -90,8 +90,24 @@ def test_inverse_for_theta2_and_flexion_round_trip(g: FingerGeometry, f: float) 
     )
 
 
+# A curve that passes within 3.4e-5 m of itself: the scan's nearest sample lay on the other
+# pass (found by hypothesis in CI, 2026-11-25).
+_NEAR_CROSSING = FingerGeometry(
+    link_lengths_m=(0.0404957429247297, 0.044921875, 0.046875),
+    guide_radii_m=(0.012869818687887613, 0.002, 0.004305815144084585),
+    tendon_diameter_m=0.0011447312550494008,
+    tendon_youngs_modulus_pa=5e10,
+    actuating_tendon_length_m=0.25,
+    link_masses_kg=(0.0, 0.0, 0.0),
+    link_com_fraction=(0.0, 0.0, 0.0),
+    theta1_range_rad=(-math.pi / 2, math.pi / 2),
+    source="<defaults>",
+)
+
+
 @settings(max_examples=40, deadline=None)
 @given(g=geometries(), f=st.floats(-1.0, 1.0))
+@example(g=_NEAR_CROSSING, f=0.32553186262541733)
 def test_q_for_tip_finds_a_point_on_the_curve(g: FingerGeometry, f: float) -> None:
     q = f * g.q_range_m[1]
     tip = kinematics.tip_position(g, q)

@@ -111,6 +111,7 @@ class NearestTip:
     distance_m: np.ndarray  # from the requested point
 
 
+_CANDIDATES = 4  # local minima of the scan refined per point
 _GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
 
 
@@ -132,10 +133,19 @@ def q_for_tip(
     if not lo < hi:
         raise ValueError(f"q_range must be (min, max) with min < max, got {(lo, hi)}")
     grid = np.linspace(lo, hi, samples)
-    pts = p.reshape(-1, 2)
     tips = tip_position(geom, grid)  # (samples, 2)
-    d2 = ((pts[:, None, :] - tips[None, :, :]) ** 2).sum(-1)
-    best = d2.argmin(axis=1)
+    pts0 = p.reshape(-1, 2)
+    d2 = ((pts0[:, None, :] - tips[None, :, :]) ** 2).sum(-1)
+    # The curve may pass close by itself: the scan's nearest sample can lie on the wrong
+    # pass. Refine the best few local minima of the scan and keep the nearest result.
+    local = np.ones_like(d2, dtype=bool)
+    local[:, 1:] &= d2[:, 1:] <= d2[:, :-1]
+    local[:, :-1] &= d2[:, :-1] <= d2[:, 1:]
+    k = min(_CANDIDATES, samples)
+    cand = np.argpartition(np.where(local, d2, np.inf), k - 1, axis=1)[:, :k]  # (n, k)
+    cand_d2 = np.take_along_axis(d2, cand, axis=1)
+    pts = np.repeat(pts0, k, axis=0)
+    best = cand.reshape(-1)
     step = grid[1] - grid[0]
     a = np.maximum(grid[best] - step, lo)
     b = np.minimum(grid[best] + step, hi)
@@ -154,12 +164,18 @@ def q_for_tip(
         c, d = np.where(left, new, d), np.where(left, c, new)
         fc, fd = np.where(left, f_new, fd), np.where(left, fc, f_new)
     q = (a + b) / 2
-    # The scan's best sample may itself be nearer (at a range end): keep the better.
-    q = np.where(dist2(q) <= d2[np.arange(len(pts)), best], q, grid[best])
+    # The scan's sample may itself be nearer (at a range end): keep the better.
+    fq = dist2(q)
+    scan_d2 = cand_d2.reshape(-1)
+    keep = fq <= scan_d2
+    q = np.where(keep, q, grid[best])
+    fq = np.where(keep, fq, scan_d2)
+    pick = fq.reshape(-1, k).argmin(axis=1)
+    q = q.reshape(-1, k)[np.arange(len(pts0)), pick]
     tip = tip_position(geom, q)
     shape = p.shape[:-1]
     return NearestTip(
         q=q.reshape(shape),
         tip=tip.reshape((*shape, 2)),
-        distance_m=np.sqrt(dist2(q)).reshape(shape),
+        distance_m=np.sqrt(((tip - pts0) ** 2).sum(-1)).reshape(shape),
     )
