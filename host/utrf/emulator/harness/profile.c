@@ -146,7 +146,7 @@ void profile_after_reset(utrf_sim_t *s)
 int utrf_sim_profile_vector(utrf_sim_t *s, int vector)
 {
     if (s->prof_vector > 0) {
-        avr_irq_t *old = avr_get_interrupt_irq(s->avr, (uint8_t)s->prof_vector);
+        avr_irq_t *old = utrf_vector_irq(s->avr, s->prof_vector);
         if (old) {
             avr_irq_unregister_notify(old + AVR_INT_IRQ_RUNNING, on_vector_running, s);
             avr_irq_unregister_notify(old + AVR_INT_IRQ_PENDING, on_vector_pending, s);
@@ -156,9 +156,7 @@ int utrf_sim_profile_vector(utrf_sim_t *s, int vector)
     s->prof_vector = 0;
     if (vector <= 0)
         return 0;
-    if (vector > 255)
-        return -1;
-    avr_irq_t *irq = avr_get_interrupt_irq(s->avr, (uint8_t)vector);
+    avr_irq_t *irq = utrf_vector_irq(s->avr, vector);
     if (!irq)
         return -1;
     avr_irq_register_notify(irq + AVR_INT_IRQ_RUNNING, on_vector_running, s);
