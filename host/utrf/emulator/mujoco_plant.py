@@ -85,6 +85,8 @@ def libmujoco_path() -> str:
 class MujocoPlant(_FingerPlant):
     """The MuJoCo hand, stepped by the harness. SI units; fingers 0 thumb .. 4 little."""
 
+    _native: NativeMjPlant
+
     def __init__(
         self,
         hand: HandGeometry | None = None,
@@ -198,21 +200,10 @@ class MujocoPlant(_FingerPlant):
     def close(self) -> None:
         self._native.close()
 
-    @property
-    def time(self) -> float:
-        return self._native.time
-
-    @property
-    def drive_mode(self) -> np.ndarray:
-        return self._st["drive_mode"].astype(np.int8)
-
     def step(self, dt: float, pins: np.ndarray | None = None) -> None:
         """One MuJoCo step of ``dt`` (the model's timestep) with the pins held."""
         if dt > 0:
             self._native.step(float(dt), None if pins is None else np.asarray(pins, float))
-
-    def encoder_volts(self) -> np.ndarray:
-        return self._native.encoder_volts()
 
     # -- observation ----------------------------------------------------------------------------
     @property

@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from utrf.emulator._native import MjPlantParamsC, NativePlant, PlantParamsC
+from utrf.emulator._native import MjPlantParamsC, NativePlant, PlantParamsC, _NativeStepper
 from utrf.models import tendons
 from utrf.models.geometry import HandGeometry
 
@@ -214,6 +214,20 @@ class _FingerPlant:
     q_limits: np.ndarray
     encoder_shift: np.ndarray
     _st: dict[str, np.ndarray]
+    _native: _NativeStepper
+
+    @property
+    def time(self) -> float:
+        return self._native.time
+
+    @property
+    def drive_mode(self) -> np.ndarray:
+        """Per finger and motor: 0 coast, 1 brake, 2 forward, 3 reverse."""
+        return self._st["drive_mode"].astype(np.int8)
+
+    def encoder_volts(self) -> np.ndarray:
+        """Each finger's AS5600 output (V), noise included: the ADC0..4 inputs."""
+        return self._native.encoder_volts()
 
     def _take_hand(self, hand: HandGeometry | None, params: PlantParams | None) -> None:
         self.hand = hand if hand is not None else HandGeometry.default()
@@ -270,6 +284,8 @@ class HandPlant(_FingerPlant):
     outputs. The state arrays (``q``, ``qd``, ``x``, ``xd``, ``current``, ``tension``, ...)
     are views of the C plant's memory: read them, or write them and call :meth:`refresh`.
     """
+
+    _native: NativePlant
 
     def __init__(
         self, hand: HandGeometry | None = None, params: PlantParams | None = None, seed: int = 0
@@ -385,15 +401,6 @@ class HandPlant(_FingerPlant):
         self._native.refresh()
 
     # -- the board's side -----------------------------------------------------------------------
-    @property
-    def time(self) -> float:
-        return self._native.time
-
-    @property
-    def drive_mode(self) -> np.ndarray:
-        """Per finger and motor: 0 coast, 1 brake, 2 forward, 3 reverse."""
-        return self._st["drive_mode"].astype(np.int8)
-
     def decode_drive(self, pins: np.ndarray) -> None:
         """TB6612FNG truth table, per channel, from the (5, 2, 4) pin block."""
         self._native.decode(np.asarray(pins, dtype=float).reshape(FINGERS, 2, 4))
@@ -405,10 +412,6 @@ class HandPlant(_FingerPlant):
         if pins is not None:
             pins = np.asarray(pins, dtype=float).reshape(FINGERS, 2, 4)
         self._native.step(float(dt), pins)
-
-    def encoder_volts(self) -> np.ndarray:
-        """Each finger's AS5600 output (V), noise included: the ADC0..4 inputs."""
-        return self._native.encoder_volts()
 
     # -- observations ---------------------------------------------------------------------------
     @property
