@@ -72,36 +72,30 @@ static void on_vector_running(struct avr_irq_t *irq, uint32_t value, void *param
     }
 }
 
+/* Exclusive time: a profiled span pauses while another vector is innermost (an interrupt
+ * nested in it) and resumes when its own is innermost again. */
+static void follow_innermost(profile_state_t *p, int mine, uint64_t now)
+{
+    if (!p->active)
+        return;
+    if (!mine && !p->paused) {
+        p->excl += now - p->seg;
+        p->paused = 1;
+    } else if (mine && p->paused) {
+        p->seg = now;
+        p->paused = 0;
+    }
+}
+
 /* The innermost running vector changed (0: none). */
 static void on_any_running(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     (void)irq;
     utrf_sim_t *s = param;
     uint64_t now = s->avr->cycle;
-    profile_state_t *v = &s->prof_vec;
-    if (v->active) {
-        int mine = (int)value == s->prof_vector;
-        if (!mine && !v->paused) {
-            v->excl += now - v->seg;
-            v->paused = 1;
-        } else if (mine && v->paused) {
-            v->seg = now;
-            v->paused = 0;
-        }
-    }
-    profile_state_t *f = &s->prof_fn;
-    if (f->active) {
-        /* Entered under prof_fn_vector (0: from the main loop): any other innermost vector
-         * while it runs is an interrupt nested in it. */
-        int mine = (int)value == s->prof_fn_vector;
-        if (!mine && !f->paused) {
-            f->excl += now - f->seg;
-            f->paused = 1;
-        } else if (mine && f->paused) {
-            f->seg = now;
-            f->paused = 0;
-        }
-    }
+    follow_innermost(&s->prof_vec, (int)value == s->prof_vector, now);
+    /* A function entered under prof_fn_vector (0: from the main loop). */
+    follow_innermost(&s->prof_fn, (int)value == s->prof_fn_vector, now);
     s->running_vector = (int)value;
 }
 
