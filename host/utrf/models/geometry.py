@@ -54,7 +54,10 @@ def read_toml(path: Path, what: str, error: type[ValueError] = GeometryError) ->
 def package_data(*parts: str) -> Iterator[Path]:
     """A file under the package's ``data/`` as a real path while in use: the one place that
     says where the built-in TOML files are, installed or from a checkout."""
-    with resources.as_file(resources.files("utrf").joinpath("data", *parts)) as path:
+    ref = resources.files("utrf") / "data"
+    for part in parts:
+        ref = ref / part
+    with resources.as_file(ref) as path:
         yield path
 
 
