@@ -12,14 +12,13 @@ import math
 import os
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
 from utrf.models import kinematics
-from utrf.models.geometry import HandGeometry, read_toml
+from utrf.models.geometry import HandGeometry, package_data, read_toml
 
 TargetKind = Literal["flexion", "theta2", "q"]
 _OVERRIDE_KEYS: dict[str, tuple[TargetKind, float]] = {
@@ -208,8 +207,7 @@ class PoseLibrary(Mapping[str, Pose]):
         """The built-in poses, then the user's file (if present), then ``extra`` files."""
         hand = hand or HandGeometry.default()
         lib = cls()
-        ref = resources.files("utrf") / "data" / "poses.toml"
-        with resources.as_file(ref) as builtin:
+        with package_data("poses.toml") as builtin:
             lib.add_file(builtin, hand)
         user = user_pose_file()
         if include_user and user.exists():

@@ -16,6 +16,11 @@ from collections.abc import Sequence
 from utrf import __version__
 
 
+def error(command: str, text: object) -> None:
+    """Every command's one line on stderr for a failure: ``utrf COMMAND: error: TEXT``."""
+    print(f"utrf {command}: error: {text}", file=sys.stderr)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="utrf",

@@ -15,6 +15,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from utrf.cli import error
 from utrf.hand import DEFAULT_TELEMETRY_HZ, Hand, HandError, TargetError
 from utrf.hand.client import OnClose
 from utrf.hand.errors import FingerFaultError, NotControlledError, NotSettledError
@@ -103,10 +104,6 @@ def connect(
         on_close=on_close,
         log_path=log_path,
     )
-
-
-def error(command: str, text: object) -> None:
-    print(f"utrf {command}: error: {text}", file=sys.stderr)
 
 
 def guarded(command: str) -> Callable[[Callable[[argparse.Namespace], int]], Callable[..., int]]:

@@ -7,13 +7,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from utrf.cli import error
 from utrf.models import kinematics, statics, tendons
 from utrf.models.geometry import FingerGeometry, GeometryError, HandGeometry
 
@@ -142,7 +142,7 @@ def guarded(fn: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Names
         try:
             return fn(args)
         except (GeometryError, ValueError, OSError) as exc:
-            print(f"utrf {args.command}: error: {exc}", file=sys.stderr)
+            error(args.command, exc)
             return EXIT_BAD_INPUT
 
     return run

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -33,6 +32,7 @@ from utrf.cli._hand_common import (
     EXIT_NOT_DONE,
     EXIT_OK,
     add_poses,
+    error,
     guarded,
     load_poses,
 )
@@ -131,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
             if live is not None:
                 live.stop()
     except EmulatorError as exc:
-        print(f"utrf demo: error: {exc}", file=sys.stderr)
+        error("demo", exc)
         return EXIT_BAD_INPUT
     took = time.monotonic() - t0
     print(

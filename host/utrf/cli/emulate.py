@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
+from utrf.cli import error
 from utrf.emulator import EmulatedBoard, EmulatorError, HarnessError, PlantError
 from utrf.models.geometry import GeometryError, HandGeometry
 
@@ -404,7 +405,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     try:
         board = build_board(args)
     except (EmulatorError, HarnessError, PlantError, GeometryError, OSError) as exc:
-        print(f"utrf emulate: error: {exc}", file=sys.stderr)
+        error("emulate", exc)
         return EXIT_BAD_INPUT
 
     stop = threading.Event()

@@ -24,13 +24,13 @@ import argparse
 import shlex
 import shutil
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import serial
 
 from utrf import artifacts
+from utrf.cli import error
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -177,7 +177,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.dry_run and args.port.startswith("/dev/") and not Path(args.port).exists():
             raise FlashError(f"no serial port {args.port}: is the MEGA plugged in?")
     except FlashError as exc:
-        print(f"utrf flash: error: {exc}", file=sys.stderr)
+        error("flash", exc)
         return EXIT_BAD_INPUT
     cmd = avrdude_command(avrdude, args.port, args.hex, args.programmer, args.baud)
     print(f"{shlex.join(cmd)}    # {size} bytes", flush=True)
@@ -187,19 +187,19 @@ def run(args: argparse.Namespace) -> int:
         try:
             sign = check_bootloader(args.port, args.baud, args.sync_timeout)
         except FlashError as exc:
-            print(f"utrf flash: error: {exc}", file=sys.stderr)
+            error("flash", exc)
             return EXIT_BAD_INPUT
         except NoBootloaderError as exc:
-            print(f"utrf flash: error: {exc}", file=sys.stderr)
+            error("flash", exc)
             return EXIT_FAILED
         print(f"bootloader on {args.port}: {sign}", flush=True)
     try:
         proc = subprocess.run(cmd, check=False, timeout=args.timeout)
     except subprocess.TimeoutExpired:
-        print(f"utrf flash: error: avrdude did not finish in {args.timeout:g} s", file=sys.stderr)
+        error("flash", f"avrdude did not finish in {args.timeout:g} s")
         return EXIT_FAILED
     if proc.returncode:
-        print(f"utrf flash: error: avrdude failed (exit {proc.returncode})", file=sys.stderr)
+        error("flash", f"avrdude failed (exit {proc.returncode})")
         return EXIT_FAILED
     print(f"flashed {args.hex} to {args.port}")
     return EXIT_OK

@@ -15,6 +15,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from utrf.cli import error
 from utrf.models.geometry import GeometryError, HandGeometry
 
 EXIT_BAD_INPUT = 2
@@ -70,7 +71,7 @@ def _render(args: argparse.Namespace, hand: HandGeometry, xml: str) -> int:
             )
             images.append(render.render(model, data, height=args.height, width=args.width))
     except render.RenderError as exc:
-        print(f"utrf mjcf: error: {exc}", file=sys.stderr)
+        error("mjcf", exc)
         return EXIT_NO_RENDER
     path = Path(args.render)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -87,7 +88,7 @@ def _guarded(args: argparse.Namespace) -> int:
         return _run(args)
     except (GeometryError, ValueError, OSError, KeyError) as exc:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
-        print(f"utrf mjcf: error: {message}", file=sys.stderr)
+        error("mjcf", message)
         return EXIT_BAD_INPUT
 
 

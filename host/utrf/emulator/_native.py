@@ -43,23 +43,24 @@ from utrf.emulator.harness_abi import (
 _DP = ctypes.POINTER(ctypes.c_double)
 
 
-class NativePlant:
-    """One C plant (``utrf_plant_t``). ``state`` holds numpy views of its state, by field."""
+class _NativeStepper:
+    """What both C plants share: a handle, numpy views of the state, stepping, the encoder
+    volts, freeing. ``_prefix`` names the C functions (``<prefix>_step`` ...)."""
 
-    def __init__(self, params: PlantParamsC, seed: int) -> None:
-        self._lib = load_library()
-        handle = self._lib.utrf_plant_new(ctypes.byref(params), seed & (2**64 - 1))
-        if not handle:
-            raise HarnessError("out of memory for the plant")
+    _prefix: str
+
+    def _bind(
+        self, lib: ctypes.CDLL, handle: int, fields: tuple[tuple[str, tuple[int, ...]], ...]
+    ) -> None:
+        self._lib = lib
         self._h: int | None = handle
-        self._c = self._lib.utrf_plant_state(handle).contents
+        self._c = getattr(lib, f"{self._prefix}_state")(handle).contents
         self.state = {
-            name: np.ctypeslib.as_array(getattr(self._c, name))
-            for name, shape in PLANT_STATE_FIELDS
-            if shape
+            name: np.ctypeslib.as_array(getattr(self._c, name)) for name, shape in fields if shape
         }
         self._volts = np.zeros(FINGERS)
-        self._step = self._lib.utrf_plant_step
+        self._step = getattr(lib, f"{self._prefix}_step")
+        self._encoder_volts = getattr(lib, f"{self._prefix}_encoder_volts")
 
     @property
     def handle(self) -> int:
@@ -74,7 +75,7 @@ class NativePlant:
     def close(self) -> None:
         if self._h is not None:
             self.state = {k: v.copy() for k, v in self.state.items()}  # views outlive it
-            self._lib.utrf_plant_free(self._h)
+            getattr(self._lib, f"{self._prefix}_free")(self._h)
             self._h = None
 
     def step(self, dt: float, pins: np.ndarray | None) -> None:
@@ -84,13 +85,36 @@ class NativePlant:
         block = np.ascontiguousarray(pins, dtype=np.float64)
         self._step(self.handle, dt, block.ctypes.data_as(_DP))
 
+    def encoder_volts(self) -> np.ndarray:
+        self._encoder_volts(self.handle, self._volts.ctypes.data_as(_DP))
+        return self._volts.copy()
+
+    def pulses(self) -> int:
+        return int(getattr(self._lib, f"{self._prefix}_pulses")(self.handle))
+
+    @staticmethod
+    def _check_hit(rc: int, what: str) -> None:
+        if rc == -2:
+            raise HarnessError("too many hits under way at once (64)")
+        if rc:
+            raise HarnessError(f"bad hit: {what}")
+
+
+class NativePlant(_NativeStepper):
+    """One C plant (``utrf_plant_t``). ``state`` holds numpy views of its state, by field."""
+
+    _prefix = "utrf_plant"
+
+    def __init__(self, params: PlantParamsC, seed: int) -> None:
+        lib = load_library()
+        handle = lib.utrf_plant_new(ctypes.byref(params), seed & (2**64 - 1))
+        if not handle:
+            raise HarnessError("out of memory for the plant")
+        self._bind(lib, handle, PLANT_STATE_FIELDS)
+
     def decode(self, pins: np.ndarray) -> None:
         block = np.ascontiguousarray(pins, dtype=np.float64)
         self._lib.utrf_plant_decode(self.handle, block.ctypes.data_as(_DP))
-
-    def encoder_volts(self) -> np.ndarray:
-        self._lib.utrf_plant_encoder_volts(self.handle, self._volts.ctypes.data_as(_DP))
-        return self._volts.copy()
 
     def refresh(self) -> None:
         self._lib.utrf_plant_refresh(self.handle)
@@ -100,74 +124,30 @@ class NativePlant:
 
     def hit(self, finger: int, jx: float, jy: float, duration: float) -> None:
         rc = self._lib.utrf_plant_hit(self.handle, finger, jx, jy, duration)
-        if rc == -2:
-            raise HarnessError("too many hits under way at once (64)")
-        if rc:
-            raise HarnessError(f"bad hit: finger {finger}, duration {duration}")
-
-    def pulses(self) -> int:
-        return self._lib.utrf_plant_pulses(self.handle)
+        self._check_hit(rc, f"finger {finger}, duration {duration}")
 
 
-class NativeMjPlant:
+class NativeMjPlant(_NativeStepper):
     """The MuJoCo plant's stepping in C (``utrf_mjplant_t``) over the caller's model and data."""
+
+    _prefix = "utrf_mjplant"
 
     def __init__(
         self, libmujoco: str, model: int, data: int, params: MjPlantParamsC, seed: int
     ) -> None:
-        self._lib = load_library()
+        lib = load_library()
         err = ctypes.create_string_buffer(1024)
-        handle = self._lib.utrf_mjplant_new(
+        handle = lib.utrf_mjplant_new(
             libmujoco.encode(), model, data, ctypes.byref(params), seed & (2**64 - 1), err, 1024
         )
         if not handle:
             raise HarnessError(err.value.decode(errors="replace"))
-        self._h: int | None = handle
-        self._c = self._lib.utrf_mjplant_state(handle).contents
-        self.state = {
-            name: np.ctypeslib.as_array(getattr(self._c, name))
-            for name, shape in MJ_STATE_FIELDS
-            if shape
-        }
+        self._bind(lib, handle, MJ_STATE_FIELDS)
         self.state["load_body"][:] = -1
-        self._volts = np.zeros(FINGERS)
-
-    @property
-    def handle(self) -> int:
-        if self._h is None:
-            raise HarnessError("the plant is freed")
-        return self._h
-
-    @property
-    def time(self) -> float:
-        return float(self._c.time)
-
-    def close(self) -> None:
-        if self._h is not None:
-            self.state = {k: v.copy() for k, v in self.state.items()}
-            self._lib.utrf_mjplant_free(self._h)
-            self._h = None
-
-    def step(self, dt: float, pins: np.ndarray | None) -> None:
-        if pins is None:
-            self._lib.utrf_mjplant_step(self.handle, dt, None)
-            return
-        block = np.ascontiguousarray(pins, dtype=np.float64)
-        self._lib.utrf_mjplant_step(self.handle, dt, block.ctypes.data_as(_DP))
-
-    def encoder_volts(self) -> np.ndarray:
-        self._lib.utrf_mjplant_encoder_volts(self.handle, self._volts.ctypes.data_as(_DP))
-        return self._volts.copy()
 
     def hit(self, body: int, site: int, impulse: np.ndarray, duration: float) -> None:
         rc = self._lib.utrf_mjplant_hit(self.handle, body, site, *map(float, impulse), duration)
-        if rc == -2:
-            raise HarnessError("too many hits under way at once (64)")
-        if rc:
-            raise HarnessError(f"bad hit: body {body}, duration {duration}")
-
-    def pulses(self) -> int:
-        return self._lib.utrf_mjplant_pulses(self.handle)
+        self._check_hit(rc, f"body {body}, duration {duration}")
 
 
 class NativeBoard:

@@ -106,6 +106,18 @@ def _arr(kind: type, *shape: int) -> type:
     return t
 
 
+# The encoder's constants, the same run in both plants' parameter structs (utrf_sim.h).
+_ENCODER_FIELDS = [
+    ("enc_supply", _D),
+    ("enc_offset", _D),
+    ("enc_band", _arr(_D, 2)),
+    ("enc_noise_v", _D),
+    ("enc_unplugged_v", _D),
+    ("enc_invert", _I32),
+    ("enc_bits", _I32),
+]
+
+
 class PlantParamsC(ctypes.Structure):
     """``utrf_plant_params_t``: the plant's constants (utrf.emulator.plant fills it)."""
 
@@ -126,13 +138,7 @@ class PlantParamsC(ctypes.Structure):
         ("coulomb_friction", _D),
         ("viscous_friction", _D),
         ("stroke", _arr(_D, 2)),
-        ("enc_supply", _D),
-        ("enc_offset", _D),
-        ("enc_band", _arr(_D, 2)),
-        ("enc_noise_v", _D),
-        ("enc_unplugged_v", _D),
-        ("enc_invert", _I32),
-        ("enc_bits", _I32),
+        *_ENCODER_FIELDS,
         ("joint_damping", _D),
         ("tendon_damping", _D),
         ("gravity", _arr(_D, 2)),
@@ -185,13 +191,7 @@ class MjPlantParamsC(ctypes.Structure):
         ("resistance", _D),
         ("electrical_time_constant", _D),
         ("stall_force", _D),
-        ("enc_supply", _D),
-        ("enc_offset", _D),
-        ("enc_band", _arr(_D, 2)),
-        ("enc_noise_v", _D),
-        ("enc_unplugged_v", _D),
-        ("enc_invert", _I32),
-        ("enc_bits", _I32),
+        *_ENCODER_FIELDS,
     ]
 
 

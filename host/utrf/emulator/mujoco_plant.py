@@ -26,7 +26,15 @@ import mujoco
 import numpy as np
 
 from utrf.emulator._native import HarnessError, MjPlantParamsC, NativeMjPlant
-from utrf.emulator.plant import FINGERS, PlantError, PlantParams, _finger_index, _force_vector
+from utrf.emulator.plant import (
+    FINGERS,
+    PlantError,
+    PlantParams,
+    _finger_index,
+    _FingerPlant,
+    _force_vector,
+    _put_encoder,
+)
 from utrf.models import mjcf, objects
 from utrf.models.geometry import HandGeometry
 
@@ -74,8 +82,10 @@ def libmujoco_path() -> str:
     return str(found[-1])
 
 
-class MujocoPlant:
+class MujocoPlant(_FingerPlant):
     """The MuJoCo hand, stepped by the harness. SI units; fingers 0 thumb .. 4 little."""
+
+    _native: NativeMjPlant
 
     def __init__(
         self,
@@ -87,14 +97,8 @@ class MujocoPlant:
         object_pose: tuple[tuple[float, ...], tuple[float, ...]] | None = None,
         timestep: float = 1e-3,
     ) -> None:
-        self.hand = hand if hand is not None else HandGeometry.default()
-        if len(self.hand.fingers) != FINGERS:
-            raise PlantError(
-                f"the plant needs {FINGERS} fingers, the hand has {len(self.hand.fingers)}"
-            )
-        self.params = params if params is not None else PlantParams()
+        self._take_hand(hand, params)
         self.names = [f.name for f in self.hand.fingers]
-        self.geometries = tuple(f.geometry for f in self.hand.fingers)
         self.R = np.array([g.guide_radii_m for g in self.geometries])
         self.L = np.array([g.link_lengths_m for g in self.geometries])
         self.q_limits = np.array([g.q_range_m for g in self.geometries])
@@ -181,10 +185,7 @@ class MujocoPlant:
             mot.electrical_time_constant_s,
         )
         c.stall_force = mot.stall_force_n
-        c.enc_supply, c.enc_offset = enc.supply_v, enc.offset_rad
-        np.ctypeslib.as_array(c.enc_band)[...] = enc.band
-        c.enc_noise_v, c.enc_unplugged_v = enc.noise_v, enc.unplugged_v
-        c.enc_invert, c.enc_bits = int(enc.invert), enc.resolution_bits
+        _put_encoder(c, enc)
         return c
 
     # -- the board's side ----------------------------------------------------------------------
@@ -199,21 +200,10 @@ class MujocoPlant:
     def close(self) -> None:
         self._native.close()
 
-    @property
-    def time(self) -> float:
-        return self._native.time
-
-    @property
-    def drive_mode(self) -> np.ndarray:
-        return self._st["drive_mode"].astype(np.int8)
-
     def step(self, dt: float, pins: np.ndarray | None = None) -> None:
         """One MuJoCo step of ``dt`` (the model's timestep) with the pins held."""
         if dt > 0:
             self._native.step(float(dt), None if pins is None else np.asarray(pins, float))
-
-    def encoder_volts(self) -> np.ndarray:
-        return self._native.encoder_volts()
 
     # -- observation ----------------------------------------------------------------------------
     @property
@@ -271,39 +261,15 @@ class MujocoPlant:
     def set_theta2(self, finger: int, theta2: float) -> None:
         """Put a finger at rest at a Joint-2 angle on the rigid coupling, tendons just taut."""
         f = _finger_index(finger)
-        q = float(theta2) * self.R[f, 1]
-        lo, hi = self.q_limits[f]
-        if not lo <= q <= hi:
-            raise PlantError(
-                f"finger {f}: θ2 = {theta2:.3f} rad is outside its range "
-                f"[{lo / self.R[f, 1]:.3f}, {hi / self.R[f, 1]:.3f}] rad"
-            )
+        q = self._q_at_theta2(f, theta2)
         mjcf.set_coupled_pose(self.model, self.data, {self.names[f]: q}, self.hand)
         self.current[f] = 0.0
-
-    def unplug_encoder(self, finger: int, volts: float | None = None) -> None:
-        f = _finger_index(finger)
-        volts = self.params.encoder.unplugged_v if volts is None else volts
-        if not (math.isfinite(volts) and 0.0 <= volts <= 5.0):
-            raise PlantError(f"an unplugged encoder's input must lie in [0, 5] V, got {volts!r}")
-        self._st["unplugged_v"][f] = volts
-        self._st["plugged"][f] = 0.0
-
-    def plug_encoder(self, finger: int) -> None:
-        self._st["plugged"][_finger_index(finger)] = 1.0
-
-    def shift_encoder(self, finger: int, radians: float) -> None:
-        f = _finger_index(finger)
-        if not (isinstance(radians, int | float) and math.isfinite(radians)):
-            raise PlantError(f"encoder shift must be a finite angle in rad, got {radians!r}")
-        self.encoder_shift[f] = float(radians)
 
     def block(self, finger: int, theta2: float | None = None, direction: str = "both") -> None:
         """Block a finger at a Joint-2 angle (default: where it is) by narrowing its joints'
         ranges at the coupled pose there: ``both`` jams it, ``flexion`` stops it flexing."""
         f = _finger_index(finger)
-        if direction not in ("both", "flexion"):
-            raise PlantError(f"direction must be 'both' or 'flexion', got {direction!r}")
+        self._check_direction(direction)
         th2 = self.theta2[f] if theta2 is None else float(theta2)
         q = th2 * self.R[f, 1]
         lo, hi = self.q_limits[f]

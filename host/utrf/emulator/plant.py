@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from utrf.emulator._native import NativePlant, PlantParamsC
+from utrf.emulator._native import MjPlantParamsC, NativePlant, PlantParamsC, _NativeStepper
 from utrf.models import tendons
 from utrf.models.geometry import HandGeometry
 
@@ -196,7 +196,87 @@ def _finger_index(finger: int) -> int:
     return int(finger)
 
 
-class HandPlant:
+def _put_encoder(c: PlantParamsC | MjPlantParamsC, e: EncoderParams) -> None:
+    """The encoder's constants into either C plant's parameters (the same ``enc_*`` fields)."""
+    c.enc_supply, c.enc_offset = e.supply_v, e.offset_rad
+    np.ctypeslib.as_array(c.enc_band)[...] = e.band
+    c.enc_noise_v, c.enc_unplugged_v = e.noise_v, e.unplugged_v
+    c.enc_invert, c.enc_bits = int(e.invert), e.resolution_bits
+
+
+class _FingerPlant:
+    """What both plants (:class:`HandPlant`, the MuJoCo one) share: the hand they take, the
+    range check on a Joint-2 angle, and the encoder faults, so both accept the same input."""
+
+    hand: HandGeometry
+    params: PlantParams
+    R: np.ndarray
+    q_limits: np.ndarray
+    encoder_shift: np.ndarray
+    _st: dict[str, np.ndarray]
+    _native: _NativeStepper
+
+    @property
+    def time(self) -> float:
+        return self._native.time
+
+    @property
+    def drive_mode(self) -> np.ndarray:
+        """Per finger and motor: 0 coast, 1 brake, 2 forward, 3 reverse."""
+        return self._st["drive_mode"].astype(np.int8)
+
+    def encoder_volts(self) -> np.ndarray:
+        """Each finger's AS5600 output (V), noise included: the ADC0..4 inputs."""
+        return self._native.encoder_volts()
+
+    def _take_hand(self, hand: HandGeometry | None, params: PlantParams | None) -> None:
+        self.hand = hand if hand is not None else HandGeometry.default()
+        if len(self.hand.fingers) != FINGERS:
+            raise PlantError(
+                f"the plant needs {FINGERS} fingers, the hand has {len(self.hand.fingers)}"
+            )
+        self.params = params if params is not None else PlantParams()
+        self.geometries = tuple(f.geometry for f in self.hand.fingers)
+
+    def _q_at_theta2(self, f: int, theta2: float) -> float:
+        """Joint-2 angle ``theta2`` (rad) of finger ``f`` as its q (m), inside its range."""
+        q = float(theta2) * self.R[f, 1]
+        lo, hi = self.q_limits[f]
+        if not lo <= q <= hi:
+            raise PlantError(
+                f"finger {f}: θ2 = {theta2:.3f} rad is outside its range "
+                f"[{lo / self.R[f, 1]:.3f}, {hi / self.R[f, 1]:.3f}] rad"
+            )
+        return q
+
+    @staticmethod
+    def _check_direction(direction: str) -> None:
+        if direction not in ("both", "flexion"):
+            raise PlantError(f"direction must be 'both' or 'flexion', got {direction!r}")
+
+    def unplug_encoder(self, finger: int, volts: float | None = None) -> None:
+        """The encoder's cable comes off: the ADC input reads ``volts`` (default: the
+        encoder parameters' ``unplugged_v``, 0 V)."""
+        f = _finger_index(finger)
+        if volts is None:
+            volts = self.params.encoder.unplugged_v
+        if not (math.isfinite(volts) and 0.0 <= volts <= 5.0):
+            raise PlantError(f"an unplugged encoder's input must lie in [0, 5] V, got {volts!r}")
+        self._st["unplugged_v"][f] = volts
+        self._st["plugged"][f] = 0.0
+
+    def plug_encoder(self, finger: int) -> None:
+        self._st["plugged"][_finger_index(finger)] = 1.0
+
+    def shift_encoder(self, finger: int, radians: float) -> None:
+        """The encoder's magnet slips: its reading is off by ``radians`` from now on."""
+        f = _finger_index(finger)
+        if not (isinstance(radians, int | float) and math.isfinite(radians)):
+            raise PlantError(f"encoder shift must be a finite angle in rad, got {radians!r}")
+        self.encoder_shift[f] = float(radians)
+
+
+class HandPlant(_FingerPlant):
     """State and dynamics of the five fingers. SI units: m, rad, N, A, s.
 
     ``step(dt, pins)`` advances by ``dt`` with the board's pins held (the (5, 2, 4) block of
@@ -205,16 +285,12 @@ class HandPlant:
     are views of the C plant's memory: read them, or write them and call :meth:`refresh`.
     """
 
+    _native: NativePlant
+
     def __init__(
         self, hand: HandGeometry | None = None, params: PlantParams | None = None, seed: int = 0
     ) -> None:
-        self.hand = hand if hand is not None else HandGeometry.default()
-        if len(self.hand.fingers) != FINGERS:
-            raise PlantError(
-                f"the plant needs {FINGERS} fingers, the hand has {len(self.hand.fingers)}"
-            )
-        self.params = params if params is not None else PlantParams()
-        self.geometries = tuple(f.geometry for f in self.hand.fingers)
+        self._take_hand(hand, params)
         g = self.geometries
         self.R = np.array([x.guide_radii_m for x in g])  # (5, 3)
         self.L = np.array([x.link_lengths_m for x in g])
@@ -259,7 +335,7 @@ class HandPlant:
         self._st = st
 
     def _c_params(self) -> PlantParamsC:
-        m, e, p = self.params.motor, self.params.encoder, self.params
+        m, p = self.params.motor, self.params
         c = PlantParamsC()
 
         def put(field: object, values: np.ndarray) -> None:
@@ -279,10 +355,7 @@ class HandPlant:
         c.moving_mass = m.moving_mass_kg
         c.coulomb_friction, c.viscous_friction = m.coulomb_friction_n, m.viscous_friction_n_s_m
         put(c.stroke, np.array(m.stroke_m))
-        c.enc_supply, c.enc_offset = e.supply_v, e.offset_rad
-        put(c.enc_band, np.array(e.band))
-        c.enc_noise_v, c.enc_unplugged_v = e.noise_v, e.unplugged_v
-        c.enc_invert, c.enc_bits = int(e.invert), e.resolution_bits
+        _put_encoder(c, self.params.encoder)
         c.joint_damping, c.tendon_damping = p.joint_damping_n_m_s, p.tendon_damping_n_s_m
         put(c.gravity, self._gravity)
         c.max_substep = self._max_substep
@@ -328,15 +401,6 @@ class HandPlant:
         self._native.refresh()
 
     # -- the board's side -----------------------------------------------------------------------
-    @property
-    def time(self) -> float:
-        return self._native.time
-
-    @property
-    def drive_mode(self) -> np.ndarray:
-        """Per finger and motor: 0 coast, 1 brake, 2 forward, 3 reverse."""
-        return self._st["drive_mode"].astype(np.int8)
-
     def decode_drive(self, pins: np.ndarray) -> None:
         """TB6612FNG truth table, per channel, from the (5, 2, 4) pin block."""
         self._native.decode(np.asarray(pins, dtype=float).reshape(FINGERS, 2, 4))
@@ -348,10 +412,6 @@ class HandPlant:
         if pins is not None:
             pins = np.asarray(pins, dtype=float).reshape(FINGERS, 2, 4)
         self._native.step(float(dt), pins)
-
-    def encoder_volts(self) -> np.ndarray:
-        """Each finger's AS5600 output (V), noise included: the ADC0..4 inputs."""
-        return self._native.encoder_volts()
 
     # -- observations ---------------------------------------------------------------------------
     @property
@@ -431,14 +491,8 @@ class HandPlant:
     def set_theta2(self, finger: int, theta2: float) -> None:
         """Put a finger at rest at a Joint-2 angle with both tendons just taut."""
         f = _finger_index(finger)
-        q = float(theta2) * self.R[f, 1]
         lo, hi = self.q_limits[f]
-        if not lo <= q <= hi:
-            raise PlantError(
-                f"finger {f}: θ2 = {theta2:.3f} rad is outside its range "
-                f"[{lo / self.R[f, 1]:.3f}, {hi / self.R[f, 1]:.3f}] rad"
-            )
-        q = min(max(q + self.coupling_stretch[f, 0], lo), hi)
+        q = min(max(self._q_at_theta2(f, theta2) + self.coupling_stretch[f, 0], lo), hi)
         self.q[f], self.qd[f] = q, 0.0
         self.x[f] = (q, -q)
         self.xd[f] = 0.0
@@ -449,34 +503,12 @@ class HandPlant:
     def encoder_plugged(self) -> np.ndarray:
         return self._st["plugged"] > 0.5
 
-    def unplug_encoder(self, finger: int, volts: float | None = None) -> None:
-        """The encoder's cable comes off: the ADC input reads ``volts`` (default: the
-        encoder parameters' ``unplugged_v``, 0 V)."""
-        f = _finger_index(finger)
-        if volts is None:
-            volts = self.params.encoder.unplugged_v
-        if not (math.isfinite(volts) and 0.0 <= volts <= 5.0):
-            raise PlantError(f"an unplugged encoder's input must lie in [0, 5] V, got {volts!r}")
-        self._st["unplugged_v"][f] = volts
-        self._st["plugged"][f] = 0.0
-
-    def plug_encoder(self, finger: int) -> None:
-        self._st["plugged"][_finger_index(finger)] = 1.0
-
-    def shift_encoder(self, finger: int, radians: float) -> None:
-        """The encoder's magnet slips: its reading is off by ``radians`` from now on."""
-        f = _finger_index(finger)
-        if not (isinstance(radians, int | float) and math.isfinite(radians)):
-            raise PlantError(f"encoder shift must be a finite angle in rad, got {radians!r}")
-        self.encoder_shift[f] = float(radians)
-
     def block(self, finger: int, theta2: float | None = None, direction: str = "both") -> None:
         """Block a finger at a Joint-2 angle (default: where it is). ``both``: jammed there;
         ``flexion``: an obstacle stops it flexing further (it can still open). A finger beyond
         the angle is pushed to it."""
         f = _finger_index(finger)
-        if direction not in ("both", "flexion"):
-            raise PlantError(f"direction must be 'both' or 'flexion', got {direction!r}")
+        self._check_direction(direction)
         q = self.q[f] if theta2 is None else float(theta2) * self.R[f, 1]
         lo, hi = self.q_limits[f]
         if not lo <= q <= hi:

@@ -51,14 +51,7 @@ class HandTelemetry(HandSession):
             self._take_status(self._request(m.GetStatus()))
         host_time = self.clock.timestamp()
         with self._lock:
-            st = HandState.from_message(
-                msg,
-                self.fingers,
-                self._status,
-                self._tips,
-                board_time=self._board_clock.unwrap(msg.board_time, host_time),
-                host_time=host_time,
-            )
+            st = self._state_of(msg, host_time)
             if self._latest is None or st.board_time >= self._latest.board_time:
                 self._latest = st
         return st
@@ -138,6 +131,19 @@ class HandTelemetry(HandSession):
         if old is not None:
             old.close()
 
+    def _state_of(self, msg: m.State, host_time: float, seq: int | None = None) -> HandState:
+        """A state message as a HandState, with the status and tips known now and its board
+        time unwrapped (the caller holds the lock)."""
+        return HandState.from_message(
+            msg,
+            self.fingers,
+            self._status,
+            self._tips,
+            board_time=self._board_clock.unwrap(msg.board_time, host_time),
+            host_time=host_time,
+            seq=seq,
+        )
+
     def _take_status(self, msg: m.Status) -> None:
         """A status (stream or get_status reply): the newest by change count is kept."""
         with self._lock:
@@ -152,15 +158,7 @@ class HandTelemetry(HandSession):
             self._take_status(msg)
         elif isinstance(msg, m.State):
             with self._lock:
-                st = HandState.from_message(
-                    msg,
-                    self.fingers,
-                    self._status,
-                    self._tips,
-                    board_time=self._board_clock.unwrap(msg.board_time, host_time),
-                    host_time=host_time,
-                    seq=item.seq,
-                )
+                st = self._state_of(msg, host_time, item.seq)
                 self._latest = st
                 log_ = self._log
             if log_ is not None:

@@ -11,9 +11,10 @@ flexion, toward +y; gravity and bench loads act along −y. Joint angles are rel
 
 from __future__ import annotations
 
+import contextlib
 import math
 import tomllib
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -47,6 +48,17 @@ def read_toml(path: Path, what: str, error: type[ValueError] = GeometryError) ->
         raise error(f"{path}: no such {what} file") from None
     except tomllib.TOMLDecodeError as exc:
         raise error(f"{path}: not valid TOML: {exc}") from None
+
+
+@contextlib.contextmanager
+def package_data(*parts: str) -> Iterator[Path]:
+    """A file under the package's ``data/`` as a real path while in use: the one place that
+    says where the built-in TOML files are, installed or from a checkout."""
+    ref = resources.files("utrf") / "data"
+    for part in parts:
+        ref = ref / part
+    with resources.as_file(ref) as path:
+        yield path
 
 
 def _triple(
@@ -130,8 +142,7 @@ class FingerGeometry:
     @classmethod
     def default(cls) -> FingerGeometry:
         """The documented default finger (an assumption: the paper gives no dimensions)."""
-        ref = resources.files("utrf") / "data" / "geometry" / "finger.toml"
-        with resources.as_file(ref) as path:
+        with package_data("geometry", "finger.toml") as path:
             return cls.from_toml(path)
 
     def to_dict(self) -> dict[str, Any]:
@@ -268,8 +279,7 @@ class HandGeometry:
 
     @classmethod
     def default(cls) -> HandGeometry:
-        ref = resources.files("utrf") / "data" / "hand.toml"
-        with resources.as_file(ref) as path:
+        with package_data("hand.toml") as path:
             return cls.from_toml(path)
 
     def index(self, name: str) -> int:

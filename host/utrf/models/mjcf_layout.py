@@ -8,14 +8,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import mujoco
 import numpy as np
 
-from utrf.models.geometry import read_toml
+from utrf.models.geometry import package_data, read_toml
 
 INTEGRATORS = ("Euler", "RK4", "implicit", "implicitfast")
 
@@ -116,8 +115,7 @@ def _table(doc: Mapping[str, Any], key: str, where: str) -> Mapping[str, Any]:
 def load_layout(path: str | Path | None = None) -> Layout:
     """Read a layout TOML (default: the package's ``data/mjcf.toml``)."""
     if path is None:
-        ref = resources.files("utrf") / "data" / "mjcf.toml"
-        with resources.as_file(ref) as p:
+        with package_data("mjcf.toml") as p:
             return load_layout(p)
     path = Path(path)
     doc = read_toml(path, "MJCF layout", MjcfError)

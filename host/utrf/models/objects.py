@@ -21,12 +21,11 @@ import math
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from utrf.models import mjcf
-from utrf.models.geometry import read_toml
+from utrf.models.geometry import package_data, read_toml
 
 SHAPES = {"sphere": 1, "cylinder": 2, "box": 3, "ellipsoid": 3}  # number of sizes
 _KEYS = {
@@ -140,8 +139,7 @@ def parse_object(name: str, table: Mapping[str, Any], source: str = "<dict>") ->
 def load_objects(path: str | Path | None = None) -> dict[str, GraspObject]:
     """The object library (default: the package's ``data/objects.toml``)."""
     if path is None:
-        ref = resources.files("utrf") / "data" / "objects.toml"
-        with resources.as_file(ref) as p:
+        with package_data("objects.toml") as p:
             return load_objects(p)
     path = Path(path)
     doc = read_toml(path, "object", ObjectError)

@@ -19,22 +19,6 @@ void utrf_rng_init(utrf_rng_t *r, uint64_t seed)
     r->spare = 0.0;
 }
 
-/* xorshift64* */
-static uint64_t next_u64(utrf_rng_t *r)
-{
-    uint64_t x = r->state;
-    x ^= x >> 12;
-    x ^= x << 25;
-    x ^= x >> 27;
-    r->state = x;
-    return x * 0x2545F4914F6CDD1DULL;
-}
-
-static double uniform(utrf_rng_t *r)
-{
-    return (double)(next_u64(r) >> 11) * (1.0 / 9007199254740992.0);
-}
-
 /* Marsaglia's polar method: two Gaussians a round, the second kept for the next call. */
 double utrf_rng_normal(utrf_rng_t *r)
 {
@@ -44,8 +28,8 @@ double utrf_rng_normal(utrf_rng_t *r)
     }
     double u, v, s;
     do {
-        u = 2.0 * uniform(r) - 1.0;
-        v = 2.0 * uniform(r) - 1.0;
+        u = 2.0 * utrf_xorshift64s_uniform(&r->state) - 1.0;
+        v = 2.0 * utrf_xorshift64s_uniform(&r->state) - 1.0;
         s = u * u + v * v;
     } while (s >= 1.0 || s == 0.0);
     double k = sqrt(-2.0 * log(s) / s);

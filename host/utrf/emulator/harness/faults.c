@@ -23,7 +23,7 @@ static void on_stall_running(struct avr_irq_t *irq, uint32_t value, void *param)
 int utrf_sim_stall_vector(utrf_sim_t *s, int vector, uint64_t cycles, int64_t count)
 {
     if (s->stall_vector > 0) {
-        avr_irq_t *old = avr_get_interrupt_irq(s->avr, (uint8_t)s->stall_vector);
+        avr_irq_t *old = utrf_vector_irq(s->avr, s->stall_vector);
         if (old)
             avr_irq_unregister_notify(old + AVR_INT_IRQ_RUNNING, on_stall_running, s);
     }
@@ -31,9 +31,7 @@ int utrf_sim_stall_vector(utrf_sim_t *s, int vector, uint64_t cycles, int64_t co
     s->stall_count = 0;
     if (vector <= 0 || count == 0 || cycles == 0)
         return 0;
-    if (vector > 255)
-        return -1;
-    avr_irq_t *irq = avr_get_interrupt_irq(s->avr, (uint8_t)vector);
+    avr_irq_t *irq = utrf_vector_irq(s->avr, vector);
     if (!irq)
         return -1;
     avr_irq_register_notify(irq + AVR_INT_IRQ_RUNNING, on_stall_running, s);

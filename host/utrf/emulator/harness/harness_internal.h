@@ -15,12 +15,39 @@
 #define CAPTURE_SIZE 1048576u  /* in-process output buffer (power of two) */
 #define LOG_SIZE 4096u
 
+/* An AVR interrupt vector's simavr IRQ (faults.c's stalls, profile.c's timing): NULL for a
+ * vector outside 1..255 or one the core does not have. */
+static inline avr_irq_t *utrf_vector_irq(avr_t *avr, int vector)
+{
+    if (vector <= 0 || vector > 255)
+        return NULL;
+    return avr_get_interrupt_irq(avr, (uint8_t)vector);
+}
+
 /* ---- shared by the plants (drive.c) ----------------------------------------------------- */
 typedef struct {
     uint64_t state;
     double spare;
     int have_spare;
 } utrf_rng_t;
+
+/* xorshift64*: small, fast and reproducible for a seed; the one generator of the plants' noise
+ * (utrf_rng_t) and the line faults (utrf_sim_t.rng). The state must not be zero. */
+static inline uint64_t utrf_xorshift64s(uint64_t *state)
+{
+    uint64_t x = *state;
+    x ^= x >> 12;
+    x ^= x << 25;
+    x ^= x >> 27;
+    *state = x;
+    return x * 0x2545F4914F6CDD1DULL;
+}
+
+/* A uniform double in [0, 1) from the generator's top 53 bits. */
+static inline double utrf_xorshift64s_uniform(uint64_t *state)
+{
+    return (double)(utrf_xorshift64s(state) >> 11) * (1.0 / 9007199254740992.0);
+}
 
 void utrf_rng_init(utrf_rng_t *r, uint64_t seed); /* any seed, 0 included */
 double utrf_rng_normal(utrf_rng_t *r);            /* standard Gaussian */
@@ -142,6 +169,17 @@ struct utrf_sim {
     char log[LOG_SIZE];
     size_t log_len;
 };
+
+/* plant.c, mjplant.c: attach a plant's stepping and encoder volts to the board, or detach it
+ * (ctx NULL); the two plants attach alike. */
+static inline void utrf_sim_attach_ops(utrf_sim_t *s, void *ctx,
+                                       void (*step)(void *ctx, double dt, const double *pins),
+                                       void (*volts)(void *ctx, double *out5))
+{
+    s->plant_ctx = ctx;
+    s->plant_step = ctx ? step : NULL;
+    s->plant_volts = ctx ? volts : NULL;
+}
 
 /* uart_bridge.c */
 void bridge_init(utrf_sim_t *s);

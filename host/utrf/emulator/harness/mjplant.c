@@ -267,7 +267,5 @@ static void mj_ops_volts(void *ctx, double *out)
 
 void utrf_sim_attach_mjplant(utrf_sim_t *s, utrf_mjplant_t *mp)
 {
-    s->plant_ctx = mp;
-    s->plant_step = mp ? mj_ops_step : NULL;
-    s->plant_volts = mp ? mj_ops_volts : NULL;
+    utrf_sim_attach_ops(s, mp, mj_ops_step, mj_ops_volts);
 }

@@ -393,9 +393,7 @@ static void ops_volts(void *ctx, double *out)
 
 void utrf_sim_attach_plant(utrf_sim_t *s, utrf_plant_t *pl)
 {
-    s->plant_ctx = pl;
-    s->plant_step = pl ? ops_step : NULL;
-    s->plant_volts = pl ? ops_volts : NULL;
+    utrf_sim_attach_ops(s, pl, ops_step, ops_volts);
 }
 
 int utrf_sim_run_plant(utrf_sim_t *s, uint64_t target, uint64_t period)

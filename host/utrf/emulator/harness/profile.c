@@ -72,36 +72,30 @@ static void on_vector_running(struct avr_irq_t *irq, uint32_t value, void *param
     }
 }
 
+/* Exclusive time: a profiled span pauses while another vector is innermost (an interrupt
+ * nested in it) and resumes when its own is innermost again. */
+static void follow_innermost(profile_state_t *p, int mine, uint64_t now)
+{
+    if (!p->active)
+        return;
+    if (!mine && !p->paused) {
+        p->excl += now - p->seg;
+        p->paused = 1;
+    } else if (mine && p->paused) {
+        p->seg = now;
+        p->paused = 0;
+    }
+}
+
 /* The innermost running vector changed (0: none). */
 static void on_any_running(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     (void)irq;
     utrf_sim_t *s = param;
     uint64_t now = s->avr->cycle;
-    profile_state_t *v = &s->prof_vec;
-    if (v->active) {
-        int mine = (int)value == s->prof_vector;
-        if (!mine && !v->paused) {
-            v->excl += now - v->seg;
-            v->paused = 1;
-        } else if (mine && v->paused) {
-            v->seg = now;
-            v->paused = 0;
-        }
-    }
-    profile_state_t *f = &s->prof_fn;
-    if (f->active) {
-        /* Entered under prof_fn_vector (0: from the main loop): any other innermost vector
-         * while it runs is an interrupt nested in it. */
-        int mine = (int)value == s->prof_fn_vector;
-        if (!mine && !f->paused) {
-            f->excl += now - f->seg;
-            f->paused = 1;
-        } else if (mine && f->paused) {
-            f->seg = now;
-            f->paused = 0;
-        }
-    }
+    follow_innermost(&s->prof_vec, (int)value == s->prof_vector, now);
+    /* A function entered under prof_fn_vector (0: from the main loop). */
+    follow_innermost(&s->prof_fn, (int)value == s->prof_fn_vector, now);
     s->running_vector = (int)value;
 }
 
@@ -146,7 +140,7 @@ void profile_after_reset(utrf_sim_t *s)
 int utrf_sim_profile_vector(utrf_sim_t *s, int vector)
 {
     if (s->prof_vector > 0) {
-        avr_irq_t *old = avr_get_interrupt_irq(s->avr, (uint8_t)s->prof_vector);
+        avr_irq_t *old = utrf_vector_irq(s->avr, s->prof_vector);
         if (old) {
             avr_irq_unregister_notify(old + AVR_INT_IRQ_RUNNING, on_vector_running, s);
             avr_irq_unregister_notify(old + AVR_INT_IRQ_PENDING, on_vector_pending, s);
@@ -156,9 +150,7 @@ int utrf_sim_profile_vector(utrf_sim_t *s, int vector)
     s->prof_vector = 0;
     if (vector <= 0)
         return 0;
-    if (vector > 255)
-        return -1;
-    avr_irq_t *irq = avr_get_interrupt_irq(s->avr, (uint8_t)vector);
+    avr_irq_t *irq = utrf_vector_irq(s->avr, vector);
     if (!irq)
         return -1;
     avr_irq_register_notify(irq + AVR_INT_IRQ_RUNNING, on_vector_running, s);

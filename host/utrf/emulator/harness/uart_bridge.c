@@ -22,20 +22,9 @@
 #define TX_MASK (TX_QUEUE_SIZE - 1)
 #define CAP_MASK (CAPTURE_SIZE - 1)
 
-static uint64_t next_random(utrf_sim_t *s)
-{
-    /* xorshift64*: small, fast and reproducible for a seed */
-    uint64_t x = s->rng;
-    x ^= x >> 12;
-    x ^= x << 25;
-    x ^= x >> 27;
-    s->rng = x;
-    return x * 0x2545F4914F6CDD1DULL;
-}
-
 double bridge_random(utrf_sim_t *s)
 {
-    return (double)(next_random(s) >> 11) * (1.0 / 9007199254740992.0);
+    return utrf_xorshift64s_uniform(&s->rng);
 }
 
 static int chance(utrf_sim_t *s, double p)
@@ -45,7 +34,7 @@ static int chance(utrf_sim_t *s, double p)
 
 static uint8_t flip_bit(utrf_sim_t *s, uint8_t b)
 {
-    return (uint8_t)(b ^ (1u << (next_random(s) >> 61)));
+    return (uint8_t)(b ^ (1u << (utrf_xorshift64s(&s->rng) >> 61)));
 }
 
 /* A burst of noise: starts at a byte with probability f->burst and replaces it and the
@@ -54,12 +43,12 @@ static int burst_byte(utrf_sim_t *s, line_faults_t *f, uint8_t *b)
 {
     if (!f->burst_left && chance(s, f->burst)) {
         uint32_t span = f->burst_max - f->burst_min + 1;
-        f->burst_left = f->burst_min + (uint32_t)((next_random(s) >> 32) % span);
+        f->burst_left = f->burst_min + (uint32_t)((utrf_xorshift64s(&s->rng) >> 32) % span);
     }
     if (!f->burst_left)
         return 0;
     f->burst_left--;
-    *b = (uint8_t)(next_random(s) >> 56);
+    *b = (uint8_t)(utrf_xorshift64s(&s->rng) >> 56);
     return 1;
 }
 
@@ -94,7 +83,7 @@ static avr_cycle_count_t rx_wire(avr_t *avr, avr_cycle_count_t when, void *param
     line_faults_t *f = &s->faults[UTRF_SIM_TO_BOARD];
     uint8_t b;
     if (!f->burst_left && chance(s, f->insert)) { /* a noise byte takes this frame; the host byte waits */
-        b = (uint8_t)(next_random(s) >> 56);
+        b = (uint8_t)(utrf_xorshift64s(&s->rng) >> 56);
         s->stats.rx_inserted++;
     } else {
         b = s->rx[s->rx_tail & RX_MASK];
@@ -204,7 +193,7 @@ void bridge_deliver(utrf_sim_t *s)
             continue;
         }
         if (chance(s, f->insert)) {
-            out[n++] = (uint8_t)(next_random(s) >> 56);
+            out[n++] = (uint8_t)(utrf_xorshift64s(&s->rng) >> 56);
             s->stats.tx_inserted++;
         }
         if (chance(s, f->drop)) {
