@@ -69,7 +69,7 @@ void Path::start(const Plan& p, int16_t from_bu, uint8_t first) {
     inc_ = p.inc;
     cv_ = p.cv;
     ca_ = p.ca;
-    pos8_ = (int32_t)from_bu << 8;
+    pos8_ = (int32_t)from_bu * 256;  // Q8 (a multiply: a left shift of a negative is UB)
     step8_ = 0;
     ff_ = 0;
     left_ = p.ticks;
@@ -85,7 +85,7 @@ void Path::next_segment() {
     // the same step goes on for another tick.
     if (UTRF_LIKELY(next_ready_)) {
         const uint8_t n = next_len_;
-        step8_ = fx::mul_q16(((int32_t)next_goal_ << 8) - pos8_, kRecip[n]);
+        step8_ = fx::mul_q16((int32_t)next_goal_ * 256 - pos8_, kRecip[n]);
         ff_ = next_ff_;
         seg_left_ = n;
         next_ready_ = 0;
