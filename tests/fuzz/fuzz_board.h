@@ -196,11 +196,13 @@ class Board {
                 }
             }
             // STBY high with a stop fault only to short-brake after JOINT_LIMIT alone (both
-            // channels BRAKE, nothing driven); never on a halted hand.
+            // channels BRAKE, nothing driven); never on a halted hand. Channel B brakes unless
+            // the finger is rotary; after a loop() pass the outputs are still the tick's, while
+            // a set_finger_config may have changed `rotary` since: B is judged after ticks.
             const uint8_t stop = (uint8_t)(fg.faults() & finger::kStopFaults);
             const bool braking = s.motor[f][0].drive == hal::Drive::BRAKE &&
                                  (s.motor[f][1].drive == hal::Drive::BRAKE ||
-                                  fg.params().rotary);
+                                  fg.params().rotary || !after_tick);
             if (halted || (stop && !(stop == finger::JOINT_LIMIT && braking))) {
                 FUZZ_CHECK(!s.stby[f], "finger %u: STBY high with faults 0x%02X (halted %d)", f,
                            fg.faults(), (int)halted);
