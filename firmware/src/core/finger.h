@@ -56,10 +56,10 @@ struct Params {
     bool encoder_invert;
     hal::Drive pull;       // the drive that pulls a tendon: FORWARD, or REVERSE (motor_invert)
     bool rotary;
-    // Read by the antagonistic output mapping every tick, but only on the pulling side's
-    // channel that is not working (one access), by the stall rule (a finger's turn every
-    // kStallEvery ticks), DUTY and loop().
+    // Read by the antagonistic output mapping every tick, by the stall rule (a finger's turn
+    // every kStallEvery ticks), DUTY and loop().
     uint16_t pretension_counts;  // PWM counts of the pretension alone
+    uint8_t hold_drives;         // hal::drives() of both channels holding the pretension alone
 
     int16_t max_duty;      // motor duty limit
     int16_t theta_min;     // joint limits
@@ -246,46 +246,43 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
         duty_b_ = 0;
         const bool neg = u < 0;
         const uint16_t c = pwm_counts((uint16_t)(neg ? -u : u));
-        out.a.on_counts = c;
+        out.a_counts = c;
+        out.b_counts = 0;
         // Forward flexes; motor_invert swaps the directions (pull is then REVERSE).
-        const hal::Drive flex = pull;
         const hal::Drive extend =
             pull == hal::Drive::FORWARD ? hal::Drive::REVERSE : hal::Drive::FORWARD;
-        out.a.drive = c == 0 ? hal::Drive::COAST : (neg ? extend : flex);
-        out.b.drive = hal::Drive::COAST;
-        out.b.on_counts = 0;
+        out.drives = hal::drives(c == 0 ? hal::Drive::COAST : (neg ? extend : pull),
+                                 hal::Drive::COAST, true);
     } else {
         // Both motors pull (duties >= 0): the flexor takes u > 0 on top of the pretension, the
-        // extensor u < 0; the other one holds the pretension alone, whose counts were worked
-        // out with the configuration.
+        // extensor u < 0; the other one holds the pretension alone, whose counts (and drive
+        // byte, both channels holding it) were worked out with the configuration.
         const int16_t p = params_.pretension;
         const uint16_t cp = params_.pretension_counts;
-        const hal::Drive dp = cp == 0 ? hal::Drive::COAST : pull;
+        uint8_t d = params_.hold_drives;
         if (u > 0) {
             const int16_t a = (int16_t)(p + u);
             const uint16_t ca = pwm_counts((uint16_t)a);
             duty_a_ = a;
             duty_b_ = p;
-            out.a.on_counts = ca;
-            out.a.drive = ca == 0 ? hal::Drive::COAST : pull;
-            out.b.on_counts = cp;
-            out.b.drive = dp;
+            out.a_counts = ca;
+            out.b_counts = cp;
+            // ca >= cp (a >= p): A drives unless both are 0, when hold_drives has it coast.
+            if (ca != 0) d = (uint8_t)((d & (uint8_t)~3u) | (uint8_t)pull);
         } else if (u < 0) {
             const int16_t b = (int16_t)(p - u);
             const uint16_t cb = pwm_counts((uint16_t)b);
             duty_a_ = p;
             duty_b_ = b;
-            out.a.on_counts = cp;
-            out.a.drive = dp;
-            out.b.on_counts = cb;
-            out.b.drive = cb == 0 ? hal::Drive::COAST : pull;
+            out.a_counts = cp;
+            out.b_counts = cb;
+            if (cb != 0) d = (uint8_t)((d & (uint8_t)~12u) | (uint8_t)((uint8_t)pull << 2));
         } else {
             duty_a_ = duty_b_ = p;
-            out.a.on_counts = out.b.on_counts = cp;
-            out.a.drive = out.b.drive = dp;
+            out.a_counts = out.b_counts = cp;
         }
+        out.drives = d;
     }
-    out.stby = true;
 }
 
 }  // namespace finger

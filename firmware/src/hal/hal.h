@@ -27,16 +27,26 @@ struct MotorOut {
     uint16_t on_counts;  // FORWARD/REVERSE: 1..kPwmPeriod counts high per period
 };
 
-// One finger's driver: its two channels and its STBY pin.
+// One finger's driver as the tick leaves it: each channel's counts (0 when it does not drive)
+// and, in one byte, both channels' drives and the STBY pin (drives()), so that the layer
+// compares one byte with the last one to know whether a pin must change.
 struct MotorCommand {
-    MotorOut a;  // motor A: flexor (Tendon 1), or the rotary motor
-    MotorOut b;  // motor B: extensor (Tendon 4)
-    bool stby;   // STBY high: the driver's outputs enabled
+    uint16_t a_counts;  // motor A: flexor (Tendon 1), or the rotary motor
+    uint16_t b_counts;  // motor B: extensor (Tendon 4)
+    uint8_t drives;     // drives(a, b, stby)
 };
+static const uint8_t kStbyBit = 1u << 4;  // STBY high: the driver's outputs enabled
+inline uint8_t drives(Drive a, Drive b, bool stby) {
+    return (uint8_t)((uint8_t)a | (uint8_t)((uint8_t)b << 2) | (stby ? kStbyBit : 0));
+}
+inline Drive drive_a(uint8_t d) { return (Drive)(d & 3u); }
+inline Drive drive_b(uint8_t d) { return (Drive)((d >> 2) & 3u); }
+inline bool stby_of(uint8_t d) { return (d & kStbyBit) != 0; }
 
 // Drive every finger's channels and STBY pin (called once per tick with all five). The core
-// sends FORWARD/REVERSE only with on_counts >= 1; COAST and BRAKE disconnect the compare
-// output, so fast PWM's one-count spike at OCR = 0 never reaches the driver.
+// sends FORWARD/REVERSE only with counts >= 1; COAST and BRAKE disconnect the compare output,
+// so fast PWM's one-count spike at OCR = 0 never reaches the driver (the AVR layer writes
+// every channel's compare register every tick, whatever its drive).
 void motors_write(const MotorCommand* cmd /* [UTRF_FINGER_COUNT] */);
 
 // Every channel to COAST and every STBY low. Safe from any context, interrupts included.
