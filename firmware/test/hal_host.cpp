@@ -67,12 +67,18 @@ void motors_all_off() {
     ++g_state.all_off_calls;
 }
 
+namespace {
+EncoderSetup g_setup[5];
+}  // namespace
+
+void encoder_setup(uint8_t finger, const EncoderSetup& s) { g_setup[finger] = s; }
+
+// Judged here, as the tick reads them: the setup in force is the one they are judged with.
 const EncoderReading* encoders_read() {
     static EncoderReading out[5];
     const bool stale = host::g_staleness.stale(g_state.adc_seq);
     for (uint8_t f = 0; f < 5; ++f) {
-        out[f] = encoder::as5600_reading(g_state.adc[f]);
-        if (stale) out[f].status = EncoderStatus::NO_DATA;
+        out[f] = stale ? encoder::no_data() : encoder::judge(g_state.adc[f], g_setup[f]);
     }
     return out;
 }

@@ -149,6 +149,22 @@ void Finger::clear_faults() {
     stall_count_ = 0;
 }
 
+uint8_t Finger::judge_reading(const hal::EncoderReading& enc) {
+    if (enc.status != hal::EncoderStatus::OK) {
+        encoder_ok_ = false;
+        return ENCODER_RANGE;
+    }
+    encoder_ok_ = true;
+    last_turn_ = enc.turn;
+    const int16_t th = encoder::angle_bu(enc.turn, params_.zero_turn, params_.encoder_invert);
+    uint8_t found = 0;
+    if (have_theta_ && fx::abs16((int16_t)(th - theta_)) > params_.jump) found = ENCODER_JUMP;
+    theta_ = th;
+    have_theta_ = true;
+    if (th < params_.fault_low || th > params_.fault_high) found |= JOINT_LIMIT;
+    return found;
+}
+
 void Finger::latch(uint8_t bits) {
     new_faults_ |= bits & (uint8_t)~faults_;
     faults_ |= bits;

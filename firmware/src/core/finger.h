@@ -92,7 +92,15 @@ class Finger {
         target_valid_ = true;
     }
     void clear_faults();
-    void set_zero_turn(uint16_t turn) { params_.zero_turn = turn; have_theta_ = false; }
+    // What the encoder sampler needs to judge this finger's readings (hal::encoder_setup()).
+    hal::EncoderSetup encoder_setup() const {
+        hal::EncoderSetup s;
+        s.zero_turn = params_.zero_turn;
+        s.invert = params_.encoder_invert;
+        s.low = params_.fault_low;
+        s.high = params_.fault_high;
+        return s;
+    }
 
     // ---- from the tick ----
     // Latch faults (the host-silence and overrun rules live at the hand level).
@@ -139,6 +147,10 @@ class Finger {
 
    private:
     int16_t limit_for(uint8_t mode) const;
+    // A reading the sampler flagged (out of band, beyond a joint limit, or judged with an
+    // earlier setup): every encoder rule from its turn and status, with this finger's
+    // configuration. Updates the angle; returns the faults found.
+    uint8_t judge_reading(const hal::EncoderReading& enc);
     void enter_closed_loop(uint8_t mode);
     // The stall rule, on the finger's turn: false when it stopped the finger (STALL latched,
     // the motors off in `out`).
@@ -198,24 +210,25 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
     // Angles are BU within +-pi, so every difference below fits int16. The faults found are
     // latched together, after theta_ took the new reading: the same bits as one at a time, and
     // the PID reset that stops the finger is repeated (from theta_) whenever it drives again.
-    int16_t th = theta_;
-    uint8_t found = 0;
+    // (The band and the limits were judged by the sampler: hal.h, EncoderReading.)
     // The usual paths are told to the compiler (UTRF_LIKELY), so they run straight through.
-    if (UTRF_UNLIKELY(enc.status != hal::EncoderStatus::OK)) {
-        encoder_ok_ = false;
-        found = ENCODER_RANGE;
-    } else {
+    int16_t th;
+    uint8_t found = 0;
+    if (UTRF_LIKELY(enc.flags == 0)) {
+        // In band and within the joint limits, its angle worked out by the sampler with this
+        // finger's setup (core/encoder.h, judge()): only the jump rule is left.
         encoder_ok_ = true;
-        const uint16_t turn = enc.turn;
-        last_turn_ = turn;
-        th = encoder::angle_bu(turn, params_.zero_turn, params_.encoder_invert);
+        last_turn_ = enc.turn;
+        th = enc.angle;
         if (UTRF_LIKELY(have_theta_) &&
             UTRF_UNLIKELY(fx::abs16((int16_t)(th - theta_)) > params_.jump)) {
             found = ENCODER_JUMP;
         }
         theta_ = th;
         have_theta_ = true;
-        if (UTRF_UNLIKELY(th < params_.fault_low || th > params_.fault_high)) found |= JOINT_LIMIT;
+    } else {
+        found = judge_reading(enc);  // every rule, from the reading's turn and status
+        th = theta_;
     }
     if (UTRF_UNLIKELY(found)) latch(found);
 

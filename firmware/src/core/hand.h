@@ -53,6 +53,7 @@ class Hand {
     // loop() context, under the tick lock.
     void configure_finger(uint8_t f, const finger::Params& p, const pid::Coeffs& c) {
         fingers_[f].configure(p, c);
+        hal::encoder_setup(f, fingers_[f].encoder_setup());  // the sampler judges with it
     }
     void set_safety(uint16_t timeout_ms, uint8_t safe_action);
     finger::Finger& finger(uint8_t f) { return fingers_[f]; }

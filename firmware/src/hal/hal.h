@@ -53,7 +53,9 @@ void motors_write(const MotorCommand* cmd /* [UTRF_FINGER_COUNT] */);
 void motors_all_off();
 
 // ---- encoders ----------------------------------------------------------------------------------
-// One Joint-2 encoder reading, already checked by its driver.
+// One Joint-2 encoder reading, already checked by its driver (and judged: the angle and the
+// stateless fault rules run where the sample is taken, the AVR's ADC interrupt, not in the
+// tick).
 enum class EncoderStatus : uint8_t {
     OK = 0,
     OUT_OF_BAND = 1,  // the signal is outside the sensor's valid band (unplugged, shorted)
@@ -63,7 +65,27 @@ enum class EncoderStatus : uint8_t {
 struct EncoderReading {
     uint16_t turn;  // angle as a fraction of one turn: 65536 = 360 degrees
     EncoderStatus status;
+    // Judged by the sampler, with the finger's EncoderSetup (core/encoder.h, judge()):
+    int16_t angle;   // BU (core/fixed.h): the Joint-2 angle, zero and direction applied
+    uint8_t flags;   // 0: status OK and the angle within the setup's fault limits
 };
+// Flags of a reading: the tick takes a reading with none as it is, and judges any other
+// itself from `turn` and `status` (rare: a fault, or a reading judged before a new setup).
+static const uint8_t kReadingOut = 1u << 0;      // status not OK
+static const uint8_t kReadingLimit = 1u << 1;    // angle outside [low, high]
+static const uint8_t kReadingRejudge = 1u << 7;  // judged with an earlier setup
+
+// What the sampler needs to judge a finger's readings: its encoder's zero and direction, and
+// the finger's fault limits (BU).
+struct EncoderSetup {
+    uint16_t zero_turn;
+    bool invert;
+    int16_t low;
+    int16_t high;
+};
+// loop() context: the setup for the readings to come; a reading already judged with an
+// earlier one is flagged kReadingRejudge.
+void encoder_setup(uint8_t finger, const EncoderSetup& s);
 
 // The readings of all fingers [UTRF_FINGER_COUNT], from one sampling round: called once per
 // control tick, from the tick; they stay valid until encoders_sample(). All NO_DATA when the

@@ -177,8 +177,11 @@ EncoderReading* volatile g_adc_fill = g_reading[0];
 const EncoderReading* volatile g_adc_done = g_reading[1];
 // What the tick gets while the sampling stands still.
 const EncoderReading kNoData[UTRF_FINGER_COUNT] = {
-    {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA},
-    {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA}};
+    {0, EncoderStatus::NO_DATA, 0, kReadingOut}, {0, EncoderStatus::NO_DATA, 0, kReadingOut},
+    {0, EncoderStatus::NO_DATA, 0, kReadingOut}, {0, EncoderStatus::NO_DATA, 0, kReadingOut},
+    {0, EncoderStatus::NO_DATA, 0, kReadingOut}};
+// Each finger's setup, the ADC interrupt judges its samples with (encoder_setup()).
+EncoderSetup g_setup[UTRF_FINGER_COUNT];
 volatile uint8_t g_adc_round;    // completed rounds (wraps)
 volatile uint8_t g_adc_at = 0xFF;  // channel being converted, 0xFF: idle
 encoder::Staleness g_staleness;
@@ -304,9 +307,10 @@ ISR(TIMER2_COMPA_vect) {
 
 ISR(ADC_vect) {
     uint8_t i = g_adc_at;
-    // Judged here, between ticks (the round runs after each tick), not in the tick.
+    // Judged here, between ticks (the round runs after each tick), not in the tick: the band,
+    // the angle and the joint limits (core/encoder.h, judge()).
     EncoderReading* const fill = g_adc_fill;
-    fill[i] = encoder::as5600_reading(ADC);
+    fill[i] = encoder::judge(ADC, g_setup[i]);
     if (++i < UTRF_FINGER_COUNT) {
         g_adc_at = i;
         adc_select(i);
@@ -480,6 +484,15 @@ const EncoderReading* encoders_read() {
         round = g_adc_round;
     }
     return g_staleness.stale(round) ? kNoData : done;
+}
+
+void encoder_setup(uint8_t finger, const EncoderSetup& s) {
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+        g_setup[finger] = s;
+        // Readings judged with the earlier setup: the tick judges them again itself.
+        g_reading[0][finger].flags |= kReadingRejudge;
+        g_reading[1][finger].flags |= kReadingRejudge;
+    }
 }
 
 void encoders_sample() {
