@@ -165,7 +165,8 @@ class Finger {
     // configuration (Params: the fields the tick reads first): all that a tick in closed loop
     // touches lies within the object's first 64 bytes, which the AVR's ldd/std reach by
     // displacement from one pointer (beyond them, each access needs an address computed
-    // first). static_assert in finger.cpp.
+    // first). static_assert in finger.cpp. (The hand's tick now reaches each finger at a fixed
+    // address, hand.h; the layout is kept for code that reaches a finger through a pointer.)
     int16_t theta_;
     int16_t target_;
     int16_t limit_;  // limit_for(mode_), kept current
