@@ -240,7 +240,7 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         "",
         "| what | bytes | target |",
         "|---|---|---|",
-        f"| flash (.text + .data) | {mem['flash']:,} | 49,152 (48 KB) |",
+        f"| flash (.text + .data) | {mem['flash']:,} | 65,536 (64 KB) |",
         f"| static RAM (.data {mem['data']} + .bss {mem['bss']} + .noinit {mem['noinit']}) "
         f"| {mem['ram']:,} | 3,072 (3 KB) |",
     ]

@@ -55,6 +55,7 @@ struct FingerHw {
     MotorHw m[2];
     Pin stby;
     uint8_t stby_last;
+    uint8_t drives_last;  // the last MotorCommand::drives written, 0xFF: unknown
 };
 FingerHw g_hw[UTRF_FINGER_COUNT];
 
@@ -131,9 +132,9 @@ MotorHw motor_hw(const utrf_motor_pins_t& p) {
 }
 
 // A change of drive (direction, coast, brake): rare, so not inlined.
-void __attribute__((noinline)) motor_change(MotorHw& m, const MotorOut& out) {
-    if (out.drive == Drive::FORWARD || out.drive == Drive::REVERSE) {
-        const bool fwd = out.drive == Drive::FORWARD;
+void __attribute__((noinline)) motor_change(MotorHw& m, Drive drive) {
+    if (drive == Drive::FORWARD || drive == Drive::REVERSE) {
+        const bool fwd = drive == Drive::FORWARD;
         pin_set(m.in1, fwd);
         pin_set(m.in2, !fwd);
         ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { *m.tccra |= m.com; }
@@ -141,11 +142,28 @@ void __attribute__((noinline)) motor_change(MotorHw& m, const MotorOut& out) {
         // COAST or BRAKE: the compare output is disconnected, so the pin is its PORT bit, low.
         // Fast PWM at OCR = 0 would still give a one-count spike every period.
         ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { *m.tccra &= (uint8_t)~m.com; }
-        const bool brake = out.drive == Drive::BRAKE;
+        const bool brake = drive == Drive::BRAKE;
         pin_set(m.in1, brake);
         pin_set(m.in2, brake);
     }
-    m.last = (uint8_t)out.drive;
+    m.last = (uint8_t)drive;
+}
+
+// A change of a finger's drive byte (a channel's drive or STBY): rare, so not inlined. STBY
+// goes low before the channels change and high after them.
+void __attribute__((noinline)) drives_change(FingerHw& h, uint8_t d) {
+    const uint8_t stby = stby_of(d) ? 1 : 0;
+    if (!stby && h.stby_last) {
+        pin_set(h.stby, false);  // off first
+        h.stby_last = 0;
+    }
+    if ((uint8_t)drive_a(d) != h.m[0].last) motor_change(h.m[0], drive_a(d));
+    if ((uint8_t)drive_b(d) != h.m[1].last) motor_change(h.m[1], drive_b(d));
+    if (stby && !h.stby_last) {
+        pin_set(h.stby, true);
+        h.stby_last = 1;
+    }
+    h.drives_last = d;
 }
 
 // ---- ADC: one round over the five encoder channels between two ticks ------------------------
@@ -159,8 +177,11 @@ EncoderReading* volatile g_adc_fill = g_reading[0];
 const EncoderReading* volatile g_adc_done = g_reading[1];
 // What the tick gets while the sampling stands still.
 const EncoderReading kNoData[UTRF_FINGER_COUNT] = {
-    {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA},
-    {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA}};
+    {0, EncoderStatus::NO_DATA, 0, kReadingOut}, {0, EncoderStatus::NO_DATA, 0, kReadingOut},
+    {0, EncoderStatus::NO_DATA, 0, kReadingOut}, {0, EncoderStatus::NO_DATA, 0, kReadingOut},
+    {0, EncoderStatus::NO_DATA, 0, kReadingOut}};
+// Each finger's setup, the ADC interrupt judges its samples with (encoder_setup()).
+EncoderSetup g_setup[UTRF_FINGER_COUNT];
 volatile uint8_t g_adc_round;    // completed rounds (wraps)
 volatile uint8_t g_adc_at = 0xFF;  // channel being converted, 0xFF: idle
 encoder::Staleness g_staleness;
@@ -286,9 +307,10 @@ ISR(TIMER2_COMPA_vect) {
 
 ISR(ADC_vect) {
     uint8_t i = g_adc_at;
-    // Judged here, between ticks (the round runs after each tick), not in the tick.
+    // Judged here, between ticks (the round runs after each tick), not in the tick: the band,
+    // the angle and the joint limits (core/encoder.h, judge()).
     EncoderReading* const fill = g_adc_fill;
-    fill[i] = encoder::as5600_reading(ADC);
+    fill[i] = encoder::judge(ADC, g_setup[i]);
     if (++i < UTRF_FINGER_COUNT) {
         g_adc_at = i;
         adc_select(i);
@@ -336,6 +358,7 @@ void avr_init() {
         g_hw[f].m[1] = motor_hw(p.b);
         g_hw[f].stby = output_pin(p.stby);
         g_hw[f].stby_last = 0;
+        g_hw[f].drives_last = 0xFF;
         g_adc_mux[f] = p.adc_channel;
         if (p.adc_channel < 8) DIDR0 |= (uint8_t)(1u << p.adc_channel);  // analog only
     }
@@ -404,40 +427,24 @@ volatile uint16_t* ocr_reg(uint8_t timer, char channel) {
     }
 }
 
-template <uint8_t F, uint8_t K>
-__attribute__((always_inline)) inline void channel_write(const MotorOut& out) {
-    const utrf_motor_pins_t& pins = K == 0 ? UTRF_FINGER_PINS[F].a : UTRF_FINGER_PINS[F].b;
-    static_assert((uint8_t)Drive::FORWARD == 2 && (uint8_t)Drive::REVERSE == 3,
-                  "FORWARD and REVERSE are the drives from 2 up");
-    const Drive d = out.drive;
-    if (__builtin_expect((uint8_t)d >= (uint8_t)Drive::FORWARD, 1)) {  // the tick's usual case
-        // on_counts is 1..kPwmPeriod; anything else is clamped into it, one compare for both
-        // ends: 0 would wrap to 0xFFFF (the core sends COAST for zero duty; never a spike from
-        // here).
-        uint16_t ocr = (uint16_t)(out.on_counts - 1u);
-        if (__builtin_expect(ocr >= kPwmPeriod, 0)) ocr = out.on_counts == 0 ? 0 : kPwmPeriod - 1;
-        // OCRnx is double-buffered in fast PWM: the new duty starts with the next period.
-        *ocr_reg(pins.pwm.timer, pins.pwm.channel) = ocr;
-    }
-    MotorHw& m = g_hw[F].m[K];
-    if (__builtin_expect((uint8_t)d != m.last, 0)) motor_change(m, out);
+// OCRnx from a channel's counts: counts - 1 (fast PWM: OCR + 1 counts high). 1..kPwmPeriod
+// is the core's range when the channel drives; anything else is clamped into it, one compare
+// for both ends (0, a channel that does not drive, would wrap to 0xFFFF: 0 instead; its compare
+// output is disconnected, so the value does not reach the pin).
+__attribute__((always_inline)) inline uint16_t ocr_of(uint16_t counts) {
+    uint16_t ocr = (uint16_t)(counts - 1u);
+    if (__builtin_expect(ocr >= kPwmPeriod, 0)) ocr = counts == 0 ? 0 : kPwmPeriod - 1;
+    return ocr;
 }
 
 template <uint8_t F>
 __attribute__((always_inline)) inline void finger_write(const MotorCommand& c) {
+    // OCRnx is double-buffered in fast PWM: the new duty starts with the next period.
+    const utrf_finger_pins_t& pins = UTRF_FINGER_PINS[F];
+    *ocr_reg(pins.a.pwm.timer, pins.a.pwm.channel) = ocr_of(c.a_counts);
+    *ocr_reg(pins.b.pwm.timer, pins.b.pwm.channel) = ocr_of(c.b_counts);
     FingerHw& h = g_hw[F];
-    const uint8_t stby = c.stby ? 1 : 0;
-    const bool change = __builtin_expect(stby != h.stby_last, 0);  // one compare, usually
-    if (change && !stby) {
-        pin_set(h.stby, false);  // off first
-        h.stby_last = 0;
-    }
-    channel_write<F, 0>(c.a);
-    channel_write<F, 1>(c.b);
-    if (change && stby) {
-        pin_set(h.stby, true);
-        h.stby_last = 1;
-    }
+    if (__builtin_expect(c.drives != h.drives_last, 0)) drives_change(h, c.drives);
 }
 
 }  // namespace
@@ -457,6 +464,7 @@ void motors_all_off() {
             FingerHw& h = g_hw[f];
             *h.stby.port &= (uint8_t)~h.stby.mask;
             h.stby_last = 0;
+            h.drives_last = drives(Drive::COAST, Drive::COAST, false);
             for (uint8_t k = 0; k < 2; ++k) {
                 MotorHw& m = h.m[k];
                 *m.tccra &= (uint8_t)~m.com;
@@ -476,6 +484,15 @@ const EncoderReading* encoders_read() {
         round = g_adc_round;
     }
     return g_staleness.stale(round) ? kNoData : done;
+}
+
+void encoder_setup(uint8_t finger, const EncoderSetup& s) {
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+        g_setup[finger] = s;
+        // Readings judged with the earlier setup: the tick judges them again itself.
+        g_reading[0][finger].flags |= kReadingRejudge;
+        g_reading[1][finger].flags |= kReadingRejudge;
+    }
 }
 
 void encoders_sample() {
