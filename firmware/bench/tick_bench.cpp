@@ -116,6 +116,15 @@ struct Bench {
     uint64_t rt_start = 0;
     bool rt_started = false;  // its first byte went out
     std::vector<uint64_t> rt_ping, rt_targets;
+    // Where a round trip's time goes (UTRF_DISPATCH_ENTRY=<hex byte address of
+    // dispatch::handle()>): the request's last byte in, dispatch's entry, the reply frame's
+    // first byte out; per request, the segments between them.
+    uint32_t dispatch_entry = 0;
+    uint64_t rt_last_in = 0;
+    uint64_t rt_dispatch = 0;
+    uint64_t out_frame_start = 0;  // the first byte of the frame coming out now
+    bool out_in_frame = false;
+    std::vector<uint64_t> seg_in, seg_notice, seg_reply, seg_out;
 };
 
 Bench g;
@@ -147,15 +156,25 @@ void adc_trigger(avr_irq_t*, uint32_t value, void*) {
 }
 
 bool g_trace = false;
+uint32_t g_trace_pc = 0;
 void uart_out(avr_irq_t*, uint32_t value, void*) {
     if (g_trace && g.rt_seq >= 0) fprintf(stderr, "  out %02x at %llu\n", value, (unsigned long long)(g.avr->cycle - g.rt_start));
+    if (value != 0 && !g.out_in_frame) g.out_frame_start = g.avr->cycle;
+    g.out_in_frame = value != 0;
     const framing::RxEvent ev = g.decoder.feed((uint8_t)value);
     if (ev != framing::RxEvent::FRAME) return;
     const uint8_t id = g.decoder.msg_id();
     if (g.rt_seq >= 0 && g.decoder.seq() == (uint8_t)g.rt_seq && g.rt_started) {
         const uint64_t c = g.avr->cycle - g.rt_start;
         (g.rt_id == proto::Ping::kId ? g.rt_ping : g.rt_targets).push_back(c);
+        if (g_trace) fprintf(stderr, " reply %s done at %llu, its first byte at %llu\n", g.rt_id == proto::Ping::kId ? "ping" : "targets", (unsigned long long)c, (unsigned long long)(g.out_frame_start - g.rt_start));
         g.rt_seq = -1;
+        if (g.dispatch_entry && g.rt_dispatch > g.rt_last_in) {
+            g.seg_in.push_back(g.rt_last_in + kByteCycles - g.rt_start);
+            g.seg_notice.push_back(g.rt_dispatch - (g.rt_last_in + kByteCycles));
+            g.seg_reply.push_back(g.out_frame_start - g.rt_dispatch);
+            g.seg_out.push_back(g.avr->cycle - g.out_frame_start);
+        }
     }
     if (id == proto::MsgId::STATE && (g.decoder.seq() & proto::kBoardSeqFlag)) {
         ++g.state_frames;
@@ -261,6 +280,13 @@ void run_until(double t_end) {
                 if (g.tick_nested > g.sim_nested_worst) g.sim_nested_worst = g.tick_nested;
             }
         }
+        if (g_trace && g_trace_pc && g.avr->pc == g_trace_pc && g.rt_seq >= 0)
+            fprintf(stderr, " pc at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
+        if (g.dispatch_entry && g.avr->pc == g.dispatch_entry && g.rt_seq >= 0 &&
+            g.rt_dispatch <= g.rt_last_in) {
+            g.rt_dispatch = g.avr->cycle;
+            if (g_trace) fprintf(stderr, " dispatch at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
+        }
         if (g.loop_entry) {
             if (!g.pass_profile.empty() && pc0 < g.pass_profile.size()) {
                 if (g.pass_profile[pc0] == 0) g.pass_touched.push_back(pc0);
@@ -293,6 +319,10 @@ void run_until(double t_end) {
             }
             avr_raise_irq(in, g.to_board.front());
             g.to_board.pop_front();
+            if (g.rt_seq >= 0 && g.to_board.empty()) {
+                g.rt_last_in = g.avr->cycle;
+                if (g_trace) fprintf(stderr, " last in at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
+            }
             g.next_byte_cycle = g.avr->cycle + kByteCycles;
         }
     }
@@ -480,6 +510,11 @@ int main(int argc, char** argv) {
     if (g.loop_entry && loop_profile && *loop_profile) g.pass_profile.assign(256 * 1024, 0);
     g.profile_all = getenv("UTRF_LOOP_PROFILE_ALL") != nullptr;
     g_trace = getenv("UTRF_TRACE") != nullptr;
+    if (getenv("UTRF_TRACE_PC")) g_trace_pc = (uint32_t)strtoul(getenv("UTRF_TRACE_PC"), nullptr, 16);
+    const char* dispatch_entry = getenv("UTRF_DISPATCH_ENTRY");
+    if (dispatch_entry && *dispatch_entry) {
+        g.dispatch_entry = (uint32_t)strtoul(dispatch_entry, nullptr, 16);
+    }
     g.measuring = true;
     uint16_t move_id = 0;
     const uint32_t frames_before = g.state_frames;
@@ -587,15 +622,22 @@ int main(int argc, char** argv) {
         const size_t i = (size_t)std::min<double>(v.size() - 1, floor(q * (v.size() - 1) + 0.5));
         return v[i] / kCpuHz * 1e6;
     };
-    char rt[512] = "";
+    char rt[1024] = "";
     if (scenario == "latency") {
-        snprintf(rt, sizeof rt,
+        int n = snprintf(rt, sizeof rt,
                  ", \"ping_n\": %zu, \"ping_median_us\": %.1f, \"ping_p99_us\": %.1f, "
                  "\"ping_max_us\": %.1f, \"targets_n\": %zu, \"targets_median_us\": %.1f, "
                  "\"targets_p99_us\": %.1f, \"targets_max_us\": %.1f",
                  g.rt_ping.size(), pct(g.rt_ping, 0.5), pct(g.rt_ping, 0.99), pct(g.rt_ping, 1.0),
                  g.rt_targets.size(), pct(g.rt_targets, 0.5), pct(g.rt_targets, 0.99),
                  pct(g.rt_targets, 1.0));
+        // The segments, both requests together: median and 99th percentile of each.
+        const std::vector<uint64_t>* segs[] = {&g.seg_in, &g.seg_notice, &g.seg_reply, &g.seg_out};
+        const char* names[] = {"in", "notice", "reply", "out"};
+        for (int k = 0; k < 4 && !g.seg_in.empty(); ++k) {
+            n += snprintf(rt + n, sizeof rt - n, ", \"seg_%s_median_us\": %.1f, \"seg_%s_p99_us\": %.1f",
+                          names[k], pct(*segs[k], 0.5), names[k], pct(*segs[k], 0.99));
+        }
     }
     if (!g.worst_profile.empty()) {
         FILE* pf = fopen(loop_profile, "w");

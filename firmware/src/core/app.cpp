@@ -76,30 +76,43 @@ void take_request(Board& b) {
     b.request_seq = -1;
 }
 
+// One received byte into the decoder, and what it completes.
+void receive_byte(Board& b, uint8_t byte) {
+    if (!b.decoder.in_frame()) b.rx_frame_tick = b.hand.ticks();
+    switch (b.decoder.feed(byte)) {
+        case framing::RxEvent::FRAME:
+            take_request(b);
+            break;
+        case framing::RxEvent::CRC_ERROR:
+            ++b.link.rx_crc_errors;
+            dispatch::nack(b, b.decoder.seq(), b.decoder.msg_id(),
+                           (uint8_t)proto::ErrorCode::BAD_CRC, 0);
+            break;
+        case framing::RxEvent::FRAMING_ERROR:
+        case framing::RxEvent::OVERSIZE:
+            // Nothing trustworthy to answer to (no seq): counted for get_stats.
+            ++b.link.rx_framing_errors;
+            break;
+        case framing::RxEvent::NONE:
+            break;
+    }
+}
+
+// The received bytes, read in place from the UART's buffer (no copy, no call a byte), up to
+// kRxBurst of them; a reply waiting for room stops the reading (the rest stays in the buffer).
 void receive(Board& b) {
     const uint16_t lost = hal::serial_take_overruns();
     b.link.rx_overruns += lost;
-    for (uint8_t i = 0; i < kRxBurst && b.reply_len == 0; ++i) {
-        uint8_t byte;
-        if (hal::serial_read(&byte, 1) == 0) break;
-        if (!b.decoder.in_frame()) b.rx_frame_tick = b.hand.ticks();
-        switch (b.decoder.feed(byte)) {
-            case framing::RxEvent::FRAME:
-                take_request(b);
-                break;
-            case framing::RxEvent::CRC_ERROR:
-                ++b.link.rx_crc_errors;
-                dispatch::nack(b, b.decoder.seq(), b.decoder.msg_id(),
-                               (uint8_t)proto::ErrorCode::BAD_CRC, 0);
-                break;
-            case framing::RxEvent::FRAMING_ERROR:
-            case framing::RxEvent::OVERSIZE:
-                // Nothing trustworthy to answer to (no seq): counted for get_stats.
-                ++b.link.rx_framing_errors;
-                break;
-            case framing::RxEvent::NONE:
-                break;
-        }
+    uint8_t budget = kRxBurst;
+    while (budget != 0 && b.reply_len == 0) {
+        const uint8_t* data;
+        uint8_t n = hal::serial_rx_peek(&data);
+        if (n == 0) break;
+        if (n > budget) n = budget;
+        uint8_t used = 0;
+        while (used < n && b.reply_len == 0) receive_byte(b, data[used++]);
+        hal::serial_rx_take(used);
+        budget = (uint8_t)(budget - used);
     }
 }
 
@@ -170,9 +183,14 @@ void board_frames(Board& b) {
     if (pending == 0) return;
     if (pending < 2) {
         // A request is coming in: its reply goes first, onto a free line. The state waits (it
-        // may: the samples wait in the ring).
+        // may: the samples wait in the ring). Coming in: bytes of it in the decoder (for at
+        // most kRequestHoldTicks: garbage with no 0x00 after it holds nothing longer), or
+        // bytes in the UART's buffer that loop() has not read yet (a tick or this pass's work
+        // held it up while they came): they are read first, at the next pass.
+        const uint8_t* waiting;
         const bool request_coming =
-            b.decoder.in_frame() && b.hand.ticks() - b.rx_frame_tick < kRequestHoldTicks;
+            (b.decoder.in_frame() && b.hand.ticks() - b.rx_frame_tick < kRequestHoldTicks) ||
+            hal::serial_rx_peek(&waiting) != 0;
         if (!idle || request_coming) return;
     }
     while (pending != 0 && b.reply_len == 0 &&

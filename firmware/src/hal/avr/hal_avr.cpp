@@ -175,7 +175,7 @@ void adc_select(uint8_t finger) {
 // ---- UART0 ---------------------------------------------------------------------------------
 // Ring buffers shared with the interrupt routines below. The receive ring's head and tail live
 // in the general-purpose I/O registers GPIOR1 (head, written by the interrupt) and GPIOR2
-// (tail, written by serial_read()): single-cycle in/out, nothing else uses them, and the
+// (tail, written by serial_rx_take()): single-cycle in/out, nothing else uses them, and the
 // receive interrupt, which nests in the control tick once for each byte that arrives while it
 // runs, touches no other memory on its usual path.
 namespace {
@@ -519,16 +519,14 @@ bool tick_period_elapsed() { return g_tick_deferred != 0; }
 
 uint32_t millis() { return ::millis(); }
 
-uint16_t serial_read(uint8_t* buf, uint16_t max) {
-    uint16_t n = 0;
-    uint8_t tail = GPIOR2;
-    while (n < max && tail != GPIOR1) {
-        buf[n++] = g_rx_buf[tail];
-        tail = (uint8_t)((tail + 1) & 0x7F);
-    }
-    GPIOR2 = tail;
-    return n;
+uint8_t serial_rx_peek(const uint8_t** data) {
+    const uint8_t tail = GPIOR2;
+    const uint8_t head = GPIOR1;  // one read: bytes arriving meanwhile come at the next call
+    *data = g_rx_buf + tail;
+    return head >= tail ? (uint8_t)(head - tail) : (uint8_t)(sizeof g_rx_buf - tail);
 }
+
+void serial_rx_take(uint8_t n) { GPIOR2 = (uint8_t)((GPIOR2 + n) & 0x7F); }
 
 uint16_t serial_tx_room() {
     return (uint16_t)((uint8_t)(g_tx_tail - g_tx_head - 1));  // 256-byte ring
