@@ -32,6 +32,7 @@
 #include <simavr/avr_adc.h>
 #include <simavr/avr_uart.h>
 #include <simavr/sim_avr.h>
+#include <simavr/sim_cycle_timers.h>
 #include <simavr/sim_elf.h>
 
 #include "board_pins.h"
@@ -55,6 +56,8 @@ struct Bench {
     std::deque<uint8_t> to_board;
     bool xon = true;
     uint64_t next_byte_cycle = 0;
+    bool feeding = false;  // feed_byte() is scheduled
+    avr_irq_t* uart_in = nullptr;
     framing::FrameDecoder decoder;
     uint8_t seq = 0;
     uint32_t state_frames = 0;
@@ -194,6 +197,37 @@ void uart_out(avr_irq_t*, uint32_t value, void*) {
 }
 
 void uart_xon(avr_irq_t*, uint32_t, void*) { g.xon = true; }
+
+// The firmware's idle sleep (SLEEP until the next interrupt): simavr skips the cycles and
+// reports them here; counted, and never paced to the wall clock.
+uint64_t g_sleep_cycles = 0;
+void count_sleep(avr_t*, avr_cycle_count_t how_long) { g_sleep_cycles += 1 + how_long; }
+
+// One byte of the host's into the UART, one byte time after the last.
+avr_cycle_count_t feed_byte(avr_t* avr, avr_cycle_count_t when, void*) {
+    if (g.to_board.empty() || !g.xon) {
+        g.feeding = false;
+        return 0;
+    }
+    if (g_trace && g.rt_seq >= 0) fprintf(stderr, "  in at %llu\n", (unsigned long long)(when - g.rt_start));
+    if (g.rt_seq >= 0 && !g.rt_started) {
+        g.rt_started = true;
+        g.rt_start = when;
+    }
+    avr_raise_irq(g.uart_in, g.to_board.front());
+    g.to_board.pop_front();
+    if (g.rt_seq >= 0 && g.to_board.empty()) {
+        g.rt_last_in = when;
+        if (g_trace) fprintf(stderr, " last in at %llu\n", (unsigned long long)(when - g.rt_start));
+    }
+    g.next_byte_cycle = when + kByteCycles;
+    (void)avr;
+    if (g.to_board.empty()) {
+        g.feeding = false;
+        return 0;
+    }
+    return when + kByteCycles;
+}
 void uart_xoff(avr_irq_t*, uint32_t, void*) { g.xon = false; }
 
 template <typename Msg>
@@ -311,19 +345,13 @@ void run_until(double t_end) {
                 g.loop_start = g.avr->cycle;
             }
         }
-        if (!g.to_board.empty() && g.xon && g.avr->cycle >= g.next_byte_cycle) {
-            if (g_trace && g.rt_seq >= 0) fprintf(stderr, "  in at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
-            if (g.rt_seq >= 0 && !g.rt_started) {
-                g.rt_started = true;
-                g.rt_start = g.avr->cycle;
-            }
-            avr_raise_irq(in, g.to_board.front());
-            g.to_board.pop_front();
-            if (g.rt_seq >= 0 && g.to_board.empty()) {
-                g.rt_last_in = g.avr->cycle;
-                if (g_trace) fprintf(stderr, " last in at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
-            }
-            g.next_byte_cycle = g.avr->cycle + kByteCycles;
+        if (!g.feeding && !g.to_board.empty() && g.xon) {
+            // The host's bytes on simavr's clock (a cycle timer: exact even while the firmware
+            // sleeps, when one step of the simulator skips many cycles).
+            g.feeding = true;
+            g.uart_in = in;
+            const uint64_t at = std::max<uint64_t>(g.next_byte_cycle, g.avr->cycle + 1);
+            avr_cycle_timer_register(g.avr, at - g.avr->cycle, feed_byte, nullptr);
         }
     }
 }
@@ -464,6 +492,7 @@ int main(int argc, char** argv) {
     g.avr->frequency = (uint32_t)kCpuHz;
     g.avr->vcc = g.avr->avcc = g.avr->aref = 5000;
     g.avr->log = 0;
+    g.avr->sleep = count_sleep;
 
     uint32_t flags = 0;
     avr_ioctl(g.avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
@@ -516,6 +545,8 @@ int main(int argc, char** argv) {
         g.dispatch_entry = (uint32_t)strtoul(dispatch_entry, nullptr, 16);
     }
     g.measuring = true;
+    const uint64_t sleep_before = g_sleep_cycles;
+    const uint64_t cycles_before = g.avr->cycle;
     uint16_t move_id = 0;
     const uint32_t frames_before = g.state_frames;
     const uint32_t gaps_before = g.state_gaps;
@@ -584,6 +615,8 @@ int main(int argc, char** argv) {
             run_until(next_send < t + 0.0005 ? next_send : t + 0.0005);
         }
     }
+    const double asleep = (double)(g_sleep_cycles - sleep_before) /
+                          (double)(g.avr->cycle - cycles_before);
     const uint32_t frames = g.state_frames - frames_before;
     const uint32_t gaps = g.state_gaps - gaps_before;
     const uint64_t sim_ticks = g.sim_ticks;
@@ -674,7 +707,7 @@ int main(int argc, char** argv) {
            "\"sim_nested_mean_cycles\": %.1f, \"sim_nested_interrupts\": %llu, "
            "\"sim_isr_mean_cycles\": %.1f, \"sim_isr_worst_cycles\": %llu, "
            "\"sim_isr_ticks\": %llu, \"loop_passes\": %llu, \"loop_worst_cycles\": %llu, "
-           "\"loop_worst_at_s\": %.6f%s}\n",
+           "\"loop_worst_at_s\": %.6f, \"asleep\": %.4f%s}\n",
            scenario.c_str(), seconds, (unsigned)s.ticks, (unsigned)s.tick_overruns,
            (unsigned)s.tick_worst, (unsigned)s.tick_mean, (unsigned)s.rx_frames,
            (unsigned)s.rx_crc_errors, (unsigned)s.rx_framing_errors, (unsigned)s.rx_overruns,
@@ -684,6 +717,6 @@ int main(int argc, char** argv) {
            (unsigned long long)sim_nested_worst, sim_nested_mean,
            (unsigned long long)sim_nested_count, isr_mean, (unsigned long long)isr_worst,
            (unsigned long long)isr_ticks, (unsigned long long)g.loop_passes,
-           (unsigned long long)g.loop_worst, g.loop_worst_at / kCpuHz, rt);
+           (unsigned long long)g.loop_worst, g.loop_worst_at / kCpuHz, asleep, rt);
     return 0;
 }

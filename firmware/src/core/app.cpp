@@ -169,8 +169,12 @@ bool report_faults(Board& b) {
 // two samples wait (loop() or the line fell a period behind), the waiting samples go out in
 // this pass, back to back, as far as the buffer has room.
 void board_frames(Board& b) {
-    poll_status(b);
     const bool idle = tx_idle(b);
+    uint8_t pending = b.hand.stream_pending();
+    // Nothing can start (the buffer busy, fewer than two samples waiting): the status is
+    // polled when a frame can go, before it.
+    if (!idle && pending < 2) return;
+    poll_status(b);
     if (idle && report_faults(b)) return;
     if (idle && b.status_pending) {
         proto::Status m;
@@ -179,7 +183,6 @@ void board_frames(Board& b) {
         b.status_pending = false;
         return;
     }
-    uint8_t pending = b.hand.stream_pending();
     if (pending == 0) return;
     if (pending < 2) {
         // A request is coming in: its reply goes first, onto a free line. The state waits (it
@@ -231,6 +234,8 @@ void watchdog(Board& b) {
     b.hand.note_loop();
     const uint32_t t = b.hand.ticks();
     const uint32_t ms = hal::millis();
+    b.pass_ticks = t;
+    b.pass_ms = ms;
     if (t != b.watch_ticks) {
         b.watch_ticks = t;
         b.watch_ms = ms;
@@ -362,6 +367,22 @@ void loop() {
     save_progress(b);
     flush_reply(b);
     board_frames(b);
+}
+
+bool idle() {
+    const Board& b = g_board;
+    if (!b.boot_sent || b.reply_len != 0 || b.writer.busy()) return false;
+    if (b.hand.ticks() != b.pass_ticks || hal::millis() != b.pass_ms) return false;
+    const uint8_t* waiting;
+    if (hal::serial_rx_peek(&waiting) != 0) return false;
+    const uint8_t pending = b.hand.stream_pending();
+    if (pending >= 2) return false;  // behind: they go as the buffer has room (rare: spin)
+    if (!tx_idle(b)) return true;    // a frame starts when the buffer empties: an interrupt
+    if (pending != 0 || b.status_pending) return false;
+    for (uint8_t f = 0; f < hand::kFingers; ++f) {
+        if (b.hand.finger(f).pending_new_faults() != 0) return false;
+    }
+    return true;
 }
 
 void tick() {

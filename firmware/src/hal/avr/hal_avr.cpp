@@ -12,6 +12,7 @@
 #include <avr/interrupt.h>
 #include <avr/io.h>
 #include <avr/pgmspace.h>
+#include <avr/sleep.h>
 #include <avr/wdt.h>
 #include <util/atomic.h>
 
@@ -23,6 +24,7 @@
 #include "../hal.h"
 
 extern "C" unsigned long millis(void);  // Arduino core (timer 0)
+extern "C" volatile unsigned long timer0_overflow_count;  // Arduino core: timer 0's overflows
 
 namespace utrf {
 namespace hal {
@@ -178,6 +180,10 @@ void adc_select(uint8_t finger) {
 // (tail, written by serial_rx_take()): single-cycle in/out, nothing else uses them, and the
 // receive interrupt, which nests in the control tick once for each byte that arrives while it
 // runs, touches no other memory on its usual path.
+// GPIOR0 bit 0, set (sbi: two cycles, no register) by the interrupts that give loop() work:
+// a byte received, a tick, the transmit buffer emptied. sleep_until_interrupt() sleeps again
+// after any other (an ADC conversion, a byte going out, ...) without a loop() pass.
+static const uint8_t kWake = 0;
 namespace {
 uint8_t g_rx_buf[128];
 uint8_t g_tx_buf[256];
@@ -276,6 +282,7 @@ inline __attribute__((always_inline)) void run_due_ticks() {
 }  // namespace
 
 ISR(TIMER2_COMPA_vect) {
+    GPIOR0 |= _BV(kWake);  // loop() after the tick (sleep_until_interrupt)
     if (g_tick_running || g_tick_locked) {
         if (g_tick_deferred) g_tick_lost = 1;
         g_tick_deferred = 1;
@@ -315,6 +322,7 @@ ISR(USART0_RX_vect) {
     }
     g_rx_buf[head] = byte;
     GPIOR1 = next;
+    GPIOR0 |= _BV(kWake);
 }
 
 // The next byte of the ring into UDR0; when the ring is empty, this interrupt goes off.
@@ -322,6 +330,7 @@ ISR(USART0_UDRE_vect) {
     const uint8_t tail = g_tx_tail;
     if (tail == g_tx_head) {
         UCSR0B &= (uint8_t)~_BV(UDRIE0);
+        GPIOR0 |= _BV(kWake);  // the buffer is empty: a board frame may start
         return;
     }
     UDR0 = g_tx_buf[tail];
@@ -381,6 +390,7 @@ void avr_init() {
     UCSR0A = _BV(U2X0);
     UBRR0 = (uint16_t)((F_CPU + 4UL * UTRF_BAUD) / (8UL * UTRF_BAUD) - 1);
     UCSR0C = _BV(UCSZ01) | _BV(UCSZ00);
+    GPIOR0 = 0;  // bit kWake: see sleep_until_interrupt()
     GPIOR1 = 0;  // receive head: empty
     GPIOR2 = 0;  // receive tail
     g_tx_head = g_tx_tail = 0;
@@ -546,6 +556,24 @@ uint16_t serial_take_overruns() {
         g_rx_lost = 0;
     }
     return n;
+}
+
+void sleep_until_interrupt(bool (*idle)()) {
+    set_sleep_mode(SLEEP_MODE_IDLE);
+    cli();
+    GPIOR0 &= (uint8_t)~_BV(kWake);  // before the check: what comes after it wakes us
+    const uint8_t ms = (uint8_t)timer0_overflow_count;
+    if (idle()) {
+        do {
+            sleep_enable();
+            sei();  // SLEEP runs before any interrupt pending now, which then wakes it at once
+            sleep_cpu();
+            sleep_disable();
+            cli();
+            // Timer 0's overflow (millis(), the tick-alive check) wakes loop() too.
+        } while (!(GPIOR0 & _BV(kWake)) && (uint8_t)timer0_overflow_count == ms);
+    }
+    sei();
 }
 
 uint8_t eeprom_read(uint16_t addr) { return eeprom_read_byte((const uint8_t*)addr); }
