@@ -159,6 +159,7 @@ void adc_trigger(avr_irq_t*, uint32_t value, void*) {
 }
 
 bool g_trace = false;
+std::vector<uint64_t> g_notice_profile;  // UTRF_NOTICE_PROFILE=file
 uint32_t g_trace_pc = 0;
 void uart_out(avr_irq_t*, uint32_t value, void*) {
     if (g_trace && g.rt_seq >= 0) fprintf(stderr, "  out %02x at %llu\n", value, (unsigned long long)(g.avr->cycle - g.rt_start));
@@ -313,6 +314,10 @@ void run_until(double t_end) {
                 g.sim_nested_sum += g.tick_nested;
                 if (g.tick_nested > g.sim_nested_worst) g.sim_nested_worst = g.tick_nested;
             }
+        }
+        if (!g_notice_profile.empty() && g.rt_seq >= 0 && g.rt_last_in &&
+            g.rt_dispatch <= g.rt_last_in && pc0 < g_notice_profile.size()) {
+            g_notice_profile[pc0] += g.avr->cycle - c0;  // the notice segment's cycles
         }
         if (g_trace && g_trace_pc && g.avr->pc == g_trace_pc && g.rt_seq >= 0)
             fprintf(stderr, " pc at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
@@ -540,6 +545,8 @@ int main(int argc, char** argv) {
     g.profile_all = getenv("UTRF_LOOP_PROFILE_ALL") != nullptr;
     g_trace = getenv("UTRF_TRACE") != nullptr;
     if (getenv("UTRF_TRACE_PC")) g_trace_pc = (uint32_t)strtoul(getenv("UTRF_TRACE_PC"), nullptr, 16);
+    const char* notice_path = getenv("UTRF_NOTICE_PROFILE");
+    if (notice_path && *notice_path) g_notice_profile.assign(256 * 1024, 0);
     const char* dispatch_entry = getenv("UTRF_DISPATCH_ENTRY");
     if (dispatch_entry && *dispatch_entry) {
         g.dispatch_entry = (uint32_t)strtoul(dispatch_entry, nullptr, 16);
@@ -670,6 +677,16 @@ int main(int argc, char** argv) {
         for (int k = 0; k < 4 && !g.seg_in.empty(); ++k) {
             n += snprintf(rt + n, sizeof rt - n, ", \"seg_%s_median_us\": %.1f, \"seg_%s_p99_us\": %.1f",
                           names[k], pct(*segs[k], 0.5), names[k], pct(*segs[k], 0.99));
+        }
+    }
+    if (!g_notice_profile.empty()) {
+        FILE* pf = fopen(notice_path, "w");
+        if (pf) {
+            fprintf(pf, "# byte address, cycles between requests' last byte and dispatch\n");
+            for (size_t a = 0; a < g_notice_profile.size(); ++a) {
+                if (g_notice_profile[a]) fprintf(pf, "%zx %llu\n", a, (unsigned long long)g_notice_profile[a]);
+            }
+            fclose(pf);
         }
     }
     if (!g.worst_profile.empty()) {

@@ -110,7 +110,13 @@ void receive(Board& b) {
         if (n == 0) break;
         if (n > budget) n = budget;
         uint8_t used = 0;
-        while (used < n && b.reply_len == 0) receive_byte(b, data[used++]);
+        while (used < n && b.reply_len == 0) {
+            // A frame's bytes in one run, then the byte that ends the run (its 0x00) one at a
+            // time.
+            if (!b.decoder.in_frame()) b.rx_frame_tick = b.hand.ticks();
+            used = (uint8_t)(used + b.decoder.feed_run(data + used, (uint8_t)(n - used)));
+            if (used < n) receive_byte(b, data[used++]);
+        }
         hal::serial_rx_take(used);
         budget = (uint8_t)(budget - used);
     }
