@@ -139,6 +139,14 @@ void note_status(Board& b, const uint8_t* mode, const uint8_t* faults) {
 }
 
 void poll_status(Board& b) {
+    // Usually nothing changed: a byte at a time needs no lock to tell (each byte is read
+    // whole); only a change is taken as one snapshot, under the lock.
+    bool same = true;
+    for (uint8_t f = 0; f < hand::kFingers; ++f) {
+        const finger::Finger& fg = b.hand.finger(f);
+        if (fg.mode() != b.status_mode[f] || fg.faults() != b.status_faults[f]) same = false;
+    }
+    if (same) return;
     uint8_t mode[hand::kFingers];
     uint8_t faults[hand::kFingers];
     {

@@ -184,6 +184,9 @@ void adc_select(uint8_t finger) {
 // a byte received, a tick, the transmit buffer emptied. sleep_until_interrupt() sleeps again
 // after any other (an ADC conversion, a byte going out, ...) without a loop() pass.
 static const uint8_t kWake = 0;
+// GPIOR0 bit 1, set by every tick: timer 0's overflow wakes loop() only when no tick came
+// since the last one (below).
+static const uint8_t kTickSeen = 1;
 namespace {
 uint8_t g_rx_buf[128];
 uint8_t g_tx_buf[256];
@@ -282,7 +285,7 @@ inline __attribute__((always_inline)) void run_due_ticks() {
 }  // namespace
 
 ISR(TIMER2_COMPA_vect) {
-    GPIOR0 |= _BV(kWake);  // loop() after the tick (sleep_until_interrupt)
+    GPIOR0 |= _BV(kWake) | _BV(kTickSeen);  // loop() after the tick (sleep_until_interrupt)
     if (g_tick_running || g_tick_locked) {
         if (g_tick_deferred) g_tick_lost = 1;
         g_tick_deferred = 1;
@@ -562,16 +565,26 @@ void sleep_until_interrupt(bool (*idle)()) {
     set_sleep_mode(SLEEP_MODE_IDLE);
     cli();
     GPIOR0 &= (uint8_t)~_BV(kWake);  // before the check: what comes after it wakes us
-    const uint8_t ms = (uint8_t)timer0_overflow_count;
+    uint8_t ms = (uint8_t)timer0_overflow_count;
     if (idle()) {
-        do {
+        for (;;) {
             sleep_enable();
             sei();  // SLEEP runs before any interrupt pending now, which then wakes it at once
             sleep_cpu();
             sleep_disable();
             cli();
-            // Timer 0's overflow (millis(), the tick-alive check) wakes loop() too.
-        } while (!(GPIOR0 & _BV(kWake)) && (uint8_t)timer0_overflow_count == ms);
+            if (GPIOR0 & _BV(kWake)) break;
+            const uint8_t now = (uint8_t)timer0_overflow_count;
+            if (now == ms) continue;
+            // Timer 0's overflow: a new millisecond for the tick-alive check. While the tick
+            // runs, its own wake-up brings loop() round every period and that check with it;
+            // once a whole overflow period passed with no tick, every overflow wakes loop(),
+            // so a stopped tick is seen at the same millisecond as by a loop() that never
+            // sleeps.
+            ms = now;
+            if (!(GPIOR0 & _BV(kTickSeen))) break;
+            GPIOR0 &= (uint8_t)~_BV(kTickSeen);
+        }
     }
     sei();
 }
