@@ -110,13 +110,16 @@ Stamp stamp() {
 bool tick_period_elapsed() { return g_state.period_elapsed; }
 uint32_t millis() { return g_state.ms; }
 
-uint16_t serial_read(uint8_t* buf, uint16_t max) {
-    uint16_t n = 0;
-    while (n < max && g_state.rx_tail != g_state.rx_head) {
-        buf[n++] = g_state.rx[g_state.rx_tail];
-        g_state.rx_tail = (uint16_t)((g_state.rx_tail + 1) % host::kRxBytes);
-    }
-    return n;
+uint8_t serial_rx_peek(const uint8_t** data) {
+    const uint16_t tail = g_state.rx_tail;
+    const uint16_t head = g_state.rx_head;
+    *data = g_state.rx + tail;
+    const uint16_t n = head >= tail ? (uint16_t)(head - tail) : (uint16_t)(host::kRxBytes - tail);
+    return (uint8_t)(n > 255 ? 255 : n);
+}
+
+void serial_rx_take(uint8_t n) {
+    g_state.rx_tail = (uint16_t)((g_state.rx_tail + n) % host::kRxBytes);
 }
 
 uint16_t serial_tx_room() {

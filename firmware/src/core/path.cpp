@@ -93,12 +93,11 @@ void Path::next_segment() {
     }
 }
 
-void Path::plan_next() {
+void Path::plan_next_work() {
     // Only loop() writes the planning fields and sets next_ready_; the tick clears it and
     // stop() ends the path: read the flag and the path's state under the lock.
-    // Without the lock first: plan_left_ is loop()'s own and next_ready_ a byte, and most
-    // passes have nothing to do.
-    if (plan_left_ == 0 || next_ready_) return;
+    // Without the lock first (plan_next(), inline): plan_left_ is loop()'s own and next_ready_
+    // a byte, and most passes have nothing to do.
     hal::tick_lock();
     const bool todo = left_ != 0 && !next_ready_;
     hal::tick_unlock();

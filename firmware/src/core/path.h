@@ -82,8 +82,13 @@ class Path {
     void start(const Plan& p, int16_t from_bu, uint8_t first);
     void stop() { left_ = 0; }
     // loop() context, without the lock (it takes it to hand the segment over): work out the
-    // next segment when the tick has taken the last one. Cheap when there is nothing to do.
-    void plan_next();
+    // next segment when the tick has taken the last one. Cheap when there is nothing to do:
+    // that test inline (loop() runs it for every finger every pass; a call with the frame
+    // plan_next_work() needs took ~80 cycles just to return).
+    void plan_next() {
+        if (plan_left_ != 0 && !next_ready_) plan_next_work();
+    }
+    void plan_next_work();  // plan_next()'s work, out of line
     // The tick: the setpoint for it in `target`, the feedforward duty (Q15) as the result.
     inline int16_t tick(int16_t& target);
 

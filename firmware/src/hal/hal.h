@@ -118,7 +118,12 @@ uint32_t millis();
 
 // ---- serial (UART0) ----------------------------------------------------------------------------
 // Never blocks. Reads what has arrived; writes only when serial_tx_room() says it fits.
-uint16_t serial_read(uint8_t* buf, uint16_t max);
+// The bytes received and not yet taken, read in place: the length of the first contiguous
+// run of them in the receive buffer (0: none), *data pointing at it; when the run wraps round
+// the buffer, the rest comes at the next call. serial_rx_take(n) then frees the first n of
+// them (n at most that length).
+uint8_t serial_rx_peek(const uint8_t** data);
+void serial_rx_take(uint8_t n);
 uint16_t serial_tx_room();
 void serial_write(const uint8_t* data, uint16_t len);
 // Bytes lost since the last call because the receive buffer or the UART itself overflowed.

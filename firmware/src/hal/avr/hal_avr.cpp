@@ -12,6 +12,7 @@
 #include <avr/interrupt.h>
 #include <avr/io.h>
 #include <avr/pgmspace.h>
+#include <avr/sleep.h>
 #include <avr/wdt.h>
 #include <util/atomic.h>
 
@@ -23,6 +24,7 @@
 #include "../hal.h"
 
 extern "C" unsigned long millis(void);  // Arduino core (timer 0)
+extern "C" volatile unsigned long timer0_overflow_count;  // Arduino core: timer 0's overflows
 
 namespace utrf {
 namespace hal {
@@ -196,9 +198,16 @@ void adc_select(uint8_t finger) {
 // ---- UART0 ---------------------------------------------------------------------------------
 // Ring buffers shared with the interrupt routines below. The receive ring's head and tail live
 // in the general-purpose I/O registers GPIOR1 (head, written by the interrupt) and GPIOR2
-// (tail, written by serial_read()): single-cycle in/out, nothing else uses them, and the
+// (tail, written by serial_rx_take()): single-cycle in/out, nothing else uses them, and the
 // receive interrupt, which nests in the control tick once for each byte that arrives while it
 // runs, touches no other memory on its usual path.
+// GPIOR0 bit 0, set (sbi: two cycles, no register) by the interrupts that give loop() work:
+// a byte received, a tick, the transmit buffer emptied. sleep_until_interrupt() sleeps again
+// after any other (an ADC conversion, a byte going out, ...) without a loop() pass.
+static const uint8_t kWake = 0;
+// GPIOR0 bit 1, set by every tick: timer 0's overflow wakes loop() only when no tick came
+// since the last one (below).
+static const uint8_t kTickSeen = 1;
 namespace {
 uint8_t g_rx_buf[128];
 uint8_t g_tx_buf[256];
@@ -297,6 +306,7 @@ inline __attribute__((always_inline)) void run_due_ticks() {
 }  // namespace
 
 ISR(TIMER2_COMPA_vect) {
+    GPIOR0 |= _BV(kWake) | _BV(kTickSeen);  // loop() after the tick (sleep_until_interrupt)
     if (g_tick_running || g_tick_locked) {
         if (g_tick_deferred) g_tick_lost = 1;
         g_tick_deferred = 1;
@@ -337,6 +347,7 @@ ISR(USART0_RX_vect) {
     }
     g_rx_buf[head] = byte;
     GPIOR1 = next;
+    GPIOR0 |= _BV(kWake);
 }
 
 // The next byte of the ring into UDR0; when the ring is empty, this interrupt goes off.
@@ -344,6 +355,7 @@ ISR(USART0_UDRE_vect) {
     const uint8_t tail = g_tx_tail;
     if (tail == g_tx_head) {
         UCSR0B &= (uint8_t)~_BV(UDRIE0);
+        GPIOR0 |= _BV(kWake);  // the buffer is empty: a board frame may start
         return;
     }
     UDR0 = g_tx_buf[tail];
@@ -404,6 +416,7 @@ void avr_init() {
     UCSR0A = _BV(U2X0);
     UBRR0 = (uint16_t)((F_CPU + 4UL * UTRF_BAUD) / (8UL * UTRF_BAUD) - 1);
     UCSR0C = _BV(UCSZ01) | _BV(UCSZ00);
+    GPIOR0 = 0;  // bit kWake: see sleep_until_interrupt()
     GPIOR1 = 0;  // receive head: empty
     GPIOR2 = 0;  // receive tail
     g_tx_head = g_tx_tail = 0;
@@ -536,16 +549,14 @@ bool tick_period_elapsed() { return g_tick_deferred != 0; }
 
 uint32_t millis() { return ::millis(); }
 
-uint16_t serial_read(uint8_t* buf, uint16_t max) {
-    uint16_t n = 0;
-    uint8_t tail = GPIOR2;
-    while (n < max && tail != GPIOR1) {
-        buf[n++] = g_rx_buf[tail];
-        tail = (uint8_t)((tail + 1) & 0x7F);
-    }
-    GPIOR2 = tail;
-    return n;
+uint8_t serial_rx_peek(const uint8_t** data) {
+    const uint8_t tail = GPIOR2;
+    const uint8_t head = GPIOR1;  // one read: bytes arriving meanwhile come at the next call
+    *data = g_rx_buf + tail;
+    return head >= tail ? (uint8_t)(head - tail) : (uint8_t)(sizeof g_rx_buf - tail);
 }
+
+void serial_rx_take(uint8_t n) { GPIOR2 = (uint8_t)((GPIOR2 + n) & 0x7F); }
 
 uint16_t serial_tx_room() {
     return (uint16_t)((uint8_t)(g_tx_tail - g_tx_head - 1));  // 256-byte ring
@@ -565,6 +576,34 @@ uint16_t serial_take_overruns() {
         g_rx_lost = 0;
     }
     return n;
+}
+
+void sleep_until_interrupt(bool (*idle)()) {
+    set_sleep_mode(SLEEP_MODE_IDLE);
+    cli();
+    GPIOR0 &= (uint8_t)~_BV(kWake);  // before the check: what comes after it wakes us
+    uint8_t ms = (uint8_t)timer0_overflow_count;
+    if (idle()) {
+        for (;;) {
+            sleep_enable();
+            sei();  // SLEEP runs before any interrupt pending now, which then wakes it at once
+            sleep_cpu();
+            sleep_disable();
+            cli();
+            if (GPIOR0 & _BV(kWake)) break;
+            const uint8_t now = (uint8_t)timer0_overflow_count;
+            if (now == ms) continue;
+            // Timer 0's overflow: a new millisecond for the tick-alive check. While the tick
+            // runs, its own wake-up brings loop() round every period and that check with it;
+            // once a whole overflow period passed with no tick, every overflow wakes loop(),
+            // so a stopped tick is seen at the same millisecond as by a loop() that never
+            // sleeps.
+            ms = now;
+            if (!(GPIOR0 & _BV(kTickSeen))) break;
+            GPIOR0 &= (uint8_t)~_BV(kTickSeen);
+        }
+    }
+    sei();
 }
 
 uint8_t eeprom_read(uint16_t addr) { return eeprom_read_byte((const uint8_t*)addr); }
