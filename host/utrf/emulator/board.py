@@ -256,11 +256,15 @@ class EmulatedBoard(BoardFaults, BoardPlant, BoardProbes):
         """Simulated seconds since power-on (the MCU's cycle count / 16 MHz)."""
         return self._cycle / F_CPU_HZ
 
-    def _run_plant(self, target: int) -> None:
+    def _run_plant(self, target: int, wake: int = -1) -> None:
         """Run in lockstep with the plant up to cycle ``target``, all in C: each exchange
         period the MCU runs with the encoders as the plant had them at its start, then the
-        plant runs the same period with the pins as the MCU had set them at its start."""
-        status = self._native.run_plant(target, self._period_cycles)
+        plant runs the same period with the pins as the MCU had set them at its start.
+        ``wake`` (a byte value): stop early after the period in which the board sent it."""
+        if wake < 0:
+            status = self._native.run_plant(target, self._period_cycles)
+        else:
+            status = self._native.run_plant_until(target, self._period_cycles, wake)
         self._cycle = self._native.cycle
         if status != self._status:
             self._status = status
@@ -301,6 +305,39 @@ class EmulatedBoard(BoardFaults, BoardPlant, BoardProbes):
                 self._run_driven(seconds)
             return
         self.wait_until(lambda b: True, timeout=None, after=seconds)
+
+    def run_until_output(
+        self, seconds: float, until: Callable[[], bool] | None = None, byte: int = 0
+    ) -> bool:
+        """Driven: run ``seconds`` of simulated time in whole exchanges (the last one may pass
+        it), stopping after each exchange in which the board sent ``byte`` (0x00 by default,
+        the end of every protocol frame) to the captured output, where ``until()`` says whether
+        to end there (None: end at the first). In C between those stops however long the
+        wait: a client looks at the output when a frame has come, not at every exchange (as
+        ``run_until`` does). Returns whether it ended early."""
+        if self.realtime:
+            raise EmulatorError("run_until_output needs realtime=False; in real time read the port")
+        if not (isinstance(seconds, int | float) and math.isfinite(seconds) and seconds >= 0):
+            raise EmulatorError(f"seconds must be a finite number >= 0, got {seconds!r}")
+        if not (isinstance(byte, int) and 0 <= byte <= 255):
+            raise EmulatorError(f"byte must be 0..255, got {byte!r}")
+        if not self._capture:
+            raise EmulatorError("run_until_output needs capture=True")
+        with self._lock:
+            self._board()
+            period = self._period_cycles
+            target = self._cycle - (-round(seconds * F_CPU_HZ) // period) * period
+            t0 = time.perf_counter()
+            try:
+                while self._cycle < target:
+                    self._run_plant(target, byte)
+                    if self._cycle < target and (until is None or until()):
+                        return True
+                return False
+            finally:
+                dt = time.perf_counter() - t0
+                self._busy += dt
+                self._driven_wall += dt
 
     def run_until(self, predicate: Callable[[EmulatedBoard], bool], timeout: float) -> bool:
         """Run (driven) or wait (real time) until ``predicate(board)`` holds, at most ``timeout``

@@ -485,6 +485,7 @@ utrf_sim_t *utrf_sim_open(const char *elf_path, uint64_t seed, char *err, size_t
     }
     s->pending_cause = -1;
     s->eempe_cycle = -1;
+    s->wake_byte = -1;
     s->rng = seed;
     s->auto_reset = 0;
     no_level_polling(s->avr);
