@@ -1,10 +1,11 @@
 """The emulated board: the real firmware ELF on simavr, wired to the plant, served to clients.
 
-This module holds the board's lifecycle (open, serve, close), its time (the lockstep with the
-plant, driven or paced to the wall clock), UART0, reset and the EEPROM. Its faults
-(``board_faults``), plant knobs (``board_plant``) and views into the MCU (``board_probes``)
-are mixins in their own modules; ``SimSerial`` is in ``sim_serial``. Every public name is
-importable from here. See ``README.md`` in this package for the API and the time modes.
+This module holds the board's lifecycle (open, serve, close), its time (paced to the wall
+clock, or driven: the lockstep with the plant in ``board_driven``), UART0, reset and the
+EEPROM. Its driven time, faults (``board_faults``), plant knobs (``board_plant``) and views
+into the MCU (``board_probes``) are mixins in their own modules; ``SimSerial`` is in
+``sim_serial``. Every public name is importable from here. See ``README.md`` in this package
+for the API and the time modes.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 from utrf import artifacts
 from utrf.emulator import _native
 from utrf.emulator._native import F_CPU_HZ, HarnessError, NativeBoard
+from utrf.emulator.board_driven import BoardDriven
 from utrf.emulator.board_faults import BoardFaults
 from utrf.emulator.board_plant import BoardPlant
 from utrf.emulator.board_probes import BoardProbes
@@ -86,7 +88,7 @@ def _shutdown(stop: threading.Event, holder: dict) -> None:
         plant.close()
 
 
-class EmulatedBoard(BoardFaults, BoardPlant, BoardProbes):
+class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
     """The firmware ELF on an emulated ATmega2560 driving the plant model of the hand.
 
     ``realtime=True`` (the default) starts a thread that runs the board paced to the wall
@@ -256,44 +258,6 @@ class EmulatedBoard(BoardFaults, BoardPlant, BoardProbes):
         """Simulated seconds since power-on (the MCU's cycle count / 16 MHz)."""
         return self._cycle / F_CPU_HZ
 
-    def _run_plant(self, target: int, wake: int = -1) -> None:
-        """Run in lockstep with the plant up to cycle ``target``, all in C: each exchange
-        period the MCU runs with the encoders as the plant had them at its start, then the
-        plant runs the same period with the pins as the MCU had set them at its start.
-        ``wake`` (a byte value): stop early after the period in which the board sent it."""
-        if wake < 0:
-            status = self._native.run_plant(target, self._period_cycles)
-        else:
-            status = self._native.run_plant_until(target, self._period_cycles, wake)
-        self._cycle = self._native.cycle
-        if status != self._status:
-            self._status = status
-            self.crash_pc = self._native.pc if status == 1 else None
-
-    def _exchange(self) -> None:
-        """One lockstep period."""
-        self._run_plant(self._cycle + self._period_cycles)
-
-    def _run_driven(
-        self, seconds: float, until: Callable[[EmulatedBoard], bool] | None = None
-    ) -> bool:
-        target = self._cycle + round(seconds * F_CPU_HZ)
-        t0 = time.perf_counter()
-        try:
-            if until is None:
-                while self._cycle < target:  # one call; again only if a crash stopped it
-                    self._run_plant(target)
-                return False
-            while self._cycle < target:  # the predicate is judged between exchanges
-                self._exchange()
-                if until(self):
-                    return True
-            return False
-        finally:
-            dt = time.perf_counter() - t0
-            self._busy += dt
-            self._driven_wall += dt
-
     def run_for(self, seconds: float) -> None:
         """Advance the simulation by ``seconds``: at once when driven, and by waiting for the
         board thread in real time."""
@@ -305,39 +269,6 @@ class EmulatedBoard(BoardFaults, BoardPlant, BoardProbes):
                 self._run_driven(seconds)
             return
         self.wait_until(lambda b: True, timeout=None, after=seconds)
-
-    def run_until_output(
-        self, seconds: float, until: Callable[[], bool] | None = None, byte: int = 0
-    ) -> bool:
-        """Driven: run ``seconds`` of simulated time in whole exchanges (the last one may pass
-        it), stopping after each exchange in which the board sent ``byte`` (0x00 by default,
-        the end of every protocol frame) to the captured output, where ``until()`` says whether
-        to end there (None: end at the first). In C between those stops however long the
-        wait: a client looks at the output when a frame has come, not at every exchange (as
-        ``run_until`` does). Returns whether it ended early."""
-        if self.realtime:
-            raise EmulatorError("run_until_output needs realtime=False; in real time read the port")
-        if not (isinstance(seconds, int | float) and math.isfinite(seconds) and seconds >= 0):
-            raise EmulatorError(f"seconds must be a finite number >= 0, got {seconds!r}")
-        if not (isinstance(byte, int) and 0 <= byte <= 255):
-            raise EmulatorError(f"byte must be 0..255, got {byte!r}")
-        if not self._capture:
-            raise EmulatorError("run_until_output needs capture=True")
-        with self._lock:
-            self._board()
-            period = self._period_cycles
-            target = self._cycle - (-round(seconds * F_CPU_HZ) // period) * period
-            t0 = time.perf_counter()
-            try:
-                while self._cycle < target:
-                    self._run_plant(target, byte)
-                    if self._cycle < target and (until is None or until()):
-                        return True
-                return False
-            finally:
-                dt = time.perf_counter() - t0
-                self._busy += dt
-                self._driven_wall += dt
 
     def run_until(self, predicate: Callable[[EmulatedBoard], bool], timeout: float) -> bool:
         """Run (driven) or wait (real time) until ``predicate(board)`` holds, at most ``timeout``
