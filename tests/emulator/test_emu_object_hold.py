@@ -18,14 +18,17 @@ from utrf.models import objects
 def test_the_object_grasp_holds_it_through_a_tap(
     name: str, firmware_elf: Path, tmp_path: Path
 ) -> None:
-    """The object's own grasp (objects.toml: pose, effort, rest position) closes on it by
-    contact and holds it palm down through a hammer tap; the egg stays intact."""
+    """The object's own grasp (objects.toml: pose, effort, rest position, the thumb) closes on
+    it by contact and holds it palm down through a hammer tap; the egg stays intact; on the
+    ball the thumb, meeting it from the heel of the palm, opposes the fingers."""
     config = oh.ObjectHoldConfig(object=name, duration_s=3.0, hits=1, picture=False)
     result = oh.run(config, tmp_path / "run", elf=firmware_elf, progress=lambda s: None)
     assert not result["dropped"], oh.describe(result)
     assert result["slip_mm"] < 5.0
     assert sum(f > 1.0 for f in result["closed_contact_forces_n"]) >= 2  # fingers on it
-    assert result["largest_contact_force_n"]["thumb"] == 0.0  # the thumb stays open
+    assert objects.get_object(name).grasp_thumb  # the thumb closes too
+    if name == "ball":
+        assert result["closed_contact_forces_n"][0] > 1.0  # and presses on it
     assert len(result["hits"]) == 1
     assert result["broke"] is (False if name == "egg" else None)
     saved = json.loads((tmp_path / "run" / "results.json").read_text())

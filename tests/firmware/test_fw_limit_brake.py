@@ -53,8 +53,9 @@ def pushed(elf: Path, *, coast: bool, force_n: float = 0.0, impulse_ns: float = 
 def test_a_push_past_the_limit_is_slowed_by_the_brake(firmware_elf: Path, force_n: float) -> None:
     braked = pushed(firmware_elf, coast=False, force_n=force_n)
     coasted = pushed(firmware_elf, coast=True, force_n=force_n)
-    # Measured: 4 N: 1.5 against 8.9 rad/s at 0.6 rad, peak 0.698 against 0.810 rad;
-    # 8 N: 3.7 against 13.0 rad/s, 0.703 against 0.827 rad. Both end at the stroke's end.
+    # Measured (MuJoCo plant): 4 N: 1.5 against 8.6 rad/s at 0.6 rad, peak 0.698 against
+    # 0.809 rad; 8 N: 3.7 against 12.7 rad/s, 0.705 against 0.821 rad. Both end at the
+    # stroke's end.
     assert braked["speed_at_0.6"] < coasted["speed_at_0.6"] / 3
     assert braked["peak"] < coasted["peak"] - 0.08
 
@@ -62,7 +63,9 @@ def test_a_push_past_the_limit_is_slowed_by_the_brake(firmware_elf: Path, force_
 def test_a_blow_past_the_limit_is_damped_by_the_brake(firmware_elf: Path) -> None:
     braked = pushed(firmware_elf, coast=False, impulse_ns=0.2)
     coasted = pushed(firmware_elf, coast=True, impulse_ns=0.2)
-    # Measured: braked, the finger comes to rest at 0.16 rad; coasting, it swings back to
-    # -0.35 rad, past where it started (0.25).
+    # Measured (MuJoCo plant): braked, the finger comes to rest at 0.08 rad, near where it
+    # started (0.25); coasting, the blow's bounces between the two tendons send both carriages
+    # off, both tendons go slack and the finger falls on into flexion (1.54 rad after 0.6 s).
+    # (On the analytic plant, whose tendons damp the bounces, it swung back to -0.35 rad.)
     assert braked["end"] > 0.0
-    assert coasted["end"] < braked["end"] - 0.3
+    assert abs(coasted["end"] - 0.25) > abs(braked["end"] - 0.25) + 0.3

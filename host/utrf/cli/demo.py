@@ -2,8 +2,7 @@
 firmware (``build/firmware/utrf.elf``, ``make firmware``) running on the emulated board.
 
 Starts the emulated board (simavr, paced to the wall clock so you can watch; the plant is the
-analytic finger model unless ``--plant mujoco``: in the MuJoCo twin the thumb, which does not
-yet oppose the fingers, strikes the flexed index in the fist and latches STALL), connects a
+MuJoCo hand, ``--plant analytic`` the one-degree-of-freedom finger model it replaced), connects a
 Hand to it over its socket as to a real MEGA, moves through the poses (one move each: the board
 runs the minimum-jerk paths, the pose's duration; then settling) with a live table on a
 terminal (a line per pose elsewhere), and writes to ``--out`` (default ``out/demo``): a picture
@@ -186,9 +185,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--plant",
         choices=("mujoco", "analytic"),
-        default="analytic",
-        help="the emulated hand: the analytic plant (default) or the MuJoCo twin (its thumb "
-        "strikes the index in the fist: issue 10)",
+        default="mujoco",
+        help="the emulated hand: the MuJoCo twin (default) or the analytic finger model",
     )
     p.add_argument("--no-live", action="store_true", help="no live table, a line per pose")
     p.set_defaults(handler=run)

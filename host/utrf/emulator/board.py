@@ -46,7 +46,7 @@ if TYPE_CHECKING:
 # ELF given, the board takes utrf.artifacts.firmware_elf() (this, or a cached build).
 DEFAULT_ELF = artifacts.CHECKOUT_ELF
 EXCHANGE_PERIOD_S = 250e-6
-MUJOCO_EXCHANGE_PERIOD_S = 1e-3  # the MJCF's own timestep: one mj_step per exchange
+MUJOCO_EXCHANGE_PERIOD_S = 1e-3  # one exchange per control tick; MuJoCo steps 0.5 ms twice
 #: real time: simulated time the board thread runs per hold of the lock (sim_time moves by it)
 SERVE_BATCH_S = 1e-3
 
@@ -115,7 +115,7 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
         auto_reset_hold: float = 0.1,
         capture: bool | None = None,
         exchange_period: float | None = None,
-        plant: str | HandPlant | Any = "analytic",
+        plant: str | HandPlant | Any = "mujoco",
     ) -> None:
         if elf is None:
             try:
@@ -128,7 +128,7 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
             raise EmulatorError(
                 f"speed must be a factor > 0 or None (as fast as possible), got {speed!r}"
             )
-        if exchange_period is None:  # MuJoCo steps once per exchange: its own 1 ms step
+        if exchange_period is None:  # the MuJoCo plant: one exchange per 1 ms control tick
             exchange_period = (
                 MUJOCO_EXCHANGE_PERIOD_S
                 if plant == "mujoco" or hasattr(plant, "set_timestep")
@@ -159,7 +159,7 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
             raise EmulatorError(f"plant must be 'analytic', 'mujoco' or a plant, got {plant!r}")
         else:
             self.plant = plant
-        if hasattr(self.plant, "set_timestep"):  # MuJoCo steps once per exchange
+        if hasattr(self.plant, "set_timestep"):  # MuJoCo cuts the exchange into its steps
             self.plant.set_timestep(round(exchange_period * F_CPU_HZ) / F_CPU_HZ)
         self._lock = threading.RLock()
         self._tick = threading.Condition()

@@ -3,10 +3,11 @@
 The model is :func:`utrf.models.mjcf.hand_xml` with ``drive="force"`` (each actuator's
 control is its motor's force, N), optionally with an object of :mod:`utrf.models.objects`.
 The mujoco package owns the ``MjModel`` and ``MjData``; the harness (``harness/mjplant.c``)
-steps them in C in lockstep with the MCU, one ``mj_step`` per exchange (the model's timestep
-is set to the board's exchange period): the TB6612FNG truth table and the DC motor's
-electrical model (:class:`~utrf.emulator.plant.MotorParams`) turn the firmware's pins into the
-actuators' forces, and Joint 2's angle becomes the AS5600's analog voltage
+steps them in C in lockstep with the MCU, as many ``mj_step`` per exchange as the MJCF's
+timestep (0.5 ms) fits in the board's exchange period (1 ms: two): the TB6612FNG truth
+table and the DC motor's electrical model (:class:`~utrf.emulator.plant.MotorParams`) turn
+the firmware's pins into the actuators' forces, and Joint 2's angle becomes the AS5600's
+analog voltage
 (:class:`~utrf.emulator.plant.EncoderParams`: 12-bit, 10-90 % band, seeded noise). Everything
 MuJoCo knows (poses, contacts, the object) is live in :attr:`MujocoPlant.data`.
 
@@ -69,6 +70,7 @@ def twin_layout(params: PlantParams) -> mjcf.Layout:
         coulomb_friction_n=mot.coulomb_friction_n,
         viscous_friction_n_s_m=mot.viscous_friction_n_s_m,
         stroke_m=(float(mot.stroke_m[0]), float(mot.stroke_m[1])),
+        peak_force_n=mot.peak_force_n,
     )
     return dataclasses.replace(mjcf.load_layout(), motor=motor)
 
@@ -126,7 +128,10 @@ class MujocoPlant(_FingerPlant):
             )
         self.xml = xml
         self.model = mujoco.MjModel.from_xml_string(xml)
-        self.model.opt.timestep = float(timestep)
+        #: the longest step MuJoCo takes (the MJCF's timestep): an exchange is cut into steps
+        #: no longer than this
+        self.max_step_s = float(self.model.opt.timestep)
+        self.set_timestep(timestep)
         if self.object is not None:
             # a grasp's friction: elliptic cones and a high impratio keep the contacts from
             # creeping under a steady load (MuJoCo's own advice for grasping)
@@ -134,6 +139,12 @@ class MujocoPlant(_FingerPlant):
             self.model.opt.impratio = IMPRATIO
         if tuple(self.params.gravity_m_s2) == (0.0, 0.0):
             self.model.opt.gravity[:] = 0.0
+        # The actuators take the force K i the motor model gives, up to the driver's peak
+        # current (MotorParams.peak_force_n): a back-driven motor brakes with more than its
+        # stall force. (Clipped at the stall force, a hammer hit on a fingertip sent the
+        # antagonist's carriage off with nothing but 100 N to stop it.)
+        self.force_limit_n = self.params.motor.peak_force_n
+        self.model.actuator_ctrlrange[:] = (-self.force_limit_n, self.force_limit_n)
         self.data = mujoco.MjData(self.model)
         mujoco.mj_forward(self.model, self.data)
         m = self.model
@@ -184,7 +195,7 @@ class MujocoPlant(_FingerPlant):
             mot.resistance_ohm,
             mot.electrical_time_constant_s,
         )
-        c.stall_force = mot.stall_force_n
+        c.stall_force = self.force_limit_n  # the force limit: K times the driver's peak current
         _put_encoder(c, enc)
         return c
 
@@ -194,14 +205,16 @@ class MujocoPlant(_FingerPlant):
         return self._native
 
     def set_timestep(self, seconds: float) -> None:
-        """MuJoCo steps once per exchange: its timestep is the board's exchange period."""
-        self.model.opt.timestep = float(seconds)
+        """The board's exchange period: MuJoCo takes ``substeps`` equal steps in each, none
+        longer than the MJCF's timestep (the harness counts them from the model's timestep)."""
+        self.substeps = max(1, math.ceil(float(seconds) / self.max_step_s - 1e-9))
+        self.model.opt.timestep = float(seconds) / self.substeps
 
     def close(self) -> None:
         self._native.close()
 
     def step(self, dt: float, pins: np.ndarray | None = None) -> None:
-        """One MuJoCo step of ``dt`` (the model's timestep) with the pins held."""
+        """One exchange period ``dt`` (``substeps`` MuJoCo steps) with the pins held."""
         if dt > 0:
             self._native.step(float(dt), None if pins is None else np.asarray(pins, float))
 

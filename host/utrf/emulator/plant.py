@@ -77,7 +77,10 @@ class MotorParams:
     100 N stall force and 50 mm/s no-load speed at 12 V (stall current 0.42 A, within the
     TB6612's 1.2 A), 0.5 ms electrical time constant, 20 kg of rotor inertia reflected through
     the lead screw (a 10 ms mechanical time constant), 1.5 N Coulomb friction (backdrivable:
-    the antagonist's tendon pulls it back), 50 mm stroke centred on the straight finger."""
+    the antagonist's tendon pulls it back), 50 mm stroke centred on the straight finger. The
+    TB6612FNG's 3.2 A peak output current bounds the force (``peak_force_n``): a back-driven
+    motor brakes with more than its stall force, i = (u V − K v) / R passing the stall current
+    when v runs against u."""
 
     supply_v: float = 12.0
     stall_force_n: float = 100.0
@@ -87,10 +90,12 @@ class MotorParams:
     coulomb_friction_n: float = 1.5
     viscous_friction_n_s_m: float = 5.0
     stroke_m: tuple[float, float] = (-0.025, 0.025)
+    driver_peak_current_a: float = 3.2
 
     def __post_init__(self) -> None:
         for name in (
             "supply_v",
+            "driver_peak_current_a",
             "stall_force_n",
             "no_load_speed_m_s",
             "electrical_time_constant_s",
@@ -119,6 +124,12 @@ class MotorParams:
     @property
     def resistance_ohm(self) -> float:
         return self.supply_v / self.stall_current_a
+
+    @property
+    def peak_force_n(self) -> float:
+        """The most force the motor gives or brakes with: K times the driver's peak current
+        (never below the stall force)."""
+        return max(self.force_constant_n_a * self.driver_peak_current_a, self.stall_force_n)
 
 
 @dataclass(frozen=True)

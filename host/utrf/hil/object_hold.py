@@ -227,11 +227,12 @@ def _close(
     hand: Any, s: _Sampler, config: ObjectHoldConfig, progress: Any
 ) -> tuple[np.ndarray, float]:
     """The grasp pose's closing fingers close on the object in GRASP with the effort, each
-    heading for (almost) full flexion: it stops on the object. The thumb stays open: in the
-    MJCF layout it does not oppose the fingers, and closing it pushes the object off the palm
-    (measured), so the four fingers cage the object against the palm. Waits until the fingers
-    have stopped (they reach the object after the path's time: measured). Returns the contact
-    forces once closed and the effort."""
+    heading for (almost) full flexion: it stops on the object. The thumb closes with them when
+    the object says so (``grasp_thumb``: the ball and the egg, which it meets from the heel of
+    the palm); otherwise the four fingers cage the object against the palm and the thumb stays
+    open (on the box it pushed the box's end and the box slipped more: measured). Waits until
+    the fingers have stopped (they reach the object after the path's time: measured). Returns
+    the contact forces once closed and the effort."""
     from utrf.protocol import messages as m
 
     plant = s.plant
@@ -242,7 +243,8 @@ def _close(
     if effort is None:
         effort = plant.object.grasp_effort or pose.grasp.effort
     goal = pose.theta2(hand.geometry)
-    closing = [i for i in range(1, 5) if goal[i] > 0.2]
+    thumb = plant.object.grasp_thumb
+    closing = [i for i in range(5) if goal[i] > 0.2 and (i > 0 or thumb)]
     hand.clear_faults()
     plant.hold_object(True)  # an operator keeps it in place while the fingers close
     progress(

@@ -303,9 +303,12 @@ def _add_finger(
 def _actuator(
     root: ET.Element, name: str, joint: str, gear: float, mot: MotorConstants, drive: str
 ) -> None:
-    f = mot.stall_force_n
+    f, peak = mot.stall_force_n, mot.peak_force_n
     if drive == "duty":
-        # DC motor at duty u: F = F_stall (u − v / v0); v is the actuator's (rim) speed.
+        # DC motor at duty u: F = F_stall (u − v / v0); v is the actuator's (rim) speed. Driven
+        # against its motion it brakes with more than F_stall, up to the driver's peak current
+        # (clipped at F_stall, a finger at its stop made the carriage chatter, undamped on
+        # every backward swing).
         _sub(
             root,
             "general",
@@ -313,7 +316,7 @@ def _actuator(
             joint=joint,
             gear=xml_numbers(gear),
             ctrlrange="-1 1",
-            forcerange=xml_numbers(-f, f),
+            forcerange=xml_numbers(-peak, peak),
             gainprm=xml_numbers(f),
             biastype="affine",
             biasprm=xml_numbers(0.0, 0.0, -f / mot.no_load_speed_m_s),
@@ -326,7 +329,7 @@ def _actuator(
             joint=joint,
             gear=xml_numbers(gear),
             ctrlrange=xml_numbers(-f, f),
-            forcerange=xml_numbers(-f, f),
+            forcerange=xml_numbers(-peak, peak),
         )
 
 

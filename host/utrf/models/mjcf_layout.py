@@ -30,16 +30,22 @@ class FingerPlacement:
     position_m: tuple[float, float, float]
     yaw_rad: float
     roll_rad: float
+    pitch_rad: float = 0.0
 
     def rotation(self) -> np.ndarray:
-        """Finger frame axes (columns x, y, z) in the palm frame."""
+        """Finger frame axes (columns x, y, z) in the palm frame: yaw about the palm's z, then
+        pitch (positive: the finger's axis tilts up out of the palm's plane), then roll about
+        the finger's own axis."""
         cy, sy = math.cos(self.yaw_rad), math.sin(self.yaw_rad)
+        cp, sp = math.cos(self.pitch_rad), math.sin(self.pitch_rad)
         cr, sr = math.cos(self.roll_rad), math.sin(self.roll_rad)
         yaw = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+        # Positive pitch turns the axis from +x toward +z (about the palm's −y).
+        pitch = np.array([[cp, 0.0, -sp], [0.0, 1.0, 0.0], [sp, 0.0, cp]])
         # The finger's (x, y, z) at yaw = roll = 0 is (x, z, −y) of the palm: it flexes up.
         base = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
         roll = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
-        return yaw @ base @ roll
+        return yaw @ pitch @ base @ roll
 
     def quat(self) -> np.ndarray:
         q = np.zeros(4)
@@ -55,6 +61,7 @@ class MotorConstants:
     coulomb_friction_n: float
     viscous_friction_n_s_m: float
     stroke_m: tuple[float, float]
+    peak_force_n: float  # the force bound: a back-driven motor brakes with more than stall
 
 
 @dataclass(frozen=True)
@@ -136,6 +143,7 @@ def load_layout(path: str | Path | None = None) -> Layout:
             position_m=_vec(t, "position_m", where, 3),  # type: ignore[arg-type]  # _vec checked the length
             yaw_rad=math.radians(_num(t, "yaw_deg", where, bound="any")),
             roll_rad=math.radians(_num(t, "roll_deg", where, bound="any")),
+            pitch_rad=math.radians(_num({"pitch_deg": 0.0, **t}, "pitch_deg", where, bound="any")),
         )
     size = _vec(palm, "size_m", f"{src} [palm]", 3)
     if min(size) <= 0:
@@ -166,6 +174,7 @@ def load_layout(path: str | Path | None = None) -> Layout:
             coulomb_friction_n=_num(motor, "coulomb_friction_n", w, bound="nonnegative"),
             viscous_friction_n_s_m=_num(motor, "viscous_friction_n_s_m", w, bound="nonnegative"),
             stroke_m=stroke,  # type: ignore[arg-type]  # _vec checked the length
+            peak_force_n=_num(motor, "peak_force_n", w),
         ),
         pulley_radius_m=_num(rotary, "pulley_radius_m", f"{src} [rotary]"),
         dynamics=Dynamics(

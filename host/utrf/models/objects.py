@@ -10,7 +10,8 @@
   with the fingers, the palm and other objects.
 
 Each object also says how the emulated grasp hold takes it (``grasp_pose``, ``grasp_effort``,
-``rest_position_m`` and ``rest_axis``: where it rests on the palm-up hand).
+``grasp_thumb``: whether the thumb closes on it too; ``rest_position_m`` and ``rest_axis``:
+where it rests on the palm-up hand).
 A fragile object has a ``breaking_force_n``: the largest contact force it survives (the
 simulation reports breakage; MuJoCo does not break it).
 """
@@ -37,6 +38,7 @@ _KEYS = {
     "breaking_force_n",
     "grasp_pose",
     "grasp_effort",
+    "grasp_thumb",
     "rest_position_m",
     "rest_axis",
 }
@@ -65,6 +67,7 @@ class GraspObject:
     breaking_force_n: float | None = None  # None: not fragile
     grasp_pose: str | None = None  # the pose library's grasp that holds it
     grasp_effort: float | None = None  # None: the pose's own
+    grasp_thumb: bool = False  # the thumb closes on it too (else the four fingers cage it)
     rest_position_m: tuple[float, float, float] | None = None  # on the palm-up hand, world
     rest_axis: str = "z"  # the world axis its own z axis points along there
 
@@ -115,6 +118,9 @@ def parse_object(name: str, table: Mapping[str, Any], source: str = "<dict>") ->
         isinstance(effort, int | float) and not isinstance(effort, bool) and 0 < effort <= 1
     ):
         raise ObjectError(f"{where}: grasp_effort must lie in (0, 1], got {effort!r}")
+    thumb = table.get("grasp_thumb", False)
+    if not isinstance(thumb, bool):
+        raise ObjectError(f"{where}: grasp_thumb must be true or false, got {thumb!r}")
     rest = table.get("rest_position_m")
     if rest is not None:
         rest = _vector(rest, 3, f"{where}: rest_position_m")
@@ -131,6 +137,7 @@ def parse_object(name: str, table: Mapping[str, Any], source: str = "<dict>") ->
         breaking_force_n=None if breaking is None else _positive(table, "breaking_force_n", where),
         grasp_pose=pose,
         grasp_effort=None if effort is None else float(effort),
+        grasp_thumb=thumb,
         rest_position_m=None if rest is None else (rest[0], rest[1], rest[2]),
         rest_axis=str(axis),
     )

@@ -11,7 +11,8 @@
  * the circuit open); the DC motor's current follows L di/dt = u V − R i − K v exactly over
  * the period with the carriage speed v held (from MuJoCo's state); its force K i is the
  * actuator's control; tip loads and hammer pulses go into xfrc_applied at their points; then
- * one mj_step (the model's timestep is the exchange period). Joint 2's angle gives the
+ * mj_step, as many times as the model's timestep fits in the exchange period (two of 0.5 ms
+ * in the default 1 ms exchange), the pins held. Joint 2's angle gives the
  * AS5600's analog voltage: 12-bit quantisation, 10-90 % band, seeded Gaussian noise.
  */
 #define _GNU_SOURCE
@@ -49,6 +50,10 @@ struct utrf_mjplant {
     double decay, decay_dt;
     mj_pulse_t pulses[MAX_PULSES];
     int n_pulses;
+    /* bodies whose xfrc_applied the last step wrote (loads and pulses): cleared before the
+     * next, so a pulse that has ended leaves no force behind */
+    int written[MAX_PULSES + UTRF_MJPLANT_LOADS];
+    int n_written;
     utrf_rng_t rng;
     utrf_as5600_t enc;
 };
@@ -159,6 +164,8 @@ int utrf_mjplant_pulses(const utrf_mjplant_t *mp)
 static void apply_at(utrf_mjplant_t *mp, int body, int site, const double *force, double scale)
 {
     const mjData *d = mp->d;
+    if (mp->n_written < MAX_PULSES + UTRF_MJPLANT_LOADS)
+        mp->written[mp->n_written++] = body;
     double *x = mp->d->xfrc_applied + 6 * body;
     const double *com = d->xipos + 3 * body;
     const double *pt = site >= 0 ? d->site_xpos + 3 * site : com;
@@ -175,11 +182,10 @@ static void apply_at(utrf_mjplant_t *mp, int body, int site, const double *force
 static void apply_loads(utrf_mjplant_t *mp, double dt)
 {
     utrf_mjplant_state_t *st = &mp->st;
-    for (int i = 0; i < UTRF_MJPLANT_LOADS; i++) /* clear what the loads wrote last time */
-        if (st->load_body[i] >= 0)
-            memset(mp->d->xfrc_applied + 6 * (int)st->load_body[i], 0, 6 * sizeof(double));
-    for (int i = 0; i < mp->n_pulses; i++)
-        memset(mp->d->xfrc_applied + 6 * mp->pulses[i].body, 0, 6 * sizeof(double));
+    /* clear what the loads and pulses wrote last step (a pulse that ended then included) */
+    for (int i = 0; i < mp->n_written; i++)
+        memset(mp->d->xfrc_applied + 6 * mp->written[i], 0, 6 * sizeof(double));
+    mp->n_written = 0;
     for (int i = 0; i < UTRF_MJPLANT_LOADS; i++) {
         if (st->load_body[i] < 0)
             continue;
@@ -213,27 +219,37 @@ void utrf_mjplant_step(utrf_mjplant_t *mp, double dt, const double *pins)
         return;
     if (pins)
         decode(mp, pins);
-    if (dt != mp->decay_dt) {
-        mp->decay_dt = dt;
-        mp->decay = exp(-dt / mp->p.electrical_time_constant);
+    /* As many mj_steps as the model's timestep fits in dt (the exchange period: 1 ms, two
+     * steps of the MJCF's 0.5 ms), the pins held; the motors' currents follow each step. */
+    double ts = mp->m->opt.timestep;
+    int n = ts > 0.0 ? (int)lround(dt / ts) : 1;
+    if (n < 1)
+        n = 1;
+    double h = dt / n;
+    if (h != mp->decay_dt) {
+        mp->decay_dt = h;
+        mp->decay = exp(-h / mp->p.electrical_time_constant);
     }
-    const double K = mp->p.force_constant, R = mp->p.resistance, stall = mp->p.stall_force;
-    for (int f = 0; f < F; f++) {
-        for (int c = 0; c < 2; c++) {
-            int act = mp->p.actuator[f][c];
-            if (act < 0)
-                continue;
-            double v = mp->p.gear[f][c] * mp->d->qvel[mp->p.dof[f][c]]; /* pulling speed */
-            double i_ss = (mp->voltage[f][c] - K * v) / R;
-            double i = (i_ss + (mp->st.current[f][c] - i_ss) * mp->decay) * mp->connected[f][c];
-            mp->st.current[f][c] = i;
-            double force = K * i;
-            mp->d->ctrl[act] = force > stall ? stall : force < -stall ? -stall : force;
+    const double K = mp->p.force_constant, R = mp->p.resistance, limit = mp->p.stall_force;
+    for (int k = 0; k < n; k++) {
+        for (int f = 0; f < F; f++) {
+            for (int c = 0; c < 2; c++) {
+                int act = mp->p.actuator[f][c];
+                if (act < 0)
+                    continue;
+                double v = mp->p.gear[f][c] * mp->d->qvel[mp->p.dof[f][c]]; /* pulling speed */
+                double i_ss = (mp->voltage[f][c] - K * v) / R;
+                double i = (i_ss + (mp->st.current[f][c] - i_ss) * mp->decay) *
+                           mp->connected[f][c];
+                mp->st.current[f][c] = i;
+                double force = K * i; /* within the driver's peak current (params) */
+                mp->d->ctrl[act] = force > limit ? limit : force < -limit ? -limit : force;
+            }
         }
+        apply_loads(mp, h);
+        mp->step(mp->m, mp->d);
+        mp->st.time += h;
     }
-    apply_loads(mp, dt);
-    mp->step(mp->m, mp->d);
-    mp->st.time += dt;
 #else
     (void)mp;
     (void)dt;
