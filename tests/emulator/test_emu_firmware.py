@@ -204,13 +204,14 @@ def test_control_tick_profile(board: EmulatedBoard, client: LinkClient) -> None:
 
 
 def test_quiet_pwm_timers_change_nothing_the_firmware_sees(firmware_elf: Path) -> None:
-    """simavr's events of the PWM timers whose interrupts are off and whose counter is never
-    read are left out (harness/timers.c): the firmware streams the same frames at the same
-    times and controls the same way. (Not to the bit: simavr ends each idle skip one cycle past
-    the event that wakes it, so fewer events shift wake-ups by a few cycles, and a reading
-    on a count's edge may differ by one count.)"""
+    """simavr's events of the PWM timers whose interrupts are off are left out
+    (harness/timers.c): the firmware streams the same frames at the same times and controls
+    the same way, and its tick timing from TCNT1 (timer 1 quiet too) reads the same. (Not to
+    the bit: simavr ends each idle skip one cycle past the event that wakes it, so fewer
+    events shift wake-ups by a few cycles, and a reading on a count's edge may differ by one
+    count.)"""
 
-    def run(quiet: bool) -> tuple[list[m.State], np.ndarray, int]:
+    def run(quiet: bool) -> tuple[list[m.State], np.ndarray, int, m.Stats]:
         with EmulatedBoard(firmware_elf, realtime=False, plant_params=QUIET) as b:
             b._native.set_quiet_timers(quiet)
             c = LinkClient(b)
@@ -226,10 +227,14 @@ def test_quiet_pwm_timers_change_nothing_the_firmware_sees(firmware_elf: Path) -
             )  # fmt: skip
             c.run(1.0)
             states = [s for s in c.stream if isinstance(s, m.State)]
-            return states, b.theta2.copy(), b.stats["quieted_timer_events"]
+            return states, b.theta2.copy(), b.stats["quieted_timer_events"], c.request(m.GetStats())
 
-    (quiet, th_q, n_q), (loud, th_l, n_l) = run(True), run(False)
+    (quiet, th_q, n_q, fw_q), (loud, th_l, n_l, fw_l) = run(True), run(False)
     assert n_q > 0 and n_l == 0
+    # the tick's own timing, from TCNT1 and TCNT2: a stale count would put it off by periods
+    assert fw_q.ticks == fw_l.ticks and fw_q.tick_overruns == fw_l.tick_overruns == 0
+    assert abs(fw_q.tick_worst - fw_l.tick_worst) <= 2e-6
+    assert abs(fw_q.tick_mean - fw_l.tick_mean) <= 2e-6
     assert [s.board_time for s in quiet] == [s.board_time for s in loud]  # same frames, times
     count = 2 * np.pi / (1024 * 0.8)  # one ADC count of Joint 2 (80 % of a turn): 7.7 mrad
     diff = np.array([np.subtract(a.theta2, b.theta2) for a, b in zip(quiet, loud, strict=True)])
