@@ -241,3 +241,32 @@ def test_quiet_pwm_timers_change_nothing_the_firmware_sees(firmware_elf: Path) -
     assert np.abs(diff).max() <= count * 1.01
     np.testing.assert_allclose(th_q, th_l, atol=0.01)
     np.testing.assert_allclose(th_q, 0.5, atol=0.03)  # both reached the targets
+
+
+def test_simlink_looks_at_the_output_per_frame(firmware_elf: Path) -> None:
+    """Driven, SimLink runs the board in C from one frame to the next
+    (``run_until_output``): one crossing per frame and heartbeat, not one per millisecond."""
+    from utrf.hand.simlink import SimLink
+
+    with EmulatedBoard(firmware_elf, realtime=False, plant_params=QUIET) as board:
+        got: list[float] = []
+        link = SimLink(
+            board, on_telemetry=lambda t: got.append(t.received_s)
+            if isinstance(t.message, m.State) else None,
+        )  # fmt: skip
+        link.handshake()
+        link.request(m.SetTelemetry(rate_hz=100))
+        link.sleep(0.05)
+        native = board._native
+        calls = [0]
+        run = native.run_plant_until
+
+        def counted(*args: int) -> int:
+            calls[0] += 1
+            return run(*args)
+
+        native.run_plant_until = counted  # type: ignore[method-assign]
+        got.clear()
+        link.sleep(1.0)
+        assert 99 <= len(got) <= 101  # the 100 Hz stream, every frame delivered
+        assert len(got) <= calls[0] < 1.5 * len(got)  # plus heartbeats' acks, not 1000
