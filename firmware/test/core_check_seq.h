@@ -64,6 +64,27 @@ inline uint32_t product_mismatches() {
             bad += fx::prod_lo16(q) != (int16_t)p;
         }
     }
+    // apply(): x * gain, every shift, against the 32-bit product shifted
+    const float gains[] = {0.37f, 2.5f, 100.3f, 838.9f, 12345.0f, 1.6e6f, 8.4e7f, 4.0e9f};
+    for (uint8_t k = 0; k < sizeof gains / sizeof gains[0]; ++k) {
+        const fx::Gain g = fx::make_gain(gains[k], 1L << 30);
+        for (int32_t x = -32768; x < 32768; x += 7) {
+            int32_t want;
+            if (x > g.xlim) {
+                want = 1L << 30;
+            } else if (x < -g.xlim) {
+                want = -(1L << 30);
+            } else {
+                const int32_t p = fx::mul_su((int16_t)x, g.m);
+                want = g.shift == 16  ? (int32_t)((uint32_t)p << 16)
+                       : g.shift == 8 ? (int32_t)((uint32_t)p << 8)
+                       : g.shift == 0 ? p
+                       : g.shift == -8 ? p >> 8
+                                       : p >> 16;
+            }
+            bad += fx::apply(g, (int16_t)x, 1L << 30) != want;
+        }
+    }
     return bad;
 }
 
