@@ -309,6 +309,7 @@ uint16_t fw_encoder_turn_from_rad(double rad) { return encoder::turn_from_rad((f
 
 uint16_t fw_config_image_bytes(void) { return config::kImageBytes; }
 uint32_t fw_core_check(void) { return check::core_check_run(); }
+uint32_t fw_product_mismatches(void) { return check::product_mismatches(); }
 uint16_t fw_config_body_bytes(void) { return sizeof(config::Config); }
 
 }  // extern "C"

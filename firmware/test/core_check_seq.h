@@ -35,6 +35,59 @@ struct Lcg {
     }
 };
 
+// The slices of a 16 x 16 product taken from its 8 x 8 pieces (fixed.h, ProdSU) against the
+// 32-bit product, for a's of every high byte and low byte pattern against a sweep of b's:
+// the number of slices that differ (0 expected).
+inline uint32_t product_mismatches() {
+    uint32_t bad = 0;
+    for (int32_t a = -32768; a < 32768; a += 37) {
+        for (int32_t b = 0; b < 65536; b += 251) {
+            const int32_t p = fx::mul_su((int16_t)a, (uint16_t)b);
+            const fx::ProdSU q = fx::prod_su((int16_t)a, (uint16_t)b);
+            bad += fx::prod_hi16(q) != (int16_t)(p >> 16);
+            bad += fx::prod_hi16(q, true) != (int16_t)((p + 32768L) >> 16);
+            bad += fx::prod_mid16(q) != (int16_t)(p >> 8);
+            bad += fx::prod_lo16(q) != (int16_t)p;
+        }
+    }
+    // and the edges: a and b at their extremes and next to them
+    const int32_t as[] = {-32768, -32767, -257, -256, -255, -129, -128, -1, 0, 1, 127, 128,
+                          255, 256, 32766, 32767};
+    const int32_t bs[] = {0, 1, 127, 128, 255, 256, 257, 32767, 32768, 65279, 65280, 65534, 65535};
+    for (uint8_t i = 0; i < sizeof as / sizeof as[0]; ++i) {
+        for (uint8_t j = 0; j < sizeof bs / sizeof bs[0]; ++j) {
+            const int32_t p = fx::mul_su((int16_t)as[i], (uint16_t)bs[j]);
+            const fx::ProdSU q = fx::prod_su((int16_t)as[i], (uint16_t)bs[j]);
+            bad += fx::prod_hi16(q) != (int16_t)(p >> 16);
+            bad += fx::prod_hi16(q, true) != (int16_t)((p + 32768L) >> 16);
+            bad += fx::prod_mid16(q) != (int16_t)(p >> 8);
+            bad += fx::prod_lo16(q) != (int16_t)p;
+        }
+    }
+    // apply(): x * gain, every shift, against the 32-bit product shifted
+    const float gains[] = {0.37f, 2.5f, 100.3f, 838.9f, 12345.0f, 1.6e6f, 8.4e7f, 4.0e9f};
+    for (uint8_t k = 0; k < sizeof gains / sizeof gains[0]; ++k) {
+        const fx::Gain g = fx::make_gain(gains[k], 1L << 30);
+        for (int32_t x = -32768; x < 32768; x += 7) {
+            int32_t want;
+            if (x > g.xlim) {
+                want = 1L << 30;
+            } else if (x < -g.xlim) {
+                want = -(1L << 30);
+            } else {
+                const int32_t p = fx::mul_su((int16_t)x, g.m);
+                want = g.shift == 16  ? (int32_t)((uint32_t)p << 16)
+                       : g.shift == 8 ? (int32_t)((uint32_t)p << 8)
+                       : g.shift == 0 ? p
+                       : g.shift == -8 ? p >> 8
+                                       : p >> 16;
+            }
+            bad += fx::apply(g, (int16_t)x, 1L << 30) != want;
+        }
+    }
+    return bad;
+}
+
 inline uint32_t core_check_run() {
     Fnv f;
     Lcg r(12345);
@@ -45,6 +98,12 @@ inline uint32_t core_check_run() {
         f.add(fx::mul_uu(b, r.next()));
         f.add((uint32_t)fx::mul_q16((int32_t)(((uint32_t)r.next() << 16) | r.next()), r.next()));
         f.add((uint16_t)fx::au_from_bu((int16_t)(a >> 1)));
+        // The product's slices from its 8 x 8 pieces (the tick's P, D and filter).
+        const fx::ProdSU q = fx::prod_su(a, b);
+        f.add((uint16_t)fx::prod_hi16(q));
+        f.add((uint16_t)fx::prod_hi16(q, true));
+        f.add((uint16_t)fx::prod_mid16(q));
+        f.add((uint16_t)fx::prod_lo16(q));
     }
     // Byte products, and Q15 duty to PWM counts (both 8 x 8 multiplies on the AVR).
     for (uint16_t i = 0; i < 2000; ++i) {

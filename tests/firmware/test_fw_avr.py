@@ -85,6 +85,15 @@ def test_core_arithmetic_is_the_same_on_the_avr(built, fwlib: ctypes.CDLL) -> No
     assert int(found.group(1), 16) == fwlib.fw_core_check()
 
 
+def test_product_slices_from_byte_products_are_exact(fwlib: ctypes.CDLL) -> None:
+    """The tick's P, D and filter take slices of a 16 x 16 product from its four 8 x 8 pieces
+    (fixed.h, ProdSU): every slice equals the one of the 32-bit product, on a sweep of a
+    against b and at their edges; and a gain of each shift applied with its saturation equals
+    the 32-bit product shifted (the core check above shows the AVR computes the same)."""
+    fwlib.fw_product_mismatches.restype = ctypes.c_uint32
+    assert fwlib.fw_product_mismatches() == 0
+
+
 def run_bench(scenario: str, seconds: float, *extra: str) -> dict:
     r = subprocess.run(
         [str(BENCH), str(ELF), scenario, str(seconds), *extra],

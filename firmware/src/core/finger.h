@@ -200,8 +200,8 @@ static_assert(hal::kPwmPeriod == 800, "pwm_counts() is written for 800 counts a 
 // (lo + 512) >> 8 is (lo >> 8) + 2: on the AVR the high byte of the second product, added
 // with the 2, in one sequence (tested against the C in the AVR check).
 UTRF_HOT uint16_t pwm_counts(uint16_t mag) {
-    const uint16_t hi = fx::mul8u((uint8_t)(mag >> 8), 25u);
-    const uint16_t lo = fx::mul8u((uint8_t)mag, 25u);
+    const uint16_t hi = fx::mul8u(fx::hi8(mag), 25u);
+    const uint16_t lo = fx::mul8u(fx::lo8(mag), 25u);
     return (uint16_t)((uint16_t)(hi + (uint16_t)((uint16_t)(lo + 512u) >> 8)) >> 2);
 }
 

@@ -16,6 +16,7 @@
 #define UTRF_CORE_FIXED_H
 
 #include <stdint.h>
+#include <string.h>
 
 namespace utrf {
 namespace fx {
@@ -53,6 +54,65 @@ inline int16_t sat_add16(int16_t a, int16_t b) {
 inline int32_t mul_su(int16_t a, uint16_t b) { return (int32_t)a * (int32_t)b; }
 inline uint32_t mul_uu(uint16_t a, uint16_t b) { return (uint32_t)a * (uint32_t)b; }
 inline uint16_t mul8u(uint8_t a, uint8_t b) { return (uint16_t)((uint16_t)a * b); }
+inline int16_t mul8su(int8_t a, uint8_t b) { return (int16_t)((int16_t)a * (uint16_t)b); }
+
+// The bytes of a 16-bit value, through memcpy: avr-gcc then takes the register's byte, where
+// from (x >> 8) it makes a 16-bit value again, and an 8 x 8 product of it a 16 x 16 one
+// (three MULs). Little-endian (the AVR and the hosts the tests run on).
+static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "lo8() and hi8() are little-endian");
+__attribute__((always_inline)) inline uint8_t lo8(uint16_t x) {
+    uint8_t b[2];
+    memcpy(b, &x, 2);
+    return b[0];
+}
+__attribute__((always_inline)) inline uint8_t hi8(uint16_t x) {
+    uint8_t b[2];
+    memcpy(b, &x, 2);
+    return b[1];
+}
+
+// A 16 x 16 product (a signed, b unsigned) from its four 8 x 8 ones, written out in C so the
+// tick needs no libgcc call (whose call, return and sign correction cost as much as its
+// four MULs): p = a b = hh 2^16 + (hl + t) 2^8 + l0, with t = lh + (ll >> 8), which fits 16
+// bits. The slices the tick uses are taken from the pieces in 8- and 16-bit arithmetic,
+// exactly (tests/firmware/test_fw_avr.py checks them against the 32-bit product, on the host
+// and, through the core check, on the AVR).
+struct ProdSU {
+    int16_t hh;  // (a >> 8) (b >> 8)
+    int16_t hl;  // (a >> 8) (b & 0xFF)
+    uint16_t t;  // (a & 0xFF) (b >> 8) + ((a & 0xFF) (b & 0xFF) >> 8)
+    uint8_t l0;  // the product's low byte
+};
+__attribute__((always_inline)) inline ProdSU prod_su(int16_t a, uint16_t b) {
+    const uint8_t al = lo8((uint16_t)a);
+    const int8_t ah = (int8_t)hi8((uint16_t)a);
+    const uint8_t bl = lo8(b);
+    const uint8_t bh = hi8(b);
+    const uint16_t ll = mul8u(al, bl);
+    ProdSU q;
+    q.hh = mul8su(ah, bh);
+    q.hl = mul8su(ah, bl);
+    q.t = (uint16_t)(mul8u(al, bh) + hi8(ll));
+    q.l0 = lo8(ll);
+    return q;
+}
+// floor(p / 2^16), and floor((p + 2^15) / 2^16) with round (t + 128 still fits 16 bits).
+__attribute__((always_inline)) inline int16_t prod_hi16(ProdSU q, bool round = false) {
+    if (round) q.t = (uint16_t)(q.t + 128u);
+    // floor((hl + t) / 256) = (hl >> 8) + (t >> 8) + the carry of their low bytes
+    const uint8_t carry = hi8((uint16_t)((uint16_t)lo8((uint16_t)q.hl) + lo8(q.t)));
+    return (int16_t)(q.hh + (int8_t)hi8((uint16_t)q.hl) + hi8(q.t) + carry);
+}
+// (int16_t)(p >> 8): hh 2^8 + hl + t, modulo 2^16.
+__attribute__((always_inline)) inline int16_t prod_mid16(const ProdSU& q) {
+    return (int16_t)(uint16_t)((uint16_t)((uint16_t)lo8((uint16_t)q.hh) << 8) +
+                               (uint16_t)q.hl + q.t);
+}
+// (int16_t)p: the low byte of hl + t, then l0.
+__attribute__((always_inline)) inline int16_t prod_lo16(const ProdSU& q) {
+    return (int16_t)(uint16_t)((uint16_t)((uint16_t)lo8((uint16_t)((uint16_t)q.hl + q.t)) << 8) |
+                               q.l0);
+}
 
 // A gain as a 16-bit mantissa and a byte-multiple exponent: y = x * m * 2^shift with shift
 // one of 16, 8, 0, -8, -16, so the tick needs one 16 x 16 multiply and byte moves. make()
@@ -93,10 +153,10 @@ __attribute__((always_inline)) inline int32_t apply(const Gain& g, int16_t x, in
 __attribute__((always_inline)) inline int16_t apply16(const Gain& g, int16_t x, int16_t ymax) {
     if (x > g.xlim) return ymax;
     if (x < -g.xlim) return (int16_t)-ymax;
-    const int32_t p = mul_su(x, g.m);  // |p >> -shift| <= ymax
-    if (g.shift == -16) return (int16_t)(p >> 16);
-    if (g.shift == -8) return (int16_t)(p >> 8);
-    return (int16_t)p;
+    const ProdSU q = prod_su(x, g.m);  // |p >> -shift| <= ymax
+    if (g.shift == -16) return prod_hi16(q);
+    if (g.shift == -8) return prod_mid16(q);
+    return prod_lo16(q);
 }
 
 // x * c / 65536 for any int32 x (the result must fit), c an unsigned Q16 fraction: two

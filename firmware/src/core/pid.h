@@ -19,8 +19,9 @@
 // float, no division): angles BU (int16), e and d(measured) int16 with no overflow (angles stay
 // within +-pi); v in Q8 BU per tick (int16; d(measured) is clamped to +-63 BU per tick, 12
 // rad/s, beyond any finger's speed); the P and D terms int16 in Q14 duty, saturated at +-2
-// duty (one 16 x 16 multiply each, the result a byte-aligned slice of the product); I in Q31
-// (|I| < 1 duty fits; its high word is the Q15 duty); u in Q15.
+// duty (one 16 x 16 multiply each, the result a byte-aligned slice of the product, taken from
+// the product's four 8 x 8 pieces: fixed.h, ProdSU); I in Q31 (|I| < 1 duty fits; its high
+// word is the Q15 duty); u in Q15.
 #ifndef UTRF_CORE_PID_H
 #define UTRF_CORE_PID_H
 
@@ -108,14 +109,14 @@ UTRF_HOT int16_t add_deadband(int16_t v, int16_t db) {
     if (v >= kDeadbandRamp15) return fx::sat_add16(v, db);
     if (v <= -kDeadbandRamp15) return fx::sat_add16(v, (int16_t)-db);
     // |v| < 2^8 and db <= 2^14: the product fits; the ramp is 2^8, so the shift is a byte move.
-    return (int16_t)(v + (int16_t)(fx::mul_su(v, (uint16_t)db) >> 8));
+    return (int16_t)(v + fx::prod_mid16(fx::prod_su(v, (uint16_t)db)));
 }
 
 // The same on the unlimited sum (int32, before the limit).
 UTRF_HOT int32_t add_deadband32(int32_t v, int16_t db) {
     if (v >= kDeadbandRamp15) return v + db;
     if (v <= -kDeadbandRamp15) return v - db;
-    return v + (fx::mul_su((int16_t)v, (uint16_t)db) >> 8);
+    return v + fx::prod_mid16(fx::prod_su((int16_t)v, (uint16_t)db));
 }
 
 UTRF_HOT int16_t slew_limit(int16_t want, int16_t last, int16_t slew) {
@@ -139,7 +140,7 @@ UTRF_HOT int16_t Pid::step(int16_t limit, int16_t target, int16_t measured, int1
     // v += alpha (256 dm - v): |256 dm - v| < 2^15, one 16 x 16 multiply, rounded. 256 dm is a
     // multiply, not a shift: dm may be negative.
     const int16_t dv = (int16_t)(dm * 256 - v8_);
-    v8_ = (int16_t)(v8_ + (int16_t)((fx::mul_su(dv, c.alpha) + 32768L) >> 16));
+    v8_ = (int16_t)(v8_ + fx::prod_hi16(fx::prod_su(dv, c.alpha), true));
 
     // P and D in Q14 (+-2 duty each), the integrator's high word and the feedforward in Q15:
     // the sum fits int32 with room to spare.
