@@ -560,6 +560,8 @@ int main(int argc, char** argv) {
     const double t0 = g.avr->cycle / kCpuHz;
     const double t_end = t0 + seconds;
     double next_send = t0;
+    bool waiting = false;  // the latency row: a request is out
+    double phase = 0.0;
     while (g.avr->cycle / kCpuHz < t_end) {
         const double t = g.avr->cycle / kCpuHz;
         if (scenario == "stress") {
@@ -600,11 +602,16 @@ int main(int argc, char** argv) {
                     g.rt_id = proto::SetTargets::kId;
                 }
                 g.rt_seq = g.seq;
-                static double phase = 0.0;
-                phase = fmod(phase + 0.6180339887, 1.0);
-                next_send = t + 0.0005 + 0.0025 * phase;
+                waiting = true;
             }
-            if (g.rt_seq >= 0) next_send = g.avr->cycle / kCpuHz + 0.0005;
+            if (waiting && g.rt_seq < 0) {
+                // Answered: the next one 0.5-3 ms after the reply, the step irrational so that
+                // the requests sample every phase of the tick and of the stream evenly (a
+                // fixed gap after the reply would lock onto one phase).
+                waiting = false;
+                phase = fmod(phase + 0.6180339887, 1.0);
+                next_send = g.avr->cycle / kCpuHz + 0.0005 + 0.0025 * phase;
+            }
             run_until(g.avr->cycle / kCpuHz + 0.00002);
         } else if (scenario == "silent") {
             run_until(t + 0.0005);
