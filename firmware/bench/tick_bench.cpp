@@ -160,6 +160,7 @@ void adc_trigger(avr_irq_t*, uint32_t value, void*) {
 
 bool g_trace = false;
 std::vector<uint64_t> g_notice_profile;  // UTRF_NOTICE_PROFILE=file
+std::vector<uint64_t> g_dispatch_profile;  // UTRF_DISPATCH_PROFILE=file
 uint32_t g_trace_pc = 0;
 void uart_out(avr_irq_t*, uint32_t value, void*) {
     if (g_trace && g.rt_seq >= 0) fprintf(stderr, "  out %02x at %llu\n", value, (unsigned long long)(g.avr->cycle - g.rt_start));
@@ -318,6 +319,10 @@ void run_until(double t_end) {
         if (!g_notice_profile.empty() && g.rt_seq >= 0 && g.rt_last_in &&
             g.rt_dispatch <= g.rt_last_in && pc0 < g_notice_profile.size()) {
             g_notice_profile[pc0] += g.avr->cycle - c0;  // the notice segment's cycles
+        }
+        if (!g_dispatch_profile.empty() && g.rt_seq >= 0 && g.rt_last_in &&
+            g.rt_dispatch > g.rt_last_in && pc0 < g_dispatch_profile.size()) {
+            g_dispatch_profile[pc0] += g.avr->cycle - c0;  // from dispatch to the reply's end
         }
         if (g_trace && g_trace_pc && g.avr->pc == g_trace_pc && g.rt_seq >= 0)
             fprintf(stderr, " pc at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
@@ -547,6 +552,8 @@ int main(int argc, char** argv) {
     if (getenv("UTRF_TRACE_PC")) g_trace_pc = (uint32_t)strtoul(getenv("UTRF_TRACE_PC"), nullptr, 16);
     const char* notice_path = getenv("UTRF_NOTICE_PROFILE");
     if (notice_path && *notice_path) g_notice_profile.assign(256 * 1024, 0);
+    const char* dispatch_path = getenv("UTRF_DISPATCH_PROFILE");
+    if (dispatch_path && *dispatch_path) g_dispatch_profile.assign(256 * 1024, 0);
     const char* dispatch_entry = getenv("UTRF_DISPATCH_ENTRY");
     if (dispatch_entry && *dispatch_entry) {
         g.dispatch_entry = (uint32_t)strtoul(dispatch_entry, nullptr, 16);
@@ -692,6 +699,16 @@ int main(int argc, char** argv) {
             fprintf(pf, "# byte address, cycles between requests' last byte and dispatch\n");
             for (size_t a = 0; a < g_notice_profile.size(); ++a) {
                 if (g_notice_profile[a]) fprintf(pf, "%zx %llu\n", a, (unsigned long long)g_notice_profile[a]);
+            }
+            fclose(pf);
+        }
+    }
+    if (!g_dispatch_profile.empty()) {
+        FILE* pf = fopen(dispatch_path, "w");
+        if (pf) {
+            fprintf(pf, "# byte address, cycles between dispatch's entry and the reply's end\n");
+            for (size_t a = 0; a < g_dispatch_profile.size(); ++a) {
+                if (g_dispatch_profile[a]) fprintf(pf, "%zx %llu\n", a, (unsigned long long)g_dispatch_profile[a]);
             }
             fclose(pf);
         }
