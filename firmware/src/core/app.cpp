@@ -218,10 +218,12 @@ void board_frames(Board& b) {
             ++b.link.tx_dropped;
             b.board_seq = proto::next_board_seq(b.board_seq);
         }
-        uint8_t frame[framing::kMaxFrameBytes];
-        const uint8_t n = dispatch::write_state_frame(b, b.board_seq, s, frame);
+        // Encoded straight into the UART's ring, behind what it still holds (room checked).
+        const uint8_t end =
+            dispatch::write_state_frame(b, b.board_seq, s, hal::serial_tx_ring(), hal::serial_tx_head());
         b.hand.stream_pop();
-        send_board_frame(b, frame, n);
+        hal::serial_tx_commit(end);
+        b.board_seq = proto::next_board_seq(b.board_seq);
         --pending;
     }
 }

@@ -536,10 +536,11 @@ void ack(app::Board& b, uint8_t seq, uint8_t msg_id) {
     reply(b, seq, m);
 }
 
-uint8_t write_state_frame(app::Board& b, uint8_t seq, const hand::StateSample& s, uint8_t* out) {
+uint8_t write_state_frame(app::Board& b, uint8_t seq, const hand::StateSample& s, uint8_t* out,
+                          uint8_t start) {
     // The angles go out in the board's own units and the duties as their rounded high bytes
     // (taken by the tick): no arithmetic per field.
-    framing::FrameWriter w(out, seq, State::kId);
+    framing::FrameWriter w(out, start, seq, State::kId);
     put_u16(w, s.tick);
     w.put(b.status_change);
     for (uint8_t f = 0; f < kFingerCount; ++f) put_i16(w, s.theta[f]);

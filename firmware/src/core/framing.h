@@ -48,18 +48,26 @@ class FrameWriter {
     put(seq);
     put(msg_id);
   }
+  // Into a 256-byte ring from index `start`: the indices wrap by themselves (uint8_t), and
+  // finish() returns the index after the frame.
+  FrameWriter(uint8_t* ring, uint8_t start, uint8_t seq, uint8_t msg_id)
+      : out_(ring), pos_(static_cast<uint8_t>(start + 1)), code_at_(start), hi_(0xFF), lo_(0xFF) {
+    put(seq);
+    put(msg_id);
+  }
   void put(uint8_t byte) {
     crc_step(hi_, lo_, byte);  // the table-free CRC step of crc16_ccitt()
     stuff(byte);
   }
-  // Appends the CRC (low byte first), the last code and the 0x00; returns the frame's length.
+  // Appends the CRC (low byte first), the last code and the 0x00; returns the frame's length
+  // (from a start index in a ring: the index after the frame).
   uint8_t finish() {
     const uint8_t hi = hi_;
     stuff(lo_);
     stuff(hi);
     out_[code_at_] = static_cast<uint8_t>(pos_ - code_at_);
     out_[pos_] = 0x00;
-    return static_cast<uint8_t>(pos_ + 1);
+    return static_cast<uint8_t>(pos_ + 1);  // wraps with the ring's index
   }
 
  private:

@@ -552,6 +552,14 @@ void serial_write(const uint8_t* data, uint16_t len) {
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { UCSR0B |= _BV(UDRIE0); }
 }
 
+uint8_t* serial_tx_ring() { return g_tx_buf; }
+uint8_t serial_tx_head() { return g_tx_head; }
+
+void serial_tx_commit(uint8_t end) {
+    g_tx_head = end;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { UCSR0B |= _BV(UDRIE0); }
+}
+
 uint16_t serial_take_overruns() {
     uint16_t n;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
