@@ -181,7 +181,7 @@ void adc_select(uint8_t finger) {
 // receive interrupt, which nests in the control tick once for each byte that arrives while it
 // runs, touches no other memory on its usual path.
 // GPIOR0 bit 0, set (sbi: two cycles, no register) by the interrupts that give loop() work:
-// a byte received, a tick, the transmit buffer emptied. sleep_until_interrupt() sleeps again
+// a frame's last byte (0x00) received, a tick, the transmit buffer emptied. sleep_until_interrupt() sleeps again
 // after any other (an ADC conversion, a byte going out, ...) without a loop() pass.
 static const uint8_t kWake = 0;
 // GPIOR0 bit 1, set by every tick: timer 0's overflow wakes loop() only when no tick came
@@ -325,7 +325,10 @@ ISR(USART0_RX_vect) {
     }
     g_rx_buf[head] = byte;
     GPIOR1 = next;
-    GPIOR0 |= _BV(kWake);
+    // A frame's 0x00 wakes loop(): it reads the whole frame then (the bytes before it wait in
+    // the ring, and hold the stream's next frame back meanwhile). A pass a byte would cost more
+    // than the frame's decoding.
+    if (byte == 0) GPIOR0 |= _BV(kWake);
 }
 
 // The next byte of the ring into UDR0; when the ring is empty, this interrupt goes off.
