@@ -468,6 +468,38 @@ int run_pins() {
     return 0;
 }
 
+// The tick-alive rule, to the cycle: at 0.3 s + `phase` seconds timer 2's clock is stopped
+// (TCCR2B's clock select cleared, as the emulator's stop_tick_timer does); the time from the
+// last tick's entry (and from the stop) until every STBY pin is low. Needs the tick's entry
+// address (argv 4).
+int run_tickdead(double phase) {
+    run_until(0.3 + phase);
+    const uint64_t stop = g.avr->cycle;
+    // TCCR2B: CS22..CS20 = 0, written through the timer's own register hook.
+    const uint8_t tccr2b = (uint8_t)(g.avr->data[0xB1] & ~0x07);
+    const avr_io_addr_t io = AVR_DATA_TO_IO(0xB1);
+    if (g.avr->io[io].w.c) {
+        g.avr->io[io].w.c(g.avr, 0xB1, tccr2b, g.avr->io[io].w.param);
+    } else {
+        g.avr->data[0xB1] = tccr2b;
+    }
+    const uint64_t last_tick = g.tick_start;
+    const uint64_t limit = stop + (uint64_t)(0.05 * kCpuHz);
+    while (g.avr->cycle < limit) {
+        run_until((g.avr->cycle + 1) / kCpuHz);
+        bool any = false;
+        for (int f = 0; f < UTRF_FINGER_COUNT; ++f) any = any || pin(UTRF_FINGER_PINS[f].stby);
+        if (!any) {
+            printf("{\"scenario\": \"tickdead\", \"from_stop_ms\": %.4f, \"from_last_tick_ms\": "
+                   "%.4f}\n", (g.avr->cycle - stop) / kCpuHz * 1e3,
+                   (g.avr->cycle - last_tick) / kCpuHz * 1e3);
+            return 0;
+        }
+    }
+    fprintf(stderr, "tick_bench: the motors stayed on 50 ms after the tick stopped\n");
+    return 1;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -485,6 +517,7 @@ int main(int argc, char** argv) {
     const double seconds = atof(argv[3]);
     if (scenario != "idle" && scenario != "typical" && scenario != "stress" &&
         scenario != "silent" && scenario != "pins" && scenario != "moves" &&
+        scenario != "tickdead" &&
         scenario != "latency") {
         fprintf(stderr, "tick_bench: unknown scenario %s\n", scenario.c_str());
         return 2;
@@ -535,6 +568,7 @@ int main(int argc, char** argv) {
     tel.rate_hz = (scenario == "moves" || scenario == "latency") ? 1000 : 500;
     send(tel);
     run_until(0.3);
+    if (scenario == "tickdead") return run_tickdead(seconds);
     send(proto::ResetStats());
     run_until(0.31);
     g.sim_ticks = g.sim_sum = g.sim_worst = 0;
