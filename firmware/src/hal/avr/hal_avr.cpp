@@ -5,6 +5,7 @@
 //   timer 0            left to the Arduino core (millis)
 //   ADC                interrupt-driven round robin over the five encoder channels
 //   UART0              own interrupt-driven driver: counts lost bytes, never blocks
+//   idle sleep         loop() sleeps (idle mode) until an interrupt gives it work
 //   watchdog           30 ms, reset mode; fed by loop() only while the tick runs
 #include "hal_avr.h"
 
@@ -181,8 +182,9 @@ void adc_select(uint8_t finger) {
 // receive interrupt, which nests in the control tick once for each byte that arrives while it
 // runs, touches no other memory on its usual path.
 // GPIOR0 bit 0, set (sbi: two cycles, no register) by the interrupts that give loop() work:
-// a frame's last byte (0x00) received, a tick, the transmit buffer emptied. sleep_until_interrupt() sleeps again
-// after any other (an ADC conversion, a byte going out, ...) without a loop() pass.
+// a frame's last byte (0x00) received, a tick, the transmit buffer emptied.
+// sleep_until_interrupt() sleeps again after any other (an ADC conversion, a byte going out)
+// without a loop() pass.
 static const uint8_t kWake = 0;
 // GPIOR0 bit 1, set by every tick: timer 0's overflow wakes loop() only when no tick came
 // since the last one (below).
