@@ -160,6 +160,7 @@ void adc_trigger(avr_irq_t*, uint32_t value, void*) {
 
 bool g_trace = false;
 std::vector<uint64_t> g_notice_profile;  // UTRF_NOTICE_PROFILE=file
+std::vector<uint64_t> g_dispatch_profile;  // UTRF_DISPATCH_PROFILE=file
 uint32_t g_trace_pc = 0;
 void uart_out(avr_irq_t*, uint32_t value, void*) {
     if (g_trace && g.rt_seq >= 0) fprintf(stderr, "  out %02x at %llu\n", value, (unsigned long long)(g.avr->cycle - g.rt_start));
@@ -319,6 +320,10 @@ void run_until(double t_end) {
             g.rt_dispatch <= g.rt_last_in && pc0 < g_notice_profile.size()) {
             g_notice_profile[pc0] += g.avr->cycle - c0;  // the notice segment's cycles
         }
+        if (!g_dispatch_profile.empty() && g.rt_seq >= 0 && g.rt_last_in &&
+            g.rt_dispatch > g.rt_last_in && pc0 < g_dispatch_profile.size()) {
+            g_dispatch_profile[pc0] += g.avr->cycle - c0;  // from dispatch to the reply's end
+        }
         if (g_trace && g_trace_pc && g.avr->pc == g_trace_pc && g.rt_seq >= 0)
             fprintf(stderr, " pc at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
         if (g.dispatch_entry && g.avr->pc == g.dispatch_entry && g.rt_seq >= 0 &&
@@ -463,6 +468,38 @@ int run_pins() {
     return 0;
 }
 
+// The tick-alive rule, to the cycle: at 0.3 s + `phase` seconds timer 2's clock is stopped
+// (TCCR2B's clock select cleared, as the emulator's stop_tick_timer does); the time from the
+// last tick's entry (and from the stop) until every STBY pin is low. Needs the tick's entry
+// address (argv 4).
+int run_tickdead(double phase) {
+    run_until(0.3 + phase);
+    const uint64_t stop = g.avr->cycle;
+    // TCCR2B: CS22..CS20 = 0, written through the timer's own register hook.
+    const uint8_t tccr2b = (uint8_t)(g.avr->data[0xB1] & ~0x07);
+    const avr_io_addr_t io = AVR_DATA_TO_IO(0xB1);
+    if (g.avr->io[io].w.c) {
+        g.avr->io[io].w.c(g.avr, 0xB1, tccr2b, g.avr->io[io].w.param);
+    } else {
+        g.avr->data[0xB1] = tccr2b;
+    }
+    const uint64_t last_tick = g.tick_start;
+    const uint64_t limit = stop + (uint64_t)(0.05 * kCpuHz);
+    while (g.avr->cycle < limit) {
+        run_until((g.avr->cycle + 1) / kCpuHz);
+        bool any = false;
+        for (int f = 0; f < UTRF_FINGER_COUNT; ++f) any = any || pin(UTRF_FINGER_PINS[f].stby);
+        if (!any) {
+            printf("{\"scenario\": \"tickdead\", \"from_stop_ms\": %.4f, \"from_last_tick_ms\": "
+                   "%.4f}\n", (g.avr->cycle - stop) / kCpuHz * 1e3,
+                   (g.avr->cycle - last_tick) / kCpuHz * 1e3);
+            return 0;
+        }
+    }
+    fprintf(stderr, "tick_bench: the motors stayed on 50 ms after the tick stopped\n");
+    return 1;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -480,6 +517,7 @@ int main(int argc, char** argv) {
     const double seconds = atof(argv[3]);
     if (scenario != "idle" && scenario != "typical" && scenario != "stress" &&
         scenario != "silent" && scenario != "pins" && scenario != "moves" &&
+        scenario != "tickdead" &&
         scenario != "latency") {
         fprintf(stderr, "tick_bench: unknown scenario %s\n", scenario.c_str());
         return 2;
@@ -530,6 +568,7 @@ int main(int argc, char** argv) {
     tel.rate_hz = (scenario == "moves" || scenario == "latency") ? 1000 : 500;
     send(tel);
     run_until(0.3);
+    if (scenario == "tickdead") return run_tickdead(seconds);
     send(proto::ResetStats());
     run_until(0.31);
     g.sim_ticks = g.sim_sum = g.sim_worst = 0;
@@ -547,6 +586,8 @@ int main(int argc, char** argv) {
     if (getenv("UTRF_TRACE_PC")) g_trace_pc = (uint32_t)strtoul(getenv("UTRF_TRACE_PC"), nullptr, 16);
     const char* notice_path = getenv("UTRF_NOTICE_PROFILE");
     if (notice_path && *notice_path) g_notice_profile.assign(256 * 1024, 0);
+    const char* dispatch_path = getenv("UTRF_DISPATCH_PROFILE");
+    if (dispatch_path && *dispatch_path) g_dispatch_profile.assign(256 * 1024, 0);
     const char* dispatch_entry = getenv("UTRF_DISPATCH_ENTRY");
     if (dispatch_entry && *dispatch_entry) {
         g.dispatch_entry = (uint32_t)strtoul(dispatch_entry, nullptr, 16);
@@ -560,6 +601,8 @@ int main(int argc, char** argv) {
     const double t0 = g.avr->cycle / kCpuHz;
     const double t_end = t0 + seconds;
     double next_send = t0;
+    bool waiting = false;  // the latency row: a request is out
+    double phase = 0.0;
     while (g.avr->cycle / kCpuHz < t_end) {
         const double t = g.avr->cycle / kCpuHz;
         if (scenario == "stress") {
@@ -600,11 +643,16 @@ int main(int argc, char** argv) {
                     g.rt_id = proto::SetTargets::kId;
                 }
                 g.rt_seq = g.seq;
-                static double phase = 0.0;
-                phase = fmod(phase + 0.6180339887, 1.0);
-                next_send = t + 0.0005 + 0.0025 * phase;
+                waiting = true;
             }
-            if (g.rt_seq >= 0) next_send = g.avr->cycle / kCpuHz + 0.0005;
+            if (waiting && g.rt_seq < 0) {
+                // Answered: the next one 0.5-3 ms after the reply, the step irrational so that
+                // the requests sample every phase of the tick and of the stream evenly (a
+                // fixed gap after the reply would lock onto one phase).
+                waiting = false;
+                phase = fmod(phase + 0.6180339887, 1.0);
+                next_send = g.avr->cycle / kCpuHz + 0.0005 + 0.0025 * phase;
+            }
             run_until(g.avr->cycle / kCpuHz + 0.00002);
         } else if (scenario == "silent") {
             run_until(t + 0.0005);
@@ -685,6 +733,16 @@ int main(int argc, char** argv) {
             fprintf(pf, "# byte address, cycles between requests' last byte and dispatch\n");
             for (size_t a = 0; a < g_notice_profile.size(); ++a) {
                 if (g_notice_profile[a]) fprintf(pf, "%zx %llu\n", a, (unsigned long long)g_notice_profile[a]);
+            }
+            fclose(pf);
+        }
+    }
+    if (!g_dispatch_profile.empty()) {
+        FILE* pf = fopen(dispatch_path, "w");
+        if (pf) {
+            fprintf(pf, "# byte address, cycles between dispatch's entry and the reply's end\n");
+            for (size_t a = 0; a < g_dispatch_profile.size(); ++a) {
+                if (g_dispatch_profile[a]) fprintf(pf, "%zx %llu\n", a, (unsigned long long)g_dispatch_profile[a]);
             }
             fclose(pf);
         }

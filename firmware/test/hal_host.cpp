@@ -136,6 +136,15 @@ void serial_write(const uint8_t* data, uint16_t len) {
     g_state.tx_len = (uint16_t)(g_state.tx_len + len);
 }
 
+// The host's transmit buffer is linear: a frame is written into a ring of its own from 0 and
+// copied over at the commit.
+namespace {
+uint8_t g_tx_ring[256];
+}
+uint8_t* serial_tx_ring() { return g_tx_ring; }
+uint8_t serial_tx_head() { return 0; }
+void serial_tx_commit(uint8_t end) { serial_write(g_tx_ring, end); }
+
 uint16_t serial_take_overruns() {
     const uint16_t n = g_state.rx_lost;
     g_state.rx_lost = 0;

@@ -178,10 +178,21 @@ bool report_faults(Board& b) {
     return false;
 }
 
+// A request is coming in: bytes of it in the decoder (for at most kRequestHoldTicks: garbage
+// with no 0x00 after it holds nothing longer), or bytes in the UART's buffer that loop() has
+// not read yet (a tick or this pass's work held it up while they came).
+bool request_coming(const Board& b) {
+    const uint8_t* waiting;
+    return (b.decoder.in_frame() && b.hand.ticks() - b.rx_frame_tick < kRequestHoldTicks) ||
+           hal::serial_rx_peek(&waiting) != 0;
+}
+
 // The board's own frames, in priority order: faults, the status, the state stream's samples.
 // A frame starts only into an empty transmit buffer, so a reply waits behind at most one; once
 // two samples wait (loop() or the line fell a period behind), the waiting samples go out in
-// this pass, back to back, as far as the buffer has room.
+// this pass, back to back, as far as the buffer has room. While a request is coming in, no
+// sample starts (its reply goes first, onto a free line; they wait in the ring) until
+// kStreamBacklog of them wait.
 void board_frames(Board& b) {
     const bool idle = tx_idle(b);
     uint8_t pending = b.hand.stream_pending();
@@ -198,29 +209,21 @@ void board_frames(Board& b) {
         return;
     }
     if (pending == 0) return;
-    if (pending < 2) {
-        // A request is coming in: its reply goes first, onto a free line. The state waits (it
-        // may: the samples wait in the ring). Coming in: bytes of it in the decoder (for at
-        // most kRequestHoldTicks: garbage with no 0x00 after it holds nothing longer), or
-        // bytes in the UART's buffer that loop() has not read yet (a tick or this pass's work
-        // held it up while they came): they are read first, at the next pass.
-        const uint8_t* waiting;
-        const bool request_coming =
-            (b.decoder.in_frame() && b.hand.ticks() - b.rx_frame_tick < kRequestHoldTicks) ||
-            hal::serial_rx_peek(&waiting) != 0;
-        if (!idle || request_coming) return;
-    }
+    if (pending < 2 && !idle) return;
     while (pending != 0 && b.reply_len == 0 &&
            hal::serial_tx_room() >= framing::kMaxFrameBytes) {
+        if (pending < kStreamBacklog && request_coming(b)) return;  // read first, next pass
         const hand::StateSample& s = b.hand.stream_oldest();
         for (uint8_t k = 0; k < s.skipped; ++k) {  // dropped samples: their seqs skipped
             ++b.link.tx_dropped;
             b.board_seq = proto::next_board_seq(b.board_seq);
         }
-        uint8_t frame[framing::kMaxFrameBytes];
-        const uint8_t n = dispatch::write_state_frame(b, b.board_seq, s, frame);
+        // Encoded straight into the UART's ring, behind what it still holds (room checked).
+        const uint8_t end =
+            dispatch::write_state_frame(b, b.board_seq, s, hal::serial_tx_ring(), hal::serial_tx_head());
         b.hand.stream_pop();
-        send_board_frame(b, frame, n);
+        hal::serial_tx_commit(end);
+        b.board_seq = proto::next_board_seq(b.board_seq);
         --pending;
     }
 }

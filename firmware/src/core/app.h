@@ -24,6 +24,9 @@ static const uint8_t kTickDeadMs = 20;
 // Longest a request arriving holds the state stream back (ticks); garbage with no 0x00 after
 // it holds it no longer.
 static const uint8_t kRequestHoldTicks = 2;
+// Samples the state stream lets wait while a request comes in (the ring holds
+// hand::kStreamSlots = 8): beyond, they go out whatever comes in.
+static const uint8_t kStreamBacklog = 4;
 
 struct LinkStats {
     uint32_t rx_frames;

@@ -18,8 +18,11 @@ void nack(app::Board& b, uint8_t seq, uint8_t msg_id, uint8_t code, uint8_t deta
 void ack(app::Board& b, uint8_t seq, uint8_t msg_id);
 
 // Board-initiated messages (used by app for the stream and reports).
-// The state frame with this seq, sampled now, written into `out` (kMaxFrameBytes); its length.
-uint8_t write_state_frame(app::Board& b, uint8_t seq, const hand::StateSample& s, uint8_t* out);
+// The state frame with this seq for sample `s`, written into `out` (kMaxFrameBytes); its
+// length. With `start`: into a 256-byte ring from that index (the UART's, in place); the index
+// after the frame.
+uint8_t write_state_frame(app::Board& b, uint8_t seq, const hand::StateSample& s, uint8_t* out,
+                          uint8_t start = 0);
 void fill_status(const app::Board& b, proto::Status& m);
 void fill_boot(const app::Board& b, proto::Boot& m);
 

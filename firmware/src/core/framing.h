@@ -23,6 +23,13 @@ static const uint8_t kMinRawBytes = kHeaderBytes + kCrcBytes;
 static const uint8_t kMaxEncodedBytes = kMaxRawBytes + (kMaxRawBytes + 253) / 254;  // 69
 static const uint8_t kMaxFrameBytes = kMaxEncodedBytes + 1;                          // 70
 
+// One byte of crc16_ccitt() (framing.cpp explains it), the CRC kept as its two bytes.
+inline void crc_step(uint8_t& hi, uint8_t& lo, uint8_t byte) {
+  uint8_t w = static_cast<uint8_t>(hi ^ byte);
+  w = static_cast<uint8_t>(w ^ (w >> 4));
+  hi = static_cast<uint8_t>(lo ^ static_cast<uint8_t>(w << 4) ^ static_cast<uint8_t>(w >> 3));
+  lo = static_cast<uint8_t>(static_cast<uint8_t>(w << 5) ^ w);
+}
 // CRC-16/CCITT-FALSE; pass a previous result as `crc` to continue over more bytes.
 uint16_t crc16_ccitt(const uint8_t* data, uint16_t len, uint16_t crc = 0xFFFF);
 
@@ -41,22 +48,26 @@ class FrameWriter {
     put(seq);
     put(msg_id);
   }
+  // Into a 256-byte ring from index `start`: the indices wrap by themselves (uint8_t), and
+  // finish() returns the index after the frame.
+  FrameWriter(uint8_t* ring, uint8_t start, uint8_t seq, uint8_t msg_id)
+      : out_(ring), pos_(static_cast<uint8_t>(start + 1)), code_at_(start), hi_(0xFF), lo_(0xFF) {
+    put(seq);
+    put(msg_id);
+  }
   void put(uint8_t byte) {
-    // The table-free CRC step of crc16_ccitt(), kept in two bytes.
-    uint8_t w = static_cast<uint8_t>(hi_ ^ byte);
-    w = static_cast<uint8_t>(w ^ (w >> 4));
-    hi_ = static_cast<uint8_t>(lo_ ^ static_cast<uint8_t>(w << 4) ^ static_cast<uint8_t>(w >> 3));
-    lo_ = static_cast<uint8_t>(static_cast<uint8_t>(w << 5) ^ w);
+    crc_step(hi_, lo_, byte);  // the table-free CRC step of crc16_ccitt()
     stuff(byte);
   }
-  // Appends the CRC (low byte first), the last code and the 0x00; returns the frame's length.
+  // Appends the CRC (low byte first), the last code and the 0x00; returns the frame's length
+  // (from a start index in a ring: the index after the frame).
   uint8_t finish() {
     const uint8_t hi = hi_;
     stuff(lo_);
     stuff(hi);
     out_[code_at_] = static_cast<uint8_t>(pos_ - code_at_);
     out_[pos_] = 0x00;
-    return static_cast<uint8_t>(pos_ + 1);
+    return static_cast<uint8_t>(pos_ + 1);  // wraps with the ring's index
   }
 
  private:

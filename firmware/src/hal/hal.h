@@ -126,6 +126,12 @@ uint8_t serial_rx_peek(const uint8_t** data);
 void serial_rx_take(uint8_t n);
 uint16_t serial_tx_room();
 void serial_write(const uint8_t* data, uint16_t len);
+// A frame written in place: the transmit ring (256 bytes: a uint8_t index wraps by itself)
+// and the index of its first free byte; serial_tx_commit(end) sends the bytes from there up to
+// `end`, at most serial_tx_room() of them. No copy through a buffer of the caller's.
+uint8_t* serial_tx_ring();
+uint8_t serial_tx_head();
+void serial_tx_commit(uint8_t end);
 // Bytes lost since the last call because the receive buffer or the UART itself overflowed.
 uint16_t serial_take_overruns();
 

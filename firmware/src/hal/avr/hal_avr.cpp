@@ -5,6 +5,7 @@
 //   timer 0            left to the Arduino core (millis)
 //   ADC                interrupt-driven round robin over the five encoder channels
 //   UART0              own interrupt-driven driver: counts lost bytes, never blocks
+//   idle sleep         loop() sleeps (idle mode) until an interrupt gives it work
 //   watchdog           30 ms, reset mode; fed by loop() only while the tick runs
 #include "hal_avr.h"
 
@@ -202,8 +203,9 @@ void adc_select(uint8_t finger) {
 // receive interrupt, which nests in the control tick once for each byte that arrives while it
 // runs, touches no other memory on its usual path.
 // GPIOR0 bit 0, set (sbi: two cycles, no register) by the interrupts that give loop() work:
-// a byte received, a tick, the transmit buffer emptied. sleep_until_interrupt() sleeps again
-// after any other (an ADC conversion, a byte going out, ...) without a loop() pass.
+// a frame's last byte (0x00) received, a tick, the transmit buffer emptied.
+// sleep_until_interrupt() sleeps again after any other (an ADC conversion, a byte going out)
+// without a loop() pass.
 static const uint8_t kWake = 0;
 // GPIOR0 bit 1, set by every tick: timer 0's overflow wakes loop() only when no tick came
 // since the last one (below).
@@ -347,7 +349,10 @@ ISR(USART0_RX_vect) {
     }
     g_rx_buf[head] = byte;
     GPIOR1 = next;
-    GPIOR0 |= _BV(kWake);
+    // A frame's 0x00 wakes loop(): it reads the whole frame then (the bytes before it wait in
+    // the ring, and hold the stream's next frame back meanwhile). A pass a byte would cost more
+    // than the frame's decoding.
+    if (byte == 0) GPIOR0 |= _BV(kWake);
 }
 
 // The next byte of the ring into UDR0; when the ring is empty, this interrupt goes off.
@@ -566,6 +571,14 @@ void serial_write(const uint8_t* data, uint16_t len) {
     uint8_t head = g_tx_head;
     for (uint16_t i = 0; i < len; ++i) g_tx_buf[head++] = data[i];
     g_tx_head = head;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { UCSR0B |= _BV(UDRIE0); }
+}
+
+uint8_t* serial_tx_ring() { return g_tx_buf; }
+uint8_t serial_tx_head() { return g_tx_head; }
+
+void serial_tx_commit(uint8_t end) {
+    g_tx_head = end;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { UCSR0B |= _BV(UDRIE0); }
 }
 
