@@ -7,7 +7,8 @@ safety tests run against it; a test must fail for every mutant.
 
 Each mutant is a copy of the checkout (its sources, tests and build products, timestamps
 kept, so make rebuilds only what the mutation touched) under build/mutants/<name>/, with one
-exact edit to firmware/src: a rule's condition made false, its action removed. The tests run
+exact edit to firmware/src: a rule's condition made false, its action removed (a condition the
+code states in two places is edited in both, or has a mutant for each). The tests run
 there, on the mutated firmware, both as the host build (tests/firmware/test_fw_safety.py and
 test_fw_moves.py) and as the ELF on the emulated board (tests/reliability/test_safety_matrix.py),
 and stop at the first failure: the mutant is caught. An edit whose text is no longer in the
@@ -38,12 +39,26 @@ COPY_BUILD = ["firmware", "emulator"]
 
 
 @dataclass(frozen=True)
+class Edit:
+    path: str
+    old: str
+    new: str
+
+
+@dataclass(frozen=True)
 class Mutant:
     name: str
     rule: str  # the safety table's row (firmware/README.md)
     path: str
     old: str
     new: str
+    # further edits of the same mutant: a rule whose condition the code states in more than
+    # one place is off only with every copy of it off
+    more: tuple[Edit, ...] = ()
+
+    @property
+    def edits(self) -> tuple[Edit, ...]:
+        return (Edit(self.path, self.old, self.new), *self.more)
 
 
 # set_targets and move check their targets with the same lines: each mutant names its own by
@@ -73,12 +88,29 @@ MUTANTS = [
         "if (safe_action_ == 0) {",
         "if (true) {",
     ),
+    # The encoder's rules live in two places since the sampler judges each sample (the AVR's
+    # ADC interrupt, core/encoder.h judge()): it flags a reading out of band or beyond the
+    # fault limits, and the tick takes an unflagged reading as it is; a flagged one goes to
+    # Finger::judge_reading(), the only place ENCODER_RANGE and JOINT_LIMIT are latched. So
+    # each rule has two mutants: its latch removed (the rule off wherever a reading is judged)
+    # and the sampler's judgment off (a bad reading reaches the tick unflagged, and only a
+    # reading flagged for another reason is judged again).
     Mutant(
         "encoder-band-off",
         "encoder band (and a stale ADC round)",
-        "firmware/src/core/finger.h",
-        "        encoder_ok_ = false;\n        found = ENCODER_RANGE;",
-        "        encoder_ok_ = false;",
+        "firmware/src/core/finger.cpp",
+        "        encoder_ok_ = false;\n        return ENCODER_RANGE;",
+        "        encoder_ok_ = false;\n        return 0;",
+    ),
+    Mutant(
+        "encoder-band-sampler-off",
+        "encoder band (the sampler's judgment)",
+        "firmware/src/core/encoder.h",
+        "    r.status = (sample < kAdcBandLow || sample > kAdcBandHigh) ? "
+        "hal::EncoderStatus::OUT_OF_BAND\n"
+        "                                                               : "
+        "hal::EncoderStatus::OK;",
+        "    r.status = hal::EncoderStatus::OK;",
     ),
     Mutant(
         "encoder-jump-off",
@@ -86,13 +118,22 @@ MUTANTS = [
         "firmware/src/core/finger.h",
         "            found = ENCODER_JUMP;",
         "            ;",
+        # the same rule on a flagged reading
+        (Edit("firmware/src/core/finger.cpp", "found = ENCODER_JUMP;", "found = 0;"),),
     ),
     Mutant(
         "joint-limit-off",
         "joint limit",
-        "firmware/src/core/finger.h",
+        "firmware/src/core/finger.cpp",
         "found |= JOINT_LIMIT;",
         ";",
+    ),
+    Mutant(
+        "joint-limit-sampler-off",
+        "joint limit (the sampler's judgment)",
+        "firmware/src/core/encoder.h",
+        "r.flags = (r.angle < s.low || r.angle > s.high) ? hal::kReadingLimit : 0;",
+        "r.flags = 0;",
     ),
     Mutant(
         "stall-off",
@@ -147,8 +188,8 @@ MUTANTS = [
         "brake-stby-with-stop-fault",
         "STBY low with a stop fault (BRAKE)",
         "firmware/src/core/finger.cpp",
-        "out.stby = mode == BRAKE && (faults_ & (kStopFaults & ~JOINT_LIMIT)) == 0;",
-        "out.stby = mode == BRAKE;",
+        "mode == BRAKE && (faults_ & (kStopFaults & ~JOINT_LIMIT)) == 0);",
+        "mode == BRAKE);",
     ),
     Mutant(
         "targets-beyond-limits",
@@ -205,14 +246,15 @@ def prepare(m: Mutant | None) -> Path:
             shutil.copytree(src, root / "build" / name, symlinks=True)
     if m is None:
         return root
-    path = root / m.path
-    text = path.read_text()
-    if text.count(m.old) != 1:
-        raise SystemExit(
-            f"mutant {m.name}: {m.path} has {text.count(m.old)} copies of the text to change "
-            "(the mutant list must follow the code)"
-        )
-    path.write_text(text.replace(m.old, m.new))
+    for e in m.edits:
+        path = root / e.path
+        text = path.read_text()
+        if text.count(e.old) != 1:
+            raise SystemExit(
+                f"mutant {m.name}: {e.path} has {text.count(e.old)} copies of the text to "
+                "change (the mutant list must follow the code)"
+            )
+        path.write_text(text.replace(e.old, e.new))
     return root
 
 
@@ -277,7 +319,7 @@ def run(m: Mutant, timeout: float, broken: list[str]) -> dict:
     res = {
         "name": m.name,
         "rule": m.rule,
-        "file": m.path,
+        "file": ", ".join(dict.fromkeys(e.path for e in m.edits)),
         "caught": caught,
         "by": by,
         "seconds": round(time.monotonic() - t0, 1),
@@ -296,7 +338,7 @@ def main(argv: list[str] | None = None) -> int:
     chosen = [m for m in MUTANTS if not a.only or m.name in a.only]
     if a.list:
         for m in chosen:
-            print(f"{m.name:28} {m.rule}  ({m.path})")
+            print(f"{m.name:28} {m.rule}  ({', '.join(e.path for e in m.edits)})")
         return 0
     broken = baseline(a.timeout)
     if broken:
