@@ -76,9 +76,18 @@ def loop_address() -> str:
     return next(ln.split()[0] for ln in nm.splitlines() if ln.endswith(" utrf::app::loop()"))
 
 
+def dispatch_address() -> str:
+    nm = run(["avr-nm", "-C", str(ELF)])
+    return next(ln.split()[0] for ln in nm.splitlines() if " utrf::dispatch::handle(" in ln)
+
+
 def tick_load(scenario: str, seconds: float) -> dict:
     entry, ret = tick_addresses()
-    env = {**os.environ, "UTRF_LOOP_ENTRY": loop_address()}
+    env = {
+        **os.environ,
+        "UTRF_LOOP_ENTRY": loop_address(),
+        "UTRF_DISPATCH_ENTRY": dispatch_address(),
+    }
     out = subprocess.run(
         [str(BENCH), str(ELF), scenario, str(seconds), entry, ret],
         cwd=REPO,
@@ -205,6 +214,19 @@ def round_trips(loads: list[dict]) -> list[str]:
         f"| set_targets | {d['targets_n']} | {line['set_targets']:.0f} µs | "
         f"{d['targets_median_us']:.0f} µs | {d['targets_p99_us']:.0f} µs | "
         f"{d['targets_max_us']:.0f} µs |",
+        "",
+        "Where the time goes (both requests together, median / 99th percentile): the request "
+        f"on the line {d['seg_in_median_us']:.0f} / {d['seg_in_p99_us']:.0f} µs; from its last "
+        f"byte to dispatch's entry (loop() noticing it: the tick, the pass under way) "
+        f"{d['seg_notice_median_us']:.0f} / {d['seg_notice_p99_us']:.0f} µs; from dispatch to "
+        f"the reply's first byte out (dispatch, a frame ahead on the line) "
+        f"{d['seg_reply_median_us']:.0f} / {d['seg_reply_p99_us']:.0f} µs; the reply on the "
+        f"line {d['seg_out_median_us']:.0f} / {d['seg_out_p99_us']:.0f} µs.",
+        "",
+        "loop() sleeps (idle mode) when a pass would find nothing to do: share of the cycles "
+        "the CPU slept, per row: "
+        + ", ".join(f"{d['scenario']} {100 * d['asleep']:.1f} %" for d in loads)
+        + " (the loop() passes above are timed entry to entry: a pass's sleep is in it).",
     ]
 
 
@@ -240,7 +262,7 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         "",
         "| what | bytes | target |",
         "|---|---|---|",
-        f"| flash (.text + .data) | {mem['flash']:,} | 49,152 (48 KB) |",
+        f"| flash (.text + .data) | {mem['flash']:,} | 65,536 (64 KB) |",
         f"| static RAM (.data {mem['data']} + .bss {mem['bss']} + .noinit {mem['noinit']}) "
         f"| {mem['ram']:,} | 3,072 (3 KB) |",
     ]

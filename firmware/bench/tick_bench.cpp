@@ -32,6 +32,7 @@
 #include <simavr/avr_adc.h>
 #include <simavr/avr_uart.h>
 #include <simavr/sim_avr.h>
+#include <simavr/sim_cycle_timers.h>
 #include <simavr/sim_elf.h>
 
 #include "board_pins.h"
@@ -55,6 +56,8 @@ struct Bench {
     std::deque<uint8_t> to_board;
     bool xon = true;
     uint64_t next_byte_cycle = 0;
+    bool feeding = false;  // feed_byte() is scheduled
+    avr_irq_t* uart_in = nullptr;
     framing::FrameDecoder decoder;
     uint8_t seq = 0;
     uint32_t state_frames = 0;
@@ -116,6 +119,15 @@ struct Bench {
     uint64_t rt_start = 0;
     bool rt_started = false;  // its first byte went out
     std::vector<uint64_t> rt_ping, rt_targets;
+    // Where a round trip's time goes (UTRF_DISPATCH_ENTRY=<hex byte address of
+    // dispatch::handle()>): the request's last byte in, dispatch's entry, the reply frame's
+    // first byte out; per request, the segments between them.
+    uint32_t dispatch_entry = 0;
+    uint64_t rt_last_in = 0;
+    uint64_t rt_dispatch = 0;
+    uint64_t out_frame_start = 0;  // the first byte of the frame coming out now
+    bool out_in_frame = false;
+    std::vector<uint64_t> seg_in, seg_notice, seg_reply, seg_out;
 };
 
 Bench g;
@@ -147,15 +159,26 @@ void adc_trigger(avr_irq_t*, uint32_t value, void*) {
 }
 
 bool g_trace = false;
+std::vector<uint64_t> g_notice_profile;  // UTRF_NOTICE_PROFILE=file
+uint32_t g_trace_pc = 0;
 void uart_out(avr_irq_t*, uint32_t value, void*) {
     if (g_trace && g.rt_seq >= 0) fprintf(stderr, "  out %02x at %llu\n", value, (unsigned long long)(g.avr->cycle - g.rt_start));
+    if (value != 0 && !g.out_in_frame) g.out_frame_start = g.avr->cycle;
+    g.out_in_frame = value != 0;
     const framing::RxEvent ev = g.decoder.feed((uint8_t)value);
     if (ev != framing::RxEvent::FRAME) return;
     const uint8_t id = g.decoder.msg_id();
     if (g.rt_seq >= 0 && g.decoder.seq() == (uint8_t)g.rt_seq && g.rt_started) {
         const uint64_t c = g.avr->cycle - g.rt_start;
         (g.rt_id == proto::Ping::kId ? g.rt_ping : g.rt_targets).push_back(c);
+        if (g_trace) fprintf(stderr, " reply %s done at %llu, its first byte at %llu\n", g.rt_id == proto::Ping::kId ? "ping" : "targets", (unsigned long long)c, (unsigned long long)(g.out_frame_start - g.rt_start));
         g.rt_seq = -1;
+        if (g.dispatch_entry && g.rt_dispatch > g.rt_last_in) {
+            g.seg_in.push_back(g.rt_last_in + kByteCycles - g.rt_start);
+            g.seg_notice.push_back(g.rt_dispatch - (g.rt_last_in + kByteCycles));
+            g.seg_reply.push_back(g.out_frame_start - g.rt_dispatch);
+            g.seg_out.push_back(g.avr->cycle - g.out_frame_start);
+        }
     }
     if (id == proto::MsgId::STATE && (g.decoder.seq() & proto::kBoardSeqFlag)) {
         ++g.state_frames;
@@ -175,6 +198,37 @@ void uart_out(avr_irq_t*, uint32_t value, void*) {
 }
 
 void uart_xon(avr_irq_t*, uint32_t, void*) { g.xon = true; }
+
+// The firmware's idle sleep (SLEEP until the next interrupt): simavr skips the cycles and
+// reports them here; counted, and never paced to the wall clock.
+uint64_t g_sleep_cycles = 0;
+void count_sleep(avr_t*, avr_cycle_count_t how_long) { g_sleep_cycles += 1 + how_long; }
+
+// One byte of the host's into the UART, one byte time after the last.
+avr_cycle_count_t feed_byte(avr_t* avr, avr_cycle_count_t when, void*) {
+    if (g.to_board.empty() || !g.xon) {
+        g.feeding = false;
+        return 0;
+    }
+    if (g_trace && g.rt_seq >= 0) fprintf(stderr, "  in at %llu\n", (unsigned long long)(when - g.rt_start));
+    if (g.rt_seq >= 0 && !g.rt_started) {
+        g.rt_started = true;
+        g.rt_start = when;
+    }
+    avr_raise_irq(g.uart_in, g.to_board.front());
+    g.to_board.pop_front();
+    if (g.rt_seq >= 0 && g.to_board.empty()) {
+        g.rt_last_in = when;
+        if (g_trace) fprintf(stderr, " last in at %llu\n", (unsigned long long)(when - g.rt_start));
+    }
+    g.next_byte_cycle = when + kByteCycles;
+    (void)avr;
+    if (g.to_board.empty()) {
+        g.feeding = false;
+        return 0;
+    }
+    return when + kByteCycles;
+}
 void uart_xoff(avr_irq_t*, uint32_t, void*) { g.xon = false; }
 
 template <typename Msg>
@@ -261,6 +315,17 @@ void run_until(double t_end) {
                 if (g.tick_nested > g.sim_nested_worst) g.sim_nested_worst = g.tick_nested;
             }
         }
+        if (!g_notice_profile.empty() && g.rt_seq >= 0 && g.rt_last_in &&
+            g.rt_dispatch <= g.rt_last_in && pc0 < g_notice_profile.size()) {
+            g_notice_profile[pc0] += g.avr->cycle - c0;  // the notice segment's cycles
+        }
+        if (g_trace && g_trace_pc && g.avr->pc == g_trace_pc && g.rt_seq >= 0)
+            fprintf(stderr, " pc at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
+        if (g.dispatch_entry && g.avr->pc == g.dispatch_entry && g.rt_seq >= 0 &&
+            g.rt_dispatch <= g.rt_last_in) {
+            g.rt_dispatch = g.avr->cycle;
+            if (g_trace) fprintf(stderr, " dispatch at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
+        }
         if (g.loop_entry) {
             if (!g.pass_profile.empty() && pc0 < g.pass_profile.size()) {
                 if (g.pass_profile[pc0] == 0) g.pass_touched.push_back(pc0);
@@ -285,15 +350,13 @@ void run_until(double t_end) {
                 g.loop_start = g.avr->cycle;
             }
         }
-        if (!g.to_board.empty() && g.xon && g.avr->cycle >= g.next_byte_cycle) {
-            if (g_trace && g.rt_seq >= 0) fprintf(stderr, "  in at %llu\n", (unsigned long long)(g.avr->cycle - g.rt_start));
-            if (g.rt_seq >= 0 && !g.rt_started) {
-                g.rt_started = true;
-                g.rt_start = g.avr->cycle;
-            }
-            avr_raise_irq(in, g.to_board.front());
-            g.to_board.pop_front();
-            g.next_byte_cycle = g.avr->cycle + kByteCycles;
+        if (!g.feeding && !g.to_board.empty() && g.xon) {
+            // The host's bytes on simavr's clock (a cycle timer: exact even while the firmware
+            // sleeps, when one step of the simulator skips many cycles).
+            g.feeding = true;
+            g.uart_in = in;
+            const uint64_t at = std::max<uint64_t>(g.next_byte_cycle, g.avr->cycle + 1);
+            avr_cycle_timer_register(g.avr, at - g.avr->cycle, feed_byte, nullptr);
         }
     }
 }
@@ -434,6 +497,7 @@ int main(int argc, char** argv) {
     g.avr->frequency = (uint32_t)kCpuHz;
     g.avr->vcc = g.avr->avcc = g.avr->aref = 5000;
     g.avr->log = 0;
+    g.avr->sleep = count_sleep;
 
     uint32_t flags = 0;
     avr_ioctl(g.avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
@@ -480,7 +544,16 @@ int main(int argc, char** argv) {
     if (g.loop_entry && loop_profile && *loop_profile) g.pass_profile.assign(256 * 1024, 0);
     g.profile_all = getenv("UTRF_LOOP_PROFILE_ALL") != nullptr;
     g_trace = getenv("UTRF_TRACE") != nullptr;
+    if (getenv("UTRF_TRACE_PC")) g_trace_pc = (uint32_t)strtoul(getenv("UTRF_TRACE_PC"), nullptr, 16);
+    const char* notice_path = getenv("UTRF_NOTICE_PROFILE");
+    if (notice_path && *notice_path) g_notice_profile.assign(256 * 1024, 0);
+    const char* dispatch_entry = getenv("UTRF_DISPATCH_ENTRY");
+    if (dispatch_entry && *dispatch_entry) {
+        g.dispatch_entry = (uint32_t)strtoul(dispatch_entry, nullptr, 16);
+    }
     g.measuring = true;
+    const uint64_t sleep_before = g_sleep_cycles;
+    const uint64_t cycles_before = g.avr->cycle;
     uint16_t move_id = 0;
     const uint32_t frames_before = g.state_frames;
     const uint32_t gaps_before = g.state_gaps;
@@ -549,6 +622,8 @@ int main(int argc, char** argv) {
             run_until(next_send < t + 0.0005 ? next_send : t + 0.0005);
         }
     }
+    const double asleep = (double)(g_sleep_cycles - sleep_before) /
+                          (double)(g.avr->cycle - cycles_before);
     const uint32_t frames = g.state_frames - frames_before;
     const uint32_t gaps = g.state_gaps - gaps_before;
     const uint64_t sim_ticks = g.sim_ticks;
@@ -587,15 +662,32 @@ int main(int argc, char** argv) {
         const size_t i = (size_t)std::min<double>(v.size() - 1, floor(q * (v.size() - 1) + 0.5));
         return v[i] / kCpuHz * 1e6;
     };
-    char rt[512] = "";
+    char rt[1024] = "";
     if (scenario == "latency") {
-        snprintf(rt, sizeof rt,
+        int n = snprintf(rt, sizeof rt,
                  ", \"ping_n\": %zu, \"ping_median_us\": %.1f, \"ping_p99_us\": %.1f, "
                  "\"ping_max_us\": %.1f, \"targets_n\": %zu, \"targets_median_us\": %.1f, "
                  "\"targets_p99_us\": %.1f, \"targets_max_us\": %.1f",
                  g.rt_ping.size(), pct(g.rt_ping, 0.5), pct(g.rt_ping, 0.99), pct(g.rt_ping, 1.0),
                  g.rt_targets.size(), pct(g.rt_targets, 0.5), pct(g.rt_targets, 0.99),
                  pct(g.rt_targets, 1.0));
+        // The segments, both requests together: median and 99th percentile of each.
+        const std::vector<uint64_t>* segs[] = {&g.seg_in, &g.seg_notice, &g.seg_reply, &g.seg_out};
+        const char* names[] = {"in", "notice", "reply", "out"};
+        for (int k = 0; k < 4 && !g.seg_in.empty(); ++k) {
+            n += snprintf(rt + n, sizeof rt - n, ", \"seg_%s_median_us\": %.1f, \"seg_%s_p99_us\": %.1f",
+                          names[k], pct(*segs[k], 0.5), names[k], pct(*segs[k], 0.99));
+        }
+    }
+    if (!g_notice_profile.empty()) {
+        FILE* pf = fopen(notice_path, "w");
+        if (pf) {
+            fprintf(pf, "# byte address, cycles between requests' last byte and dispatch\n");
+            for (size_t a = 0; a < g_notice_profile.size(); ++a) {
+                if (g_notice_profile[a]) fprintf(pf, "%zx %llu\n", a, (unsigned long long)g_notice_profile[a]);
+            }
+            fclose(pf);
+        }
     }
     if (!g.worst_profile.empty()) {
         FILE* pf = fopen(loop_profile, "w");
@@ -632,7 +724,7 @@ int main(int argc, char** argv) {
            "\"sim_nested_mean_cycles\": %.1f, \"sim_nested_interrupts\": %llu, "
            "\"sim_isr_mean_cycles\": %.1f, \"sim_isr_worst_cycles\": %llu, "
            "\"sim_isr_ticks\": %llu, \"loop_passes\": %llu, \"loop_worst_cycles\": %llu, "
-           "\"loop_worst_at_s\": %.6f%s}\n",
+           "\"loop_worst_at_s\": %.6f, \"asleep\": %.4f%s}\n",
            scenario.c_str(), seconds, (unsigned)s.ticks, (unsigned)s.tick_overruns,
            (unsigned)s.tick_worst, (unsigned)s.tick_mean, (unsigned)s.rx_frames,
            (unsigned)s.rx_crc_errors, (unsigned)s.rx_framing_errors, (unsigned)s.rx_overruns,
@@ -642,6 +734,6 @@ int main(int argc, char** argv) {
            (unsigned long long)sim_nested_worst, sim_nested_mean,
            (unsigned long long)sim_nested_count, isr_mean, (unsigned long long)isr_worst,
            (unsigned long long)isr_ticks, (unsigned long long)g.loop_passes,
-           (unsigned long long)g.loop_worst, g.loop_worst_at / kCpuHz, rt);
+           (unsigned long long)g.loop_worst, g.loop_worst_at / kCpuHz, asleep, rt);
     return 0;
 }

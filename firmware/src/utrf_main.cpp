@@ -10,4 +10,7 @@ void setup() {
     utrf::app::setup();
 }
 
-void loop() { utrf::app::loop(); }
+void loop() {
+    utrf::app::loop();
+    utrf::hal::sleep_until_interrupt(utrf::app::idle);  // nothing to do: until an interrupt
+}

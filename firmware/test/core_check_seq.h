@@ -209,6 +209,14 @@ inline uint32_t core_check_run() {
         f.add(e.turn);
         f.add((uint8_t)e.status);
         f.add((uint16_t)encoder::angle_bu(e.turn, 40000u, adc & 1));
+        hal::EncoderSetup su;
+        su.zero_turn = (uint16_t)(adc * 61u);
+        su.invert = (adc & 2) != 0;
+        su.low = -9000;
+        su.high = 7000;
+        const hal::EncoderReading j = encoder::judge(adc, su);
+        f.add((uint16_t)j.angle);
+        f.add(j.flags);
     }
     return f.h;
 }

@@ -41,17 +41,19 @@ using host::g_state;
 
 void motors_write(const MotorCommand* cmd) {
     for (uint8_t f = 0; f < 5; ++f) {
-        // The rule the AVR layer relies on: a driving channel has at least one count.
+        const MotorOut ch[2] = {{drive_a(cmd[f].drives), cmd[f].a_counts},
+                                {drive_b(cmd[f].drives), cmd[f].b_counts}};
+        // The rule the AVR layer relies on: a driving channel has at least one count; and the
+        // core's: a channel that does not drive has none.
         for (uint8_t k = 0; k < 2; ++k) {
-            const MotorOut& m = k ? cmd[f].b : cmd[f].a;
-            if ((m.drive == Drive::FORWARD || m.drive == Drive::REVERSE) &&
-                (m.on_counts == 0 || m.on_counts > kPwmPeriod)) {
+            const MotorOut& m = ch[k];
+            const bool drives = m.drive == Drive::FORWARD || m.drive == Drive::REVERSE;
+            if (drives ? (m.on_counts == 0 || m.on_counts > kPwmPeriod) : m.on_counts != 0) {
                 ++g_state.lock_errors;
             }
+            g_state.motor[f][k] = m;
         }
-        g_state.motor[f][0] = cmd[f].a;
-        g_state.motor[f][1] = cmd[f].b;
-        g_state.stby[f] = cmd[f].stby;
+        g_state.stby[f] = stby_of(cmd[f].drives);
     }
     ++g_state.motor_writes;
 }
@@ -65,12 +67,18 @@ void motors_all_off() {
     ++g_state.all_off_calls;
 }
 
+namespace {
+EncoderSetup g_setup[5];
+}  // namespace
+
+void encoder_setup(uint8_t finger, const EncoderSetup& s) { g_setup[finger] = s; }
+
+// Judged here, as the tick reads them: the setup in force is the one they are judged with.
 const EncoderReading* encoders_read() {
     static EncoderReading out[5];
     const bool stale = host::g_staleness.stale(g_state.adc_seq);
     for (uint8_t f = 0; f < 5; ++f) {
-        out[f] = encoder::as5600_reading(g_state.adc[f]);
-        if (stale) out[f].status = EncoderStatus::NO_DATA;
+        out[f] = stale ? encoder::no_data() : encoder::judge(g_state.adc[f], g_setup[f]);
     }
     return out;
 }
@@ -102,13 +110,16 @@ Stamp stamp() {
 bool tick_period_elapsed() { return g_state.period_elapsed; }
 uint32_t millis() { return g_state.ms; }
 
-uint16_t serial_read(uint8_t* buf, uint16_t max) {
-    uint16_t n = 0;
-    while (n < max && g_state.rx_tail != g_state.rx_head) {
-        buf[n++] = g_state.rx[g_state.rx_tail];
-        g_state.rx_tail = (uint16_t)((g_state.rx_tail + 1) % host::kRxBytes);
-    }
-    return n;
+uint8_t serial_rx_peek(const uint8_t** data) {
+    const uint16_t tail = g_state.rx_tail;
+    const uint16_t head = g_state.rx_head;
+    *data = g_state.rx + tail;
+    const uint16_t n = head >= tail ? (uint16_t)(head - tail) : (uint16_t)(host::kRxBytes - tail);
+    return (uint8_t)(n > 255 ? 255 : n);
+}
+
+void serial_rx_take(uint8_t n) {
+    g_state.rx_tail = (uint16_t)((g_state.rx_tail + n) % host::kRxBytes);
 }
 
 uint16_t serial_tx_room() {

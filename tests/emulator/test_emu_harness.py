@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from emu_helpers import Console
 
-from utrf.emulator import EmulatedBoard, EncoderParams, PlantParams
+from utrf.emulator import EmulatedBoard, EmulatorError, EncoderParams, PlantParams
 from utrf.emulator.board import RESET_FLAGS
 
 QUIET = PlantParams(gravity_m_s2=(0.0, 0.0), encoder=EncoderParams(noise_v=0.0))
@@ -386,6 +386,66 @@ def test_a_run_is_determined_by_its_seed(fixture_elf: Path) -> None:
     assert out1 == out2 and np.array_equal(theta1, theta2) and np.array_equal(adc1, adc2)
     assert out1 != out3  # other line faults and encoder noise
     assert theta1[1, 1] > 0.05  # the run did drive finger 1
+
+
+class TestRunUntilOutput:
+    """``run_until_output``: in C from one awaited byte to the next (a frame's end for the
+    protocol's clients), stopping where a look after every exchange would have."""
+
+    @staticmethod
+    def counting(board: EmulatedBoard) -> None:
+        assert Console(board).line() == "boot 1"
+        board.write(b"z 300\n")  # bytes 0, 1, ..., 255, 0, ..., 43: 10 us apart
+
+    def test_it_stops_where_a_look_every_exchange_would(self, fixture_elf: Path) -> None:
+        seen = bytearray()
+
+        def has_200(b: EmulatedBoard) -> bool:
+            seen.extend(b.read())
+            return 200 in seen
+
+        stops = []
+        for wait in ("every exchange", "in C"):
+            with EmulatedBoard(fixture_elf, realtime=False, plant_params=QUIET) as board:
+                self.counting(board)
+                start = board.sim_time
+                if wait == "in C":
+                    assert board.run_until_output(1.0, byte=200)
+                    seen[:] = board.read()
+                else:
+                    seen.clear()
+                    assert board.run_until(has_200, timeout=1.0)
+                stops.append((board.sim_time, bytes(seen)))
+        assert stops[0] == stops[1]
+        at, out = stops[0]
+        assert out[-1] != 200 and 200 in out[-30:]  # the rest of its exchange came too
+        assert 2e-3 < at - start < 3e-3  # 200 bytes of 10 us after the command's echo
+
+    def test_until_decides_at_each_awaited_byte(self, board: EmulatedBoard) -> None:
+        self.counting(board)
+        period = board.exchange_period
+        start = board.sim_time
+        looks: list[tuple[float, bytes]] = []
+
+        def look() -> bool:
+            looks.append((board.sim_time, board.read()))
+            return False
+
+        assert not board.run_until_output(0.01 + period / 3, look, byte=0)
+        # whole exchanges, the last one past the time asked (and an instruction's cycles past
+        # that); a look at each 0x00 only
+        whole = math.ceil(0.01 / period + 1 / 3) * period
+        assert board.sim_time - start == pytest.approx(whole, abs=1e-6)
+        assert len(looks) == 2
+        assert all(0 in out[-26:] for _, out in looks)  # in the last exchange's 25 bytes
+        assert 2.5e-3 < looks[1][0] - looks[0][0] < 2.6e-3 + period  # 256 bytes apart
+
+    def test_it_needs_a_driven_capturing_board(self, fixture_elf: Path) -> None:
+        with EmulatedBoard(fixture_elf, realtime=False, capture=False) as board:
+            with pytest.raises(EmulatorError, match="capture"):
+                board.run_until_output(0.01)
+            with pytest.raises(EmulatorError, match="byte"):
+                board.run_until_output(0.01, byte=256)
 
 
 class TestProfiler:

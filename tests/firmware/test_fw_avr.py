@@ -22,7 +22,7 @@ from fwsim import REPO
 ELF = REPO / "build" / "firmware" / "utrf.elf"
 CHECK_ELF = REPO / "build" / "firmware" / "check" / "core_check.elf"
 BENCH = REPO / "build" / "firmware" / "bench" / "tick_bench"
-FLASH_TARGET = 48 * 1024
+FLASH_TARGET = 64 * 1024  # firmware.mk FW_TARGET_FLASH
 RAM_TARGET = 3 * 1024
 
 

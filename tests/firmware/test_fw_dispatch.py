@@ -661,3 +661,17 @@ def test_the_default_heartbeat_timeout_is_the_specs_and_on_the_protocol_page(sim
     assert sim.ok(m.GetSafety()).heartbeat_timeout == m.DEFAULT_HEARTBEAT_TIMEOUT_S == 0.5
     readme = Path(__file__).resolve().parents[2] / "protocol" / "README.md"
     assert "| default heartbeat timeout | 0.5 s |" in readme.read_text(encoding="utf-8")
+
+
+def test_joint2_angle_targets_are_the_exact_nearest_count(sim: Sim) -> None:
+    # The board turns micro-radians into counts in 32-bit pieces (dispatch.cpp bu_from_urad):
+    # every value must come out as the 64-bit form x * M / 2^32 rounded, the sign's both sides
+    # and the 16-bit boundaries of x included.
+    big_m = 22399067  # round(2^32 * 32768 / (2 pi 1e6))
+    values = [0, 1, -1, 65535, 65536, -65536, -65537, 95874, -95874, 700000, -700000]
+    values += [(k * 104729) % 1_500_001 - 700_000 for k in range(60)]
+    for urad in values:
+        body = raw_body(m.SetTargets, int(m.TargetKind.JOINT2_ANGLE), 0b1, urad, 0, 0, 0, 0)
+        r = sim.request_body(m.SetTargets.ID, body)
+        assert not isinstance(r.msg, m.Nack), (urad, r.msg)
+        assert sim.finger(0).target == (urad * big_m + 2**31) >> 32, urad

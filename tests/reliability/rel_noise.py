@@ -85,6 +85,11 @@ def line_faults(board: EmulatedBoard, rate: float) -> None:
     board.set_line_faults("both", **kw)
 
 
+def _held(fs: Any) -> bool:
+    """A finger's state shows HOST_TIMEOUT's HOLD: the fault latched, the target the angle."""
+    return M.FaultBits.HOST_TIMEOUT in fs.faults and abs(fs.target - fs.theta2) <= HOLD_TOL
+
+
 def _retry(fn: Any, attempts: int = 50) -> Any:
     for _ in range(attempts - 1):
         try:
@@ -209,6 +214,12 @@ def run_campaign(
             st = _retry(hand.state)
             now_v = st[f].target if what == "target" else st[f].mode
             applied = abs(now_v - v) <= TARGET_TOL if what == "target" else now_v == v
+            if failed is None and not applied and what == "target" and _held(st[f]):
+                # The board heard nothing valid for heartbeat_timeout between the command's
+                # reply and the read-back, and HOST_TIMEOUT's HOLD replaced the target: the
+                # read-back says so (its stream frame may still be on its way).
+                res.held_targets += 1
+                continue
             if failed is None and not applied:
                 res.silent_losses += 1
                 res.notes.append(f"command {k} ({what} {v}) returned but the board shows {now_v}")

@@ -76,30 +76,49 @@ void take_request(Board& b) {
     b.request_seq = -1;
 }
 
+// One received byte into the decoder, and what it completes.
+void receive_byte(Board& b, uint8_t byte) {
+    if (!b.decoder.in_frame()) b.rx_frame_tick = b.hand.ticks();
+    switch (b.decoder.feed(byte)) {
+        case framing::RxEvent::FRAME:
+            take_request(b);
+            break;
+        case framing::RxEvent::CRC_ERROR:
+            ++b.link.rx_crc_errors;
+            dispatch::nack(b, b.decoder.seq(), b.decoder.msg_id(),
+                           (uint8_t)proto::ErrorCode::BAD_CRC, 0);
+            break;
+        case framing::RxEvent::FRAMING_ERROR:
+        case framing::RxEvent::OVERSIZE:
+            // Nothing trustworthy to answer to (no seq): counted for get_stats.
+            ++b.link.rx_framing_errors;
+            break;
+        case framing::RxEvent::NONE:
+            break;
+    }
+}
+
+// The received bytes, read in place from the UART's buffer (no copy, no call a byte), up to
+// kRxBurst of them; a reply waiting for room stops the reading (the rest stays in the buffer).
 void receive(Board& b) {
     const uint16_t lost = hal::serial_take_overruns();
     b.link.rx_overruns += lost;
-    for (uint8_t i = 0; i < kRxBurst && b.reply_len == 0; ++i) {
-        uint8_t byte;
-        if (hal::serial_read(&byte, 1) == 0) break;
-        if (!b.decoder.in_frame()) b.rx_frame_tick = b.hand.ticks();
-        switch (b.decoder.feed(byte)) {
-            case framing::RxEvent::FRAME:
-                take_request(b);
-                break;
-            case framing::RxEvent::CRC_ERROR:
-                ++b.link.rx_crc_errors;
-                dispatch::nack(b, b.decoder.seq(), b.decoder.msg_id(),
-                               (uint8_t)proto::ErrorCode::BAD_CRC, 0);
-                break;
-            case framing::RxEvent::FRAMING_ERROR:
-            case framing::RxEvent::OVERSIZE:
-                // Nothing trustworthy to answer to (no seq): counted for get_stats.
-                ++b.link.rx_framing_errors;
-                break;
-            case framing::RxEvent::NONE:
-                break;
+    uint8_t budget = kRxBurst;
+    while (budget != 0 && b.reply_len == 0) {
+        const uint8_t* data;
+        uint8_t n = hal::serial_rx_peek(&data);
+        if (n == 0) break;
+        if (n > budget) n = budget;
+        uint8_t used = 0;
+        while (used < n && b.reply_len == 0) {
+            // A frame's bytes in one run, then the byte that ends the run (its 0x00) one at a
+            // time.
+            if (!b.decoder.in_frame()) b.rx_frame_tick = b.hand.ticks();
+            used = (uint8_t)(used + b.decoder.feed_run(data + used, (uint8_t)(n - used)));
+            if (used < n) receive_byte(b, data[used++]);
         }
+        hal::serial_rx_take(used);
+        budget = (uint8_t)(budget - used);
     }
 }
 
@@ -120,6 +139,14 @@ void note_status(Board& b, const uint8_t* mode, const uint8_t* faults) {
 }
 
 void poll_status(Board& b) {
+    // Usually nothing changed: a byte at a time needs no lock to tell (each byte is read
+    // whole); only a change is taken as one snapshot, under the lock.
+    bool same = true;
+    for (uint8_t f = 0; f < hand::kFingers; ++f) {
+        const finger::Finger& fg = b.hand.finger(f);
+        if (fg.mode() != b.status_mode[f] || fg.faults() != b.status_faults[f]) same = false;
+    }
+    if (same) return;
     uint8_t mode[hand::kFingers];
     uint8_t faults[hand::kFingers];
     {
@@ -156,8 +183,12 @@ bool report_faults(Board& b) {
 // two samples wait (loop() or the line fell a period behind), the waiting samples go out in
 // this pass, back to back, as far as the buffer has room.
 void board_frames(Board& b) {
-    poll_status(b);
     const bool idle = tx_idle(b);
+    uint8_t pending = b.hand.stream_pending();
+    // Nothing can start (the buffer busy, fewer than two samples waiting): the status is
+    // polled when a frame can go, before it.
+    if (!idle && pending < 2) return;
+    poll_status(b);
     if (idle && report_faults(b)) return;
     if (idle && b.status_pending) {
         proto::Status m;
@@ -166,13 +197,17 @@ void board_frames(Board& b) {
         b.status_pending = false;
         return;
     }
-    uint8_t pending = b.hand.stream_pending();
     if (pending == 0) return;
     if (pending < 2) {
         // A request is coming in: its reply goes first, onto a free line. The state waits (it
-        // may: the samples wait in the ring).
+        // may: the samples wait in the ring). Coming in: bytes of it in the decoder (for at
+        // most kRequestHoldTicks: garbage with no 0x00 after it holds nothing longer), or
+        // bytes in the UART's buffer that loop() has not read yet (a tick or this pass's work
+        // held it up while they came): they are read first, at the next pass.
+        const uint8_t* waiting;
         const bool request_coming =
-            b.decoder.in_frame() && b.hand.ticks() - b.rx_frame_tick < kRequestHoldTicks;
+            (b.decoder.in_frame() && b.hand.ticks() - b.rx_frame_tick < kRequestHoldTicks) ||
+            hal::serial_rx_peek(&waiting) != 0;
         if (!idle || request_coming) return;
     }
     while (pending != 0 && b.reply_len == 0 &&
@@ -213,6 +248,8 @@ void watchdog(Board& b) {
     b.hand.note_loop();
     const uint32_t t = b.hand.ticks();
     const uint32_t ms = hal::millis();
+    b.pass_ticks = t;
+    b.pass_ms = ms;
     if (t != b.watch_ticks) {
         b.watch_ticks = t;
         b.watch_ms = ms;
@@ -344,6 +381,22 @@ void loop() {
     save_progress(b);
     flush_reply(b);
     board_frames(b);
+}
+
+bool idle() {
+    const Board& b = g_board;
+    if (!b.boot_sent || b.reply_len != 0 || b.writer.busy()) return false;
+    if (b.hand.ticks() != b.pass_ticks || hal::millis() != b.pass_ms) return false;
+    const uint8_t* waiting;
+    if (hal::serial_rx_peek(&waiting) != 0) return false;
+    const uint8_t pending = b.hand.stream_pending();
+    if (pending >= 2) return false;  // behind: they go as the buffer has room (rare: spin)
+    if (!tx_idle(b)) return true;    // a frame starts when the buffer empties: an interrupt
+    if (pending != 0 || b.status_pending) return false;
+    for (uint8_t f = 0; f < hand::kFingers; ++f) {
+        if (b.hand.finger(f).pending_new_faults() != 0) return false;
+    }
+    return true;
 }
 
 void tick() {

@@ -83,6 +83,10 @@ struct Board {
 
     uint32_t watch_ticks;  // loop()'s view of the tick, for the watchdog
     uint32_t watch_ms;
+    // The tick count and millis() when this loop() pass began (its watchdog check): idle()
+    // finds whether a tick or timer 0 came since.
+    uint32_t pass_ticks;
+    uint32_t pass_ms;
 
     // The last move (dispatch.cpp): a resend (same seq and body) gets its reply again and
     // restarts nothing. Zero at start-up (static storage): no move yet.
@@ -103,6 +107,13 @@ struct Lock {
 
 void setup();  // after hal init: load the configuration, arm the tick and the watchdog
 void loop();   // one pass: link, dispatch, reports, telemetry, EEPROM, watchdog
+// After a pass, called by the hardware layer with interrupts disabled: true when a pass run
+// now would find nothing to do, so the CPU may sleep until the next interrupt (whatever gives
+// loop() work comes from an interrupt: a byte received or sent, a tick, timer 0's millisecond).
+// False when a byte waits to be read, a reply or a board frame can go, the EEPROM is being
+// written, or a tick or timer 0 came during the pass (its work, or the tick-alive check at
+// the new millisecond, is not left for the next interrupt).
+bool idle();
 void tick();   // the control tick (timer interrupt context)
 // After each tick, from the hardware layer that timed it: its length in CPU cycles, and
 // whether the next period began before it ended (an overrun).

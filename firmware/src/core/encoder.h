@@ -22,8 +22,8 @@ static const uint16_t kAdcBandHigh = 932;
 // A sampler whose round counter has not moved for this many ticks has stopped (NO_DATA).
 static const uint8_t kStaleTicks = 3;
 
-// One AS5600 analog sample judged: its angle as a turn fraction and whether it lies in the
-// sensor's valid band. (Cheap enough for the ADC interrupt, which calls it for each sample.)
+// One AS5600 analog sample: its angle as a turn fraction and whether it lies in the sensor's
+// valid band (judge(), below, adds the finger's angle and limits).
 __attribute__((always_inline)) inline hal::EncoderReading as5600_reading(uint16_t sample) {
     hal::EncoderReading r;
     // 102.4..921.6 counts mapped to 0..65536, i.e. sample * 80 - 8192, modulo 2^16 (16-bit
@@ -34,6 +34,45 @@ __attribute__((always_inline)) inline hal::EncoderReading as5600_reading(uint16_
     r.turn = (uint16_t)((uint16_t)(sample * 80u) - 8192u);
     r.status = (sample < kAdcBandLow || sample > kAdcBandHigh) ? hal::EncoderStatus::OUT_OF_BAND
                                                                : hal::EncoderStatus::OK;
+    r.angle = 0;
+    r.flags = r.status == hal::EncoderStatus::OK ? 0 : hal::kReadingOut;  // see judge()
+    return r;
+}
+
+// Joint-2 angle in BU (2 pi / 32768 rad, within +-pi) from a one-turn reading: the reading
+// minus the reading at angle 0, wrapped to +-half a turn, counted against flexion for an
+// encoder mounted the other way round. Two instructions' worth of 16-bit arithmetic.
+__attribute__((always_inline)) inline int16_t angle_bu(uint16_t turn, uint16_t zero_turn,
+                                                       bool invert) {
+    const uint16_t d =
+        UTRF_UNLIKELY(invert) ? (uint16_t)(zero_turn - turn) : (uint16_t)(turn - zero_turn);
+    return (int16_t)((int16_t)d >> 1);  // -16384..16383
+}
+
+// A sample judged for the tick: the band, the angle with the finger's setup and the fault
+// limits (the rules that need no memory of earlier samples; the jump rule needs the finger's
+// last angle and stays in the tick). The sampler runs it for each sample (the AVR's ADC
+// interrupt, between ticks), so the tick takes a ready angle.
+__attribute__((always_inline)) inline hal::EncoderReading judge(uint16_t sample,
+                                                                const hal::EncoderSetup& s) {
+    hal::EncoderReading r = as5600_reading(sample);
+    if (r.status != hal::EncoderStatus::OK) {
+        r.angle = 0;
+        r.flags = hal::kReadingOut;
+        return r;
+    }
+    r.angle = angle_bu(r.turn, s.zero_turn, s.invert);
+    r.flags = (r.angle < s.low || r.angle > s.high) ? hal::kReadingLimit : 0;
+    return r;
+}
+
+// A reading with no data (the sampler stopped).
+inline hal::EncoderReading no_data() {
+    hal::EncoderReading r;
+    r.turn = 0;
+    r.status = hal::EncoderStatus::NO_DATA;
+    r.angle = 0;
+    r.flags = hal::kReadingOut;
     return r;
 }
 
@@ -57,15 +96,6 @@ class Staleness {
     uint8_t last_seq_;
     uint8_t stale_;
 };
-
-// Joint-2 angle in BU (2 pi / 32768 rad, within +-pi) from a one-turn reading: the reading
-// minus the reading at angle 0, wrapped to +-half a turn, counted against flexion for an
-// encoder mounted the other way round. Two instructions' worth of 16-bit arithmetic.
-inline int16_t angle_bu(uint16_t turn, uint16_t zero_turn, bool invert) {
-    const uint16_t d =
-        UTRF_UNLIKELY(invert) ? (uint16_t)(zero_turn - turn) : (uint16_t)(turn - zero_turn);
-    return (int16_t)((int16_t)d >> 1);  // -16384..16383
-}
 
 // Angle (rad) <-> one-turn count, for configuration (loop() context).
 uint16_t turn_from_rad(float rad);

@@ -42,6 +42,8 @@ Params compile(const config::Finger& cfg, float dt_s, pid::Coeffs& coeffs) {
     p.pull = cfg.hw.motor_invert != 0 ? hal::Drive::REVERSE : hal::Drive::FORWARD;
     p.rotary = cfg.hw.actuation == 1;  // proto::Actuation::ROTARY
     p.pretension_counts = pwm_counts((uint16_t)p.pretension);
+    const hal::Drive hold = p.pretension_counts == 0 ? hal::Drive::COAST : p.pull;
+    p.hold_drives = hal::drives(hold, hold, true);
     return p;
 }
 
@@ -147,6 +149,22 @@ void Finger::clear_faults() {
     stall_count_ = 0;
 }
 
+uint8_t Finger::judge_reading(const hal::EncoderReading& enc) {
+    if (enc.status != hal::EncoderStatus::OK) {
+        encoder_ok_ = false;
+        return ENCODER_RANGE;
+    }
+    encoder_ok_ = true;
+    last_turn_ = enc.turn;
+    const int16_t th = encoder::angle_bu(enc.turn, params_.zero_turn, params_.encoder_invert);
+    uint8_t found = 0;
+    if (have_theta_ && fx::abs16((int16_t)(th - theta_)) > params_.jump) found = ENCODER_JUMP;
+    theta_ = th;
+    have_theta_ = true;
+    if (th < params_.fault_low || th > params_.fault_high) found |= JOINT_LIMIT;
+    return found;
+}
+
 void Finger::latch(uint8_t bits) {
     new_faults_ |= bits & (uint8_t)~faults_;
     faults_ |= bits;
@@ -183,19 +201,19 @@ void Finger::halt() {
 
 void Finger::stop_now(hal::MotorCommand& out) {
     duty_a_ = duty_b_ = 0;
-    out.a.on_counts = out.b.on_counts = 0;
-    out.a.drive = out.b.drive = hal::Drive::COAST;
-    out.stby = false;
+    out.a_counts = out.b_counts = 0;
+    out.drives = hal::drives(hal::Drive::COAST, hal::Drive::COAST, false);
 }
 
 void Finger::idle_outputs(uint8_t mode, hal::MotorCommand& out) {
     duty_a_ = duty_b_ = 0;
-    out.a.on_counts = out.b.on_counts = 0;
-    out.a.drive = mode == BRAKE ? hal::Drive::BRAKE : hal::Drive::COAST;
-    out.b.drive = (mode == BRAKE && !params_.rotary) ? hal::Drive::BRAKE : hal::Drive::COAST;
+    out.a_counts = out.b_counts = 0;
     // Short brake needs the driver enabled: refused to a finger with a stop fault other than
     // JOINT_LIMIT (an encoder or stall fault, an overrun: nothing of it is trusted).
-    out.stby = mode == BRAKE && (faults_ & (kStopFaults & ~JOINT_LIMIT)) == 0;
+    out.drives = hal::drives(mode == BRAKE ? hal::Drive::BRAKE : hal::Drive::COAST,
+                             (mode == BRAKE && !params_.rotary) ? hal::Drive::BRAKE
+                                                                : hal::Drive::COAST,
+                             mode == BRAKE && (faults_ & (kStopFaults & ~JOINT_LIMIT)) == 0);
 }
 
 int16_t Finger::duty_step(int16_t th) {

@@ -56,10 +56,10 @@ struct Params {
     bool encoder_invert;
     hal::Drive pull;       // the drive that pulls a tendon: FORWARD, or REVERSE (motor_invert)
     bool rotary;
-    // Read by the antagonistic output mapping every tick, but only on the pulling side's
-    // channel that is not working (one access), by the stall rule (a finger's turn every
-    // kStallEvery ticks), DUTY and loop().
+    // Read by the antagonistic output mapping every tick, by the stall rule (a finger's turn
+    // every kStallEvery ticks), DUTY and loop().
     uint16_t pretension_counts;  // PWM counts of the pretension alone
+    uint8_t hold_drives;         // hal::drives() of both channels holding the pretension alone
 
     int16_t max_duty;      // motor duty limit
     int16_t theta_min;     // joint limits
@@ -92,7 +92,15 @@ class Finger {
         target_valid_ = true;
     }
     void clear_faults();
-    void set_zero_turn(uint16_t turn) { params_.zero_turn = turn; have_theta_ = false; }
+    // What the encoder sampler needs to judge this finger's readings (hal::encoder_setup()).
+    hal::EncoderSetup encoder_setup() const {
+        hal::EncoderSetup s;
+        s.zero_turn = params_.zero_turn;
+        s.invert = params_.encoder_invert;
+        s.low = params_.fault_low;
+        s.high = params_.fault_high;
+        return s;
+    }
 
     // ---- from the tick ----
     // Latch faults (the host-silence and overrun rules live at the hand level).
@@ -139,6 +147,10 @@ class Finger {
 
    private:
     int16_t limit_for(uint8_t mode) const;
+    // A reading the sampler flagged (out of band, beyond a joint limit, or judged with an
+    // earlier setup): every encoder rule from its turn and status, with this finger's
+    // configuration. Updates the angle; returns the faults found.
+    uint8_t judge_reading(const hal::EncoderReading& enc);
     void enter_closed_loop(uint8_t mode);
     // The stall rule, on the finger's turn: false when it stopped the finger (STALL latched,
     // the motors off in `out`).
@@ -153,7 +165,8 @@ class Finger {
     // configuration (Params: the fields the tick reads first): all that a tick in closed loop
     // touches lies within the object's first 64 bytes, which the AVR's ldd/std reach by
     // displacement from one pointer (beyond them, each access needs an address computed
-    // first). static_assert in finger.cpp.
+    // first). static_assert in finger.cpp. (The hand's tick now reaches each finger at a fixed
+    // address, hand.h; the layout is kept for code that reaches a finger through a pointer.)
     int16_t theta_;
     int16_t target_;
     int16_t limit_;  // limit_for(mode_), kept current
@@ -198,24 +211,25 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
     // Angles are BU within +-pi, so every difference below fits int16. The faults found are
     // latched together, after theta_ took the new reading: the same bits as one at a time, and
     // the PID reset that stops the finger is repeated (from theta_) whenever it drives again.
-    int16_t th = theta_;
-    uint8_t found = 0;
+    // (The band and the limits were judged by the sampler: hal.h, EncoderReading.)
     // The usual paths are told to the compiler (UTRF_LIKELY), so they run straight through.
-    if (UTRF_UNLIKELY(enc.status != hal::EncoderStatus::OK)) {
-        encoder_ok_ = false;
-        found = ENCODER_RANGE;
-    } else {
+    int16_t th;
+    uint8_t found = 0;
+    if (UTRF_LIKELY(enc.flags == 0)) {
+        // In band and within the joint limits, its angle worked out by the sampler with this
+        // finger's setup (core/encoder.h, judge()): only the jump rule is left.
         encoder_ok_ = true;
-        const uint16_t turn = enc.turn;
-        last_turn_ = turn;
-        th = encoder::angle_bu(turn, params_.zero_turn, params_.encoder_invert);
+        last_turn_ = enc.turn;
+        th = enc.angle;
         if (UTRF_LIKELY(have_theta_) &&
             UTRF_UNLIKELY(fx::abs16((int16_t)(th - theta_)) > params_.jump)) {
             found = ENCODER_JUMP;
         }
         theta_ = th;
         have_theta_ = true;
-        if (UTRF_UNLIKELY(th < params_.fault_low || th > params_.fault_high)) found |= JOINT_LIMIT;
+    } else {
+        found = judge_reading(enc);  // every rule, from the reading's turn and status
+        th = theta_;
     }
     if (UTRF_UNLIKELY(found)) latch(found);
 
@@ -246,46 +260,43 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
         duty_b_ = 0;
         const bool neg = u < 0;
         const uint16_t c = pwm_counts((uint16_t)(neg ? -u : u));
-        out.a.on_counts = c;
+        out.a_counts = c;
+        out.b_counts = 0;
         // Forward flexes; motor_invert swaps the directions (pull is then REVERSE).
-        const hal::Drive flex = pull;
         const hal::Drive extend =
             pull == hal::Drive::FORWARD ? hal::Drive::REVERSE : hal::Drive::FORWARD;
-        out.a.drive = c == 0 ? hal::Drive::COAST : (neg ? extend : flex);
-        out.b.drive = hal::Drive::COAST;
-        out.b.on_counts = 0;
+        out.drives = hal::drives(c == 0 ? hal::Drive::COAST : (neg ? extend : pull),
+                                 hal::Drive::COAST, true);
     } else {
         // Both motors pull (duties >= 0): the flexor takes u > 0 on top of the pretension, the
-        // extensor u < 0; the other one holds the pretension alone, whose counts were worked
-        // out with the configuration.
+        // extensor u < 0; the other one holds the pretension alone, whose counts (and drive
+        // byte, both channels holding it) were worked out with the configuration.
         const int16_t p = params_.pretension;
         const uint16_t cp = params_.pretension_counts;
-        const hal::Drive dp = cp == 0 ? hal::Drive::COAST : pull;
+        uint8_t d = params_.hold_drives;
         if (u > 0) {
             const int16_t a = (int16_t)(p + u);
             const uint16_t ca = pwm_counts((uint16_t)a);
             duty_a_ = a;
             duty_b_ = p;
-            out.a.on_counts = ca;
-            out.a.drive = ca == 0 ? hal::Drive::COAST : pull;
-            out.b.on_counts = cp;
-            out.b.drive = dp;
+            out.a_counts = ca;
+            out.b_counts = cp;
+            // ca >= cp (a >= p): A drives unless both are 0, when hold_drives has it coast.
+            if (ca != 0) d = (uint8_t)((d & (uint8_t)~3u) | (uint8_t)pull);
         } else if (u < 0) {
             const int16_t b = (int16_t)(p - u);
             const uint16_t cb = pwm_counts((uint16_t)b);
             duty_a_ = p;
             duty_b_ = b;
-            out.a.on_counts = cp;
-            out.a.drive = dp;
-            out.b.on_counts = cb;
-            out.b.drive = cb == 0 ? hal::Drive::COAST : pull;
+            out.a_counts = cp;
+            out.b_counts = cb;
+            if (cb != 0) d = (uint8_t)((d & (uint8_t)~12u) | (uint8_t)((uint8_t)pull << 2));
         } else {
             duty_a_ = duty_b_ = p;
-            out.a.on_counts = out.b.on_counts = cp;
-            out.a.drive = out.b.drive = dp;
+            out.a_counts = out.b_counts = cp;
         }
+        out.drives = d;
     }
-    out.stby = true;
 }
 
 }  // namespace finger

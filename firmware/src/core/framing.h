@@ -101,6 +101,23 @@ class FrameDecoder {
     }
     return feed_rest(byte);
   }
+  // Several bytes of a frame at once, as feed() would take them: data[0..n) up to the first
+  // 0x00 (not taken: feed() it), and no further than the buffer holds (the byte that does not
+  // fit goes to feed() too, which reports OVERSIZE). Returns how many it took. A tight copy:
+  // the receive path's per-byte cost, with the CRC left to the 0x00.
+  uint8_t feed_run(const uint8_t* data, uint8_t n) {
+    if (discarding_) return 0;
+    const uint8_t room = static_cast<uint8_t>(kMaxEncodedBytes - len_);
+    if (n > room) n = room;
+    uint8_t* out = buf_ + len_;
+    uint8_t k = 0;
+    while (k < n && data[k] != 0) {
+      out[k] = data[k];
+      ++k;
+    }
+    len_ = static_cast<uint8_t>(len_ + k);
+    return k;
+  }
   // Forget any partial frame (e.g. after the UART reported an overrun).
   void reset();
   // Bytes of a frame are in, its 0x00 not yet.

@@ -24,7 +24,8 @@ Hand::Hand()
       stream_acc_(0),
       stream_head_(0),
       stream_tail_(0),
-      stream_skip_(0) {
+      stream_skip_(0),
+      stream_put_(stream_) {
     timing_.ticks = 0;
     timing_.overruns = 0;
     timing_.worst_cycles = 0;

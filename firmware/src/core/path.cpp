@@ -81,25 +81,23 @@ void Path::start(const Plan& p, int16_t from_bu, uint8_t first) {
 }
 
 void Path::next_segment() {
-    // A straight step to the path's point at the segment's end. Without one (loop() late),
-    // the same step goes on for another tick.
+    // A straight step to the path's point at the segment's end, worked out by loop() with the
+    // segment. Without one (loop() late), the same step goes on for another tick.
     if (UTRF_LIKELY(next_ready_)) {
-        const uint8_t n = next_len_;
-        step8_ = fx::mul_q16((int32_t)next_goal_ * 256 - pos8_, kRecip[n]);
+        step8_ = next_step8_;
         ff_ = next_ff_;
-        seg_left_ = n;
+        seg_left_ = next_len_;
         next_ready_ = 0;
     } else {
         seg_left_ = 1;
     }
 }
 
-void Path::plan_next() {
+void Path::plan_next_work() {
     // Only loop() writes the planning fields and sets next_ready_; the tick clears it and
     // stop() ends the path: read the flag and the path's state under the lock.
-    // Without the lock first: plan_left_ is loop()'s own and next_ready_ a byte, and most
-    // passes have nothing to do.
-    if (plan_left_ == 0 || next_ready_) return;
+    // Without the lock first (plan_next(), inline): plan_left_ is loop()'s own and next_ready_
+    // a byte, and most passes have nothing to do.
     hal::tick_lock();
     const bool todo = left_ != 0 && !next_ready_;
     hal::tick_unlock();
@@ -115,7 +113,12 @@ void Path::plan_next() {
     evaluate(acc, after, goal, ff);
     hal::tick_lock();
     if (left_ != 0) {  // a new move or a stop meanwhile would have reset the planning
-        next_goal_ = goal;
+        // The step toward `goal`, from where the setpoint will be when the tick takes this
+        // segment: the present segment's steps still to go are fixed (seg_left_ <= kEvery), so
+        // that point is known now, and the tick only copies the step (no multiply in it).
+        int32_t at = pos8_;
+        for (uint8_t k = seg_left_; k != 0; --k) at += step8_;
+        next_step8_ = fx::mul_q16((int32_t)goal * 256 - at, kRecip[n]);
         next_ff_ = ff;
         next_len_ = n;
         next_ready_ = 1;

@@ -14,9 +14,10 @@
 //
 // Cost in the tick. The path is cut into segments of kEvery = 5 ticks. loop() works out each
 // segment's end point (the polynomial: nine 16 x 16 multiplies, some 900 cycles on the AVR)
-// one segment ahead and hands it over under the tick lock; every tick a moving finger only
-// steps its setpoint (a 32-bit add), and at a segment's end takes the next one (one
-// multiply). The feedforward is that of the segment's end point (a 5 ms lead, about the
+// one segment ahead and hands it over under the tick lock, with the step a tick toward it
+// (worked out there from where the setpoint will be when the segment starts: the present
+// segment's remaining steps are fixed); every tick a moving finger only steps its setpoint
+// (a 32-bit add), and at a segment's end copies the next step in. The feedforward is that of the segment's end point (a 5 ms lead, about the
 // motor's own lag). The straight line between two points 5 ms apart departs from the curve
 // by at most h^2/8 |x''| = 3e-6 D/T^2 rad: far below a count. Should loop() be late, the
 // setpoint goes on at the same step (a tick at a time) until the next segment comes; the end
@@ -81,14 +82,19 @@ class Path {
     void start(const Plan& p, int16_t from_bu, uint8_t first);
     void stop() { left_ = 0; }
     // loop() context, without the lock (it takes it to hand the segment over): work out the
-    // next segment when the tick has taken the last one. Cheap when there is nothing to do.
-    void plan_next();
+    // next segment when the tick has taken the last one. Cheap when there is nothing to do:
+    // that test inline (loop() runs it for every finger every pass; a call with the frame
+    // plan_next_work() needs took ~80 cycles just to return).
+    void plan_next() {
+        if (plan_left_ != 0 && !next_ready_) plan_next_work();
+    }
+    void plan_next_work();  // plan_next()'s work, out of line
     // The tick: the setpoint for it in `target`, the feedforward duty (Q15) as the result.
     inline int16_t tick(int16_t& target);
 
    private:
-    // The tick, at a segment's end: take the one loop() worked out (out of line: once in
-    // kEvery ticks, and the hand's five finger ticks are written out).
+    // The tick, at a segment's end: take the one loop() worked out, its step included (out
+    // of line: once in kEvery ticks).
     void next_segment();
     // The path's point `ahead` ticks after the phase `acc` (the end for the last segment),
     // and the feedforward there.
@@ -102,7 +108,7 @@ class Path {
     uint16_t left_;      // ticks to the path's end; 0: no path
     uint8_t seg_left_;   // ticks left in this segment; 0: take the next one
     // ---- the next segment, from loop(): taken by the tick at the segment's end ----
-    int16_t next_goal_;
+    int32_t next_step8_;
     int16_t next_ff_;
     uint8_t next_len_;
     volatile uint8_t next_ready_;

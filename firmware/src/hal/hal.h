@@ -27,23 +27,35 @@ struct MotorOut {
     uint16_t on_counts;  // FORWARD/REVERSE: 1..kPwmPeriod counts high per period
 };
 
-// One finger's driver: its two channels and its STBY pin.
+// One finger's driver as the tick leaves it: each channel's counts (0 when it does not drive)
+// and, in one byte, both channels' drives and the STBY pin (drives()), so that the layer
+// compares one byte with the last one to know whether a pin must change.
 struct MotorCommand {
-    MotorOut a;  // motor A: flexor (Tendon 1), or the rotary motor
-    MotorOut b;  // motor B: extensor (Tendon 4)
-    bool stby;   // STBY high: the driver's outputs enabled
+    uint16_t a_counts;  // motor A: flexor (Tendon 1), or the rotary motor
+    uint16_t b_counts;  // motor B: extensor (Tendon 4)
+    uint8_t drives;     // drives(a, b, stby)
 };
+static const uint8_t kStbyBit = 1u << 4;  // STBY high: the driver's outputs enabled
+inline uint8_t drives(Drive a, Drive b, bool stby) {
+    return (uint8_t)((uint8_t)a | (uint8_t)((uint8_t)b << 2) | (stby ? kStbyBit : 0));
+}
+inline Drive drive_a(uint8_t d) { return (Drive)(d & 3u); }
+inline Drive drive_b(uint8_t d) { return (Drive)((d >> 2) & 3u); }
+inline bool stby_of(uint8_t d) { return (d & kStbyBit) != 0; }
 
 // Drive every finger's channels and STBY pin (called once per tick with all five). The core
-// sends FORWARD/REVERSE only with on_counts >= 1; COAST and BRAKE disconnect the compare
-// output, so fast PWM's one-count spike at OCR = 0 never reaches the driver.
+// sends FORWARD/REVERSE only with counts >= 1; COAST and BRAKE disconnect the compare output,
+// so fast PWM's one-count spike at OCR = 0 never reaches the driver (the AVR layer writes
+// every channel's compare register every tick, whatever its drive).
 void motors_write(const MotorCommand* cmd /* [UTRF_FINGER_COUNT] */);
 
 // Every channel to COAST and every STBY low. Safe from any context, interrupts included.
 void motors_all_off();
 
 // ---- encoders ----------------------------------------------------------------------------------
-// One Joint-2 encoder reading, already checked by its driver.
+// One Joint-2 encoder reading, already checked by its driver (and judged: the angle and the
+// stateless fault rules run where the sample is taken, the AVR's ADC interrupt, not in the
+// tick).
 enum class EncoderStatus : uint8_t {
     OK = 0,
     OUT_OF_BAND = 1,  // the signal is outside the sensor's valid band (unplugged, shorted)
@@ -53,7 +65,27 @@ enum class EncoderStatus : uint8_t {
 struct EncoderReading {
     uint16_t turn;  // angle as a fraction of one turn: 65536 = 360 degrees
     EncoderStatus status;
+    // Judged by the sampler, with the finger's EncoderSetup (core/encoder.h, judge()):
+    int16_t angle;   // BU (core/fixed.h): the Joint-2 angle, zero and direction applied
+    uint8_t flags;   // 0: status OK and the angle within the setup's fault limits
 };
+// Flags of a reading: the tick takes a reading with none as it is, and judges any other
+// itself from `turn` and `status` (rare: a fault, or a reading judged before a new setup).
+static const uint8_t kReadingOut = 1u << 0;      // status not OK
+static const uint8_t kReadingLimit = 1u << 1;    // angle outside [low, high]
+static const uint8_t kReadingRejudge = 1u << 7;  // judged with an earlier setup
+
+// What the sampler needs to judge a finger's readings: its encoder's zero and direction, and
+// the finger's fault limits (BU).
+struct EncoderSetup {
+    uint16_t zero_turn;
+    bool invert;
+    int16_t low;
+    int16_t high;
+};
+// loop() context: the setup for the readings to come; a reading already judged with an
+// earlier one is flagged kReadingRejudge.
+void encoder_setup(uint8_t finger, const EncoderSetup& s);
 
 // The readings of all fingers [UTRF_FINGER_COUNT], from one sampling round: called once per
 // control tick, from the tick; they stay valid until encoders_sample(). All NO_DATA when the
@@ -86,7 +118,12 @@ uint32_t millis();
 
 // ---- serial (UART0) ----------------------------------------------------------------------------
 // Never blocks. Reads what has arrived; writes only when serial_tx_room() says it fits.
-uint16_t serial_read(uint8_t* buf, uint16_t max);
+// The bytes received and not yet taken, read in place: the length of the first contiguous
+// run of them in the receive buffer (0: none), *data pointing at it; when the run wraps round
+// the buffer, the rest comes at the next call. serial_rx_take(n) then frees the first n of
+// them (n at most that length).
+uint8_t serial_rx_peek(const uint8_t** data);
+void serial_rx_take(uint8_t n);
 uint16_t serial_tx_room();
 void serial_write(const uint8_t* data, uint16_t len);
 // Bytes lost since the last call because the receive buffer or the UART itself overflowed.

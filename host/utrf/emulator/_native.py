@@ -194,6 +194,9 @@ class NativeBoard:
     def run_plant(self, cycle: int, period: int) -> int:
         return self._lib.utrf_sim_run_plant(self._h, cycle, period)
 
+    def run_plant_until(self, cycle: int, period: int, wake: int) -> int:
+        return self._lib.utrf_sim_run_plant_until(self._h, cycle, period, wake)
+
     @property
     def cycle(self) -> int:
         return self._lib.utrf_sim_cycle(self.handle)

@@ -1,10 +1,11 @@
 """The emulated board: the real firmware ELF on simavr, wired to the plant, served to clients.
 
-This module holds the board's lifecycle (open, serve, close), its time (the lockstep with the
-plant, driven or paced to the wall clock), UART0, reset and the EEPROM. Its faults
-(``board_faults``), plant knobs (``board_plant``) and views into the MCU (``board_probes``)
-are mixins in their own modules; ``SimSerial`` is in ``sim_serial``. Every public name is
-importable from here. See ``README.md`` in this package for the API and the time modes.
+This module holds the board's lifecycle (open, serve, close), its time (paced to the wall
+clock, or driven: the lockstep with the plant in ``board_driven``), UART0, reset and the
+EEPROM. Its driven time, faults (``board_faults``), plant knobs (``board_plant``) and views
+into the MCU (``board_probes``) are mixins in their own modules; ``SimSerial`` is in
+``sim_serial``. Every public name is importable from here. See ``README.md`` in this package
+for the API and the time modes.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 from utrf import artifacts
 from utrf.emulator import _native
 from utrf.emulator._native import F_CPU_HZ, HarnessError, NativeBoard
+from utrf.emulator.board_driven import BoardDriven
 from utrf.emulator.board_faults import BoardFaults
 from utrf.emulator.board_plant import BoardPlant
 from utrf.emulator.board_probes import BoardProbes
@@ -86,7 +88,7 @@ def _shutdown(stop: threading.Event, holder: dict) -> None:
         plant.close()
 
 
-class EmulatedBoard(BoardFaults, BoardPlant, BoardProbes):
+class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
     """The firmware ELF on an emulated ATmega2560 driving the plant model of the hand.
 
     ``realtime=True`` (the default) starts a thread that runs the board paced to the wall
@@ -255,40 +257,6 @@ class EmulatedBoard(BoardFaults, BoardPlant, BoardProbes):
     def sim_time(self) -> float:
         """Simulated seconds since power-on (the MCU's cycle count / 16 MHz)."""
         return self._cycle / F_CPU_HZ
-
-    def _run_plant(self, target: int) -> None:
-        """Run in lockstep with the plant up to cycle ``target``, all in C: each exchange
-        period the MCU runs with the encoders as the plant had them at its start, then the
-        plant runs the same period with the pins as the MCU had set them at its start."""
-        status = self._native.run_plant(target, self._period_cycles)
-        self._cycle = self._native.cycle
-        if status != self._status:
-            self._status = status
-            self.crash_pc = self._native.pc if status == 1 else None
-
-    def _exchange(self) -> None:
-        """One lockstep period."""
-        self._run_plant(self._cycle + self._period_cycles)
-
-    def _run_driven(
-        self, seconds: float, until: Callable[[EmulatedBoard], bool] | None = None
-    ) -> bool:
-        target = self._cycle + round(seconds * F_CPU_HZ)
-        t0 = time.perf_counter()
-        try:
-            if until is None:
-                while self._cycle < target:  # one call; again only if a crash stopped it
-                    self._run_plant(target)
-                return False
-            while self._cycle < target:  # the predicate is judged between exchanges
-                self._exchange()
-                if until(self):
-                    return True
-            return False
-        finally:
-            dt = time.perf_counter() - t0
-            self._busy += dt
-            self._driven_wall += dt
 
     def run_for(self, seconds: float) -> None:
         """Advance the simulation by ``seconds``: at once when driven, and by waiting for the

@@ -15,7 +15,7 @@ from typing import Any
 
 from utrf import artifacts
 
-ABI = 10
+ABI = 11
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -356,6 +356,10 @@ def load_library() -> ctypes.CDLL:
         "utrf_mjplant_pulses": (ctypes.c_int, [p]),
         "utrf_sim_attach_mjplant": (None, [p, p]),
         "utrf_sim_run_plant": (ctypes.c_int, [p, ctypes.c_uint64, ctypes.c_uint64]),
+        "utrf_sim_run_plant_until": (
+            ctypes.c_int,
+            [p, ctypes.c_uint64, ctypes.c_uint64, ctypes.c_int],
+        ),
     }
     for name, (restype, argtypes) in sigs.items():
         fn = getattr(lib, name)

@@ -14,8 +14,11 @@ and the same on every run for a seed.
         with Hand.emulated(board) as hand:      # a Hand over a SimLink
             hand.pose("shaka", duration=1.0)
 
-Replies and stream frames are noticed at the board's exchange period (250 µs by default), the
-finest step a driven board takes; that bounds the resolution of latencies measured here.
+Replies and stream frames are noticed at the end of the board's exchange period (250 µs by
+default, the finest step a driven board takes) in which their last byte came; that bounds the
+resolution of latencies measured here. The board runs in C from one frame to the next
+(:meth:`EmulatedBoard.run_until_output`): Python looks at the output only when a frame has
+come, and for heartbeats.
 """
 
 from __future__ import annotations
@@ -41,7 +44,8 @@ if TYPE_CHECKING:
 
 R = TypeVar("R", bound=Message)
 #: longest stretch of simulated time run between two looks at the board's output while sleeping
-PUMP_INTERVAL_S = 1e-3
+#: (each frame that comes is looked at when it has come, whatever this is)
+PUMP_INTERVAL_S = 0.1
 
 
 class SimLink(EngineDriver):
@@ -106,8 +110,9 @@ class SimLink(EngineDriver):
 
     def sleep(self, seconds: float) -> None:
         """Run the board for ``seconds`` of simulated time, with heartbeats, delivering its
-        frames to the callbacks as they arrive (to within ``PUMP_INTERVAL_S``). The board moves
-        in whole exchange periods: the sleep ends within half of one of ``seconds``."""
+        frames to the callbacks as they arrive (at the end of the exchange that brought their
+        last byte). The board moves in whole exchange periods: the sleep ends within half of
+        one of ``seconds``."""
         end = self.now() + seconds
         period = self.board.exchange_period
         while self.now() < end - period / 2:
@@ -120,8 +125,9 @@ class SimLink(EngineDriver):
             if due is not None:
                 step = min(step, due - now)
             # whole exchanges, at least one (a step shorter than a clock cycle would not move
-            # the board), the nearest to the step: the sleep ends within half an exchange
-            self.board.run_for(max(round(step / period), 1) * period)
+            # the board), the nearest to the step: the sleep ends within half an exchange. The
+            # frames that come meanwhile go to the engine as each one ends.
+            self.board.run_until_output(max(round(step / period), 1) * period, self._pump_on)
             self._pump()
 
     # --- driving the engine ----------------------------------------------------------------
@@ -136,8 +142,8 @@ class SimLink(EngineDriver):
                     self._send(action)
                     now = self.now()
                 else:  # Wait: run the board until something arrives or the time comes
-                    arrived = self.board.run_until(
-                        lambda _b: self._pump(), action.until - self.now()
+                    arrived = self._pump() or self.board.run_until_output(
+                        action.until - self.now(), self._pump
                     )
                     # run_until moves in whole exchanges of whole cycles: when it gave up, the
                     # time has come, even if rounding left it a fraction of a cycle short
@@ -151,6 +157,11 @@ class SimLink(EngineDriver):
     def _send(self, tx: Transmit) -> None:
         self.board.write(tx.data)
         self._engine.sent(tx, self.now())
+
+    def _pump_on(self) -> bool:
+        """Deliver the frames that came; go on running."""
+        self._pump()
+        return False
 
     def _pump(self) -> bool:
         """Hand what the board has sent to the engine and the callbacks; returns whether the

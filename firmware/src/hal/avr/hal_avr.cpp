@@ -12,6 +12,7 @@
 #include <avr/interrupt.h>
 #include <avr/io.h>
 #include <avr/pgmspace.h>
+#include <avr/sleep.h>
 #include <avr/wdt.h>
 #include <util/atomic.h>
 
@@ -23,6 +24,7 @@
 #include "../hal.h"
 
 extern "C" unsigned long millis(void);  // Arduino core (timer 0)
+extern "C" volatile unsigned long timer0_overflow_count;  // Arduino core: timer 0's overflows
 
 namespace utrf {
 namespace hal {
@@ -55,6 +57,7 @@ struct FingerHw {
     MotorHw m[2];
     Pin stby;
     uint8_t stby_last;
+    uint8_t drives_last;  // the last MotorCommand::drives written, 0xFF: unknown
 };
 FingerHw g_hw[UTRF_FINGER_COUNT];
 
@@ -131,9 +134,9 @@ MotorHw motor_hw(const utrf_motor_pins_t& p) {
 }
 
 // A change of drive (direction, coast, brake): rare, so not inlined.
-void __attribute__((noinline)) motor_change(MotorHw& m, const MotorOut& out) {
-    if (out.drive == Drive::FORWARD || out.drive == Drive::REVERSE) {
-        const bool fwd = out.drive == Drive::FORWARD;
+void __attribute__((noinline)) motor_change(MotorHw& m, Drive drive) {
+    if (drive == Drive::FORWARD || drive == Drive::REVERSE) {
+        const bool fwd = drive == Drive::FORWARD;
         pin_set(m.in1, fwd);
         pin_set(m.in2, !fwd);
         ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { *m.tccra |= m.com; }
@@ -141,11 +144,28 @@ void __attribute__((noinline)) motor_change(MotorHw& m, const MotorOut& out) {
         // COAST or BRAKE: the compare output is disconnected, so the pin is its PORT bit, low.
         // Fast PWM at OCR = 0 would still give a one-count spike every period.
         ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { *m.tccra &= (uint8_t)~m.com; }
-        const bool brake = out.drive == Drive::BRAKE;
+        const bool brake = drive == Drive::BRAKE;
         pin_set(m.in1, brake);
         pin_set(m.in2, brake);
     }
-    m.last = (uint8_t)out.drive;
+    m.last = (uint8_t)drive;
+}
+
+// A change of a finger's drive byte (a channel's drive or STBY): rare, so not inlined. STBY
+// goes low before the channels change and high after them.
+void __attribute__((noinline)) drives_change(FingerHw& h, uint8_t d) {
+    const uint8_t stby = stby_of(d) ? 1 : 0;
+    if (!stby && h.stby_last) {
+        pin_set(h.stby, false);  // off first
+        h.stby_last = 0;
+    }
+    if ((uint8_t)drive_a(d) != h.m[0].last) motor_change(h.m[0], drive_a(d));
+    if ((uint8_t)drive_b(d) != h.m[1].last) motor_change(h.m[1], drive_b(d));
+    if (stby && !h.stby_last) {
+        pin_set(h.stby, true);
+        h.stby_last = 1;
+    }
+    h.drives_last = d;
 }
 
 // ---- ADC: one round over the five encoder channels between two ticks ------------------------
@@ -159,8 +179,11 @@ EncoderReading* volatile g_adc_fill = g_reading[0];
 const EncoderReading* volatile g_adc_done = g_reading[1];
 // What the tick gets while the sampling stands still.
 const EncoderReading kNoData[UTRF_FINGER_COUNT] = {
-    {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA},
-    {0, EncoderStatus::NO_DATA}, {0, EncoderStatus::NO_DATA}};
+    {0, EncoderStatus::NO_DATA, 0, kReadingOut}, {0, EncoderStatus::NO_DATA, 0, kReadingOut},
+    {0, EncoderStatus::NO_DATA, 0, kReadingOut}, {0, EncoderStatus::NO_DATA, 0, kReadingOut},
+    {0, EncoderStatus::NO_DATA, 0, kReadingOut}};
+// Each finger's setup, the ADC interrupt judges its samples with (encoder_setup()).
+EncoderSetup g_setup[UTRF_FINGER_COUNT];
 volatile uint8_t g_adc_round;    // completed rounds (wraps)
 volatile uint8_t g_adc_at = 0xFF;  // channel being converted, 0xFF: idle
 encoder::Staleness g_staleness;
@@ -175,9 +198,16 @@ void adc_select(uint8_t finger) {
 // ---- UART0 ---------------------------------------------------------------------------------
 // Ring buffers shared with the interrupt routines below. The receive ring's head and tail live
 // in the general-purpose I/O registers GPIOR1 (head, written by the interrupt) and GPIOR2
-// (tail, written by serial_read()): single-cycle in/out, nothing else uses them, and the
+// (tail, written by serial_rx_take()): single-cycle in/out, nothing else uses them, and the
 // receive interrupt, which nests in the control tick once for each byte that arrives while it
 // runs, touches no other memory on its usual path.
+// GPIOR0 bit 0, set (sbi: two cycles, no register) by the interrupts that give loop() work:
+// a byte received, a tick, the transmit buffer emptied. sleep_until_interrupt() sleeps again
+// after any other (an ADC conversion, a byte going out, ...) without a loop() pass.
+static const uint8_t kWake = 0;
+// GPIOR0 bit 1, set by every tick: timer 0's overflow wakes loop() only when no tick came
+// since the last one (below).
+static const uint8_t kTickSeen = 1;
 namespace {
 uint8_t g_rx_buf[128];
 uint8_t g_tx_buf[256];
@@ -276,6 +306,7 @@ inline __attribute__((always_inline)) void run_due_ticks() {
 }  // namespace
 
 ISR(TIMER2_COMPA_vect) {
+    GPIOR0 |= _BV(kWake) | _BV(kTickSeen);  // loop() after the tick (sleep_until_interrupt)
     if (g_tick_running || g_tick_locked) {
         if (g_tick_deferred) g_tick_lost = 1;
         g_tick_deferred = 1;
@@ -286,9 +317,10 @@ ISR(TIMER2_COMPA_vect) {
 
 ISR(ADC_vect) {
     uint8_t i = g_adc_at;
-    // Judged here, between ticks (the round runs after each tick), not in the tick.
+    // Judged here, between ticks (the round runs after each tick), not in the tick: the band,
+    // the angle and the joint limits (core/encoder.h, judge()).
     EncoderReading* const fill = g_adc_fill;
-    fill[i] = encoder::as5600_reading(ADC);
+    fill[i] = encoder::judge(ADC, g_setup[i]);
     if (++i < UTRF_FINGER_COUNT) {
         g_adc_at = i;
         adc_select(i);
@@ -315,6 +347,7 @@ ISR(USART0_RX_vect) {
     }
     g_rx_buf[head] = byte;
     GPIOR1 = next;
+    GPIOR0 |= _BV(kWake);
 }
 
 // The next byte of the ring into UDR0; when the ring is empty, this interrupt goes off.
@@ -322,6 +355,7 @@ ISR(USART0_UDRE_vect) {
     const uint8_t tail = g_tx_tail;
     if (tail == g_tx_head) {
         UCSR0B &= (uint8_t)~_BV(UDRIE0);
+        GPIOR0 |= _BV(kWake);  // the buffer is empty: a board frame may start
         return;
     }
     UDR0 = g_tx_buf[tail];
@@ -336,6 +370,7 @@ void avr_init() {
         g_hw[f].m[1] = motor_hw(p.b);
         g_hw[f].stby = output_pin(p.stby);
         g_hw[f].stby_last = 0;
+        g_hw[f].drives_last = 0xFF;
         g_adc_mux[f] = p.adc_channel;
         if (p.adc_channel < 8) DIDR0 |= (uint8_t)(1u << p.adc_channel);  // analog only
     }
@@ -381,6 +416,7 @@ void avr_init() {
     UCSR0A = _BV(U2X0);
     UBRR0 = (uint16_t)((F_CPU + 4UL * UTRF_BAUD) / (8UL * UTRF_BAUD) - 1);
     UCSR0C = _BV(UCSZ01) | _BV(UCSZ00);
+    GPIOR0 = 0;  // bit kWake: see sleep_until_interrupt()
     GPIOR1 = 0;  // receive head: empty
     GPIOR2 = 0;  // receive tail
     g_tx_head = g_tx_tail = 0;
@@ -404,40 +440,24 @@ volatile uint16_t* ocr_reg(uint8_t timer, char channel) {
     }
 }
 
-template <uint8_t F, uint8_t K>
-__attribute__((always_inline)) inline void channel_write(const MotorOut& out) {
-    const utrf_motor_pins_t& pins = K == 0 ? UTRF_FINGER_PINS[F].a : UTRF_FINGER_PINS[F].b;
-    static_assert((uint8_t)Drive::FORWARD == 2 && (uint8_t)Drive::REVERSE == 3,
-                  "FORWARD and REVERSE are the drives from 2 up");
-    const Drive d = out.drive;
-    if (__builtin_expect((uint8_t)d >= (uint8_t)Drive::FORWARD, 1)) {  // the tick's usual case
-        // on_counts is 1..kPwmPeriod; anything else is clamped into it, one compare for both
-        // ends: 0 would wrap to 0xFFFF (the core sends COAST for zero duty; never a spike from
-        // here).
-        uint16_t ocr = (uint16_t)(out.on_counts - 1u);
-        if (__builtin_expect(ocr >= kPwmPeriod, 0)) ocr = out.on_counts == 0 ? 0 : kPwmPeriod - 1;
-        // OCRnx is double-buffered in fast PWM: the new duty starts with the next period.
-        *ocr_reg(pins.pwm.timer, pins.pwm.channel) = ocr;
-    }
-    MotorHw& m = g_hw[F].m[K];
-    if (__builtin_expect((uint8_t)d != m.last, 0)) motor_change(m, out);
+// OCRnx from a channel's counts: counts - 1 (fast PWM: OCR + 1 counts high). 1..kPwmPeriod
+// is the core's range when the channel drives; anything else is clamped into it, one compare
+// for both ends (0, a channel that does not drive, would wrap to 0xFFFF: 0 instead; its compare
+// output is disconnected, so the value does not reach the pin).
+__attribute__((always_inline)) inline uint16_t ocr_of(uint16_t counts) {
+    uint16_t ocr = (uint16_t)(counts - 1u);
+    if (__builtin_expect(ocr >= kPwmPeriod, 0)) ocr = counts == 0 ? 0 : kPwmPeriod - 1;
+    return ocr;
 }
 
 template <uint8_t F>
 __attribute__((always_inline)) inline void finger_write(const MotorCommand& c) {
+    // OCRnx is double-buffered in fast PWM: the new duty starts with the next period.
+    const utrf_finger_pins_t& pins = UTRF_FINGER_PINS[F];
+    *ocr_reg(pins.a.pwm.timer, pins.a.pwm.channel) = ocr_of(c.a_counts);
+    *ocr_reg(pins.b.pwm.timer, pins.b.pwm.channel) = ocr_of(c.b_counts);
     FingerHw& h = g_hw[F];
-    const uint8_t stby = c.stby ? 1 : 0;
-    const bool change = __builtin_expect(stby != h.stby_last, 0);  // one compare, usually
-    if (change && !stby) {
-        pin_set(h.stby, false);  // off first
-        h.stby_last = 0;
-    }
-    channel_write<F, 0>(c.a);
-    channel_write<F, 1>(c.b);
-    if (change && stby) {
-        pin_set(h.stby, true);
-        h.stby_last = 1;
-    }
+    if (__builtin_expect(c.drives != h.drives_last, 0)) drives_change(h, c.drives);
 }
 
 }  // namespace
@@ -457,6 +477,7 @@ void motors_all_off() {
             FingerHw& h = g_hw[f];
             *h.stby.port &= (uint8_t)~h.stby.mask;
             h.stby_last = 0;
+            h.drives_last = drives(Drive::COAST, Drive::COAST, false);
             for (uint8_t k = 0; k < 2; ++k) {
                 MotorHw& m = h.m[k];
                 *m.tccra &= (uint8_t)~m.com;
@@ -476,6 +497,15 @@ const EncoderReading* encoders_read() {
         round = g_adc_round;
     }
     return g_staleness.stale(round) ? kNoData : done;
+}
+
+void encoder_setup(uint8_t finger, const EncoderSetup& s) {
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+        g_setup[finger] = s;
+        // Readings judged with the earlier setup: the tick judges them again itself.
+        g_reading[0][finger].flags |= kReadingRejudge;
+        g_reading[1][finger].flags |= kReadingRejudge;
+    }
 }
 
 void encoders_sample() {
@@ -519,16 +549,14 @@ bool tick_period_elapsed() { return g_tick_deferred != 0; }
 
 uint32_t millis() { return ::millis(); }
 
-uint16_t serial_read(uint8_t* buf, uint16_t max) {
-    uint16_t n = 0;
-    uint8_t tail = GPIOR2;
-    while (n < max && tail != GPIOR1) {
-        buf[n++] = g_rx_buf[tail];
-        tail = (uint8_t)((tail + 1) & 0x7F);
-    }
-    GPIOR2 = tail;
-    return n;
+uint8_t serial_rx_peek(const uint8_t** data) {
+    const uint8_t tail = GPIOR2;
+    const uint8_t head = GPIOR1;  // one read: bytes arriving meanwhile come at the next call
+    *data = g_rx_buf + tail;
+    return head >= tail ? (uint8_t)(head - tail) : (uint8_t)(sizeof g_rx_buf - tail);
 }
+
+void serial_rx_take(uint8_t n) { GPIOR2 = (uint8_t)((GPIOR2 + n) & 0x7F); }
 
 uint16_t serial_tx_room() {
     return (uint16_t)((uint8_t)(g_tx_tail - g_tx_head - 1));  // 256-byte ring
@@ -548,6 +576,34 @@ uint16_t serial_take_overruns() {
         g_rx_lost = 0;
     }
     return n;
+}
+
+void sleep_until_interrupt(bool (*idle)()) {
+    set_sleep_mode(SLEEP_MODE_IDLE);
+    cli();
+    GPIOR0 &= (uint8_t)~_BV(kWake);  // before the check: what comes after it wakes us
+    uint8_t ms = (uint8_t)timer0_overflow_count;
+    if (idle()) {
+        for (;;) {
+            sleep_enable();
+            sei();  // SLEEP runs before any interrupt pending now, which then wakes it at once
+            sleep_cpu();
+            sleep_disable();
+            cli();
+            if (GPIOR0 & _BV(kWake)) break;
+            const uint8_t now = (uint8_t)timer0_overflow_count;
+            if (now == ms) continue;
+            // Timer 0's overflow: a new millisecond for the tick-alive check. While the tick
+            // runs, its own wake-up brings loop() round every period and that check with it;
+            // once a whole overflow period passed with no tick, every overflow wakes loop(),
+            // so a stopped tick is seen at the same millisecond as by a loop() that never
+            // sleeps.
+            ms = now;
+            if (!(GPIOR0 & _BV(kTickSeen))) break;
+            GPIOR0 &= (uint8_t)~_BV(kTickSeen);
+        }
+    }
+    sei();
 }
 
 uint8_t eeprom_read(uint16_t addr) { return eeprom_read_byte((const uint8_t*)addr); }

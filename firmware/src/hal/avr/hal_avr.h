@@ -13,6 +13,16 @@ namespace hal {
 // (stopped until tick_start()), the ADC sampler and UART0. Call first in setup().
 void avr_init();
 
+// After a loop() pass: with interrupts disabled, ask `idle` (app::idle) whether a pass run
+// now would find work; while not, sleep (idle mode: the timers, the UART and the ADC run on)
+// until the next interrupt, and ask again after it. The check and the sleep are one step for
+// the interrupts: one that comes after the check wakes the sleep at once (interrupts are
+// enabled by the instruction just before SLEEP, and one pending then is taken only after
+// SLEEP has begun). An interrupt that gives loop() nothing to do (an ADC conversion, a byte
+// of a frame going out) costs the check, not a pass. The sleep saves power on the board, and
+// simavr skips the slept cycles instead of running loop()'s empty passes.
+void sleep_until_interrupt(bool (*idle)());
+
 }  // namespace hal
 }  // namespace utrf
 

@@ -120,6 +120,8 @@ struct utrf_sim {
     uint8_t *capture;
     uint32_t cap_head, cap_tail;
     int capture_on;
+    int wake_byte; /* utrf_sim_run_plant_until: the byte it waits for (-1: none) */
+    int woke;      /* it was captured */
     line_faults_t faults[2];
     uint64_t rng;
     uint64_t frame_cycles;

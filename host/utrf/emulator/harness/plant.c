@@ -398,10 +398,17 @@ void utrf_sim_attach_plant(utrf_sim_t *s, utrf_plant_t *pl)
 
 int utrf_sim_run_plant(utrf_sim_t *s, uint64_t target, uint64_t period)
 {
+    return utrf_sim_run_plant_until(s, target, period, -1);
+}
+
+int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, int wake)
+{
     int status = utrf_sim_status(s);
     if (!period)
         period = 1;
-    while (s->avr->cycle < target) {
+    s->wake_byte = wake >= 0 && wake <= 255 ? wake : -1;
+    s->woke = 0;
+    while (s->avr->cycle < target && !s->woke) {
         uint64_t start = s->avr->cycle, end = start + period;
         if (end > target)
             end = target;
@@ -412,8 +419,11 @@ int utrf_sim_run_plant(utrf_sim_t *s, uint64_t target, uint64_t period)
         int now = utrf_sim_run_to(s, end);
         if (s->plant_step)
             s->plant_step(s->plant_ctx, (double)(s->avr->cycle - start) / CPU_HZ, hold);
-        if (now != status)
-            return now;
+        if (now != status) {
+            status = now;
+            break;
+        }
     }
+    s->wake_byte = -1;
     return status;
 }

@@ -169,6 +169,8 @@ void bridge_to_host(utrf_sim_t *s, const uint8_t *buf, size_t n)
             }
             s->capture[s->cap_head & CAP_MASK] = buf[i];
             s->cap_head++;
+            if (buf[i] == s->wake_byte)
+                s->woke = 1;
         }
     }
     serve_write(s, buf, n);

@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 10
+#define UTRF_SIM_ABI 11
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -261,6 +261,10 @@ void utrf_sim_attach_plant(utrf_sim_t *s, utrf_plant_t *pl);
  * same period with the pins as they were at its start. Returns the status; stops early
  * after a period in which it changed. */
 int utrf_sim_run_plant(utrf_sim_t *s, uint64_t target, uint64_t period);
+/* The same, and it also stops after the period in which the captured output (capture on) got
+ * the byte `wake` (0..255; 0 ends every protocol frame; -1: never): a driven client looks at
+ * the output when a frame has come, not every period. */
+int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, int wake);
 
 /* ---- The MuJoCo plant (mjplant.c) ----------------------------------------------------------
  * The MuJoCo hand (utrf.models.mjcf, drive "force") stepped here; its mjModel and mjData

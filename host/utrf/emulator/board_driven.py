@@ -1,0 +1,104 @@
+"""The driven board's time (``realtime=False``): the lockstep with the plant run in C, up to a
+time, between a predicate's looks, or from one frame the board sends to the next. A mixin of
+:class:`utrf.emulator.board.EmulatedBoard`; its public callers hold the board's lock."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from contextlib import AbstractContextManager
+from typing import TYPE_CHECKING, Any
+
+from utrf.emulator._native import F_CPU_HZ
+from utrf.emulator.board_types import EmulatorError
+
+if TYPE_CHECKING:
+    from utrf.emulator._native import NativeBoard
+
+
+class BoardDriven:
+    """Simulated time as a driven :class:`~utrf.emulator.board.EmulatedBoard` moves it."""
+
+    if TYPE_CHECKING:  # provided by EmulatedBoard
+        _lock: AbstractContextManager[Any]
+        _native: NativeBoard
+        _cycle: int
+        _period_cycles: int
+        _status: int
+        _busy: float
+        _driven_wall: float
+        _capture: bool
+        realtime: bool
+        crash_pc: int | None
+
+        def _board(self) -> NativeBoard: ...
+
+    def _run_plant(self, target: int, wake: int = -1) -> None:
+        """Run in lockstep with the plant up to cycle ``target``, all in C: each exchange
+        period the MCU runs with the encoders as the plant had them at its start, then the
+        plant runs the same period with the pins as the MCU had set them at its start.
+        ``wake`` (a byte value): stop early after the period in which the board sent it."""
+        if wake < 0:
+            status = self._native.run_plant(target, self._period_cycles)
+        else:
+            status = self._native.run_plant_until(target, self._period_cycles, wake)
+        self._cycle = self._native.cycle
+        if status != self._status:
+            self._status = status
+            self.crash_pc = self._native.pc if status == 1 else None
+
+    def _exchange(self) -> None:
+        """One lockstep period."""
+        self._run_plant(self._cycle + self._period_cycles)
+
+    def _run_driven(self, seconds: float, until: Callable[[Any], bool] | None = None) -> bool:
+        target = self._cycle + round(seconds * F_CPU_HZ)
+        t0 = time.perf_counter()
+        try:
+            if until is None:
+                while self._cycle < target:  # one call; again only if a crash stopped it
+                    self._run_plant(target)
+                return False
+            while self._cycle < target:  # the predicate is judged between exchanges
+                self._exchange()
+                if until(self):
+                    return True
+            return False
+        finally:
+            dt = time.perf_counter() - t0
+            self._busy += dt
+            self._driven_wall += dt
+
+    def run_until_output(
+        self, seconds: float, until: Callable[[], bool] | None = None, byte: int = 0
+    ) -> bool:
+        """Driven: run ``seconds`` of simulated time in whole exchanges (the last one may pass
+        it), stopping after each exchange in which the board sent ``byte`` (0x00 by default,
+        the end of every protocol frame) to the captured output, where ``until()`` says whether
+        to end there (None: end at the first). In C between those stops however long the
+        wait: a client looks at the output when a frame has come, not at every exchange (as
+        ``run_until`` does). Returns whether it ended early."""
+        if self.realtime:
+            raise EmulatorError("run_until_output needs realtime=False; in real time read the port")
+        if not (isinstance(seconds, int | float) and math.isfinite(seconds) and seconds >= 0):
+            raise EmulatorError(f"seconds must be a finite number >= 0, got {seconds!r}")
+        if not (isinstance(byte, int) and 0 <= byte <= 255):
+            raise EmulatorError(f"byte must be 0..255, got {byte!r}")
+        if not self._capture:
+            raise EmulatorError("run_until_output needs capture=True")
+        with self._lock:
+            self._board()
+            period = self._period_cycles
+            target = self._cycle - (-round(seconds * F_CPU_HZ) // period) * period
+            t0 = time.perf_counter()
+            try:
+                while self._cycle < target:
+                    self._run_plant(target, byte)
+                    if self._cycle < target and (until is None or until()):
+                        return True
+                return False
+            finally:
+                dt = time.perf_counter() - t0
+                self._busy += dt
+                self._driven_wall += dt
