@@ -16,12 +16,17 @@ from utrf.emulator import EmulatedBoard, EmulatorError, EncoderParams, PlantPara
 from utrf.emulator.board import RESET_FLAGS
 
 QUIET = PlantParams(gravity_m_s2=(0.0, 0.0), encoder=EncoderParams(noise_v=0.0))
+# The harness's own tests run at a 250 us exchange (the MuJoCo plant's default is 1 ms, one
+# per control tick): their timings are counted in exchanges of that size.
+EXCHANGE = 250e-6
 FRAME_S = 10e-6  # 8N1 at 1 Mbaud
 
 
 @pytest.fixture
 def board(fixture_elf: Path):
-    with EmulatedBoard(fixture_elf, realtime=False, plant_params=QUIET) as b:
+    with EmulatedBoard(
+        fixture_elf, realtime=False, plant_params=QUIET, exchange_period=EXCHANGE
+    ) as b:
         yield b
 
 
@@ -429,7 +434,9 @@ class TestRunUntilOutput:
 
         stops = []
         for wait in ("every exchange", "in C"):
-            with EmulatedBoard(fixture_elf, realtime=False, plant_params=QUIET) as board:
+            with EmulatedBoard(
+                fixture_elf, realtime=False, plant_params=QUIET, exchange_period=EXCHANGE
+            ) as board:
                 self.counting(board)
                 start = board.sim_time
                 if wait == "in C":

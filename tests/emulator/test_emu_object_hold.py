@@ -18,17 +18,14 @@ from utrf.models import objects
 def test_the_object_grasp_holds_it_through_a_tap(
     name: str, firmware_elf: Path, tmp_path: Path
 ) -> None:
-    """The object's own grasp (objects.toml: pose, effort, rest position, the thumb) closes on
-    it by contact and holds it palm down through a hammer tap; the egg stays intact; on the
-    ball the thumb, meeting it from the heel of the palm, opposes the fingers."""
+    """The object's own grasp (objects.toml: pose, effort, rest position) closes on it by
+    contact and holds it palm down through a hammer tap; the egg stays intact."""
     config = oh.ObjectHoldConfig(object=name, duration_s=3.0, hits=1, picture=False)
     result = oh.run(config, tmp_path / "run", elf=firmware_elf, progress=lambda s: None)
     assert not result["dropped"], oh.describe(result)
     assert result["slip_mm"] < 5.0
     assert sum(f > 1.0 for f in result["closed_contact_forces_n"]) >= 2  # fingers on it
-    assert objects.get_object(name).grasp_thumb  # the thumb closes too
-    if name == "ball":
-        assert result["closed_contact_forces_n"][0] > 1.0  # and presses on it
+    assert result["largest_contact_force_n"]["thumb"] == 0.0  # the thumb stays open
     assert len(result["hits"]) == 1
     assert result["broke"] is (False if name == "egg" else None)
     saved = json.loads((tmp_path / "run" / "results.json").read_text())
@@ -67,6 +64,26 @@ def test_a_shell_weaker_than_the_grasp_breaks(firmware_elf: Path, tmp_path: Path
     assert result["broke"] is True, oh.describe(result)
     assert max(result["largest_contact_force_n"].values()) > 1.0
     assert "BROKE" in oh.describe(result)
+
+
+def test_grasp_thumb_closes_the_thumb_on_the_object(firmware_elf: Path, tmp_path: Path) -> None:
+    """An object that asks for the thumb (``grasp_thumb``; the ball 10 mm nearer the heel of
+    the palm, where the thumb meets it) is closed on by the thumb too: it presses on it."""
+    library = tmp_path / "objects.toml"
+    ball = objects.get_object("ball")
+    fields = {k: v for k, v in oh.asdict(ball).items() if k != "name" and v is not None}
+    fields.update(grasp_thumb=True, rest_position_m=(-0.050, -0.005, 0.0326))
+    library.write_text(
+        "[object.ball]\n"
+        + "".join(f"{k} = {json.dumps(list(v) if isinstance(v, tuple) else v)}\n"
+                  for k, v in fields.items())
+    )  # fmt: skip
+    config = oh.ObjectHoldConfig(
+        object="ball", library=str(library), duration_s=2.0, hits=0, picture=False
+    )
+    result = oh.run(config, tmp_path / "run", elf=firmware_elf, progress=lambda s: None)
+    assert not result["dropped"], oh.describe(result)
+    assert result["closed_contact_forces_n"][0] > 1.0  # the thumb on the ball
 
 
 def _log(out: Path, config: oh.ObjectHoldConfig, rows: list[list[float]], hits: list[float]):

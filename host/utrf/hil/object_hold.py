@@ -228,11 +228,11 @@ def _close(
 ) -> tuple[np.ndarray, float]:
     """The grasp pose's closing fingers close on the object in GRASP with the effort, each
     heading for (almost) full flexion: it stops on the object. The thumb closes with them when
-    the object says so (``grasp_thumb``: the ball and the egg, which it meets from the heel of
-    the palm); otherwise the four fingers cage the object against the palm and the thumb stays
-    open (on the box it pushed the box's end and the box slipped more: measured). Waits until
-    the fingers have stopped (they reach the object after the path's time: measured). Returns
-    the contact forces once closed and the effort."""
+    the object says so (``grasp_thumb``); otherwise, as for every object of the package's
+    library, the four fingers cage the object against the palm and the thumb stays open
+    (closing it too held the ball and the egg worse over 120 s: measured, docs/mujoco.md).
+    Waits until the fingers have stopped (they reach the object after the path's time:
+    measured). Returns the contact forces once closed and the effort."""
     from utrf.protocol import messages as m
 
     plant = s.plant
