@@ -12,6 +12,7 @@ interrupts that nest inside it (the firmware re-enables interrupts during its ti
 from __future__ import annotations
 
 import argparse
+import inspect
 import math
 import os
 import platform
@@ -269,6 +270,12 @@ def realtime(elf: Path, seconds: float) -> dict:
         }
 
 
+def default_plant() -> str:
+    """The plant a board gets when none is named (the grasp hold's), for the row's label."""
+    default = inspect.signature(EmulatedBoard).parameters["plant"].default
+    return {"analytic": "analytic plant", "mujoco": "the MuJoCo hand"}.get(default, str(default))
+
+
 def pct(c: float) -> str:
     return f"{100 * c / PERIOD_CYCLES:.0f} %"
 
@@ -326,7 +333,7 @@ def report(
         *(driven_rows(mj_runs, seconds) if mj_runs else []),
         *[
             f"| `utrf hil grasp-hold --emulated --duration-s {g['seconds']:g}"
-            + (f" --object {g['obj']}` (the MuJoCo hand" if g["obj"] else "` (analytic plant")
+            + (f" --object {g['obj']}` (the MuJoCo hand" if g["obj"] else f"` ({default_plant()}")
             + f"; a fresh process: start-up and picture included) | **{g['wall']:.1f} s** wall "
             f"({g['seconds'] / g['wall']:.1f}x real time) at load average {g['load']:.1f}; "
             f"**{g['cpu']:.1f} s** of CPU time ({g['seconds'] / g['cpu']:.1f}x"
