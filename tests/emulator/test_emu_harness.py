@@ -223,6 +223,22 @@ class TestResets:
         assert board.stats["watchdog_resets"] == 1
         assert console.command("b") == "b 8"
 
+    def test_a_watchdog_reset_at_a_runs_end_ends_the_run(self, board: EmulatedBoard) -> None:
+        """Asleep, simavr skips to one cycle past the next event: a run ends at its time all
+        the same (simavr skipped on past it to the tick, 1 ms), and when the watchdog's reset
+        comes due just before a run's end, the reset, which clears every timer, ends the run
+        (it ran for ever)."""
+        console = Console(board)
+        assert console.line() == "boot 1"
+        assert console.command("S") == "S"  # asleep, the watchdog no longer fed: 250 ms
+        start = board.sim_time
+        while board.stats["resets"] == 0 and board.sim_time - start < 0.3:
+            before = board.sim_time
+            board.run_for(50e-6)  # run ends everywhere between two of the tick's wake-ups
+            assert board.sim_time - before < 60e-6
+        assert board.stats["resets"] == 1 and board.reset_cause == "watchdog"
+        assert console.line() == f"boot {RESET_FLAGS['watchdog']}"
+
     @pytest.mark.parametrize(("cause", "flags"), [("reset_pin", 2), ("power_on", 1)])
     def test_reset_on_request(
         self, board: EmulatedBoard, console: Console, cause: str, flags: int
