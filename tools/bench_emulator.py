@@ -12,6 +12,7 @@ interrupts that nest inside it (the firmware re-enables interrupts during its ti
 from __future__ import annotations
 
 import argparse
+import inspect
 import math
 import os
 import platform
@@ -269,6 +270,12 @@ def realtime(elf: Path, seconds: float) -> dict:
         }
 
 
+def default_plant() -> str:
+    """The plant a board gets when none is named (the grasp hold's), for the row's label."""
+    default = inspect.signature(EmulatedBoard).parameters["plant"].default
+    return {"analytic": "analytic plant", "mujoco": "the MuJoCo hand"}.get(default, str(default))
+
+
 def pct(c: float) -> str:
     return f"{100 * c / PERIOD_CYCLES:.0f} %"
 
@@ -326,7 +333,7 @@ def report(
         *(driven_rows(mj_runs, seconds) if mj_runs else []),
         *[
             f"| `utrf hil grasp-hold --emulated --duration-s {g['seconds']:g}"
-            + (f" --object {g['obj']}` (the MuJoCo hand" if g["obj"] else "` (analytic plant")
+            + (f" --object {g['obj']}` (the MuJoCo hand" if g["obj"] else f"` ({default_plant()}")
             + f"; a fresh process: start-up and picture included) | **{g['wall']:.1f} s** wall "
             f"({g['seconds'] / g['wall']:.1f}x real time) at load average {g['load']:.1f}; "
             f"**{g['cpu']:.1f} s** of CPU time ({g['seconds'] / g['cpu']:.1f}x"
@@ -401,7 +408,8 @@ def report(
         "firmware: 0.144 -> 0.090 s of CPU per simulated second, the same cycles and bytes), and "
         "leaves out the four PWM timers' events, timer 1's included, keeping its TCNT1 exact "
         "(0.046 -> 0.038 s on the idle-sleeping firmware of branch `line`). While the firmware "
-        "sleeps (SLEEP, idle mode), simavr skips to its next event in one step: what remains is "
+        "sleeps (SLEEP, idle mode), simavr skips to its next event in one step (the harness "
+        "stops the skip at a run's end, which simavr would pass): what remains is "
         "simavr interpreting the awake cycles. Profiled (py-spy) on the 120 s hold with the idle-"
         "sleeping firmware: 59 % of the time in C, then the run's per-sample work and its tracker"
         " (10 %), the Hand's telemetry (decoding, state and CSV log, 13 %), the figure (8 %), "

@@ -228,6 +228,22 @@ class TestResets:
         assert board.stats["watchdog_resets"] == 1
         assert console.command("b") == "b 8"
 
+    def test_a_watchdog_reset_at_a_runs_end_ends_the_run(self, board: EmulatedBoard) -> None:
+        """Asleep, simavr skips to one cycle past the next event: a run ends at its time all
+        the same (simavr skipped on past it to the tick, 1 ms), and when the watchdog's reset
+        comes due just before a run's end, the reset, which clears every timer, ends the run
+        (it ran for ever)."""
+        console = Console(board)
+        assert console.line() == "boot 1"
+        assert console.command("S") == "S"  # asleep, the watchdog no longer fed: 250 ms
+        start = board.sim_time
+        while board.stats["resets"] == 0 and board.sim_time - start < 0.3:
+            before = board.sim_time
+            board.run_for(50e-6)  # run ends everywhere between two of the tick's wake-ups
+            assert board.sim_time - before < 60e-6
+        assert board.stats["resets"] == 1 and board.reset_cause == "watchdog"
+        assert console.line() == f"boot {RESET_FLAGS['watchdog']}"
+
     @pytest.mark.parametrize(("cause", "flags"), [("reset_pin", 2), ("power_on", 1)])
     def test_reset_on_request(
         self, board: EmulatedBoard, console: Console, cause: str, flags: int
@@ -446,10 +462,12 @@ class TestRunUntilOutput:
                     seen.clear()
                     assert board.run_until(has_200, timeout=1.0)
                 stops.append((board.sim_time, bytes(seen)))
+                period = board.exchange_period
         assert stops[0] == stops[1]
         at, out = stops[0]
-        assert out[-1] != 200 and 200 in out[-30:]  # the rest of its exchange came too
-        assert 2e-3 < at - start < 3e-3  # 200 bytes of 10 us after the command's echo
+        per = round(period / FRAME_S)  # the bytes an exchange carries
+        assert 200 in out[-per - 1 :]  # the rest of its exchange came too
+        assert 2e-3 < at - start < 2.1e-3 + period  # 200 bytes of 10 us after the echo
 
     def test_until_decides_at_each_awaited_byte(self, board: EmulatedBoard) -> None:
         self.counting(board)
@@ -467,8 +485,10 @@ class TestRunUntilOutput:
         whole = math.ceil(0.01 / period + 1 / 3) * period
         assert board.sim_time - start == pytest.approx(whole, abs=1e-6)
         assert len(looks) == 2
-        assert all(0 in out[-26:] for _, out in looks)  # in the last exchange's 25 bytes
-        assert 2.5e-3 < looks[1][0] - looks[0][0] < 2.6e-3 + period  # 256 bytes apart
+        per = round(period / FRAME_S)
+        assert all(0 in out[-per - 1 :] for _, out in looks)  # in the last exchange's bytes
+        # 256 bytes apart, each look at the end of its byte's exchange
+        assert abs(looks[1][0] - looks[0][0] - 256 * FRAME_S) < period + 1e-6
 
     def test_it_needs_a_driven_capturing_board(self, fixture_elf: Path) -> None:
         with EmulatedBoard(fixture_elf, realtime=False, capture=False) as board:

@@ -211,8 +211,9 @@ def test_loop_alive_then_the_watchdog(board: EmulatedBoard, hand: Hand) -> None:
     board.hang_firmware(interrupts=True)
     t = run_until(board, lambda: all_off(board), 0.2)
     # 50 ticks without a pass, counted from the last pass: plus up to a tick for the phase
-    # and one for the hang to begin (at loop()'s next start)
-    row("loop alive (motors off)", t, (LOOP_HANG_TICKS + 2) * TICK)
+    # and one for the hang to begin (at loop()'s next start); seen at the end of the exchange
+    # it happened in (each run ends an instruction past its time: 88 exchanges read 22.003 ms)
+    row("loop alive (motors off)", t, (LOOP_HANG_TICKS + 2) * TICK + RESOLUTION)
     t_reset = run_until(board, lambda: board.reset_cause == "watchdog", 0.5)
     # the watchdog counts from loop()'s last feed: in the pass under way when the hang was
     # asked at the latest (it begins at loop()'s next start), so up to a pass after it

@@ -106,12 +106,21 @@ static avr_cycle_count_t stop_timer(avr_t *avr, avr_cycle_count_t when, void *pa
 }
 
 /* Idle sleep: simavr's default sleeps the thread to follow the wall clock; pacing is ours.
- * simavr skips the slept cycles (to its next timer event); count them. */
+ * simavr skips the slept cycles (to one past its next timer event); count them. When the run's
+ * end is the event (stop_timer ran in this pass), simavr would still skip on to the event
+ * after it: a run ended up to a whole tick late (a stop at a sleeping CPU's next wake-up), and
+ * a watchdog reset due meanwhile cleared the end's timer (the run went on for ever). So the
+ * skip stops at the end: the clock is set back by what simavr is about to add. */
 static void no_sleep(avr_t *avr, avr_cycle_count_t how_long)
 {
     utrf_sim_t *s = avr->custom.data;
-    if (s)
-        s->stats.sleep_cycles += 1 + how_long;
+    if (!s)
+        return;
+    if (s->in_run && s->stop) {
+        avr->cycle -= how_long;
+        how_long = 0;
+    }
+    s->stats.sleep_cycles += 1 + how_long;
 }
 
 static int status_of(const avr_t *avr)
@@ -292,9 +301,13 @@ static void hook_reset(avr_io_t *io)
     s->stats.last_reset_flags = flags;
     s->eempe_cycle = -1;
     no_level_polling(avr);
-    /* simavr's reset cleared every cycle timer, ours included. */
+    /* simavr's reset cleared every cycle timer, ours included: set again, or, when the run's
+     * end has come (a sleeping CPU skips to one cycle past the next event, here the end, and
+     * the watchdog's reset, already due, runs before the end's timer), end the run now. */
     if (s->in_run && s->target > avr->cycle)
         avr_cycle_timer_register(avr, s->target - avr->cycle, stop_timer, s);
+    else if (s->in_run)
+        s->stop = 1;
     bridge_after_reset(s);
     profile_after_reset(s);
     s->jump_at = -1; /* a reset is a new run: a pending jump belonged to the old one */
