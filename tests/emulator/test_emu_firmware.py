@@ -213,13 +213,14 @@ def test_control_tick_profile(board: EmulatedBoard, client: LinkClient) -> None:
 
 
 def test_quiet_pwm_timers_change_nothing_the_firmware_sees(firmware_elf: Path) -> None:
-    """simavr's events of the PWM timers whose interrupts are off and whose counter is never
-    read are left out (harness/timers.c): the firmware streams the same frames at the same
-    times and controls the same way. (Not to the bit: simavr ends each idle skip one cycle past
-    the event that wakes it, so fewer events shift wake-ups by a few cycles, and a reading
-    on a count's edge may differ by one count.)"""
+    """simavr's events of the PWM timers whose interrupts are off are left out
+    (harness/timers.c): the firmware streams the same frames at the same times and controls
+    the same way, and its tick timing from TCNT1 (timer 1 quiet too) reads the same. (Not to
+    the bit: simavr ends each idle skip one cycle past the event that wakes it, so fewer
+    events shift wake-ups by a few cycles, and a reading on a count's edge may differ by one
+    count.)"""
 
-    def run(quiet: bool) -> tuple[list[m.State], np.ndarray, int]:
+    def run(quiet: bool) -> tuple[list[m.State], np.ndarray, int, m.Stats]:
         with EmulatedBoard(firmware_elf, realtime=False, plant_params=QUIET) as b:
             b._native.set_quiet_timers(quiet)
             c = LinkClient(b)
@@ -235,13 +236,46 @@ def test_quiet_pwm_timers_change_nothing_the_firmware_sees(firmware_elf: Path) -
             )  # fmt: skip
             c.run(1.0)
             states = [s for s in c.stream if isinstance(s, m.State)]
-            return states, b.theta2.copy(), b.stats["quieted_timer_events"]
+            return states, b.theta2.copy(), b.stats["quieted_timer_events"], c.request(m.GetStats())
 
-    (quiet, th_q, n_q), (loud, th_l, n_l) = run(True), run(False)
+    (quiet, th_q, n_q, fw_q), (loud, th_l, n_l, fw_l) = run(True), run(False)
     assert n_q > 0 and n_l == 0
+    # the tick's own timing, from TCNT1 and TCNT2: a stale count would put it off by periods
+    assert fw_q.ticks == fw_l.ticks and fw_q.tick_overruns == fw_l.tick_overruns == 0
+    assert abs(fw_q.tick_worst - fw_l.tick_worst) <= 2e-6
+    assert abs(fw_q.tick_mean - fw_l.tick_mean) <= 2e-6
     assert [s.board_time for s in quiet] == [s.board_time for s in loud]  # same frames, times
     count = 2 * np.pi / (1024 * 0.8)  # one ADC count of Joint 2 (80 % of a turn): 7.7 mrad
     diff = np.array([np.subtract(a.theta2, b.theta2) for a, b in zip(quiet, loud, strict=True)])
     assert np.abs(diff).max() <= count * 1.01
     np.testing.assert_allclose(th_q, th_l, atol=0.01)
     np.testing.assert_allclose(th_q, 0.5, atol=0.03)  # both reached the targets
+
+
+def test_simlink_looks_at_the_output_per_frame(firmware_elf: Path) -> None:
+    """Driven, SimLink runs the board in C from one frame to the next
+    (``run_until_output``): one crossing per frame and heartbeat, not one per millisecond."""
+    from utrf.hand.simlink import SimLink
+
+    with EmulatedBoard(firmware_elf, realtime=False, plant_params=QUIET) as board:
+        got: list[float] = []
+        link = SimLink(
+            board, on_telemetry=lambda t: got.append(t.received_s)
+            if isinstance(t.message, m.State) else None,
+        )  # fmt: skip
+        link.handshake()
+        link.request(m.SetTelemetry(rate_hz=100))
+        link.sleep(0.05)
+        native = board._native
+        calls = [0]
+        run = native.run_plant_until
+
+        def counted(*args: int) -> int:
+            calls[0] += 1
+            return run(*args)
+
+        native.run_plant_until = counted  # type: ignore[method-assign]
+        got.clear()
+        link.sleep(1.0)
+        assert 99 <= len(got) <= 101  # the 100 Hz stream, every frame delivered
+        assert len(got) <= calls[0] < 1.5 * len(got)  # plus heartbeats' acks, not 1000

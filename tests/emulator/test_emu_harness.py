@@ -393,6 +393,29 @@ def test_a_run_is_determined_by_its_seed(fixture_elf: Path) -> None:
     assert theta1[1, 1] > 0.05  # the run did drive finger 1
 
 
+def test_a_quiet_timer_counts_as_a_running_one(fixture_elf: Path) -> None:
+    """Timer 1's events are left out (harness/timers.c: no interrupt of it is on), yet TCNT1
+    reads what the running timer gives, at any time: simavr counts from the last overflow,
+    which the harness moves along the timer's period grid before the read."""
+
+    def counts(quiet: bool) -> list[int]:
+        with EmulatedBoard(fixture_elf, realtime=False, plant_params=QUIET) as board:
+            board._native.set_quiet_timers(quiet)
+            console = Console(board)
+            assert console.line() == "boot 1"
+            out = []
+            for wait in (0.0, 13e-6, 1.003e-3, 0.25):
+                board.run_for(wait)
+                out.append(int(console.command("n").split()[1]))
+            stats = board.stats
+            assert (stats["quieted_timer_events"] > 0) == quiet
+            return out
+
+    quiet, loud = counts(True), counts(False)
+    assert quiet == loud
+    assert all(0 <= n < 800 for n in quiet) and len(set(quiet)) > 1
+
+
 class TestRunUntilOutput:
     """``run_until_output``: in C from one awaited byte to the next (a frame's end for the
     protocol's clients), stopping where a look after every exchange would have."""

@@ -15,6 +15,9 @@ static void on_stall_running(struct avr_irq_t *irq, uint32_t value, void *param)
     if (!value || s->stall_count == 0)
         return;
     s->avr->cycle += s->stall_cycles;
+    /* avr_run_one would run on as far as the next event lay before the jump (harness.c's
+     * run_cycle_limit): one instruction, then the events that came due meanwhile. */
+    s->avr->run_cycle_count = 1;
     s->stats.stalls++;
     if (s->stall_count > 0)
         s->stall_count--;

@@ -78,11 +78,16 @@ typedef struct {
 
 struct avr_timer_t;
 typedef struct {
+    avr_io_write_t c;
+    void *param;
+} io_write_hook_t;
+
+typedef struct {
     struct avr_timer_t *timer;
-    int read;    /* the firmware read its TCNT: never quieted again */
     int quieted; /* its events were cancelled */
     avr_io_read_t orig_read;
     void *orig_param;
+    io_write_hook_t orig_ocr[3]; /* simavr's handlers of OCRnA..C's writes */
 } quiet_timer_t;
 
 typedef struct {
@@ -163,7 +168,7 @@ struct utrf_sim {
     int64_t stall_count; /* stalls left; -1: every entry */
 
     /* timers.c */
-    quiet_timer_t quiet[3];
+    quiet_timer_t quiet[4];
     int n_quiet;
     int quiet_timers;
 
