@@ -221,7 +221,11 @@ def test_quiet_pwm_timers_change_nothing_the_firmware_sees(firmware_elf: Path) -
     count.)"""
 
     def run(quiet: bool) -> tuple[list[m.State], np.ndarray, int, m.Stats]:
-        with EmulatedBoard(firmware_elf, realtime=False, plant_params=QUIET) as b:
+        # a 250 us exchange: at the MuJoCo plant's 1 ms the run ends on a tick's edge, and a
+        # wake-up a few cycles later or earlier counts one tick more or less
+        with EmulatedBoard(
+            firmware_elf, realtime=False, plant_params=QUIET, exchange_period=250e-6
+        ) as b:
             b._native.set_quiet_timers(quiet)
             c = LinkClient(b)
             c.wait_boot()
