@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
-from contextlib import AbstractContextManager
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager
 from typing import TYPE_CHECKING, Any
 
 from utrf.emulator._native import F_CPU_HZ
@@ -54,8 +54,7 @@ class BoardDriven:
 
     def _run_driven(self, seconds: float, until: Callable[[Any], bool] | None = None) -> bool:
         target = self._cycle + round(seconds * F_CPU_HZ)
-        t0 = time.perf_counter()
-        try:
+        with self._timed():
             if until is None:
                 while self._cycle < target:  # one call; again only if a crash stopped it
                     self._run_plant(target)
@@ -65,6 +64,13 @@ class BoardDriven:
                 if until(self):
                     return True
             return False
+
+    @contextmanager
+    def _timed(self) -> Iterator[None]:
+        """Count the wall time of a driven run as busy (the board's real-time figures)."""
+        t0 = time.perf_counter()
+        try:
+            yield
         finally:
             dt = time.perf_counter() - t0
             self._busy += dt
@@ -91,14 +97,9 @@ class BoardDriven:
             self._board()
             period = self._period_cycles
             target = self._cycle - (-round(seconds * F_CPU_HZ) // period) * period
-            t0 = time.perf_counter()
-            try:
+            with self._timed():
                 while self._cycle < target:
                     self._run_plant(target, byte)
                     if self._cycle < target and (until is None or until()):
                         return True
                 return False
-            finally:
-                dt = time.perf_counter() - t0
-                self._busy += dt
-                self._driven_wall += dt
