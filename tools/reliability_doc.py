@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -48,15 +49,43 @@ def _markers(name: str, command: str) -> tuple[str, str]:
     return f"<!-- BEGIN {name} ({command}) -->", f"<!-- END {name} -->"
 
 
-def fuzz_section(res: dict) -> str:
+def _budget_note(r: dict) -> str:
+    """' (its time budget, N s)' for a run that stopped at -max_total_time before its -runs."""
+    budget = re.search(r"-max_total_time=(\d+)", r.get("command", ""))
+    runs = re.search(r"-runs=(\d+)", r.get("command", ""))
+    done = r.get("number_of_executed_units", 0)
+    if budget and (not runs or done < int(runs.group(1))):
+        return f" (its time budget, {int(budget.group(1)):,} s)"
+    return ""
+
+
+def _doc_rows(doc: Path, section: str) -> dict[str, str]:
+    """The table rows, by their first cell, of ``section`` as the doc has it now."""
+    if not doc.exists():
+        return {}
+    begin, end = _markers(section, SECTIONS[section][1])
+    text = doc.read_text()
+    if begin not in text or end not in text:
+        return {}
+    body = text[text.index(begin) : text.index(end)]
+    return {ln.split("|")[1].strip(): ln for ln in body.splitlines() if ln.startswith("| ")}
+
+
+def fuzz_section(res: dict, doc: Path = DOC) -> str:
     rows = []
+    earlier = _doc_rows(doc, "fuzz")
+    kept = []
     for name in ("raw", "struct", "python"):
         r = res.get(name)
         if r is None:
+            # not run this time: its row from the last run that was (a run per harness)
+            if name in earlier:
+                rows.append(earlier[name])
+                kept.append(name)
             continue
         rows.append(
             f"| {name} | {r.get('number_of_executed_units', 0):,}"
-            f"{' (stopped by hand)' if r.get('interrupted') else ''} | "
+            f"{' (stopped by hand)' if r.get('interrupted') else _budget_note(r)} | "
             f"{r.get('average_exec_per_sec', '?')} | {r.get('coverage_edges', '?')} / "
             f"{r.get('features', '?')} | {r.get('corpus_units', '?')} | "
             f"{', '.join(r['findings']) or 'none'} | `{r['command']}` | {r.get('date', '')}"
@@ -103,7 +132,14 @@ def fuzz_section(res: dict) -> str:
             "`make fuzz FUZZ_RUNS=1000000` runs for all three), under `nice -n 10`, on "
             f"{cpu_name()} with 2 cores shared with the other sessions' builds and tests: "
             "exec/s is wall-clock under the load average shown (taken at the run's end). "
-            "A run stopped by hand shows the executions it reached.",
+            "A run stopped by hand, or at a time budget (`--seconds` with `--runs`: "
+            "`-max_total_time` in its command), shows the executions it reached."
+            + (
+                f" The row of {', '.join(kept)} was not run again this time: kept from the "
+                "last write of this section, with that run's date, machine and load."
+                if kept
+                else ""
+            ),
             "",
             "The python harness's cost per execution is the instrumented protocol code itself "
             "(measured in-process over the working corpus: libFuzzer's own share about 2 %; "
@@ -350,7 +386,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name}: no results ({path.relative_to(REPO)}); section left as it is")
             continue
         begin, end = _markers(name, command)
-        write_section(a.doc, f"{begin}\n{render(res)}\n{end}", begin, end)
+        body = fuzz_section(res, a.doc) if name == "fuzz" else render(res)
+        write_section(a.doc, f"{begin}\n{body}\n{end}", begin, end)
         print(f"{name}: written to {a.doc}")
     return 0
 
