@@ -12,7 +12,6 @@ interrupts that nest inside it (the firmware re-enables interrupts during its ti
 from __future__ import annotations
 
 import argparse
-import inspect
 import math
 import os
 import platform
@@ -91,12 +90,11 @@ class Timed:
             self.seconds += time.perf_counter() - t0
 
 
-def driven(elf: Path, seconds: float, telemetry_hz: int, plant: str = "analytic") -> dict:
+def driven(elf: Path, seconds: float, telemetry_hz: int) -> dict:
     """Five fingers tracking moving targets, simulated as fast as the machine goes, over the
     engine's client (SimLink): the board and its plant run in C between the link's looks at
     the output (at each frame the board sends, and for heartbeats)."""
-    period = 1e-3 if plant == "mujoco" else 250e-6
-    with EmulatedBoard(elf, realtime=False, plant=plant, exchange_period=period) as board:
+    with EmulatedBoard(elf, realtime=False) as board:  # the MuJoCo hand, 1 ms exchanges
         states = [0]
 
         def count(t) -> None:
@@ -132,7 +130,6 @@ def driven(elf: Path, seconds: float, telemetry_hz: int, plant: str = "analytic"
         state = link.request(m.GetState())
         error = np.abs(np.array(state.theta2) - np.array(state.target)).max()
         return {
-            "plant": plant,
             "sim": sim,
             "wall": wall,
             "rtf": sim / wall,
@@ -270,12 +267,6 @@ def realtime(elf: Path, seconds: float) -> dict:
         }
 
 
-def default_plant() -> str:
-    """The plant a board gets when none is named (the grasp hold's), for the row's label."""
-    default = inspect.signature(EmulatedBoard).parameters["plant"].default
-    return {"analytic": "analytic plant", "mujoco": "the MuJoCo hand"}.get(default, str(default))
-
-
 def pct(c: float) -> str:
     return f"{100 * c / PERIOD_CYCLES:.0f} %"
 
@@ -284,10 +275,9 @@ def driven_rows(runs: list[dict], seconds: float) -> list[str]:
     best = max(runs, key=lambda r: r["rtf"])
     rtfs = [r["rtf"] for r in runs]
     cpu_rtfs = ", ".join(f"{r['cpu_rtf']:.2f}" for r in runs)
-    name = {"analytic": "analytic plant (C)", "mujoco": "MuJoCo plant (1 ms exchange)"}
     return [
-        f"| driven (`realtime=False`, as fast as it goes), {name[best['plant']]}, five fingers "
-        f"commanded, {seconds:g} s simulated, best of {len(runs)} | "
+        "| driven (`realtime=False`, as fast as it goes), MuJoCo plant (1 ms exchange), "
+        f"five fingers commanded, {seconds:g} s simulated, best of {len(runs)} | "
         f"**{best['rtf']:.2f}x** real time (runs: {', '.join(f'{x:.2f}' for x in rtfs)}); "
         f"{best['cycles_per_s'] / 1e6:.1f} M simulated cycles per wall second; "
         f"**{best['cpu_rtf']:.2f}x** per second of the process's CPU time "
@@ -307,7 +297,6 @@ def driven_rows(runs: list[dict], seconds: float) -> list[str]:
 
 def report(
     runs: list[dict],
-    mj_runs: list[dict],
     grasp: list[dict],
     ticks: list[dict],
     rt: dict,
@@ -330,10 +319,10 @@ def report(
         "| what | result |",
         "|---|---|",
         *driven_rows(runs, seconds),
-        *(driven_rows(mj_runs, seconds) if mj_runs else []),
         *[
             f"| `utrf hil grasp-hold --emulated --duration-s {g['seconds']:g}"
-            + (f" --object {g['obj']}` (the MuJoCo hand" if g["obj"] else f"` ({default_plant()}")
+            + (f" --object {g['obj']}`" if g["obj"] else "`")
+            + " (the MuJoCo hand"
             + f"; a fresh process: start-up and picture included) | **{g['wall']:.1f} s** wall "
             f"({g['seconds'] / g['wall']:.1f}x real time) at load average {g['load']:.1f}; "
             f"**{g['cpu']:.1f} s** of CPU time ({g['seconds'] / g['cpu']:.1f}x"
@@ -437,7 +426,6 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = p.parse_args(argv)
     runs = [driven(args.elf, args.seconds, 500) for _ in range(args.runs)]
-    mj_runs = [driven(args.elf, args.seconds, 500, plant="mujoco") for _ in range(args.runs)]
     elf = None if args.elf == DEFAULT_ELF else args.elf
     grasp = (
         [
@@ -450,7 +438,7 @@ def main(argv: list[str] | None = None) -> int:
     ticks = [tick_load(args.elf, k, 500) for k in range(6)] + [tick_load(args.elf, 5, 0)]
     rt = realtime(args.elf, args.seconds)
     apart = served_apart(args.elf, args.seconds)
-    section = report(runs, mj_runs, grasp, ticks, rt, apart, args.seconds)
+    section = report(runs, grasp, ticks, rt, apart, args.seconds)
     print(section)
     if not args.no_update:
         write_section(BENCH_DOC, section, BEGIN, END)

@@ -1,66 +1,26 @@
-"""Tip loads in the emulated plant: the generalised force, the coupling tendons' stretch,
-ramps, hits; and, with the real firmware holding Joint 2, the motor effort a payload needs
-and the recovery after a hammer hit."""
+"""Tip loads in the emulated plant (the MuJoCo hand): ramps, hits, bad loads refused; and,
+with the real firmware holding Joint 2, the motor effort a payload needs and the recovery after
+a hammer hit."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from utrf.emulator import EmulatedBoard, EmulatorError, HandPlant, PlantError, PlantParams
+from utrf.emulator import EmulatedBoard, EmulatorError, PlantError, PlantParams
+from utrf.emulator.mujoco_plant import MujocoPlant
 from utrf.hand import Hand
-from utrf.models import calibration, kinematics, statics, tendons
+from utrf.models import calibration, statics
 
-DT = 250e-6
+DT = 1e-3  # the board's exchange period with the MuJoCo plant
 INDEX = 1
 
 
-def test_tip_force_acts_on_q_through_the_tip_jacobian() -> None:
-    # Stiff coupling (no stretch) so the pose is the rigid one the kinematics Jacobian is for.
-    plant = HandPlant(params=PlantParams(coupling_modulus_pa=1e18))
-    g = plant.geometries[INDEX]
-    plant.set_theta2(INDEX, 0.4)
-    plant.block(INDEX)  # held still: the force is evaluated where the finger is
-    force = np.array([3.0, -7.0])
-    plant.set_tip_force(INDEX, tuple(force))
-    plant.step(DT)
-    jac = kinematics.jacobian(g, plant.q[INDEX])  # d tip / d q, (2,)
-    assert plant.generalised_tip_force[INDEX] == pytest.approx(float(jac @ force), rel=1e-6)
-    assert plant.generalised_tip_force[[0, 2, 3, 4]].tolist() == [0.0] * 4
-
-
-def test_coupling_stretch_follows_the_statics_equilibrium() -> None:
-    plant = HandPlant(params=PlantParams(coupling_modulus_pa=150e9))
-    g = plant.geometries[INDEX]
-    plant.set_theta2(INDEX, 0.2)
-    plant.block(INDEX)  # held still: the stretch is evaluated where the finger is
-    plant.set_tip_force(INDEX, (-4.0, -20.0))
-    plant.step(DT)
-    theta = plant.theta[INDEX]
-    # Independently: moments of the tip force at the plant's own (stretched) pose, the net
-    # tensions of Steps 1-3, Hooke's law with the plant's modulus.
-    tau = statics.generalised_forces(g, theta, tip_force_n=(-4.0, -20.0), gravity=False)
-    net = statics.net_tensions(g, tau)
-    soft = replace(g, tendon_youngs_modulus_pa=150e9)
-    e = net / tendons.stiffnesses(soft)
-    np.testing.assert_allclose(plant.coupling_stretch[INDEX], e[1:], rtol=2e-3)
-    r = np.asarray(g.guide_radii_m)
-    q = plant.q[INDEX]
-    e2, e3 = plant.coupling_stretch[INDEX]
-    np.testing.assert_allclose(theta * r, [q, q - e2, q - e2 - e3], rtol=0, atol=1e-12)
-    # The encoder sees the stretched Joint 2 and the tip is the stretched chain's.
-    assert plant.theta2[INDEX] == pytest.approx(theta[1])
-    tip = kinematics.chain_positions(g, theta)[-1]
-    np.testing.assert_allclose(plant.tip[INDEX], tip, atol=1e-12)
-    assert plant.coupling_stretch[INDEX, 0] > 5e-5  # a real stretch, not a rounding
-
-
 def test_force_ramps_in_and_pulses_carry_their_impulse() -> None:
-    plant = HandPlant()
+    plant = MujocoPlant(timestep=DT)
     plant.set_tip_force(INDEX, (0.0, -10.0), ramp_s=0.1)
     seen = []
     for _ in range(round(0.2 / DT)):
@@ -70,13 +30,21 @@ def test_force_ramps_in_and_pulses_carry_their_impulse() -> None:
     t = DT * np.arange(1, seen.size + 1)
     np.testing.assert_allclose(seen, -10.0 * np.minimum(t / 0.1, 1.0), atol=1e-9)
     plant.set_tip_force(INDEX, (0.0, 0.0))
+    # A hit is a force pulse on the last link at the tip: step it one MuJoCo step at a time
+    # and add up the force applied in each.
+    h = plant.max_step_s
+    plant.set_timestep(h)
+    link3 = plant.model.body(f"{plant.names[INDEX]}_link3").id
     plant.hit(INDEX, (0.05, 0.2), duration_s=3.1e-3)  # not a whole number of steps
-    total = np.zeros(2)
-    for _ in range(40):
-        plant.step(DT)
-        total += plant.applied_force[INDEX] * DT
-    np.testing.assert_allclose(total, (0.05, 0.2), rtol=1e-9)
-    assert not plant.applied_force.any()  # the pulse is over, nothing lingers
+    assert plant.native.pulses() == 1
+    total = np.zeros(3)
+    for _ in range(20):
+        plant.step(h)
+        total += plant.data.xfrc_applied[link3, :3] * h
+    _, rot = plant.frames[INDEX]
+    np.testing.assert_allclose(rot.T @ total, (0.05, 0.2, 0.0), rtol=1e-9, atol=1e-12)
+    assert plant.native.pulses() == 0
+    assert not plant.data.xfrc_applied.any()  # the pulse is over, nothing lingers
 
 
 @pytest.mark.parametrize(
@@ -92,7 +60,7 @@ def test_force_ramps_in_and_pulses_carry_their_impulse() -> None:
 )
 def test_bad_loads_are_refused_by_name(call, needle: str) -> None:
     with pytest.raises(PlantError, match=needle):
-        call(HandPlant())
+        call(MujocoPlant(timestep=DT))
 
 
 def test_params_refuse_a_bad_modulus() -> None:

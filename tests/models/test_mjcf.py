@@ -146,7 +146,7 @@ def test_tendons_pull_only(model: mujoco.MjModel) -> None:
 
 
 def test_motor_constants_are_the_emulators() -> None:
-    from utrf.emulator.plant import MotorParams
+    from utrf.emulator.plant_params import MotorParams
 
     layout = mjcf.load_layout()
     p = MotorParams()

@@ -2,15 +2,14 @@
 firmware (``build/firmware/utrf.elf``, ``make firmware``) running on the emulated board.
 
 Starts the emulated board (simavr, paced to the wall clock so you can watch; the plant is the
-MuJoCo hand, ``--plant analytic`` the one-degree-of-freedom finger model it replaced), connects a
-Hand to it over its socket as to a real MEGA, moves through the poses (one move each: the board
-runs the minimum-jerk paths, the pose's duration; then settling) with a live table on a
-terminal (a line per pose elsewhere), and writes to ``--out`` (default ``out/demo``): a picture
-of each pose (the MuJoCo hand rendered at the measured angles, and each finger drawn from the
-kinematics model with its target), ``trajectories.png`` (the joint angles against their
-targets) and ``telemetry.csv`` (every sample, SI). Then prints where they are, and each
-finger's tracking over the whole run (Joint 2 against the setpoint its controller used: RMS and
-worst). ``make demo`` runs this. Exit codes: 0 every pose settled; 1 one did not; 2 bad input
+MuJoCo hand), connects a Hand to it over its socket as to a real MEGA, moves through the poses
+(one move each: the board runs the minimum-jerk paths, the pose's duration; then settling) with
+a live table on a terminal (a line per pose elsewhere), and writes to ``--out`` (default
+``out/demo``): a picture of each pose (the MuJoCo hand rendered at the measured angles, and each
+finger drawn from the kinematics model with its target), ``trajectories.png`` (the joint angles
+against their targets) and ``telemetry.csv`` (every sample, SI). Then prints where they are, and
+each finger's tracking over the whole run (Joint 2 against the setpoint its controller used: RMS
+and worst). ``make demo`` runs this. Exit codes: 0 every pose settled; 1 one did not; 2 bad input
 (unknown pose, no firmware ELF).
 """
 
@@ -121,7 +120,6 @@ def run(args: argparse.Namespace) -> int:
                 move_s=args.duration,
                 hold_s=args.hold,
                 seed=args.seed,
-                plant=args.plant,
                 poses=library,
                 on_connect=on_connect,
                 on_step=on_step,
@@ -182,11 +180,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "the package's firmware sources into the user's cache)",
     )
     p.add_argument("--seed", type=int, default=0, help="the plant's noise seed")
-    p.add_argument(
-        "--plant",
-        choices=("mujoco", "analytic"),
-        default="mujoco",
-        help="the emulated hand: the MuJoCo twin (default) or the analytic finger model",
-    )
     p.add_argument("--no-live", action="store_true", help="no live table, a line per pose")
     p.set_defaults(handler=run)

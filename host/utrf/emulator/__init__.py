@@ -16,7 +16,7 @@ from utrf.emulator.board import (
     SimSerial,
     check_elf,
 )
-from utrf.emulator.plant import EncoderParams, HandPlant, MotorParams, PlantError, PlantParams
+from utrf.emulator.plant_params import EncoderParams, MotorParams, PlantError, PlantParams
 from utrf.emulator.process import BoardProcess
 
 __all__ = [
@@ -27,7 +27,6 @@ __all__ = [
     "EmulatedBoard",
     "EmulatorError",
     "EncoderParams",
-    "HandPlant",
     "HarnessError",
     "MotorParams",
     "PinState",

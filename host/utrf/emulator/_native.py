@@ -1,7 +1,8 @@
-"""Python objects over the C harness: :class:`NativeBoard` (one per board), :class:`NativePlant`
-and :class:`NativeMjPlant`. The ABI they call (constants, structs, signatures, loading the
-library) is in ``harness_abi``; its names are importable from here too. Nothing here is
-thread-safe: the caller serialises calls on one board (``EmulatedBoard`` holds a lock).
+"""Python objects over the C harness: :class:`NativeBoard` (one per board) and
+:class:`NativeMjPlant` (the MuJoCo plant's C side). The ABI they call (constants, structs,
+signatures, loading the library) is in ``harness_abi``; its names are importable from here too.
+Nothing here is thread-safe: the caller serialises calls on one board (``EmulatedBoard`` holds a
+lock).
 """
 
 from __future__ import annotations
@@ -20,7 +21,6 @@ from utrf.emulator.harness_abi import (
     MJ_LOADS,
     MJ_STATE_FIELDS,
     PIN_FIELDS,
-    PLANT_STATE_FIELDS,
     PROFILE_FIELDS,
     RESET_PIN,
     RESET_POWER_ON,
@@ -32,8 +32,6 @@ from utrf.emulator.harness_abi import (
     LineFaultsC,
     MjPlantParamsC,
     MjPlantStateC,
-    PlantParamsC,
-    PlantStateC,
     ProfileC,
     StatsC,
     library_path,
@@ -44,8 +42,8 @@ _DP = ctypes.POINTER(ctypes.c_double)
 
 
 class _NativeStepper:
-    """What both C plants share: a handle, numpy views of the state, stepping, the encoder
-    volts, freeing. ``_prefix`` names the C functions (``<prefix>_step`` ...)."""
+    """A C plant's handle, numpy views of its state, stepping, the encoder volts, freeing.
+    ``_prefix`` names the C functions (``<prefix>_step`` ...)."""
 
     _prefix: str
 
@@ -98,33 +96,6 @@ class _NativeStepper:
             raise HarnessError("too many hits under way at once (64)")
         if rc:
             raise HarnessError(f"bad hit: {what}")
-
-
-class NativePlant(_NativeStepper):
-    """One C plant (``utrf_plant_t``). ``state`` holds numpy views of its state, by field."""
-
-    _prefix = "utrf_plant"
-
-    def __init__(self, params: PlantParamsC, seed: int) -> None:
-        lib = load_library()
-        handle = lib.utrf_plant_new(ctypes.byref(params), seed & (2**64 - 1))
-        if not handle:
-            raise HarnessError("out of memory for the plant")
-        self._bind(lib, handle, PLANT_STATE_FIELDS)
-
-    def decode(self, pins: np.ndarray) -> None:
-        block = np.ascontiguousarray(pins, dtype=np.float64)
-        self._lib.utrf_plant_decode(self.handle, block.ctypes.data_as(_DP))
-
-    def refresh(self) -> None:
-        self._lib.utrf_plant_refresh(self.handle)
-
-    def inertia(self, finger: int) -> float:
-        return self._lib.utrf_plant_inertia(self.handle, finger)
-
-    def hit(self, finger: int, jx: float, jy: float, duration: float) -> None:
-        rc = self._lib.utrf_plant_hit(self.handle, finger, jx, jy, duration)
-        self._check_hit(rc, f"finger {finger}, duration {duration}")
 
 
 class NativeMjPlant(_NativeStepper):
@@ -185,11 +156,8 @@ class NativeBoard:
     def run_to(self, cycle: int) -> int:
         return self._run_to(self._h, cycle)
 
-    def attach_plant(self, plant: NativePlant | NativeMjPlant | None) -> None:
-        if isinstance(plant, NativeMjPlant):
-            self._lib.utrf_sim_attach_mjplant(self.handle, plant.handle)
-        else:
-            self._lib.utrf_sim_attach_plant(self.handle, None if plant is None else plant.handle)
+    def attach_plant(self, plant: NativeMjPlant | None) -> None:
+        self._lib.utrf_sim_attach_mjplant(self.handle, None if plant is None else plant.handle)
 
     def run_plant(self, cycle: int, period: int) -> int:
         return self._lib.utrf_sim_run_plant(self._h, cycle, period)
@@ -360,7 +328,6 @@ __all__ = [
     "MJ_LOADS",
     "MJ_STATE_FIELDS",
     "PIN_FIELDS",
-    "PLANT_STATE_FIELDS",
     "PROFILE_FIELDS",
     "RESET_PIN",
     "RESET_POWER_ON",
@@ -374,9 +341,6 @@ __all__ = [
     "MjPlantStateC",
     "NativeBoard",
     "NativeMjPlant",
-    "NativePlant",
-    "PlantParamsC",
-    "PlantStateC",
     "ProfileC",
     "StatsC",
     "library_path",

@@ -18,7 +18,7 @@ import time
 import weakref
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from utrf import artifacts
 from utrf.emulator import _native
@@ -35,7 +35,7 @@ from utrf.emulator.board_types import (
     EmulatorError,
     PinState,
 )
-from utrf.emulator.plant import HandPlant, PlantParams
+from utrf.emulator.plant_params import PlantParams
 from utrf.emulator.sim_serial import SimSerial
 from utrf.models.geometry import HandGeometry
 
@@ -45,8 +45,7 @@ if TYPE_CHECKING:
 # A checkout's `make firmware` output (relative: found from the working directory); with no
 # ELF given, the board takes utrf.artifacts.firmware_elf() (this, or a cached build).
 DEFAULT_ELF = artifacts.CHECKOUT_ELF
-EXCHANGE_PERIOD_S = 250e-6
-MUJOCO_EXCHANGE_PERIOD_S = 1e-3  # one exchange per control tick; MuJoCo steps 0.5 ms twice
+EXCHANGE_PERIOD_S = 1e-3  # one exchange per control tick; MuJoCo steps 0.5 ms twice
 #: real time: simulated time the board thread runs per hold of the lock (sim_time moves by it)
 SERVE_BATCH_S = 1e-3
 
@@ -115,7 +114,7 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
         auto_reset_hold: float = 0.1,
         capture: bool | None = None,
         exchange_period: float | None = None,
-        plant: str | HandPlant | Any = "mujoco",
+        plant: str | MujocoPlant = "mujoco",
     ) -> None:
         if elf is None:
             try:
@@ -128,12 +127,8 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
             raise EmulatorError(
                 f"speed must be a factor > 0 or None (as fast as possible), got {speed!r}"
             )
-        if exchange_period is None:  # the MuJoCo plant: one exchange per 1 ms control tick
-            exchange_period = (
-                MUJOCO_EXCHANGE_PERIOD_S
-                if plant == "mujoco" or hasattr(plant, "set_timestep")
-                else EXCHANGE_PERIOD_S
-            )
+        if exchange_period is None:  # one exchange per 1 ms control tick
+            exchange_period = EXCHANGE_PERIOD_S
         if not (isinstance(exchange_period, int | float) and 1e-5 <= exchange_period <= 1e-2):
             raise EmulatorError(
                 f"exchange_period must lie in [10 µs, 10 ms], got {exchange_period!r}"
@@ -148,19 +143,17 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
         self.speed = None if speed is None else float(speed)
         self.seed = int(seed)
         self.eeprom_path = Path(eeprom_path) if eeprom_path is not None else None
-        self.plant: HandPlant | MujocoPlant
-        if plant == "analytic":
-            self.plant = HandPlant(hand, plant_params, seed)
-        elif plant == "mujoco":
+        self.plant: MujocoPlant
+        if plant == "mujoco":
             from utrf.emulator.mujoco_plant import MujocoPlant  # imports MuJoCo only when asked
 
             self.plant = MujocoPlant(hand, plant_params, seed, timestep=exchange_period)
         elif isinstance(plant, str):
-            raise EmulatorError(f"plant must be 'analytic', 'mujoco' or a plant, got {plant!r}")
+            raise EmulatorError(f"plant must be 'mujoco' or a MujocoPlant, got {plant!r}")
         else:
             self.plant = plant
-        if hasattr(self.plant, "set_timestep"):  # MuJoCo cuts the exchange into its steps
-            self.plant.set_timestep(round(exchange_period * F_CPU_HZ) / F_CPU_HZ)
+        # MuJoCo cuts the exchange into its steps
+        self.plant.set_timestep(round(exchange_period * F_CPU_HZ) / F_CPU_HZ)
         self._lock = threading.RLock()
         self._tick = threading.Condition()
         self._stop = threading.Event()

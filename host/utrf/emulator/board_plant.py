@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from utrf.emulator.board_types import EmulatorError
-from utrf.emulator.plant import DRIVE_NAMES, HandPlant
+from utrf.emulator.plant_params import DRIVE_NAMES
 
 if TYPE_CHECKING:
     from utrf.emulator.mujoco_plant import MujocoPlant
@@ -23,7 +23,7 @@ class BoardPlant:
 
     if TYPE_CHECKING:  # provided by EmulatedBoard
         _lock: AbstractContextManager[Any]
-        plant: HandPlant | MujocoPlant
+        plant: MujocoPlant
 
     def unplug_encoder(self, finger: int, volts: float | None = None) -> None:
         """Finger's Joint-2 encoder disconnected: its ADC input reads ``volts`` (default 0 V)."""
@@ -55,7 +55,7 @@ class BoardPlant:
     def set_tip_force(self, finger: int, force_n: tuple[float, float], ramp_s: float = 0.0) -> None:
         """A steady force (Fx, Fy) in N at a fingertip, finger frame (y toward flexion; the
         bench's gravity is −y), reached over ``ramp_s`` s; (0, 0) removes it. The motor and the
-        controller feel it through the coupling (``HandPlant.set_tip_force``)."""
+        controller feel it through the coupling (``MujocoPlant.set_tip_force``)."""
         with self._lock:
             self.plant.set_tip_force(finger, force_n, ramp_s)
 

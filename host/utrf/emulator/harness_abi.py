@@ -15,7 +15,7 @@ from typing import Any
 
 from utrf import artifacts
 
-ABI = 11
+ABI = 12
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -106,7 +106,7 @@ def _arr(kind: type, *shape: int) -> type:
     return t
 
 
-# The encoder's constants, the same run in both plants' parameter structs (utrf_sim.h).
+# The encoder's constants in the plant's parameter struct (utrf_sim.h).
 _ENCODER_FIELDS = [
     ("enc_supply", _D),
     ("enc_offset", _D),
@@ -116,63 +116,6 @@ _ENCODER_FIELDS = [
     ("enc_invert", _I32),
     ("enc_bits", _I32),
 ]
-
-
-class PlantParamsC(ctypes.Structure):
-    """``utrf_plant_params_t``: the plant's constants (utrf.emulator.plant fills it)."""
-
-    _fields_ = [
-        ("R", _arr(_D, 5, 3)),
-        ("L", _arr(_D, 5, 3)),
-        ("link_mass", _arr(_D, 5, 3)),
-        ("com", _arr(_D, 5, 3)),
-        ("tendon_stiffness", _arr(_D, 5)),
-        ("coupling_compliance", _arr(_D, 5, 2)),
-        ("rotary", _arr(_I32, 5)),
-        ("q_limits", _arr(_D, 5, 2)),
-        ("supply_v", _D),
-        ("stall_force", _D),
-        ("no_load_speed", _D),
-        ("electrical_time_constant", _D),
-        ("moving_mass", _D),
-        ("coulomb_friction", _D),
-        ("viscous_friction", _D),
-        ("stroke", _arr(_D, 2)),
-        *_ENCODER_FIELDS,
-        ("joint_damping", _D),
-        ("tendon_damping", _D),
-        ("gravity", _arr(_D, 2)),
-        ("max_substep", _D),
-    ]
-
-
-PLANT_STATE_FIELDS: tuple[tuple[str, tuple[int, ...]], ...] = (
-    ("time", ()),
-    ("q", (5,)),
-    ("qd", (5,)),
-    ("x", (5, 2)),
-    ("xd", (5, 2)),
-    ("current", (5, 2)),
-    ("tension", (5, 2)),
-    ("drive_mode", (5, 2)),
-    ("drive_duty", (5, 2)),
-    ("tip_force", (5, 2)),
-    ("tip_goal", (5, 2)),
-    ("tip_rate", (5,)),
-    ("applied_force", (5, 2)),
-    ("coupling_stretch", (5, 2)),
-    ("q_ext", (5,)),
-    ("block", (5, 2)),
-    ("plugged", (5,)),
-    ("unplugged_v", (5,)),
-    ("encoder_shift", (5,)),
-)
-
-
-class PlantStateC(ctypes.Structure):
-    """``utrf_plant_state_t``: the plant's state, read and written in place."""
-
-    _fields_ = [(name, _arr(_D, *shape) if shape else _D) for name, shape in PLANT_STATE_FIELDS]
 
 
 MJ_LOADS = 16
@@ -319,20 +262,6 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_profile_function": (ctypes.c_int, [p, ctypes.c_int64]),
         "utrf_sim_profile_get": (None, [p, ctypes.c_int, ctypes.POINTER(ProfileC)]),
         "utrf_sim_log": (ctypes.c_size_t, [p, ctypes.c_char_p, ctypes.c_size_t]),
-        "utrf_plant_new": (p, [ctypes.POINTER(PlantParamsC), ctypes.c_uint64]),
-        "utrf_plant_free": (None, [p]),
-        "utrf_plant_state": (ctypes.POINTER(PlantStateC), [p]),
-        "utrf_plant_refresh": (None, [p]),
-        "utrf_plant_inertia": (ctypes.c_double, [p, ctypes.c_int]),
-        "utrf_plant_step": (None, [p, ctypes.c_double, ctypes.POINTER(ctypes.c_double)]),
-        "utrf_plant_encoder_volts": (None, [p, ctypes.POINTER(ctypes.c_double)]),
-        "utrf_plant_decode": (None, [p, ctypes.POINTER(ctypes.c_double)]),
-        "utrf_plant_hit": (
-            ctypes.c_int,
-            [p, ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double],
-        ),
-        "utrf_plant_pulses": (ctypes.c_int, [p]),
-        "utrf_sim_attach_plant": (None, [p, p]),
         "utrf_mjplant_new": (
             p,
             [

@@ -5,10 +5,10 @@ control is its motor's force, N), optionally with an object of :mod:`utrf.models
 The mujoco package owns the ``MjModel`` and ``MjData``; the harness (``harness/mjplant.c``)
 steps them in C in lockstep with the MCU, as many ``mj_step`` per exchange as the MJCF's
 timestep (0.5 ms) fits in the board's exchange period (1 ms: two): the TB6612FNG truth
-table and the DC motor's electrical model (:class:`~utrf.emulator.plant.MotorParams`) turn
+table and the DC motor's electrical model (:class:`~utrf.emulator.plant_params.MotorParams`) turn
 the firmware's pins into the actuators' forces, and Joint 2's angle becomes the AS5600's
 analog voltage
-(:class:`~utrf.emulator.plant.EncoderParams`: 12-bit, 10-90 % band, seeded noise). Everything
+(:class:`~utrf.emulator.plant_params.EncoderParams`: 12-bit, 10-90 % band, seeded noise). Everything
 MuJoCo knows (poses, contacts, the object) is live in :attr:`MujocoPlant.data`.
 
 Gravity is the model's, −z in the world (for index..little, −y of the finger frame, as on the
@@ -26,15 +26,14 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from utrf.emulator._native import HarnessError, MjPlantParamsC, NativeMjPlant
-from utrf.emulator.plant import (
+from utrf.emulator._native import HarnessError, MjPlantParamsC, NativeMjPlant, _NativeStepper
+from utrf.emulator.plant_params import (
     FINGERS,
+    EncoderParams,
     PlantError,
     PlantParams,
     _finger_index,
-    _FingerPlant,
     _force_vector,
-    _put_encoder,
 )
 from utrf.models import mjcf, objects
 from utrf.models.geometry import HandGeometry
@@ -82,6 +81,87 @@ def libmujoco_path() -> str:
     if not found:
         raise HarnessError(f"no libmujoco.so* next to the mujoco package in {root}")
     return str(found[-1])
+
+
+def _put_encoder(c: MjPlantParamsC, e: EncoderParams) -> None:
+    """The encoder's constants into the C plant's parameters (its ``enc_*`` fields)."""
+    c.enc_supply, c.enc_offset = e.supply_v, e.offset_rad
+    np.ctypeslib.as_array(c.enc_band)[...] = e.band
+    c.enc_noise_v, c.enc_unplugged_v = e.noise_v, e.unplugged_v
+    c.enc_invert, c.enc_bits = int(e.invert), e.resolution_bits
+
+
+class _FingerPlant:
+    """The plant's checks and encoder faults: the hand it takes, the range check on a Joint-2
+    angle, and the encoder's unplugged, replugged and slipped states (kept apart from
+    :class:`MujocoPlant`, which is long enough on its own)."""
+
+    hand: HandGeometry
+    params: PlantParams
+    R: np.ndarray
+    q_limits: np.ndarray
+    encoder_shift: np.ndarray
+    _st: dict[str, np.ndarray]
+    _native: _NativeStepper
+
+    @property
+    def time(self) -> float:
+        return self._native.time
+
+    @property
+    def drive_mode(self) -> np.ndarray:
+        """Per finger and motor: 0 coast, 1 brake, 2 forward, 3 reverse."""
+        return self._st["drive_mode"].astype(np.int8)
+
+    def encoder_volts(self) -> np.ndarray:
+        """Each finger's AS5600 output (V), noise included: the ADC0..4 inputs."""
+        return self._native.encoder_volts()
+
+    def _take_hand(self, hand: HandGeometry | None, params: PlantParams | None) -> None:
+        self.hand = hand if hand is not None else HandGeometry.default()
+        if len(self.hand.fingers) != FINGERS:
+            raise PlantError(
+                f"the plant needs {FINGERS} fingers, the hand has {len(self.hand.fingers)}"
+            )
+        self.params = params if params is not None else PlantParams()
+        self.geometries = tuple(f.geometry for f in self.hand.fingers)
+
+    def _q_at_theta2(self, f: int, theta2: float) -> float:
+        """Joint-2 angle ``theta2`` (rad) of finger ``f`` as its q (m), inside its range."""
+        q = float(theta2) * self.R[f, 1]
+        lo, hi = self.q_limits[f]
+        if not lo <= q <= hi:
+            raise PlantError(
+                f"finger {f}: θ2 = {theta2:.3f} rad is outside its range "
+                f"[{lo / self.R[f, 1]:.3f}, {hi / self.R[f, 1]:.3f}] rad"
+            )
+        return q
+
+    @staticmethod
+    def _check_direction(direction: str) -> None:
+        if direction not in ("both", "flexion"):
+            raise PlantError(f"direction must be 'both' or 'flexion', got {direction!r}")
+
+    def unplug_encoder(self, finger: int, volts: float | None = None) -> None:
+        """The encoder's cable comes off: the ADC input reads ``volts`` (default: the
+        encoder parameters' ``unplugged_v``, 0 V)."""
+        f = _finger_index(finger)
+        if volts is None:
+            volts = self.params.encoder.unplugged_v
+        if not (math.isfinite(volts) and 0.0 <= volts <= 5.0):
+            raise PlantError(f"an unplugged encoder's input must lie in [0, 5] V, got {volts!r}")
+        self._st["unplugged_v"][f] = volts
+        self._st["plugged"][f] = 0.0
+
+    def plug_encoder(self, finger: int) -> None:
+        self._st["plugged"][_finger_index(finger)] = 1.0
+
+    def shift_encoder(self, finger: int, radians: float) -> None:
+        """The encoder's magnet slips: its reading is off by ``radians`` from now on."""
+        f = _finger_index(finger)
+        if not (isinstance(radians, int | float) and math.isfinite(radians)):
+            raise PlantError(f"encoder shift must be a finite angle in rad, got {radians!r}")
+        self.encoder_shift[f] = float(radians)
 
 
 class MujocoPlant(_FingerPlant):

@@ -107,7 +107,6 @@ def run_demo(
     move_s: float | None = None,
     hold_s: float = 0.5,
     seed: int = 0,
-    plant: str = "mujoco",
     poses: PoseLibrary | None = None,
     on_connect: Callable[[Hand, object], None] | None = None,
     on_step: Callable[[Step], None] | None = None,
@@ -130,7 +129,7 @@ def run_demo(
     steps = [Step(i + 1, name) for i, name in enumerate(sequence)]
     recorder = _Recorder()
     stretched: dict[str, tuple[str, ...]] = {}
-    with EmulatedBoard(elf, realtime=True, speed=speed, pty=False, seed=seed, plant=plant) as board:
+    with EmulatedBoard(elf, realtime=True, speed=speed, pty=False, seed=seed) as board:
         # The board is up (firmware and harness found): only now is the previous run replaced,
         # so a demo that cannot start leaves the last one's files as they were.
         out.mkdir(parents=True, exist_ok=True)

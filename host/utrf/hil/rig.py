@@ -31,7 +31,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from utrf.emulator.plant import EncoderParams, MotorParams, PlantParams
+from utrf.emulator.plant_params import EncoderParams, MotorParams, PlantParams
 from utrf.hil.tracker import Registration, SimulatedTracker, Tracker, rotation_from_euler
 
 #: the emulated static-loading rig's actuator (a linear slide stage; ASSUMED values)

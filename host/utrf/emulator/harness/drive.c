@@ -1,6 +1,6 @@
-/* What both plants (plant.c, mjplant.c) share with the board: the seeded noise, the
- * TB6612FNG's truth table and the AS5600's analog output. One copy, so the two plants cannot
- * drift apart on what the firmware sees.
+/* The plant's side of the board (mjplant.c steps it): the seeded noise, the TB6612FNG's truth
+ * table and the AS5600's analog output: what the firmware's pins become and what its ADC
+ * reads.
  */
 #include <math.h>
 

@@ -24,14 +24,14 @@ static inline avr_irq_t *utrf_vector_irq(avr_t *avr, int vector)
     return avr_get_interrupt_irq(avr, (uint8_t)vector);
 }
 
-/* ---- shared by the plants (drive.c) ----------------------------------------------------- */
+/* ---- the plant's drive, encoder and noise (drive.c) ----------------------------------------------------- */
 typedef struct {
     uint64_t state;
     double spare;
     int have_spare;
 } utrf_rng_t;
 
-/* xorshift64*: small, fast and reproducible for a seed; the one generator of the plants' noise
+/* xorshift64*: small, fast and reproducible for a seed; the one generator of the plant's noise
  * (utrf_rng_t) and the line faults (utrf_sim_t.rng). The state must not be zero. */
 static inline uint64_t utrf_xorshift64s(uint64_t *state)
 {
@@ -157,7 +157,7 @@ struct utrf_sim {
     uint32_t jump_to;
     int jump_interrupts;
 
-    /* the plant stepped in lockstep (plant.c, mjplant.c); not owned */
+    /* the plant stepped in lockstep (mjplant.c, lockstep.c); not owned */
     void *plant_ctx;
     void (*plant_step)(void *ctx, double dt, const double *pins);
     void (*plant_volts)(void *ctx, double *out5);
@@ -177,8 +177,8 @@ struct utrf_sim {
     size_t log_len;
 };
 
-/* plant.c, mjplant.c: attach a plant's stepping and encoder volts to the board, or detach it
- * (ctx NULL); the two plants attach alike. */
+/* mjplant.c: attach the plant's stepping and encoder volts to the board, or detach it
+ * (ctx NULL). */
 static inline void utrf_sim_attach_ops(utrf_sim_t *s, void *ctx,
                                        void (*step)(void *ctx, double dt, const double *pins),
                                        void (*volts)(void *ctx, double *out5))

@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 11
+#define UTRF_SIM_ABI 12
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -191,71 +191,7 @@ int utrf_sim_write_io(utrf_sim_t *s, uint32_t addr, uint8_t value);
 /* Write a byte of the data space behind every module's back (no module reacts). */
 int utrf_sim_poke(utrf_sim_t *s, uint32_t addr, uint8_t value);
 
-/* ---- The plant (plant.c) ------------------------------------------------------------------
- * The hand's five fingers, motors and encoders, stepped in C. Python computes the constants
- * from the geometry files (utrf.emulator.plant) and reads and writes the state in place. */
-#define UTRF_PLANT_FINGERS 5
-
-typedef struct {
-    /* per finger: guide radii R1..R3, link lengths, masses, centres of mass (fraction of the
-     * link from its joint), the actuating tendon's stiffness, Tendon 2 and 3's compliance
-     * under tension (m/N), rotary actuation (one motor), q's range (m) */
-    double R[5][3], L[5][3], link_mass[5][3], com[5][3];
-    double tendon_stiffness[5];
-    double coupling_compliance[5][2];
-    int32_t rotary[5];
-    double q_limits[5][2];
-    /* motors (one per tendon, all alike) */
-    double supply_v, stall_force, no_load_speed, electrical_time_constant, moving_mass;
-    double coulomb_friction, viscous_friction, stroke[2];
-    /* encoder (AS5600, analog) */
-    double enc_supply, enc_offset, enc_band[2], enc_noise_v, enc_unplugged_v;
-    int32_t enc_invert, enc_bits;
-    /* the rest */
-    double joint_damping, tendon_damping, gravity[2];
-    double max_substep; /* the integration step the plant keeps under (s) */
-} utrf_plant_params_t;
-
-/* The plant's state, SI. Written by Python between runs (poses, faults, loads); call
- * utrf_plant_refresh after moving q. drive_mode: 0 coast, 1 brake, 2 forward, 3 reverse. */
-typedef struct {
-    double time;
-    double q[5], qd[5];
-    double x[5][2], xd[5][2];      /* actuators A and B: pulled-in tendon (m) and speed */
-    double current[5][2];          /* A */
-    double tension[5][2];          /* Tendon 1 (flexor), Tendon 4 (extensor), N */
-    double drive_mode[5][2], drive_duty[5][2];
-    double tip_force[5][2];        /* steady tip force now (N, finger frame) */
-    double tip_goal[5][2];         /* and where it ramps to */
-    double tip_rate[5];            /* N/s toward the goal (inf: at once) */
-    double applied_force[5][2];    /* the tip force of the last step, pulses included */
-    double coupling_stretch[5][2]; /* e2, e3 (m) */
-    double q_ext[5];               /* the tip force's generalised force on q (N) */
-    double block[5][2];            /* q's allowed interval: the limits narrowed by blocks */
-    double plugged[5], unplugged_v[5], encoder_shift[5];
-} utrf_plant_state_t;
-
-typedef struct utrf_plant utrf_plant_t;
-
-utrf_plant_t *utrf_plant_new(const utrf_plant_params_t *params, uint64_t seed);
-void utrf_plant_free(utrf_plant_t *pl);
-utrf_plant_state_t *utrf_plant_state(utrf_plant_t *pl);
-/* Recompute the terms that depend on q (after q was written). */
-void utrf_plant_refresh(utrf_plant_t *pl);
-double utrf_plant_inertia(const utrf_plant_t *pl, int finger); /* M(q) as last computed */
-/* Advance dt seconds with the pin block held (NULL: the last drive). */
-void utrf_plant_step(utrf_plant_t *pl, double dt, const double *pins);
-void utrf_plant_encoder_volts(utrf_plant_t *pl, double *out5);
-/* Decode the pin block into the drive now (the step does it too). */
-void utrf_plant_decode(utrf_plant_t *pl, const double *pins);
-/* A hammer hit: a force pulse carrying (jx, jy) N s over duration s from now. -2: too many
- * pulses under way. */
-int utrf_plant_hit(utrf_plant_t *pl, int finger, double jx, double jy, double duration);
-int utrf_plant_pulses(const utrf_plant_t *pl);
-
-/* The board's plant (NULL: none; the ADC inputs and pins are then the caller's). The board
- * does not own it: free it after the board. */
-void utrf_sim_attach_plant(utrf_sim_t *s, utrf_plant_t *pl);
+/* ---- Lockstep with the plant (lockstep.c) ------------------------------------------------- */
 /* Run in lockstep with the plant up to `target`, one exchange every `period` cycles: the MCU
  * runs each period with the encoders as the plant had them at its start, then the plant the
  * same period with the pins as they were at its start. Returns the status; stops early
@@ -269,6 +205,7 @@ int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, in
 /* ---- The MuJoCo plant (mjplant.c) ----------------------------------------------------------
  * The MuJoCo hand (utrf.models.mjcf, drive "force") stepped here; its mjModel and mjData
  * belong to the caller (the mujoco package) and stay live there. Indices are MuJoCo's. */
+#define UTRF_PLANT_FINGERS 5
 #define UTRF_MJPLANT_LOADS 16
 
 typedef struct {
@@ -311,6 +248,8 @@ void utrf_mjplant_encoder_volts(utrf_mjplant_t *mp, double *out5);
 int utrf_mjplant_hit(utrf_mjplant_t *mp, int body, int site, double jx, double jy, double jz,
                      double duration);
 int utrf_mjplant_pulses(const utrf_mjplant_t *mp);
+/* The board's plant (NULL: none; the ADC inputs and pins are then the caller's). The board
+ * does not own it: free it after the board. */
 void utrf_sim_attach_mjplant(utrf_sim_t *s, utrf_mjplant_t *mp);
 
 /* The last messages simavr logged for this board (errors and warnings), NUL-terminated. */
