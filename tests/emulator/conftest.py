@@ -7,10 +7,13 @@ tests/conftest.py), and fail with make's message if it cannot.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from emu_helpers import QUIET
+
+from utrf.emulator import EmulatedBoard
 
 REPO = Path(__file__).resolve().parents[2]
 FIXTURE_ELF = REPO / "build" / "emulator" / "fixture.elf"
@@ -21,3 +24,11 @@ def fixture_elf(make: Callable[..., None]) -> Path:
     """The harness's own test program (tests/emulator/fixtures/fixture.c), and the library."""
     make("emulator")
     return FIXTURE_ELF
+
+
+@pytest.fixture
+def board(firmware_elf: Path) -> Iterator[EmulatedBoard]:
+    """The real firmware on a driven board with the quiet plant (a test module may define its
+    own ``board``)."""
+    with EmulatedBoard(firmware_elf, realtime=False, plant_params=QUIET) as b:
+        yield b

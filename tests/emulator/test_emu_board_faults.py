@@ -7,20 +7,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from emu_helpers import LinkClient
+from emu_helpers import QUIET, LinkClient
 
-from utrf.emulator import EmulatedBoard, EmulatorError, EncoderParams, PlantParams
+from utrf.emulator import EmulatedBoard, EmulatorError
 from utrf.protocol import messages as m
 
-QUIET = PlantParams(gravity_m_s2=(0.0, 0.0), encoder=EncoderParams(noise_v=0.0))
 ALL = 0b11111
 TICK_S = 1e-3
-
-
-@pytest.fixture
-def board(firmware_elf: Path):
-    with EmulatedBoard(firmware_elf, realtime=False, plant_params=QUIET) as b:
-        yield b
 
 
 @pytest.fixture

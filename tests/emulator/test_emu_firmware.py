@@ -8,12 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from emu_helpers import LinkClient
+from emu_helpers import QUIET, LinkClient
 
-from utrf.emulator import EmulatedBoard, EncoderParams, PlantParams
+from utrf.emulator import EmulatedBoard
 from utrf.protocol import messages as m
 
-QUIET = PlantParams(gravity_m_s2=(0.0, 0.0), encoder=EncoderParams(noise_v=0.0))
 ALL = 0b11111
 COAST5 = (m.ControlMode.COAST,) * 5
 
@@ -35,12 +34,6 @@ def faults_seen(client: LinkClient, finger: int) -> m.FaultBits:
         if isinstance(msg, m.Fault) and msg.finger == finger:
             bits |= msg.new_faults
     return bits
-
-
-@pytest.fixture
-def board(firmware_elf: Path):
-    with EmulatedBoard(firmware_elf, realtime=False, plant_params=QUIET) as b:
-        yield b
 
 
 @pytest.fixture

@@ -10,12 +10,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from emu_helpers import Console
+from emu_helpers import QUIET, Console
 
-from utrf.emulator import EmulatedBoard, EmulatorError, EncoderParams, PlantParams
+from utrf.emulator import EmulatedBoard, EmulatorError, PlantParams
 from utrf.emulator.board import RESET_FLAGS
 
-QUIET = PlantParams(gravity_m_s2=(0.0, 0.0), encoder=EncoderParams(noise_v=0.0))
 # The harness's own tests run at a 250 us exchange (the MuJoCo plant's default is 1 ms, one
 # per control tick): their timings are counted in exchanges of that size.
 EXCHANGE = 250e-6

@@ -5,23 +5,15 @@ do waits for the sleep: the 1 kHz stream loses no sample, a request is answered.
 from __future__ import annotations
 
 import itertools
-from pathlib import Path
 
 import pytest
 from emu_helpers import LinkClient
 
-from utrf.emulator import EmulatedBoard, EncoderParams, PlantParams
+from utrf.emulator import EmulatedBoard
 from utrf.protocol import messages as m
 
-QUIET = PlantParams(gravity_m_s2=(0.0, 0.0), encoder=EncoderParams(noise_v=0.0))
 ALL = 0b11111
 CPU_HZ = 16e6
-
-
-@pytest.fixture
-def board(firmware_elf: Path):
-    with EmulatedBoard(firmware_elf, realtime=False, plant_params=QUIET) as b:
-        yield b
 
 
 @pytest.fixture

@@ -8,14 +8,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from emu_helpers import QUIET
 
-from utrf.emulator import EmulatedBoard, EncoderParams, PlantParams
+from utrf.emulator import EmulatedBoard, PlantParams
 from utrf.emulator.mujoco_plant import MujocoPlant
 from utrf.hand.simlink import SimLink
 from utrf.protocol import messages as m
 
 ALL = 0b11111
-QUIET = PlantParams(gravity_m_s2=(0.0, 0.0), encoder=EncoderParams(noise_v=0.0))
 COUNT_RAD = 2 * np.pi / (1024 * 0.8)  # one 10-bit ADC count over the 80 % band: 7.7 mrad
 
 
