@@ -2,15 +2,15 @@
 
     python -m tools.bench_firmware [--update docs/benchmarks.md] [--seconds 2]
 
-Run by `make bench-firmware`, which builds the ELF, the host library and the simavr harness
-first. Every figure is measured here:
+Run by `make bench-firmware`, which builds the ELF, the host library and the emulator's
+harness (build/emulator/libutrf_sim.so) first. Every figure is measured here:
 
 - flash and static RAM from `avr-size` on build/firmware/utrf.elf; the kinematics table's
   bytes and worst error from its generator;
-- the control tick on simavr (build/firmware/bench/tick_bench): the firmware's own
-  measurement (get_stats: tick_mean over 1024 ticks, tick_worst) and the simulator's cycle
-  count of app::tick(), with five fingers in closed loop and the 500 Hz state stream, under
-  three loads of host traffic;
+- the control tick on the emulated board (tools.tick_bench, on the harness's simavr): the
+  firmware's own measurement (get_stats: tick_mean over 1024 ticks, tick_worst) and the
+  harness's cycle profiles of app::tick(), with five fingers in closed loop and the state
+  stream on, under six kinds of host traffic;
 - the step response of the default gains on the reference finger plant (tests/firmware/
   fwsim.py), through the host build of the firmware core.
 """
@@ -19,17 +19,15 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
-import os
 import subprocess
 import sys
 from pathlib import Path
 
+from tools import tick_bench
 from tools.doc_sections import cpu_name, write_section
 
 REPO = Path(__file__).resolve().parents[1]
 ELF = REPO / "build" / "firmware" / "utrf.elf"
-BENCH = REPO / "build" / "firmware" / "bench" / "tick_bench"
 TABLE = REPO / "firmware" / "src" / "generated" / "kinematics_table.h"
 BEGIN = "<!-- BEGIN firmware (make bench-firmware) -->"
 END = "<!-- END firmware -->"
@@ -63,40 +61,8 @@ def table() -> list[str]:
     return [ln for ln in out.splitlines() if ln.startswith(("geometry", "total"))]
 
 
-def tick_addresses() -> tuple[str, str]:
-    nm = run(["avr-nm", "-C", str(ELF)])
-    entry = next(ln.split()[0] for ln in nm.splitlines() if ln.endswith(" utrf::app::tick()"))
-    dis = run(["avr-objdump", "-d", "-C", str(ELF)]).splitlines()
-    call = next(i for i, ln in enumerate(dis) if "call" in ln and "<utrf::app::tick()>" in ln)
-    return entry, dis[call + 1].split(":")[0].strip()
-
-
-def loop_address() -> str:
-    nm = run(["avr-nm", "-C", str(ELF)])
-    return next(ln.split()[0] for ln in nm.splitlines() if ln.endswith(" utrf::app::loop()"))
-
-
-def dispatch_address() -> str:
-    nm = run(["avr-nm", "-C", str(ELF)])
-    return next(ln.split()[0] for ln in nm.splitlines() if " utrf::dispatch::handle(" in ln)
-
-
 def tick_load(scenario: str, seconds: float) -> dict:
-    entry, ret = tick_addresses()
-    env = {
-        **os.environ,
-        "UTRF_LOOP_ENTRY": loop_address(),
-        "UTRF_DISPATCH_ENTRY": dispatch_address(),
-    }
-    out = subprocess.run(
-        [str(BENCH), str(ELF), scenario, str(seconds), entry, ret],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        check=True,
-        env=env,
-    ).stdout
-    return json.loads(out.strip().splitlines()[-1])
+    return tick_bench.run(ELF, scenario, seconds)
 
 
 def step_figures() -> list[tuple[float, dict[str, float]]]:
@@ -293,7 +259,7 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         "stress": "set_targets back to back (line saturated)",
         "silent": "none: the host falls silent, HOLD at the heartbeat timeout",
         "moves": "1 kHz stream, a five-finger move every 0.4 s, heartbeats",
-        "latency": "1 kHz stream, ping and set_targets one at a time, 0.5-3 ms apart",
+        "latency": "1 kHz stream, ping and set_targets one at a time, back to back",
     }
     for d in loads:
         fm, fw = d["tick_mean_us"] * 16, d["tick_worst_us"] * 16

@@ -149,7 +149,7 @@ static int status_of(const avr_t *avr)
 
 static void set_run_limit(utrf_sim_t *s)
 {
-    int per_instruction = s->prof_addr >= 0 || s->jump_at >= 0;
+    int per_instruction = s->prof_functions > 0 || s->jump_at >= 0;
     s->avr->run_cycle_limit = per_instruction ? 1 : RUN_CYCLE_LIMIT;
     if (per_instruction)
         s->avr->run_cycle_count = 1;
@@ -171,13 +171,13 @@ int utrf_sim_run_to(utrf_sim_t *s, uint64_t target)
         s->stop = 0;
         s->in_run = 1;
         avr_cycle_timer_register(avr, target - avr->cycle, stop_timer, s);
-        if (s->prof_addr >= 0 || s->jump_at >= 0) { /* per-instruction work: the slow loop */
+        if (s->prof_functions > 0 || s->jump_at >= 0) { /* per-instruction work: the slow loop */
             while (!s->stop) {
                 int st = avr_run(avr);
                 if (st == cpu_Crashed || st == cpu_Done || st == cpu_Stopped)
                     break;
-                if (s->prof_addr >= 0)
-                    profile_step_function(s);
+                if (s->prof_functions > 0)
+                    profile_step_functions(s);
                 if (s->jump_at >= 0 && avr->pc == (uint32_t)s->jump_at) {
                     s->jump_at = -1;
                     utrf_sim_jump(s, s->jump_to, s->jump_interrupts);

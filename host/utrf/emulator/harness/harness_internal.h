@@ -98,6 +98,7 @@ typedef struct {
     uint16_t sp0;  /* function profile: SP at entry */
     int waiting;   /* vector profile: its flag is raised, its handler not yet entered */
     uint64_t raised_at;
+    uint64_t required_at_entry; /* vector profile: the required slot's calls at its entry */
 } profile_state_t;
 
 struct utrf_sim {
@@ -125,6 +126,9 @@ struct utrf_sim {
     uint8_t *capture;
     uint32_t cap_head, cap_tail;
     int capture_on;
+    uint64_t frame_start[UTRF_SIM_FRAME_LOG], frame_end[UTRF_SIM_FRAME_LOG]; /* captured frames */
+    uint32_t frames_head, frames_tail;
+    uint64_t tx_frame_start; /* the captured frame under way: its first byte's start (0: none) */
     int wake_byte; /* utrf_sim_run_plant_until: the byte it waits for (-1: none) */
     int woke;      /* it was captured */
     line_faults_t faults[2];
@@ -146,10 +150,12 @@ struct utrf_sim {
     int pending_cause; /* -1: none (watchdog or simavr-internal) */
     int64_t eempe_cycle;
 
-    profile_state_t prof_vec, prof_fn;
+    profile_state_t prof_vec, prof_fn[UTRF_SIM_FUNCTION_PROFILES];
     int prof_vector;    /* vector profiled, 0: none */
-    int64_t prof_addr;  /* function profiled (byte address), -1: none */
-    int prof_fn_vector; /* the innermost vector when the function was entered (0: none) */
+    int prof_requires;  /* the function slot the vector's calls must run (-1: none) */
+    int64_t prof_addr[UTRF_SIM_FUNCTION_PROFILES]; /* functions profiled (byte address), -1: none */
+    int prof_functions; /* how many slots profile a function */
+    int prof_fn_vector[UTRF_SIM_FUNCTION_PROFILES]; /* innermost vector at entry (0: none) */
     int running_vector; /* the innermost vector running now (0: none) */
 
     /* a jump waiting for the PC to reach jump_at (byte address; -1: none) */
@@ -227,7 +233,7 @@ void timers_quiet(utrf_sim_t *s);
 /* profile.c */
 void profile_init(utrf_sim_t *s);
 void profile_after_reset(utrf_sim_t *s);
-void profile_step_function(utrf_sim_t *s);
+void profile_step_functions(utrf_sim_t *s);
 
 /* harness.c */
 void harness_log(utrf_sim_t *s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
