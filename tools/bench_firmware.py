@@ -170,8 +170,8 @@ def round_trips(loads: list[dict]) -> list[str]:
     return [
         "",
         "Round trips on the simulated board (the latency row; issue 11 goal 3: 99th percentile "
-        "at most 800 µs): from a request's first byte on the line to its reply's last byte, "
-        "1 kHz state stream on.",
+        "at most 800 µs): from a request's first byte on the line to its reply's last stop bit, "
+        "one request at a time, each as soon as the last reply is in, 1 kHz state stream on.",
         "",
         "| request | n | line's own time | median | 99th percentile | worst |",
         "|---|---|---|---|---|---|",
@@ -185,7 +185,7 @@ def round_trips(loads: list[dict]) -> list[str]:
         f"on the line {d['seg_in_median_us']:.0f} / {d['seg_in_p99_us']:.0f} µs; from its last "
         f"byte to dispatch's entry (loop() noticing it: the tick, the pass under way) "
         f"{d['seg_notice_median_us']:.0f} / {d['seg_notice_p99_us']:.0f} µs; from dispatch to "
-        f"the reply's first byte out (dispatch, a frame ahead on the line) "
+        f"the reply's first byte on the line (dispatch, a frame ahead on the line) "
         f"{d['seg_reply_median_us']:.0f} / {d['seg_reply_p99_us']:.0f} µs; the reply on the "
         f"line {d['seg_out_median_us']:.0f} / {d['seg_out_p99_us']:.0f} µs.",
         "",
@@ -237,17 +237,20 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         "",
         "### Control tick (five fingers in POSITION, 1 kHz = 16,000 cycles)",
         "",
-        f"simavr runs the ELF {seconds:g} s per row (after 0.3 s of start-up and a reset_stats),"
+        f"The emulator's harness (`tools/tick_bench.py` over `libutrf_sim.so`: simavr with the "
+        "emulated board's UART line, ADC and timers) runs the ELF "
+        f"{seconds:g} s per row (after 0.3 s of start-up and a reset_stats),"
         " the encoders sweeping ±0.4 rad at 1.3 Hz, the state stream at 500 Hz (1 kHz in the "
-        "moves row, 10 s). *firmware*: "
+        "moves row, 10 s, and the latency row, 5 s). *firmware*: "
         "its own figures (get_stats; timer 2 and timer 1, around app::tick() in the timer "
         "interrupt, nested UART/ADC interrupts included). *simavr*: cycles from app::tick()'s "
-        "entry to its return, counted by the simulator; *own* is that less the interrupts "
-        "served while it ran (*nested*: the UART's receive interrupt, one a byte; the "
-        "transmitter's too; timer 0's waits for the tick's end), each counted from the step that "
-        "accepts it to its reti. *whole interrupt*: the timer interrupt that runs the tick, "
-        "from its vector to its reti (register saves, the tick's timing and bookkeeping "
-        "included). Target: at most 15 % (2,400 cycles). The tick is plain C++ (no assembly).",
+        "entry to its return (the harness's function profile); *own* is that less the "
+        "interrupts served while it ran (*nested*: the UART's receive interrupt, one a byte; "
+        "the transmitter's too; timer 0's waits for the tick's end), each counted from the "
+        "cycle it is entered to the end of its reti. *whole interrupt*: the timer interrupt's "
+        "calls that ran a tick, from its vector to the end of its reti (register saves, the "
+        "tick's timing and bookkeeping included). Target: at most 15 % (2,400 cycles). The "
+        "tick is plain C++ (no assembly).",
         "",
         "| host traffic | ticks | overruns | firmware mean | firmware worst | simavr mean | "
         "simavr worst | own mean / worst | nested mean / worst | whole interrupt mean / worst |",
