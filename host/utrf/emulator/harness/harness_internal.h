@@ -94,11 +94,11 @@ typedef struct {
     utrf_sim_profile_t p;
     int active;    /* inside a call */
     int paused;    /* a nested interrupt runs */
+    int depth;     /* the interrupt nesting depth the call runs at (0: the main program) */
     uint64_t entry, seg, excl;
     uint16_t sp0;  /* function profile: SP at entry */
     int waiting;   /* vector profile: its flag is raised, its handler not yet entered */
     uint64_t raised_at;
-    uint64_t required_at_entry; /* vector profile: the required slot's calls at its entry */
 } profile_state_t;
 
 struct utrf_sim {
@@ -155,8 +155,7 @@ struct utrf_sim {
     int prof_requires;  /* the function slot the vector's calls must run (-1: none) */
     int64_t prof_addr[UTRF_SIM_FUNCTION_PROFILES]; /* functions profiled (byte address), -1: none */
     int prof_functions; /* how many slots profile a function */
-    int prof_fn_vector[UTRF_SIM_FUNCTION_PROFILES]; /* innermost vector at entry (0: none) */
-    int running_vector; /* the innermost vector running now (0: none) */
+    int depth;          /* interrupts running, nested (0: the main program) */
 
     /* a jump waiting for the PC to reach jump_at (byte address; -1: none) */
     int64_t jump_at;

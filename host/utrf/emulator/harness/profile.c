@@ -31,8 +31,9 @@ static void record(profile_state_t *p, uint64_t now)
     p->active = 0;
 }
 
-static void enter(profile_state_t *p, uint64_t now)
+static void enter(profile_state_t *p, uint64_t now, int depth)
 {
+    p->depth = depth;
     if (p->p.last_entry) {
         uint64_t interval = now - p->p.last_entry;
         p->p.period_sum += interval;
@@ -49,18 +50,26 @@ static void enter(profile_state_t *p, uint64_t now)
     p->excl = 0;
 }
 
+/* An interrupt signal is an entry when the PC stands at its vector (simavr raises it as it
+ * jumps there; a RETI raises the vector that is innermost after it, or 0). */
+static int is_entry(const avr_t *avr, int vector)
+{
+    return vector > 0 && avr->pc == (uint32_t)vector * avr->vector_size;
+}
+
 /* The cycle an interrupt signal stands for. simavr signals an interrupt's return from inside
- * its RETI, before it adds that instruction's cycles (1 + the PC's bytes): they are the
- * interrupt's, so its end is counted after them. (Its entry is signalled after the
+ * its RETI, before it adds that instruction's cycles (2 + the PC's bytes: 5 on the
+ * ATmega2560, as the datasheet gives): they are the interrupt's, so its end is counted after
+ * them. (Its entry is signalled after the
  * instruction it interrupted, with the PC at the vector; simavr charges no cycles for the
  * entry itself.) */
 static uint64_t signal_cycle(const avr_t *avr, int vector)
 {
     uint32_t pc = avr->pc;
-    if (vector > 0 && pc == (uint32_t)vector * avr->vector_size)
-        return avr->cycle; /* an entry */
+    if (is_entry(avr, vector))
+        return avr->cycle;
     if (pc + 1 <= avr->flashend && (avr->flash[pc] | (avr->flash[pc + 1] << 8)) == 0x9518)
-        return avr->cycle + 1 + avr->address_size;
+        return avr->cycle + 2 + avr->address_size;
     return avr->cycle;
 }
 
@@ -74,11 +83,6 @@ static void on_vector_pending(struct avr_irq_t *irq, uint32_t value, void *param
         p->waiting = 1;
         p->raised_at = s->avr->cycle;
     }
-}
-
-static uint64_t required_calls(const utrf_sim_t *s)
-{
-    return s->prof_requires >= 0 ? s->prof_fn[s->prof_requires].p.count : 0;
 }
 
 static void on_vector_running(struct avr_irq_t *irq, uint32_t value, void *param)
@@ -95,25 +99,26 @@ static void on_vector_running(struct avr_irq_t *irq, uint32_t value, void *param
                 p->p.latency_worst = latency;
             p->waiting = 0;
         }
-        enter(p, now);
-        p->required_at_entry = required_calls(s);
+        enter(p, now, s->avr->interrupts.running_ptr + 1); /* simavr pushes it after this */
     } else if (p->active) {
         if (!p->paused)
             p->excl += now - p->seg;
-        if (s->prof_requires >= 0 && required_calls(s) == p->required_at_entry)
-            p->active = 0; /* it did not run the required function: not counted */
+        if (s->prof_requires >= 0 && s->prof_fn[s->prof_requires].p.last_entry < p->entry)
+            p->active = 0; /* it did not enter the required function: not counted */
         else
             record(p, now);
     }
 }
 
-/* Exclusive time: a profiled span pauses while another vector is innermost (an interrupt
- * nested in it) and resumes when its own is innermost again. */
-static void follow_innermost(profile_state_t *p, int mine, uint64_t now)
+/* Exclusive time: a profiled call pauses while an interrupt nests in it (the nesting depth
+ * is above the call's) and resumes when the depth is its own again. (Below it: the call's
+ * own RETI, which ends it.) */
+static void follow_depth(profile_state_t *p, int depth, uint64_t now)
 {
     if (!p->active)
         return;
-    if (!mine && !p->paused) {
+    int mine = depth == p->depth;
+    if (depth > p->depth && !p->paused) {
         p->excl += now - p->seg;
         p->paused = 1;
         p->p.nested++;
@@ -123,17 +128,19 @@ static void follow_innermost(profile_state_t *p, int mine, uint64_t now)
     }
 }
 
-/* The innermost running vector changed (0: none). */
+/* The innermost running vector changed (0: none): an interrupt entered or returned. simavr
+ * signals an entry before it pushes the vector on its stack of running ones, a return after
+ * it pops it. */
 static void on_any_running(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     (void)irq;
     utrf_sim_t *s = param;
     uint64_t now = signal_cycle(s->avr, (int)value);
-    follow_innermost(&s->prof_vec, (int)value == s->prof_vector, now);
-    /* A function entered under prof_fn_vector (0: from the main loop). */
+    int depth = s->avr->interrupts.running_ptr + (is_entry(s->avr, (int)value) ? 1 : 0);
+    follow_depth(&s->prof_vec, depth, now);
     for (int k = 0; k < UTRF_SIM_FUNCTION_PROFILES; k++)
-        follow_innermost(&s->prof_fn[k], (int)value == s->prof_fn_vector[k], now);
-    s->running_vector = (int)value;
+        follow_depth(&s->prof_fn[k], depth, now);
+    s->depth = depth;
 }
 
 static uint16_t stack_pointer(const avr_t *avr)
@@ -149,9 +156,8 @@ void profile_step_functions(utrf_sim_t *s)
         profile_state_t *p = &s->prof_fn[k];
         if (!p->active) {
             if (avr->pc == (uint32_t)s->prof_addr[k]) {
-                enter(p, avr->cycle);
+                enter(p, avr->cycle, s->depth);
                 p->sp0 = stack_pointer(avr);
-                s->prof_fn_vector[k] = s->running_vector;
             }
         } else if (stack_pointer(avr) > p->sp0) {
             if (!p->paused)
@@ -177,7 +183,7 @@ void profile_after_reset(utrf_sim_t *s)
     s->prof_vec.waiting = 0;
     for (int k = 0; k < UTRF_SIM_FUNCTION_PROFILES; k++)
         s->prof_fn[k].active = 0;
-    s->running_vector = 0;
+    s->depth = 0;
 }
 
 int utrf_sim_profile_vector(utrf_sim_t *s, int vector)
@@ -249,6 +255,4 @@ void utrf_sim_profile_clear(utrf_sim_t *s)
     clear_figures(&s->prof_vec);
     for (int k = 0; k < UTRF_SIM_FUNCTION_PROFILES; k++)
         clear_figures(&s->prof_fn[k]);
-    /* the vector's call under way compares the required slot's calls with its entry's */
-    s->prof_vec.required_at_entry = 0;
 }

@@ -200,8 +200,8 @@ int utrf_sim_profile_function(utrf_sim_t *s, int64_t addr);
 int utrf_sim_profile_function_slot(utrf_sim_t *s, int slot, int64_t addr);
 /* which: 0 the vector, 1 + k function slot k. */
 void utrf_sim_profile_get(const utrf_sim_t *s, int which, utrf_sim_profile_t *out);
-/* The vector's calls count only when function slot `slot` completed a call within them (a
- * timer interrupt that ran the tick, not one that deferred it); -1: every call. */
+/* The vector's calls count only when function slot `slot` was entered within them (a timer
+ * interrupt that ran the tick, not one that deferred it); -1: every call. */
 int utrf_sim_profile_vector_requires(utrf_sim_t *s, int slot);
 /* Every profile's figures back to zero; calls under way, and the last entry that the next
  * interval is measured from, are kept (a measurement window opened mid-run). */
