@@ -29,14 +29,22 @@ phase of the tick, the worst (a frame arriving while the tick runs) included.
             every STBY pin is low, from the stop and from the last tick's entry
 Frames are built and parsed by the host's protocol package (utrf.protocol), generated from the
 same definition as the firmware's.
+
+Where the cycles go: with UTRF_PC_PROFILE=<file>, a row also writes the cycles per instruction
+address over its measured seconds ("<hex byte address> <cycles>" lines), of app::tick()'s own
+work, or with UTRF_PC_PROFILE_OF=loop|dispatch|all of loop()'s or dispatch::handle()'s own
+work (interrupts nested in them left out) or of every instruction (sleep included). Map the
+addresses with avr-objdump -d -C.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import subprocess
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 
 from utrf.emulator._native import NativeBoard
@@ -192,6 +200,10 @@ class Bench:
         self.send(m.ResetStats())
         self.run_until(0.31)
         b.profile_clear()
+        histogram = os.environ.get("UTRF_PC_PROFILE")
+        hist_of = os.environ.get("UTRF_PC_PROFILE_OF", "tick")
+        if histogram:
+            b.pc_histogram({"tick": TICK, "loop": LOOP, "dispatch": DISPATCH}.get(hist_of, -1))
         sleep0, cycles0 = b.stats()["sleep_cycles"], b.cycle
         frames0, gaps0 = self.state_frames, self.state_gaps
         t0 = b.cycle / CPU_HZ
@@ -250,6 +262,9 @@ class Bench:
                         next_send += 0.05 + 40e-6  # 0.8 ms a second
                 # Up to the next frame's time exactly: it starts then, at its own phase.
                 self.run_until(min(next_send, t + 0.0005))
+        if histogram:
+            write_histogram(Path(histogram), b.pc_histogram_get(), f"{hist_of}, {scenario} row")
+            b.pc_histogram(None)
         slept = b.stats()["sleep_cycles"] - sleep0
         result = self.figures(scenario, seconds, b.cycle - cycles0, slept)
         result["state_frames"] = self.state_frames - frames0
@@ -379,6 +394,12 @@ class Bench:
                     "from_last_tick_ms": round((b.cycle - last_tick) / CPU_HZ * 1e3, 4),
                 }
         sys.exit("tick_bench: the motors stayed on 50 ms after the tick stopped")
+
+
+def write_histogram(path: Path, cycles: Iterable[int], what: str) -> None:
+    lines = [f"# byte address, cycles ({what})"]
+    lines += [f"{2 * word:x} {int(c)}" for word, c in enumerate(cycles) if c]
+    path.write_text("\n".join(lines) + "\n")
 
 
 def modes(mode: m.ControlMode, duty: float) -> m.SetMode:

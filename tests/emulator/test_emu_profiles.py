@@ -10,6 +10,7 @@ import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from utrf.emulator._native import NativeBoard
@@ -145,3 +146,24 @@ def test_the_frame_log_gives_each_frame_its_wire_times(firmware_elf: Path) -> No
         assert b.uart_frames() == []
     finally:
         b.close()
+
+
+def test_the_pc_histogram_counts_every_cycle_or_a_functions_own(native: NativeBoard) -> None:
+    handler = native.symbol("__vector_13")
+    assert handler is not None
+    native.pc_histogram(-1)  # every instruction: each cycle of the run, at some address
+    start = native.cycle
+    native.run_to(start + 20 * MS)
+    every = native.pc_histogram_get()
+    assert int(every.sum()) == native.cycle - start
+    native.profile_function_slot(0, handler)
+    native.pc_histogram(0)  # the handler's own work only: its calls' cycles, where they went
+    native.run_to(native.cycle + 20 * MS)
+    own, calls = native.pc_histogram_get(), native.profile(1)
+    assert calls["count"] >= 19
+    # every completed call's cycles, and those of a call under way at the end
+    assert calls["total"] <= int(own.sum()) < calls["total"] + calls["worst"]
+    words = np.flatnonzero(own)
+    assert words.min() * 2 >= handler  # all in the handler (and the delay loop inlined in it)
+    native.pc_histogram(None)
+    assert native.pc_histogram_get().size == 0

@@ -313,6 +313,22 @@ class NativeBoard:
     def profile_clear(self) -> None:
         self._lib.utrf_sim_profile_clear(self.handle)
 
+    def pc_histogram(self, slot: int | None) -> None:
+        """Count cycles per program address from now on: every instruction's (slot -1), or
+        function slot ``slot``'s own work; None stops."""
+        if self._lib.utrf_sim_pc_histogram(self.handle, -2 if slot is None else slot):
+            raise HarnessError(f"no function profile slot {slot}")
+
+    def pc_histogram_get(self) -> np.ndarray:
+        """Cycles per program word (index = byte address / 2); empty when off."""
+        n = self._lib.utrf_sim_pc_histogram_get(self.handle, None, 0)
+        out = np.zeros(n, dtype=np.uint64)
+        if n:
+            self._lib.utrf_sim_pc_histogram_get(
+                self.handle, out.ctypes.data_as(ctypes.POINTER(ctypes.c_uint64)), n
+            )
+        return out
+
     def uart_frames(self) -> list[tuple[int, int]]:
         """The captured frames' wire times since the last call: (first byte's start, 0x00's
         stop bit end), in cycles."""

@@ -288,6 +288,8 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_profile_get": (None, [p, ctypes.c_int, ctypes.POINTER(ProfileC)]),
         "utrf_sim_profile_vector_requires": (ctypes.c_int, [p, ctypes.c_int]),
         "utrf_sim_profile_clear": (None, [p]),
+        "utrf_sim_pc_histogram": (ctypes.c_int, [p, ctypes.c_int]),
+        "utrf_sim_pc_histogram_get": (ctypes.c_size_t, [p, u64p, ctypes.c_size_t]),
         "utrf_sim_uart_frames": (ctypes.c_size_t, [p, u64p, u64p, ctypes.c_size_t]),
         "utrf_sim_pin_registers": (None, [p, ctypes.POINTER(FingerRegsC)]),
         "utrf_sim_log": (ctypes.c_size_t, [p, ctypes.c_char_p, ctypes.c_size_t]),

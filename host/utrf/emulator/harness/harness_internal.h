@@ -156,6 +156,9 @@ struct utrf_sim {
     int64_t prof_addr[UTRF_SIM_FUNCTION_PROFILES]; /* functions profiled (byte address), -1: none */
     int prof_functions; /* how many slots profile a function */
     int depth;          /* interrupts running, nested (0: the main program) */
+    uint64_t *pc_hist;  /* utrf_sim_pc_histogram: cycles per program word (NULL: off) */
+    size_t pc_hist_words;
+    int pc_hist_slot;   /* whose cycles: a function slot, or -1 every instruction's */
 
     /* a jump waiting for the PC to reach jump_at (byte address; -1: none) */
     int64_t jump_at;
@@ -233,6 +236,9 @@ void timers_quiet(utrf_sim_t *s);
 void profile_init(utrf_sim_t *s);
 void profile_after_reset(utrf_sim_t *s);
 void profile_step_functions(utrf_sim_t *s);
+void profile_step_histogram(utrf_sim_t *s, uint32_t pc0, uint64_t c0, int own0);
+int profile_in_own_work(const utrf_sim_t *s);
+void profile_close(utrf_sim_t *s);
 
 /* harness.c */
 void harness_log(utrf_sim_t *s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));

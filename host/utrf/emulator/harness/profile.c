@@ -10,6 +10,7 @@
  * Entry to entry, the longest interval and where it began are kept too (a function called in
  * a loop: its longest pass).
  */
+#include <stdlib.h>
 #include <string.h>
 
 #include "harness_internal.h"
@@ -255,4 +256,61 @@ void utrf_sim_profile_clear(utrf_sim_t *s)
     clear_figures(&s->prof_vec);
     for (int k = 0; k < UTRF_SIM_FUNCTION_PROFILES; k++)
         clear_figures(&s->prof_fn[k]);
+}
+
+/* ---- where the cycles go (utrf_sim_pc_histogram) ------------------------------------------ */
+
+/* Whether the instruction about to run is the histogram's: every one, or the slot's own work
+ * (its call under way and no interrupt nested in it). */
+int profile_in_own_work(const utrf_sim_t *s)
+{
+    if (s->pc_hist_slot < 0)
+        return 1;
+    const profile_state_t *p = &s->prof_fn[s->pc_hist_slot];
+    return p->active && !p->paused;
+}
+
+/* After each instruction: its cycles at its address (an interrupt accepted after it adds none:
+ * simavr charges no cycles for the entry). */
+void profile_step_histogram(utrf_sim_t *s, uint32_t pc0, uint64_t c0, int own0)
+{
+    if (own0 && pc0 / 2 < s->pc_hist_words)
+        s->pc_hist[pc0 / 2] += s->avr->cycle - c0;
+}
+
+int utrf_sim_pc_histogram(utrf_sim_t *s, int slot)
+{
+    if (slot >= UTRF_SIM_FUNCTION_PROFILES)
+        return -1;
+    if (slot < -1) {
+        profile_close(s);
+        return 0;
+    }
+    size_t words = (s->avr->flashend + 1) / 2;
+    if (!s->pc_hist) {
+        s->pc_hist = calloc(words, sizeof *s->pc_hist);
+        if (!s->pc_hist)
+            return -1;
+        s->pc_hist_words = words;
+    } else {
+        memset(s->pc_hist, 0, words * sizeof *s->pc_hist);
+    }
+    s->pc_hist_slot = slot;
+    return 0;
+}
+
+size_t utrf_sim_pc_histogram_get(const utrf_sim_t *s, uint64_t *out, size_t n)
+{
+    if (!s->pc_hist)
+        return 0;
+    if (out && n)
+        memcpy(out, s->pc_hist, (n < s->pc_hist_words ? n : s->pc_hist_words) * sizeof *out);
+    return s->pc_hist_words;
+}
+
+void profile_close(utrf_sim_t *s)
+{
+    free(s->pc_hist);
+    s->pc_hist = NULL;
+    s->pc_hist_words = 0;
 }

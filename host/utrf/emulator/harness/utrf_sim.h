@@ -203,6 +203,14 @@ void utrf_sim_profile_get(const utrf_sim_t *s, int which, utrf_sim_profile_t *ou
 /* The vector's calls count only when function slot `slot` was entered within them (a timer
  * interrupt that ran the tick, not one that deferred it); -1: every call. */
 int utrf_sim_profile_vector_requires(utrf_sim_t *s, int slot);
+/* Where the cycles go: per program address (byte address / 2), the cycles of the
+ * instructions executed there, counted from now on, of every instruction (slot -1) or only of
+ * function slot `slot`'s own work (its calls, less the interrupts nested in them). A sleeping
+ * CPU's skipped cycles count at the instruction after its SLEEP. slot < -1 stops and frees it.
+ * utrf_sim_pc_histogram_get copies up to n counts (address 0 first) and returns how many
+ * there are (0: off). */
+int utrf_sim_pc_histogram(utrf_sim_t *s, int slot);
+size_t utrf_sim_pc_histogram_get(const utrf_sim_t *s, uint64_t *out, size_t n);
 /* Every profile's figures back to zero; calls under way, and the last entry that the next
  * interval is measured from, are kept (a measurement window opened mid-run). */
 void utrf_sim_profile_clear(utrf_sim_t *s);
