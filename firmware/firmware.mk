@@ -141,14 +141,12 @@ $(FW_BUILD)/host/obj/%.o: %.cpp firmware/firmware.mk
 $(FW_HOST_LIB): $(FW_HOST_OBJS)
 	$(HOST_CXX) -shared $(FW_HOST_UBSAN) -o $@ $^ -lm
 
-# ---- checks that need the AVR: the core's arithmetic on the chip, the simavr harness ----------
+# ---- checks that need the AVR: the core's arithmetic on the chip -----------------------------
 FW_CHECK_ELF := $(FW_BUILD)/check/core_check.elf
 FW_CHECK_SRCS := firmware/test/avr/core_check.cpp $(FW_SRC)/core/fixed.cpp \
                  $(FW_SRC)/core/pid.cpp $(FW_SRC)/core/encoder.cpp
-FW_BENCH := $(FW_BUILD)/bench/tick_bench
-SIMAVR_INC ?= /usr/include/simavr
 
-firmware-check: $(FW_CHECK_ELF) $(FW_BENCH)
+firmware-check: $(FW_CHECK_ELF)
 
 # One compile of several sources: -MMD keeps only the last one's dependencies, so the headers
 # (the check's sequence among them) are listed here.
@@ -158,19 +156,16 @@ $(FW_CHECK_ELF): $(FW_CHECK_SRCS) firmware/test/core_check_seq.h $(wildcard $(FW
 	$(AVR_CXX) $(FW_MCU) $(FW_OPT) $(FW_CXXSTD) $(FW_WARN) -I$(FW_SRC) -Ifirmware/test -MMD -MP \
 	  -Wl,--gc-sections -o $@ $(FW_CHECK_SRCS) -lm
 
-$(FW_BENCH): firmware/bench/tick_bench.cpp $(FW_SRC)/core/framing.cpp
-	@mkdir -p $(@D)
-	$(HOST_CXX) -std=gnu++11 -O2 $(FW_WARN) -I$(FW_SRC) -I$(SIMAVR_INC) -MMD -MP -o $@ \
-	  firmware/bench/tick_bench.cpp $(FW_SRC)/core/framing.cpp -lsimavr -lelf -lm
-
--include $(FW_OWN_OBJS:.o=.d) $(FW_HOST_OBJS:.o=.d) $(FW_CHECK_ELF:.elf=.d) $(FW_BENCH).d
+-include $(FW_OWN_OBJS:.o=.d) $(FW_HOST_OBJS:.o=.d) $(FW_CHECK_ELF:.elf=.d)
 
 .PHONY: firmware-check
 TEST_DEPS     += firmware firmware-host firmware-check
 DEMO_DEPS     += firmware
 BENCH_TARGETS += bench-firmware
 
-bench-firmware: firmware firmware-host firmware-check
+# The tick under traffic runs on the emulator's harness (tools/tick_bench.py over
+# libutrf_sim.so; harness.mk's `emulator` builds it).
+bench-firmware: firmware firmware-host firmware-check emulator
 	$(PY) -m tools.bench_firmware --update docs/benchmarks.md
 
 # ---- the PlatformIO build, reproduced with Debian's toolchain (make firmware-pio) -------------

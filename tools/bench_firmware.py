@@ -2,15 +2,15 @@
 
     python -m tools.bench_firmware [--update docs/benchmarks.md] [--seconds 2]
 
-Run by `make bench-firmware`, which builds the ELF, the host library and the simavr harness
-first. Every figure is measured here:
+Run by `make bench-firmware`, which builds the ELF, the host library and the emulator's
+harness (build/emulator/libutrf_sim.so) first. Every figure is measured here:
 
 - flash and static RAM from `avr-size` on build/firmware/utrf.elf; the kinematics table's
   bytes and worst error from its generator;
-- the control tick on simavr (build/firmware/bench/tick_bench): the firmware's own
-  measurement (get_stats: tick_mean over 1024 ticks, tick_worst) and the simulator's cycle
-  count of app::tick(), with five fingers in closed loop and the 500 Hz state stream, under
-  three loads of host traffic;
+- the control tick on the emulated board (tools.tick_bench, on the harness's simavr): the
+  firmware's own measurement (get_stats: tick_mean over 1024 ticks, tick_worst) and the
+  harness's cycle profiles of app::tick(), with five fingers in closed loop and the state
+  stream on, under six kinds of host traffic;
 - the step response of the default gains on the reference finger plant (tests/firmware/
   fwsim.py), through the host build of the firmware core.
 """
@@ -19,17 +19,15 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
-import os
 import subprocess
 import sys
 from pathlib import Path
 
+from tools import tick_bench
 from tools.doc_sections import cpu_name, write_section
 
 REPO = Path(__file__).resolve().parents[1]
 ELF = REPO / "build" / "firmware" / "utrf.elf"
-BENCH = REPO / "build" / "firmware" / "bench" / "tick_bench"
 TABLE = REPO / "firmware" / "src" / "generated" / "kinematics_table.h"
 BEGIN = "<!-- BEGIN firmware (make bench-firmware) -->"
 END = "<!-- END firmware -->"
@@ -63,40 +61,8 @@ def table() -> list[str]:
     return [ln for ln in out.splitlines() if ln.startswith(("geometry", "total"))]
 
 
-def tick_addresses() -> tuple[str, str]:
-    nm = run(["avr-nm", "-C", str(ELF)])
-    entry = next(ln.split()[0] for ln in nm.splitlines() if ln.endswith(" utrf::app::tick()"))
-    dis = run(["avr-objdump", "-d", "-C", str(ELF)]).splitlines()
-    call = next(i for i, ln in enumerate(dis) if "call" in ln and "<utrf::app::tick()>" in ln)
-    return entry, dis[call + 1].split(":")[0].strip()
-
-
-def loop_address() -> str:
-    nm = run(["avr-nm", "-C", str(ELF)])
-    return next(ln.split()[0] for ln in nm.splitlines() if ln.endswith(" utrf::app::loop()"))
-
-
-def dispatch_address() -> str:
-    nm = run(["avr-nm", "-C", str(ELF)])
-    return next(ln.split()[0] for ln in nm.splitlines() if " utrf::dispatch::handle(" in ln)
-
-
 def tick_load(scenario: str, seconds: float) -> dict:
-    entry, ret = tick_addresses()
-    env = {
-        **os.environ,
-        "UTRF_LOOP_ENTRY": loop_address(),
-        "UTRF_DISPATCH_ENTRY": dispatch_address(),
-    }
-    out = subprocess.run(
-        [str(BENCH), str(ELF), scenario, str(seconds), entry, ret],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        check=True,
-        env=env,
-    ).stdout
-    return json.loads(out.strip().splitlines()[-1])
+    return tick_bench.run(ELF, scenario, seconds)
 
 
 def step_figures() -> list[tuple[float, dict[str, float]]]:
@@ -204,8 +170,8 @@ def round_trips(loads: list[dict]) -> list[str]:
     return [
         "",
         "Round trips on the simulated board (the latency row; issue 11 goal 3: 99th percentile "
-        "at most 800 µs): from a request's first byte on the line to its reply's last byte, "
-        "1 kHz state stream on.",
+        "at most 800 µs): from a request's first byte on the line to its reply's last stop bit, "
+        "one request at a time, each as soon as the last reply is in, 1 kHz state stream on.",
         "",
         "| request | n | line's own time | median | 99th percentile | worst |",
         "|---|---|---|---|---|---|",
@@ -219,7 +185,7 @@ def round_trips(loads: list[dict]) -> list[str]:
         f"on the line {d['seg_in_median_us']:.0f} / {d['seg_in_p99_us']:.0f} µs; from its last "
         f"byte to dispatch's entry (loop() noticing it: the tick, the pass under way) "
         f"{d['seg_notice_median_us']:.0f} / {d['seg_notice_p99_us']:.0f} µs; from dispatch to "
-        f"the reply's first byte out (dispatch, a frame ahead on the line) "
+        f"the reply's first byte on the line (dispatch, a frame ahead on the line) "
         f"{d['seg_reply_median_us']:.0f} / {d['seg_reply_p99_us']:.0f} µs; the reply on the "
         f"line {d['seg_out_median_us']:.0f} / {d['seg_out_p99_us']:.0f} µs.",
         "",
@@ -271,17 +237,20 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         "",
         "### Control tick (five fingers in POSITION, 1 kHz = 16,000 cycles)",
         "",
-        f"simavr runs the ELF {seconds:g} s per row (after 0.3 s of start-up and a reset_stats),"
+        f"The emulator's harness (`tools/tick_bench.py` over `libutrf_sim.so`: simavr with the "
+        "emulated board's UART line, ADC and timers) runs the ELF "
+        f"{seconds:g} s per row (after 0.3 s of start-up and a reset_stats),"
         " the encoders sweeping ±0.4 rad at 1.3 Hz, the state stream at 500 Hz (1 kHz in the "
-        "moves row, 10 s). *firmware*: "
+        "moves row, 10 s, and the latency row, 5 s). *firmware*: "
         "its own figures (get_stats; timer 2 and timer 1, around app::tick() in the timer "
         "interrupt, nested UART/ADC interrupts included). *simavr*: cycles from app::tick()'s "
-        "entry to its return, counted by the simulator; *own* is that less the interrupts "
-        "served while it ran (*nested*: the UART's receive interrupt, one a byte; the "
-        "transmitter's too; timer 0's waits for the tick's end), each counted from the step that "
-        "accepts it to its reti. *whole interrupt*: the timer interrupt that runs the tick, "
-        "from its vector to its reti (register saves, the tick's timing and bookkeeping "
-        "included). Target: at most 15 % (2,400 cycles). The tick is plain C++ (no assembly).",
+        "entry to its return (the harness's function profile); *own* is that less the "
+        "interrupts served while it ran (*nested*: the UART's receive interrupt, one a byte; "
+        "the transmitter's too; timer 0's waits for the tick's end), each counted from the "
+        "cycle it is entered to the end of its reti. *whole interrupt*: the timer interrupt's "
+        "calls that ran a tick, from its vector to the end of its reti (register saves, the "
+        "tick's timing and bookkeeping included). Target: at most 15 % (2,400 cycles). The "
+        "tick is plain C++ (no assembly).",
         "",
         "| host traffic | ticks | overruns | firmware mean | firmware worst | simavr mean | "
         "simavr worst | own mean / worst | nested mean / worst | whole interrupt mean / worst |",
@@ -293,7 +262,7 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         "stress": "set_targets back to back (line saturated)",
         "silent": "none: the host falls silent, HOLD at the heartbeat timeout",
         "moves": "1 kHz stream, a five-finger move every 0.4 s, heartbeats",
-        "latency": "1 kHz stream, ping and set_targets one at a time, 0.5-3 ms apart",
+        "latency": "1 kHz stream, ping and set_targets one at a time, back to back",
     }
     for d in loads:
         fm, fw = d["tick_mean_us"] * 16, d["tick_worst_us"] * 16

@@ -5,13 +5,12 @@
   int) as in the host build the other tests use;
 - the pins and timers follow board_pins.h through every mode (the emulator's contract);
 - the tick runs on time under protocol traffic, and the firmware's own timing agrees with the
-  simulator's cycle count.
+  simulator's cycle count (tools.tick_bench, on the emulator's harness).
 """
 
 from __future__ import annotations
 
 import ctypes
-import json
 import re
 import subprocess
 from pathlib import Path
@@ -19,9 +18,10 @@ from pathlib import Path
 import pytest
 from fwsim import REPO
 
+from tools import tick_bench
+
 ELF = REPO / "build" / "firmware" / "utrf.elf"
 CHECK_ELF = REPO / "build" / "firmware" / "check" / "core_check.elf"
-BENCH = REPO / "build" / "firmware" / "bench" / "tick_bench"
 FLASH_TARGET = 64 * 1024  # firmware.mk FW_TARGET_FLASH
 RAM_TARGET = 3 * 1024
 
@@ -29,7 +29,7 @@ RAM_TARGET = 3 * 1024
 @pytest.fixture(scope="module")
 def built() -> None:
     subprocess.run(
-        ["make", "--no-print-directory", "-s", "firmware", "firmware-check"],
+        ["make", "--no-print-directory", "-s", "firmware", "firmware-check", "emulator"],
         cwd=REPO,
         check=True,
         capture_output=True,
@@ -94,32 +94,9 @@ def test_product_slices_from_byte_products_are_exact(fwlib: ctypes.CDLL) -> None
     assert fwlib.fw_product_mismatches() == 0
 
 
-def run_bench(scenario: str, seconds: float, *extra: str) -> dict:
-    r = subprocess.run(
-        [str(BENCH), str(ELF), scenario, str(seconds), *extra],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert r.returncode == 0, r.stderr
-    return json.loads(r.stdout.strip().splitlines()[-1])
-
-
-def tick_addresses() -> tuple[str, str]:
-    """app::tick()'s entry and the return address in the timer interrupt, from the ELF."""
-    nm = subprocess.run(["avr-nm", "-C", str(ELF)], capture_output=True, text=True).stdout
-    entry = next(ln.split()[0] for ln in nm.splitlines() if ln.endswith(" utrf::app::tick()"))
-    dis = subprocess.run(
-        ["avr-objdump", "-d", "-C", str(ELF)], capture_output=True, text=True
-    ).stdout.splitlines()
-    call = next(i for i, ln in enumerate(dis) if "call" in ln and "<utrf::app::tick()>" in ln)
-    ret = dis[call + 1].split(":")[0].strip()
-    return entry, ret
-
-
 @pytest.fixture(scope="module")
 def pins(built) -> dict:
-    return run_bench("pins", 0)
+    return tick_bench.run(ELF, "pins", 0)
 
 
 def test_pwm_timers_are_fast_pwm_mode_14_at_20_khz(pins: dict) -> None:
@@ -174,7 +151,7 @@ def test_an_unplugged_encoder_turns_its_driver_off(pins: dict) -> None:
 
 
 def test_tick_runs_on_time_under_traffic_and_its_timing_is_true(built) -> None:
-    s = run_bench("typical", 0.4, *tick_addresses())
+    s = tick_bench.run(ELF, "typical", 0.4)
     assert s["tick_overruns"] == 0
     # 1 kHz: reset_stats at 0.30 s, 0.4 s of traffic from 0.31 s, 50 ms to drain, get_stats at
     # about 0.76 s.

@@ -18,8 +18,10 @@ from utrf.emulator.harness_abi import (
     ADC_CHANNELS,
     F_CPU_HZ,
     FINGERS,
+    FRAME_LOG,
     MJ_LOADS,
     MJ_STATE_FIELDS,
+    MOTOR_REG_FIELDS,
     PIN_FIELDS,
     PROFILE_FIELDS,
     RESET_PIN,
@@ -28,6 +30,7 @@ from utrf.emulator.harness_abi import (
     STATUS_NAMES,
     TO_BOARD,
     TO_HOST,
+    FingerRegsC,
     HarnessError,
     LineFaultsC,
     MjPlantParamsC,
@@ -298,6 +301,56 @@ class NativeBoard:
     def profile_function(self, address: int) -> None:
         if self._lib.utrf_sim_profile_function(self.handle, address):
             raise HarnessError(f"{address:#x} is not a code address")
+
+    def profile_function_slot(self, slot: int, address: int) -> None:
+        if self._lib.utrf_sim_profile_function_slot(self.handle, slot, address):
+            raise HarnessError(f"slot {slot} or address {address:#x} is not valid")
+
+    def profile_vector_requires(self, slot: int) -> None:
+        if self._lib.utrf_sim_profile_vector_requires(self.handle, slot):
+            raise HarnessError(f"no function profile slot {slot}")
+
+    def profile_clear(self) -> None:
+        self._lib.utrf_sim_profile_clear(self.handle)
+
+    def pc_histogram(self, slot: int | None) -> None:
+        """Count cycles per program address from now on: every instruction's (slot -1), or
+        function slot ``slot``'s own work; None stops."""
+        if self._lib.utrf_sim_pc_histogram(self.handle, -2 if slot is None else slot):
+            raise HarnessError(f"no function profile slot {slot}")
+
+    def pc_histogram_get(self) -> np.ndarray:
+        """Cycles per program word (index = byte address / 2); empty when off."""
+        n = self._lib.utrf_sim_pc_histogram_get(self.handle, None, 0)
+        out = np.zeros(n, dtype=np.uint64)
+        if n:
+            self._lib.utrf_sim_pc_histogram_get(
+                self.handle, out.ctypes.data_as(ctypes.POINTER(ctypes.c_uint64)), n
+            )
+        return out
+
+    def uart_frames(self) -> list[tuple[int, int]]:
+        """The captured frames' wire times since the last call: (first byte's start, 0x00's
+        stop bit end), in cycles."""
+        starts, ends = (ctypes.c_uint64 * FRAME_LOG)(), (ctypes.c_uint64 * FRAME_LOG)()
+        n = self._lib.utrf_sim_uart_frames(self.handle, starts, ends, FRAME_LOG)
+        return list(zip(starts[:n], ends[:n], strict=True))
+
+    def pin_registers(self) -> list[dict[str, object]]:
+        """Per finger: ``stby``, ``stby_out`` and motors ``a``, ``b`` as register fields."""
+        regs = (FingerRegsC * FINGERS)()
+        self._lib.utrf_sim_pin_registers(self.handle, regs)
+        return [
+            {
+                "stby": int(f.stby),
+                "stby_out": int(f.stby_out),
+                **{
+                    side: {name: int(getattr(f.motor[k], name)) for name in MOTOR_REG_FIELDS}
+                    for k, side in enumerate("ab")
+                },
+            }
+            for f in regs
+        ]
 
     def profile(self, which: int) -> dict[str, int]:
         p = ProfileC()

@@ -15,7 +15,7 @@ from typing import Any
 
 from utrf import artifacts
 
-ABI = 12
+ABI = 13
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -68,7 +68,14 @@ PROFILE_FIELDS = (
     "intervals",
     "latency_sum",
     "latency_worst",
+    "nested",
+    "nested_worst",
+    "period_worst",
+    "period_worst_at",
 )
+FUNCTION_PROFILES = 3  # function slots; profile(which): 0 the vector, 1 + k slot k
+FRAME_LOG = 4096
+MOTOR_REG_FIELDS = ("com", "ocr", "icr", "wgm", "cs", "in1", "in2", "pwm_pin", "outputs")
 
 
 class HarnessError(RuntimeError):
@@ -165,6 +172,22 @@ class ProfileC(ctypes.Structure):
     _fields_ = [(name, ctypes.c_uint64) for name in PROFILE_FIELDS]
 
 
+class MotorRegsC(ctypes.Structure):
+    """``utrf_sim_motor_regs_t``: one motor's driver pins as registers."""
+
+    _fields_ = [(name, ctypes.c_uint32) for name in MOTOR_REG_FIELDS]
+
+
+class FingerRegsC(ctypes.Structure):
+    """``utrf_sim_finger_regs_t``: a finger's two motors and STBY."""
+
+    _fields_ = [
+        ("motor", MotorRegsC * 2),
+        ("stby", ctypes.c_uint32),
+        ("stby_out", ctypes.c_uint32),
+    ]
+
+
 _lib: ctypes.CDLL | None = None
 
 
@@ -215,6 +238,7 @@ def load_library() -> ctypes.CDLL:
             "run `make emulator`"
         )
     p, u8p = ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint8)
+    u64p = ctypes.POINTER(ctypes.c_uint64)
     sigs: dict[str, tuple[Any, list[Any]]] = {
         "utrf_sim_open": (p, [ctypes.c_char_p, ctypes.c_uint64, ctypes.c_char_p, ctypes.c_size_t]),
         "utrf_sim_close": (None, [p]),
@@ -260,7 +284,14 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_stats": (None, [p, ctypes.POINTER(StatsC)]),
         "utrf_sim_profile_vector": (ctypes.c_int, [p, ctypes.c_int]),
         "utrf_sim_profile_function": (ctypes.c_int, [p, ctypes.c_int64]),
+        "utrf_sim_profile_function_slot": (ctypes.c_int, [p, ctypes.c_int, ctypes.c_int64]),
         "utrf_sim_profile_get": (None, [p, ctypes.c_int, ctypes.POINTER(ProfileC)]),
+        "utrf_sim_profile_vector_requires": (ctypes.c_int, [p, ctypes.c_int]),
+        "utrf_sim_profile_clear": (None, [p]),
+        "utrf_sim_pc_histogram": (ctypes.c_int, [p, ctypes.c_int]),
+        "utrf_sim_pc_histogram_get": (ctypes.c_size_t, [p, u64p, ctypes.c_size_t]),
+        "utrf_sim_uart_frames": (ctypes.c_size_t, [p, u64p, u64p, ctypes.c_size_t]),
+        "utrf_sim_pin_registers": (None, [p, ctypes.POINTER(FingerRegsC)]),
         "utrf_sim_log": (ctypes.c_size_t, [p, ctypes.c_char_p, ctypes.c_size_t]),
         "utrf_mjplant_new": (
             p,

@@ -141,6 +141,38 @@ void board_io_read_pins(utrf_sim_t *s)
     }
 }
 
+static utrf_sim_motor_regs_t motor_registers(const avr_t *avr, const utrf_motor_pins_t *m)
+{
+    utrf_sim_motor_regs_t r = {0};
+    const timer16_regs_t *t = timer_regs(m->pwm.timer);
+    int ch = m->pwm.channel - 'A';
+    if (t && ch >= 0 && ch <= 2) {
+        uint8_t tccra = avr->data[t->tccra], tccrb = avr->data[t->tccrb];
+        r.com = (tccra >> (6 - 2 * ch)) & 3;
+        r.ocr = reg16(avr, t->ocr[ch]);
+        r.icr = reg16(avr, t->icr);
+        r.wgm = (uint32_t)((tccra & 3) | (((tccrb >> 3) & 3) << 2));
+        r.cs = tccrb & 7;
+    }
+    r.in1 = (uint32_t)pin_level(avr, m->in1);
+    r.in2 = (uint32_t)pin_level(avr, m->in2);
+    r.pwm_pin = (uint32_t)pin_level(avr, m->pwm.pin);
+    r.outputs = pin_is_output(avr, m->in1) && pin_is_output(avr, m->in2) &&
+                pin_is_output(avr, m->pwm.pin);
+    return r;
+}
+
+void utrf_sim_pin_registers(const utrf_sim_t *s, utrf_sim_finger_regs_t *out5)
+{
+    for (int f = 0; f < UTRF_FINGER_COUNT; f++) {
+        const utrf_finger_pins_t *fp = &UTRF_FINGER_PINS[f];
+        out5[f].motor[0] = motor_registers(s->avr, &fp->a);
+        out5[f].motor[1] = motor_registers(s->avr, &fp->b);
+        out5[f].stby = (uint32_t)pin_level(s->avr, fp->stby);
+        out5[f].stby_out = (uint32_t)pin_is_output(s->avr, fp->stby);
+    }
+}
+
 /* A conversion starts: sample its channel now (the ADC's sample-and-hold) and hand simavr a
  * value that its own arithmetic, floor(mV * 1023 / Vref), turns into the ideal converter of
  * the datasheet's "ADC Accuracy Definitions": the first transition (0x000 -> 0x001) at

@@ -149,7 +149,7 @@ static int status_of(const avr_t *avr)
 
 static void set_run_limit(utrf_sim_t *s)
 {
-    int per_instruction = s->prof_addr >= 0 || s->jump_at >= 0;
+    int per_instruction = s->prof_functions > 0 || s->pc_hist || s->jump_at >= 0;
     s->avr->run_cycle_limit = per_instruction ? 1 : RUN_CYCLE_LIMIT;
     if (per_instruction)
         s->avr->run_cycle_count = 1;
@@ -171,13 +171,18 @@ int utrf_sim_run_to(utrf_sim_t *s, uint64_t target)
         s->stop = 0;
         s->in_run = 1;
         avr_cycle_timer_register(avr, target - avr->cycle, stop_timer, s);
-        if (s->prof_addr >= 0 || s->jump_at >= 0) { /* per-instruction work: the slow loop */
+        if (s->prof_functions > 0 || s->pc_hist || s->jump_at >= 0) { /* the slow loop */
             while (!s->stop) {
+                uint32_t pc0 = avr->pc;
+                uint64_t c0 = avr->cycle;
+                int own0 = s->pc_hist ? profile_in_own_work(s) : 0;
                 int st = avr_run(avr);
                 if (st == cpu_Crashed || st == cpu_Done || st == cpu_Stopped)
                     break;
-                if (s->prof_addr >= 0)
-                    profile_step_function(s);
+                if (s->pc_hist)
+                    profile_step_histogram(s, pc0, c0, own0);
+                if (s->prof_functions > 0)
+                    profile_step_functions(s);
                 if (s->jump_at >= 0 && avr->pc == (uint32_t)s->jump_at) {
                     s->jump_at = -1;
                     utrf_sim_jump(s, s->jump_to, s->jump_interrupts);
@@ -535,6 +540,7 @@ void utrf_sim_close(utrf_sim_t *s)
         free(s->avr);
     }
     register_board(s, 0);
+    profile_close(s);
     free_firmware(&s->fw);
     free(s->capture);
     free(s);

@@ -94,6 +94,7 @@ typedef struct {
     utrf_sim_profile_t p;
     int active;    /* inside a call */
     int paused;    /* a nested interrupt runs */
+    int depth;     /* the interrupt nesting depth the call runs at (0: the main program) */
     uint64_t entry, seg, excl;
     uint16_t sp0;  /* function profile: SP at entry */
     int waiting;   /* vector profile: its flag is raised, its handler not yet entered */
@@ -125,6 +126,9 @@ struct utrf_sim {
     uint8_t *capture;
     uint32_t cap_head, cap_tail;
     int capture_on;
+    uint64_t frame_start[UTRF_SIM_FRAME_LOG], frame_end[UTRF_SIM_FRAME_LOG]; /* captured frames */
+    uint32_t frames_head, frames_tail;
+    uint64_t tx_frame_start; /* the captured frame under way: its first byte's start (0: none) */
     int wake_byte; /* utrf_sim_run_plant_until: the byte it waits for (-1: none) */
     int woke;      /* it was captured */
     line_faults_t faults[2];
@@ -146,11 +150,15 @@ struct utrf_sim {
     int pending_cause; /* -1: none (watchdog or simavr-internal) */
     int64_t eempe_cycle;
 
-    profile_state_t prof_vec, prof_fn;
+    profile_state_t prof_vec, prof_fn[UTRF_SIM_FUNCTION_PROFILES];
     int prof_vector;    /* vector profiled, 0: none */
-    int64_t prof_addr;  /* function profiled (byte address), -1: none */
-    int prof_fn_vector; /* the innermost vector when the function was entered (0: none) */
-    int running_vector; /* the innermost vector running now (0: none) */
+    int prof_requires;  /* the function slot the vector's calls must run (-1: none) */
+    int64_t prof_addr[UTRF_SIM_FUNCTION_PROFILES]; /* functions profiled (byte address), -1: none */
+    int prof_functions; /* how many slots profile a function */
+    int depth;          /* interrupts running, nested (0: the main program) */
+    uint64_t *pc_hist;  /* utrf_sim_pc_histogram: cycles per program word (NULL: off) */
+    size_t pc_hist_words;
+    int pc_hist_slot;   /* whose cycles: a function slot, or -1 every instruction's */
 
     /* a jump waiting for the PC to reach jump_at (byte address; -1: none) */
     int64_t jump_at;
@@ -227,7 +235,10 @@ void timers_quiet(utrf_sim_t *s);
 /* profile.c */
 void profile_init(utrf_sim_t *s);
 void profile_after_reset(utrf_sim_t *s);
-void profile_step_function(utrf_sim_t *s);
+void profile_step_functions(utrf_sim_t *s);
+void profile_step_histogram(utrf_sim_t *s, uint32_t pc0, uint64_t c0, int own0);
+int profile_in_own_work(const utrf_sim_t *s);
+void profile_close(utrf_sim_t *s);
 
 /* harness.c */
 void harness_log(utrf_sim_t *s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));

@@ -176,6 +176,34 @@ void bridge_to_host(utrf_sim_t *s, const uint8_t *buf, size_t n)
     serve_write(s, buf, n);
 }
 
+/* The captured frames' wire times: a frame starts with the start bit of the first byte after
+ * a 0x00 and ends with the stop bit of its own 0x00 (the firmware's bytes, before the line's
+ * faults). */
+static void log_frame(utrf_sim_t *s, uint8_t b, uint64_t due)
+{
+    if (!s->tx_frame_start)
+        s->tx_frame_start = due - s->frame_cycles;
+    if (b)
+        return;
+    uint32_t i = s->frames_head % UTRF_SIM_FRAME_LOG;
+    s->frame_start[i] = s->tx_frame_start;
+    s->frame_end[i] = due;
+    s->frames_head++;
+    if (s->frames_head - s->frames_tail > UTRF_SIM_FRAME_LOG)
+        s->frames_tail = s->frames_head - UTRF_SIM_FRAME_LOG; /* the oldest are lost */
+    s->tx_frame_start = 0;
+}
+
+size_t utrf_sim_uart_frames(utrf_sim_t *s, uint64_t *starts, uint64_t *ends, size_t n)
+{
+    size_t k = 0;
+    for (; k < n && s->frames_tail != s->frames_head; k++, s->frames_tail++) {
+        starts[k] = s->frame_start[s->frames_tail % UTRF_SIM_FRAME_LOG];
+        ends[k] = s->frame_end[s->frames_tail % UTRF_SIM_FRAME_LOG];
+    }
+    return k;
+}
+
 void bridge_deliver(utrf_sim_t *s)
 {
     uint8_t out[512];
@@ -184,6 +212,8 @@ void bridge_deliver(utrf_sim_t *s)
     uint64_t now = s->avr->cycle;
     while (s->tx_tail != s->tx_head && s->tx[s->tx_tail & TX_MASK].due <= now) {
         uint8_t b = s->tx[s->tx_tail & TX_MASK].byte;
+        if (s->capture_on)
+            log_frame(s, b, s->tx[s->tx_tail & TX_MASK].due);
         s->tx_tail++;
         if (n + 3 > sizeof out) {
             bridge_to_host(s, out, n);
@@ -274,8 +304,11 @@ size_t utrf_sim_uart_pending(const utrf_sim_t *s)
 void utrf_sim_set_capture(utrf_sim_t *s, int on)
 {
     s->capture_on = on != 0;
-    if (!s->capture_on)
+    if (!s->capture_on) {
         s->cap_head = s->cap_tail = 0;
+        s->frames_head = s->frames_tail = 0;
+        s->tx_frame_start = 0;
+    }
 }
 
 static int probability(double p)

@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 12
+#define UTRF_SIM_ABI 13
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -83,6 +83,10 @@ typedef struct {
     uint64_t intervals;   /* how many intervals period_sum holds */
     uint64_t latency_sum; /* vector: cycles from its flag being raised to its entry */
     uint64_t latency_worst;
+    uint64_t nested;          /* interrupts that nested in the calls (directly) */
+    uint64_t nested_worst;    /* the most cycles of nested interrupts in one call */
+    uint64_t period_worst;    /* the longest entry-to-entry interval */
+    uint64_t period_worst_at; /* the entry that began it (cycle) */
 } utrf_sim_profile_t;
 
 typedef struct utrf_sim utrf_sim_t;
@@ -120,6 +124,19 @@ double *utrf_sim_adc_volts(utrf_sim_t *s);
 const double *utrf_sim_pins(utrf_sim_t *s);
 void utrf_sim_refresh_pins(utrf_sim_t *s);
 
+/* The driver pins as registers, per board_pins.h: per motor the PWM timer's compare output
+ * mode of its channel (COMnX), OCRnX, ICRn, the waveform mode (WGM), the clock select, the
+ * IN1, IN2 and PWM pins' levels, and whether all three are outputs; per finger STBY's level
+ * and whether it is an output. For checks of the firmware against the pin map. */
+typedef struct {
+    uint32_t com, ocr, icr, wgm, cs, in1, in2, pwm_pin, outputs;
+} utrf_sim_motor_regs_t;
+typedef struct {
+    utrf_sim_motor_regs_t motor[2];
+    uint32_t stby, stby_out;
+} utrf_sim_finger_regs_t;
+void utrf_sim_pin_registers(const utrf_sim_t *s, utrf_sim_finger_regs_t *out5);
+
 /* Data-space access (registers and SRAM), for tests and diagnostics. */
 int utrf_sim_read_data(const utrf_sim_t *s, uint32_t addr, uint8_t *buf, size_t n);
 /* Address of an ELF symbol (data symbols carry avr-gcc's 0x800000 offset); -1 if absent. */
@@ -132,6 +149,11 @@ size_t utrf_sim_uart_write(utrf_sim_t *s, const uint8_t *buf, size_t n);
 size_t utrf_sim_uart_read(utrf_sim_t *s, uint8_t *buf, size_t n);
 size_t utrf_sim_uart_pending(const utrf_sim_t *s); /* host bytes not yet on the UART */
 void utrf_sim_set_capture(utrf_sim_t *s, int on);
+/* With capture on, the wire times of each captured 0x00 (a protocol frame's end), in the
+ * order captured: when the first byte after the previous 0x00 started on the line (its start
+ * bit) and when this 0x00's stop bit ended. The log keeps the last UTRF_SIM_FRAME_LOG. */
+#define UTRF_SIM_FRAME_LOG 4096
+size_t utrf_sim_uart_frames(utrf_sim_t *s, uint64_t *starts, uint64_t *ends, size_t n);
 
 /* Serving: a pty (path returned) and a TCP listener on host:port (port 0: any free one;
  * returns the port, or -errno). One TCP client at a time; a second one is closed at once.
@@ -169,11 +191,29 @@ int utrf_sim_eeprom_set(utrf_sim_t *s, const uint8_t *buf, size_t n);
 void utrf_sim_stats(const utrf_sim_t *s, utrf_sim_stats_t *out);
 
 /* Cycle profiling: of an interrupt vector (its entry to its RETI), or of a function from its
- * first instruction to its return (address in bytes, e.g. from utrf_sim_symbol). One of each
- * at a time; 0 (vector) or -1 (function) turns it off. */
+ * first instruction to its return (address in bytes, e.g. from utrf_sim_symbol). One vector
+ * and UTRF_SIM_FUNCTION_PROFILES functions (slots) at a time; 0 (vector) or -1 (function)
+ * turns one off. utrf_sim_profile_function is slot 0. Setting one restarts its figures. */
+#define UTRF_SIM_FUNCTION_PROFILES 3
 int utrf_sim_profile_vector(utrf_sim_t *s, int vector);
 int utrf_sim_profile_function(utrf_sim_t *s, int64_t addr);
-void utrf_sim_profile_get(const utrf_sim_t *s, int which, utrf_sim_profile_t *out); /* 0 vector, 1 function */
+int utrf_sim_profile_function_slot(utrf_sim_t *s, int slot, int64_t addr);
+/* which: 0 the vector, 1 + k function slot k. */
+void utrf_sim_profile_get(const utrf_sim_t *s, int which, utrf_sim_profile_t *out);
+/* The vector's calls count only when function slot `slot` was entered within them (a timer
+ * interrupt that ran the tick, not one that deferred it); -1: every call. */
+int utrf_sim_profile_vector_requires(utrf_sim_t *s, int slot);
+/* Where the cycles go: per program address (byte address / 2), the cycles of the
+ * instructions executed there, counted from now on, of every instruction (slot -1) or only of
+ * function slot `slot`'s own work (its calls, less the interrupts nested in them). A sleeping
+ * CPU's skipped cycles count at the instruction after its SLEEP. slot < -1 stops and frees it.
+ * utrf_sim_pc_histogram_get copies up to n counts (address 0 first) and returns how many
+ * there are (0: off). */
+int utrf_sim_pc_histogram(utrf_sim_t *s, int slot);
+size_t utrf_sim_pc_histogram_get(const utrf_sim_t *s, uint64_t *out, size_t n);
+/* Every profile's figures back to zero; calls under way, and the last entry that the next
+ * interval is measured from, are kept (a measurement window opened mid-run). */
+void utrf_sim_profile_clear(utrf_sim_t *s);
 
 /* Quiet PWM timers (timers.c, on by default): the events of a 16-bit timer whose interrupts
  * are all off and whose TCNT the firmware never read are cancelled before each run (its
