@@ -633,6 +633,16 @@ int main(int argc, char** argv) {
             // One request at a time, ping and set_targets in turn, each sent when the last one
             // was answered plus 0.5-3 ms (a fixed irrational-ish step: every phase of the
             // tick and of the stream comes round).
+            if (waiting && g.rt_seq < 0) {
+                // Answered: the next one 0.5-3 ms after the reply, the step irrational so that
+                // the requests sample every phase of the tick and of the stream evenly (a
+                // fixed gap after the reply would lock onto one phase). Ahead of the send below:
+                // after it, the last next_send, long past, sent the next request at once (back
+                // to back, some 20 us after the reply, the row's first version).
+                waiting = false;
+                phase = fmod(phase + 0.6180339887, 1.0);
+                next_send = g.avr->cycle / kCpuHz + 0.0005 + 0.0025 * phase;
+            }
             if (g.rt_seq < 0 && t >= next_send) {
                 g.rt_started = false;
                 if ((g.rt_ping.size() + g.rt_targets.size()) % 2 == 0) {
@@ -644,14 +654,6 @@ int main(int argc, char** argv) {
                 }
                 g.rt_seq = g.seq;
                 waiting = true;
-            }
-            if (waiting && g.rt_seq < 0) {
-                // Answered: the next one 0.5-3 ms after the reply, the step irrational so that
-                // the requests sample every phase of the tick and of the stream evenly (a
-                // fixed gap after the reply would lock onto one phase).
-                waiting = false;
-                phase = fmod(phase + 0.6180339887, 1.0);
-                next_send = g.avr->cycle / kCpuHz + 0.0005 + 0.0025 * phase;
             }
             run_until(g.avr->cycle / kCpuHz + 0.00002);
         } else if (scenario == "silent") {
