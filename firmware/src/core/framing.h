@@ -101,34 +101,27 @@ enum class RxEvent : uint8_t {
 // Empty frames (0x00 right after 0x00) are ignored, so a sender may send a lone 0x00 to end
 // whatever partial frame the receiver holds. OVERSIZE is reported once, at the first byte that
 // does not fit; the bytes up to and including the next 0x00 are then dropped silently.
+// Each byte is decoded as it is taken: its COBS undone (a block's zero is written when the
+// next block's code comes, so the last block's, which is the delimiter's, never is) and the
+// CRC run over the decoded bytes two behind (the last two are the CRC itself). What is left
+// for the 0x00 is a few checks, so a request whose bytes were taken while they came is ready
+// for dispatch at once.
 class FrameDecoder {
  public:
   FrameDecoder();
   RxEvent feed(uint8_t byte) {
     // The common case inline: one more byte of a frame that still fits.
     if (byte != 0 && len_ < kMaxEncodedBytes && !discarding_) {
-      buf_[len_++] = byte;
+      ++len_;
+      take(byte);
       return RxEvent::NONE;
     }
     return feed_rest(byte);
   }
   // Several bytes of a frame at once, as feed() would take them: data[0..n) up to the first
   // 0x00 (not taken: feed() it), and no further than the buffer holds (the byte that does not
-  // fit goes to feed() too, which reports OVERSIZE). Returns how many it took. A tight copy:
-  // the receive path's per-byte cost, with the CRC left to the 0x00.
-  uint8_t feed_run(const uint8_t* data, uint8_t n) {
-    if (discarding_) return 0;
-    const uint8_t room = static_cast<uint8_t>(kMaxEncodedBytes - len_);
-    if (n > room) n = room;
-    uint8_t* out = buf_ + len_;
-    uint8_t k = 0;
-    while (k < n && data[k] != 0) {
-      out[k] = data[k];
-      ++k;
-    }
-    len_ = static_cast<uint8_t>(len_ + k);
-    return k;
-  }
+  // fit goes to feed() too, which reports OVERSIZE). Returns how many it took.
+  uint8_t feed_run(const uint8_t* data, uint8_t n);
   // Forget any partial frame (e.g. after the UART reported an overrun).
   void reset();
   // Bytes of a frame are in, its 0x00 not yet.
@@ -147,11 +140,31 @@ class FrameDecoder {
   }
 
  private:
+  // One COBS byte of a frame (len_ already counts it): a code starts a block (and writes the
+  // zero the block before it stands for), any other is a decoded byte.
+  void take(uint8_t byte) {
+    if (left_ == 0) {
+      if (len_ != 1) put(0x00);
+      left_ = static_cast<uint8_t>(byte - 1u);
+    } else {
+      --left_;
+      put(byte);
+    }
+  }
+  void put(uint8_t byte) {
+    if (out_ >= kCrcBytes) crc_step(hi_, lo_, buf_[out_ - kCrcBytes]);
+    buf_[out_++] = byte;
+  }
+  void start();  // a new frame: nothing taken
   RxEvent feed_rest(uint8_t byte);
   RxEvent finish();
 
-  uint8_t buf_[kMaxEncodedBytes];
-  uint8_t len_;
+  uint8_t buf_[kMaxEncodedBytes];  // the decoded bytes (never more than the encoded)
+  uint8_t len_;   // encoded bytes taken
+  uint8_t out_;   // decoded bytes
+  uint8_t left_;  // bytes of the current COBS block still to come (0: the next is a code)
+  uint8_t hi_;    // the CRC so far, over buf_[0 .. out_ - 2)
+  uint8_t lo_;
   uint8_t body_len_;
   bool discarding_;
 };
