@@ -36,53 +36,16 @@ void FrameDecoder::start() {
   left_ = 0;
   hi_ = 0xFF;
   lo_ = 0xFF;
+  d1_ = 0;
+  d2_ = 0;
+  lag_ = kCrcBytes;
+  zero_ = false;
 }
 
 void FrameDecoder::reset() {
   start();
   body_len_ = 0;
   discarding_ = false;
-}
-
-// take() a byte at a time, with the decoder's state in locals (through the members, every
-// store to buf_ made the compiler load them all again).
-uint8_t FrameDecoder::feed_run(const uint8_t* data, uint8_t n) {
-  if (discarding_) return 0;
-  const uint8_t room = static_cast<uint8_t>(kMaxEncodedBytes - len_);
-  if (n > room) n = room;
-  const uint8_t* p = data;
-  const uint8_t* const end = data + n;
-  uint8_t* out = buf_ + out_;
-  uint8_t* const crc_from = buf_ + kCrcBytes;
-  uint8_t left = left_;
-  uint8_t hi = hi_;
-  uint8_t lo = lo_;
-  bool first = len_ == 0;
-  while (p != end) {
-    const uint8_t byte = *p;
-    if (byte == 0) break;
-    ++p;
-    uint8_t d = byte;
-    if (left == 0) {  // a code: the block before it stood for a zero
-      left = static_cast<uint8_t>(byte - 1u);
-      if (first) {
-        first = false;
-        continue;
-      }
-      d = 0x00;
-    } else {
-      --left;
-    }
-    if (out >= crc_from) crc_step(hi, lo, out[-2]);
-    *out++ = d;
-  }
-  const uint8_t k = static_cast<uint8_t>(p - data);
-  len_ = static_cast<uint8_t>(len_ + k);
-  out_ = static_cast<uint8_t>(out - buf_);
-  left_ = left;
-  hi_ = hi;
-  lo_ = lo;
-  return k;
 }
 
 RxEvent FrameDecoder::feed_rest(uint8_t byte) {

@@ -120,8 +120,58 @@ class FrameDecoder {
   }
   // Several bytes of a frame at once, as feed() would take them: data[0..n) up to the first
   // 0x00 (not taken: feed() it), and no further than the buffer holds (the byte that does not
-  // fit goes to feed() too, which reports OVERSIZE). Returns how many it took.
-  uint8_t feed_run(const uint8_t* data, uint8_t n);
+  // fit goes to feed() too, which reports OVERSIZE). Returns how many it took. Inline, with
+  // the state in locals (through the members, every store to buf_ made the compiler load them
+  // all again): the receive path's per-byte cost.
+  uint8_t feed_run(const uint8_t* data, uint8_t n) {
+    if (discarding_) return 0;
+    const uint8_t room = static_cast<uint8_t>(kMaxEncodedBytes - len_);
+    if (n > room) n = room;
+    const uint8_t* p = data;
+    const uint8_t* const end = data + n;
+    uint8_t* out = buf_ + out_;
+    uint8_t left = left_;
+    uint8_t hi = hi_;
+    uint8_t lo = lo_;
+    uint8_t d1 = d1_;
+    uint8_t d2 = d2_;
+    uint8_t lag = lag_;
+    bool zero = zero_;
+    while (p != end) {
+      uint8_t byte = *p;
+      if (byte == 0) break;
+      ++p;
+      if (left == 0) {  // a code: the block before it stood for a zero
+        left = static_cast<uint8_t>(byte - 1u);
+        if (!zero) {
+          zero = true;
+          continue;
+        }
+        byte = 0x00;
+      } else {
+        --left;
+      }
+      if (lag != 0) {
+        --lag;
+      } else {
+        crc_step(hi, lo, d2);
+      }
+      d2 = d1;
+      d1 = byte;
+      *out++ = byte;
+    }
+    const uint8_t k = static_cast<uint8_t>(p - data);
+    len_ = static_cast<uint8_t>(len_ + k);
+    out_ = static_cast<uint8_t>(out - buf_);
+    left_ = left;
+    hi_ = hi;
+    lo_ = lo;
+    d1_ = d1;
+    d2_ = d2;
+    lag_ = lag;
+    zero_ = zero;
+    return k;
+  }
   // Forget any partial frame (e.g. after the UART reported an overrun).
   void reset();
   // Bytes of a frame are in, its 0x00 not yet.
@@ -144,15 +194,22 @@ class FrameDecoder {
   // zero the block before it stands for), any other is a decoded byte.
   void take(uint8_t byte) {
     if (left_ == 0) {
-      if (len_ != 1) put(0x00);
       left_ = static_cast<uint8_t>(byte - 1u);
+      if (!zero_) {
+        zero_ = true;
+        return;
+      }
+      byte = 0x00;
     } else {
       --left_;
-      put(byte);
     }
-  }
-  void put(uint8_t byte) {
-    if (out_ >= kCrcBytes) crc_step(hi_, lo_, buf_[out_ - kCrcBytes]);
+    if (lag_ != 0) {
+      --lag_;
+    } else {
+      crc_step(hi_, lo_, d2_);
+    }
+    d2_ = d1_;
+    d1_ = byte;
     buf_[out_++] = byte;
   }
   void start();  // a new frame: nothing taken
@@ -165,6 +222,10 @@ class FrameDecoder {
   uint8_t left_;  // bytes of the current COBS block still to come (0: the next is a code)
   uint8_t hi_;    // the CRC so far, over buf_[0 .. out_ - 2)
   uint8_t lo_;
+  uint8_t d1_;    // the last decoded byte and the one before it (not yet in the CRC)
+  uint8_t d2_;
+  uint8_t lag_;   // decoded bytes still to come before the CRC takes one (2 at the start)
+  bool zero_;     // a block was begun: the next code writes its zero
   uint8_t body_len_;
   bool discarding_;
 };
