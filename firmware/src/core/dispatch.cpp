@@ -575,37 +575,27 @@ uint8_t write_state_frame(app::Board& b, uint8_t seq, const hand::StateSample& s
     return w.finish();
 }
 
+namespace {
+// The smallest x in [-kMaxUrad, kMaxUrad + 1] with bu_from_urad(x) >= t (kMaxUrad + 1: none).
+// bu_from_urad(x) rounds x / 191.7476 (micro-radians a count), so x >= (t - 1/2) 191.7476 to
+// within the float's rounding: start there and step to the exact boundary (a step or two).
+int32_t first_at_least(int32_t t) {
+    const float kUradPerBu = 191.74759848f;  // 2 pi 1e6 / 32768
+    float e = ((float)t - 0.5f) * kUradPerBu;
+    if (e < -(float)kMaxUrad) e = -(float)kMaxUrad;
+    if (e > (float)kMaxUrad) e = (float)kMaxUrad;
+    int32_t x = (int32_t)e;
+    while (x > -kMaxUrad && bu_from_urad(x - 1) >= t) --x;
+    while (x <= kMaxUrad && bu_from_urad(x) < t) ++x;
+    return x;
+}
+}  // namespace
+
 void target_window(int16_t theta_min, int16_t theta_max, int32_t& lo, int32_t& hi) {
     // bu_from_urad() never decreases: the accepted values are one interval of
-    // [-kMaxUrad, kMaxUrad], found by bisection (a few thousand cycles, at configuration).
-    const int32_t t_lo = (int32_t)theta_min - 1;
-    const int32_t t_hi = (int32_t)theta_max + 1;
-    int32_t a = -kMaxUrad;
-    int32_t z = kMaxUrad;
-    if (bu_from_urad(z) < t_lo) {
-        lo = kMaxUrad + 1;
-    } else if (bu_from_urad(a) >= t_lo) {
-        lo = a;
-    } else {
-        while (z - a > 1) {  // bu(a) < t_lo <= bu(z)
-            const int32_t mid = a + ((z - a) >> 1);
-            if (bu_from_urad(mid) >= t_lo) z = mid; else a = mid;
-        }
-        lo = z;
-    }
-    a = -kMaxUrad;
-    z = kMaxUrad;
-    if (bu_from_urad(a) > t_hi) {
-        hi = -kMaxUrad - 1;
-    } else if (bu_from_urad(z) <= t_hi) {
-        hi = z;
-    } else {
-        while (z - a > 1) {  // bu(a) <= t_hi < bu(z)
-            const int32_t mid = a + ((z - a) >> 1);
-            if (bu_from_urad(mid) <= t_hi) a = mid; else z = mid;
-        }
-        hi = a;
-    }
+    // [-kMaxUrad, kMaxUrad].
+    lo = first_at_least((int32_t)theta_min - 1);
+    hi = first_at_least((int32_t)theta_max + 2) - 1;
 }
 
 void fill_status(const app::Board& b, Status& m) {
