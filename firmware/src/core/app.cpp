@@ -383,7 +383,6 @@ void setup() {
 void loop() {
     Board& b = g_board;
     watchdog(b);
-    b.hand.plan_paths();  // first: a segment is due every 5 ticks (core/path.h)
     if (!b.boot_sent && hal::serial_tx_room() >= framing::kMaxFrameBytes) {
         // Before any reply: the host learns of the reset first.
         proto::Boot m;
@@ -394,9 +393,10 @@ void loop() {
     flush_reply(b);
     receive(b);
     flush_reply(b);
+    board_frames(b);
+    b.hand.plan_paths();  // a segment is due every 5 ticks, planned one ahead (core/path.h)
     save_progress(b);
     flush_reply(b);
-    board_frames(b);
 }
 
 bool idle() {
