@@ -171,7 +171,7 @@ def round_trips(loads: list[dict]) -> list[str]:
         "",
         "Round trips on the simulated board (the latency row; issue 11 goal 3: 99th percentile "
         "at most 800 µs): from a request's first byte on the line to its reply's last stop bit, "
-        "one request at a time, each as soon as the last reply is in, 1 kHz state stream on.",
+        "one request at a time, each 0.5-3 ms after the last reply, 1 kHz state stream on.",
         "",
         "| request | n | line's own time | median | 99th percentile | worst |",
         "|---|---|---|---|---|---|",
@@ -262,7 +262,7 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         "stress": "set_targets back to back (line saturated)",
         "silent": "none: the host falls silent, HOLD at the heartbeat timeout",
         "moves": "1 kHz stream, a five-finger move every 0.4 s, heartbeats",
-        "latency": "1 kHz stream, ping and set_targets one at a time, back to back",
+        "latency": "1 kHz stream, ping and set_targets one at a time, 0.5-3 ms apart",
     }
     for d in loads:
         fm, fw = d["tick_mean_us"] * 16, d["tick_worst_us"] * 16

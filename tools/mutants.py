@@ -195,8 +195,17 @@ MUTANTS = [
         "targets-beyond-limits",
         "joint limit (targets outside the limits refused)",
         "firmware/src/core/dispatch.cpp",
-        _LIMIT_CHECK + "        bu[f] =",
-        _NO_LIMIT_CHECK + "        bu[f] =",
+        # JOINT2_ANGLE values against each finger's window (micro-radians), the other kinds
+        # in counts after their conversion: both off
+        "if ((m.mask & bit) && (m.value[f] < b.urad_lo[f] || m.value[f] > b.urad_hi[f])) {",
+        "if ((m.mask & bit) && false) {",
+        more=(
+            Edit(
+                "firmware/src/core/dispatch.cpp",
+                "    " + _LIMIT_CHECK.replace("\n    ", "\n        ") + "            bu[f] =",
+                "    " + _NO_LIMIT_CHECK.replace("\n    ", "\n        ") + "            bu[f] =",
+            ),
+        ),
     ),
     Mutant(
         "move-beyond-limits",

@@ -17,8 +17,8 @@ Scenarios (all five fingers in POSITION, encoders sweeping, 500 Hz telemetry):
   silent    nothing at all: after the heartbeat timeout (0.5 s by default) the safe action
             (HOLD by default) takes every finger in one tick, the tick this row's worst shows
   moves     1 kHz stream, a five-finger move every 0.4 s, heartbeats between
-  latency   1 kHz stream, ping and set_targets one at a time, each as soon as the last reply
-            is in: round trips from the request's first byte on the line to the reply's last byte
+  latency   1 kHz stream, ping and set_targets one at a time, each 0.5-3 ms after the last
+            reply: round trips from the request's first byte on the line to the reply's last byte
             off it (its stop bit), and where the time goes
 The host's frames drift against the tick (its clock is not the board's): each period is a
 little longer than nominal, so that over a run of a second or more the frames start at every
@@ -210,6 +210,7 @@ class Bench:
         t_end = t0 + seconds
         next_send = t0
         move_id = 0
+        gap_phase = 0.0
         while b.cycle / CPU_HZ < t_end:
             t = b.cycle / CPU_HZ
             if scenario == "stress":
@@ -237,8 +238,10 @@ class Bench:
                     next_send += 0.05 + 40e-6
                 self.run_until(min(next_send, t + 0.0005))
             elif scenario == "latency":
-                # One request at a time, ping and set_targets in turn, the next one as soon as
-                # the last reply is in (the run stops within a byte's time of its 0x00).
+                # One request at a time, ping and set_targets in turn, each 0.5-3 ms after the
+                # last reply (the run stops within a byte's time of its 0x00): the gap's step
+                # is irrational, so the requests sample every phase of the tick and of the
+                # stream evenly (a fixed gap would lock onto one phase).
                 self.rt_ping = len(self.rt["ping"]) == len(self.rt["targets"])
                 frame = self.send(m.Ping(token=0) if self.rt_ping else self.targets(t))
                 self.rt_seq = self.seq
@@ -250,6 +253,8 @@ class Bench:
                     if b.run_plant_until(min(end, b.cycle + CHUNK), self.frame_cycles, 0):
                         sys.exit(f"tick_bench: the simulated CPU stopped\n{b.log()}")
                     self.take_output()
+                gap_phase = math.fmod(gap_phase + 0.6180339887, 1.0)
+                self.run_until(b.cycle / CPU_HZ + 0.0005 + 0.0025 * gap_phase)
             elif scenario == "silent":
                 self.run_until(t + 0.0005)
             else:

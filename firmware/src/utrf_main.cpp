@@ -12,5 +12,5 @@ void setup() {
 
 void loop() {
     utrf::app::loop();
-    utrf::hal::sleep_until_interrupt(utrf::app::idle);  // nothing to do: until an interrupt
+    utrf::hal::sleep_until_interrupt(utrf::app::idle, utrf::app::take_bytes);  // nothing to do: until an interrupt
 }

@@ -7,6 +7,7 @@
 
 #include "core/app.h"
 #include "core/config.h"
+#include "core/dispatch.h"
 #include "core/encoder.h"
 #include "core/kinematics.h"
 #include "core/pid.h"
@@ -306,6 +307,10 @@ int16_t fw_encoder_angle(uint16_t turn, uint16_t zero, int invert) {
 int16_t fw_au_from_bu(int16_t b) { return fx::au_from_bu(b); }
 int16_t fw_bu(double rad) { return fx::bu((float)rad); }
 uint16_t fw_encoder_turn_from_rad(double rad) { return encoder::turn_from_rad((float)rad); }
+
+void fw_target_window(int16_t theta_min, int16_t theta_max, int32_t* lo, int32_t* hi) {
+    dispatch::target_window(theta_min, theta_max, *lo, *hi);
+}
 
 uint16_t fw_config_image_bytes(void) { return config::kImageBytes; }
 uint32_t fw_core_check(void) { return check::core_check_run(); }

@@ -148,6 +148,10 @@ def load_library(path: Path = LIB_PATH) -> ctypes.CDLL:
         "fw_au_from_bu": (c.c_int16, [c.c_int16]),
         "fw_bu": (c.c_int16, [c.c_double]),
         "fw_encoder_turn_from_rad": (c.c_uint16, [c.c_double]),
+        "fw_target_window": (
+            None,
+            [c.c_int16, c.c_int16, c.POINTER(c.c_int32), c.POINTER(c.c_int32)],
+        ),
         "fw_config_image_bytes": (c.c_uint16, []),
         "fw_config_body_bytes": (c.c_uint16, []),
     }

@@ -663,6 +663,37 @@ def test_the_default_heartbeat_timeout_is_the_specs_and_on_the_protocol_page(sim
     assert "| default heartbeat timeout | 0.5 s |" in readme.read_text(encoding="utf-8")
 
 
+def test_the_set_targets_window_is_exactly_the_values_the_count_check_accepts(sim: Sim) -> None:
+    # set_targets checks JOINT2_ANGLE values against a window in micro-radians worked out with
+    # the limits (dispatch.cpp target_window, by bisection), so that it can ack before it
+    # converts them: the window must hold exactly the values whose count (x * M / 2^32,
+    # rounded) lies within a count of the limits, and none beyond +-4e6.
+    import ctypes
+
+    big_m = 22399067  # round(2^32 * 32768 / (2 pi 1e6)), as bu_from_urad
+    k = 4_000_000
+
+    def bu(x: int) -> int:
+        return (x * big_m + 2**31) >> 32
+
+    def first_at_least(t: int) -> int:  # smallest x with bu(x) >= t
+        return -((-(t * 2**32 - 2**31)) // big_m)
+
+    lo, hi = ctypes.c_int32(), ctypes.c_int32()
+    limits = [(-16384, 16384), (-32768, 32767), (-100, 100), (0, 0), (12000, 12345), (-5, -3)]
+    limits += [(a, a + d) for a, d in ((-20000, 7), (31000, 1767), (-32768, 0), (777, 4096))]
+    for t_min, t_max in limits:
+        sim.lib.fw_target_window(t_min, t_max, ctypes.byref(lo), ctypes.byref(hi))
+        want_lo = max(-k, first_at_least(t_min - 1))
+        want_hi = min(k, first_at_least(t_max + 2) - 1)
+        if want_lo > want_hi:  # beyond +-4e6: nothing accepted
+            assert lo.value > hi.value, (t_min, t_max)
+            continue
+        assert (lo.value, hi.value) == (want_lo, want_hi), (t_min, t_max)
+        assert bu(want_lo) >= t_min - 1 and (want_lo == -k or bu(want_lo - 1) < t_min - 1)
+        assert bu(want_hi) <= t_max + 1 and (want_hi == k or bu(want_hi + 1) > t_max + 1)
+
+
 def test_joint2_angle_targets_are_the_exact_nearest_count(sim: Sim) -> None:
     # The board turns micro-radians into counts in 32-bit pieces (dispatch.cpp bu_from_urad):
     # every value must come out as the 64-bit form x * M / 2^32 rounded, the sign's both sides

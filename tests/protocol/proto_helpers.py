@@ -65,6 +65,8 @@ class CppCodec:
             ctypes.c_uint32,
         ]
         lib.utrf_decoder_feed.restype = ctypes.c_int32
+        lib.utrf_decoder_feed_runs.argtypes = lib.utrf_decoder_feed.argtypes
+        lib.utrf_decoder_feed_runs.restype = ctypes.c_int32
         lib.utrf_message_size.argtypes = [ctypes.c_uint8]
         lib.utrf_message_size.restype = ctypes.c_int16
         lib.utrf_decode_message.argtypes = [
@@ -93,16 +95,18 @@ class CppCodec:
         return bytes(out[:n])
 
     def decode_stream(
-        self, data: bytes, chunks: list[int] | None = None
+        self, data: bytes, chunks: list[int] | None = None, runs: bool = False
     ) -> list[Frame | FrameError]:
-        """Every event of one fresh decoder fed ``data`` (in ``chunks`` of these sizes)."""
+        """Every event of one fresh decoder fed ``data`` (in ``chunks`` of these sizes), a
+        byte at a time, or with ``runs`` as the firmware's receive loop feeds it (feed_run)."""
+        feed = self.lib.utrf_decoder_feed_runs if runs else self.lib.utrf_decoder_feed
         decoder = self.lib.utrf_decoder_new()
         try:
             events: list[Frame | FrameError] = []
             pieces = [data] if not chunks else _split(data, chunks)
             for piece in pieces:
                 records = (RxRecord * (len(piece) + 1))()
-                n = self.lib.utrf_decoder_feed(decoder, piece, len(piece), records, len(records))
+                n = feed(decoder, piece, len(piece), records, len(records))
                 assert n >= 0
                 for r in records[:n]:
                     kind = RxEvent(r.event)

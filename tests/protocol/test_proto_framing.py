@@ -109,8 +109,10 @@ def test_damage_never_yields_a_wrong_frame_and_loses_only_damaged_ones(
         pieces.append(stream[pos : pos + size])
         pos += size
     assert [e for p in pieces for e in decoder.feed(p)] == events
-    # The firmware's receiver: the same events, frame for frame.
+    # The firmware's receiver: the same events, frame for frame, a byte at a time and in runs
+    # (feed_run, as its receive loop takes the bytes waiting) cut at arbitrary places.
     assert cpp.decode_stream(stream) == events
+    assert cpp.decode_stream(stream, chunks, runs=True) == events
 
 
 def _stream_parts() -> st.SearchStrategy[bytes]:
@@ -134,6 +136,7 @@ def _stream_parts() -> st.SearchStrategy[bytes]:
 @given(_stream_parts())
 def test_cpp_and_python_receivers_agree_on_any_stream(cpp: CppCodec, stream: bytes) -> None:
     assert cpp.decode_stream(stream) == decode_stream(stream)
+    assert cpp.decode_stream(stream, runs=True) == decode_stream(stream)
 
 
 @STREAM_SETTINGS

@@ -34,6 +34,14 @@ void send_board_message(Board& b, const Msg& m) {
 void flush_reply(Board& b) {
     if (b.reply_len != 0 && hal::serial_tx_room() >= b.reply_len) {
         hal::serial_write(b.reply, b.reply_len);
+        if (b.cache_reply) {
+            // Kept for a resend of its request, once it is on its way (no request is read
+            // before: one reply waits at a time).
+            ReplyCache& c = b.cache;
+            for (uint8_t i = 0; i < b.reply_len; ++i) c.frame[i] = b.reply[i];
+            c.len = b.reply_len;
+            b.cache_reply = false;
+        }
         b.reply_len = 0;
     }
 }
@@ -188,17 +196,17 @@ bool request_coming(const Board& b) {
 }
 
 // The board's own frames, in priority order: faults, the status, the state stream's samples.
-// A frame starts only into an empty transmit buffer, so a reply waits behind at most one; once
-// two samples wait (loop() or the line fell a period behind), the waiting samples go out in
-// this pass, back to back, as far as the buffer has room. While a request is coming in, no
-// sample starts (its reply goes first, onto a free line; they wait in the ring) until
-// kStreamBacklog of them wait.
+// A frame starts only into an empty transmit buffer, one a pass, so a reply waits behind at
+// most one. While a request is coming in, no sample starts (its reply goes first, onto a free
+// line; they wait in the ring), and a sample encoded while one began to come is not sent. Once
+// kStreamBacklog samples wait (loop() or the line fell behind: a long request, a busy line),
+// they go out whatever comes in, back to back, as far as the buffer has room.
 void board_frames(Board& b) {
     const bool idle = tx_idle(b);
     uint8_t pending = b.hand.stream_pending();
-    // Nothing can start (the buffer busy, fewer than two samples waiting): the status is
-    // polled when a frame can go, before it.
-    if (!idle && pending < 2) return;
+    // Nothing can start (the buffer busy, the stream not behind): the status is polled when a
+    // frame can go, before it.
+    if (!idle && pending < kStreamBacklog) return;
     poll_status(b);
     if (idle && report_faults(b)) return;
     if (idle && b.status_pending) {
@@ -208,23 +216,24 @@ void board_frames(Board& b) {
         b.status_pending = false;
         return;
     }
-    if (pending == 0) return;
-    if (pending < 2 && !idle) return;
     while (pending != 0 && b.reply_len == 0 &&
            hal::serial_tx_room() >= framing::kMaxFrameBytes) {
-        if (pending < kStreamBacklog && request_coming(b)) return;  // read first, next pass
+        const bool hold = pending < kStreamBacklog;
+        if (hold && request_coming(b)) return;  // read first, next pass
         const hand::StateSample& s = b.hand.stream_oldest();
-        for (uint8_t k = 0; k < s.skipped; ++k) {  // dropped samples: their seqs skipped
-            ++b.link.tx_dropped;
-            b.board_seq = proto::next_board_seq(b.board_seq);
-        }
-        // Encoded straight into the UART's ring, behind what it still holds (room checked).
+        uint8_t seq = b.board_seq;
+        for (uint8_t k = 0; k < s.skipped; ++k) seq = proto::next_board_seq(seq);
+        // Encoded straight into the UART's ring, behind what it still holds (room checked),
+        // and sent only if no request began to come in meanwhile (a tick may fall in the
+        // encoding): then the bytes stay unsent, the sample waits, and the reply goes first.
         const uint8_t end =
-            dispatch::write_state_frame(b, b.board_seq, s, hal::serial_tx_ring(), hal::serial_tx_head());
+            dispatch::write_state_frame(b, seq, s, hal::serial_tx_ring(), hal::serial_tx_head());
+        if (hold && request_coming(b)) return;
+        for (uint8_t k = 0; k < s.skipped; ++k) ++b.link.tx_dropped;  // their seqs skipped
         b.hand.stream_pop();
         hal::serial_tx_commit(end);
-        b.board_seq = proto::next_board_seq(b.board_seq);
-        --pending;
+        b.board_seq = proto::next_board_seq(seq);
+        if (--pending < kStreamBacklog) return;  // one a pass, unless behind
     }
 }
 
@@ -291,14 +300,16 @@ void reply_written(uint8_t seq, uint8_t len) {
     Board& b = g_board;
     b.reply_len = len;
     if (b.request_seq != (int16_t)seq || len == 0) return;
-    // The reply to the request being dispatched: kept for a resend of that request.
+    // The reply to the request being dispatched: kept for a resend of that request (copied
+    // when it goes into the transmit buffer, flush_reply()).
     ReplyCache& c = b.cache;
-    for (uint8_t i = 0; i < len; ++i) c.frame[i] = b.reply[i];
-    c.len = len;
+    b.cache_reply = true;
     c.seq = seq;
     c.msg_id = b.request_id;
     c.crc = b.request_crc;
 }
+
+void flush_reply() { flush_reply(g_board); }
 
 bool queue_reply(uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t len) {
     uint8_t* slot = reply_slot();
@@ -312,6 +323,7 @@ void apply_finger_config(uint8_t f) {
     Board& b = g_board;
     pid::Coeffs c;
     const finger::Params p = finger::compile(b.cfg.finger[f], hand::kDt, c);
+    dispatch::target_window(p.theta_min, p.theta_max, b.urad_lo[f], b.urad_hi[f]);
     Lock lock;
     b.hand.configure_finger(f, p, c);
     // A target outside new limits is never kept: clamp it in.
@@ -343,6 +355,7 @@ void setup() {
     b.tx_capacity = hal::serial_tx_room();  // empty: nothing was sent yet
     b.rx_frame_tick = 0;
     b.cache.len = 0;
+    b.cache_reply = false;
     b.request_seq = -1;
     b.status_change = 0;
     b.status_pending = false;
@@ -370,7 +383,6 @@ void setup() {
 void loop() {
     Board& b = g_board;
     watchdog(b);
-    b.hand.plan_paths();  // first: a segment is due every 5 ticks (core/path.h)
     if (!b.boot_sent && hal::serial_tx_room() >= framing::kMaxFrameBytes) {
         // Before any reply: the host learns of the reset first.
         proto::Boot m;
@@ -381,9 +393,10 @@ void loop() {
     flush_reply(b);
     receive(b);
     flush_reply(b);
+    board_frames(b);
+    b.hand.plan_paths();  // a segment is due every 5 ticks, planned one ahead (core/path.h)
     save_progress(b);
     flush_reply(b);
-    board_frames(b);
 }
 
 bool idle() {
@@ -393,13 +406,23 @@ bool idle() {
     const uint8_t* waiting;
     if (hal::serial_rx_peek(&waiting) != 0) return false;
     const uint8_t pending = b.hand.stream_pending();
-    if (pending >= 2) return false;  // behind: they go as the buffer has room (rare: spin)
+    if (pending >= kStreamBacklog) return false;  // behind: they go as the buffer has room
     if (!tx_idle(b)) return true;    // a frame starts when the buffer empties: an interrupt
     if (pending != 0 || b.status_pending) return false;
     for (uint8_t f = 0; f < hand::kFingers; ++f) {
         if (b.hand.finger(f).pending_new_faults() != 0) return false;
     }
     return true;
+}
+
+void take_bytes() {
+    Board& b = g_board;
+    if (b.reply_len != 0) return;
+    const uint8_t* data;
+    const uint8_t n = hal::serial_rx_peek(&data);
+    if (n == 0) return;
+    if (!b.decoder.in_frame()) b.rx_frame_tick = b.hand.ticks();
+    hal::serial_rx_take(b.decoder.feed_run(data, n));
 }
 
 void tick() {

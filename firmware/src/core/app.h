@@ -66,6 +66,7 @@ struct Board {
     uint8_t reply[framing::kMaxFrameBytes];
     uint8_t reply_len;
     ReplyCache cache;
+    bool cache_reply;  // the reply waiting is to be cached (once it is in the transmit buffer)
     int16_t request_seq;  // the request being dispatched (its reply is cached), -1 when none
     uint8_t request_id;
     uint16_t request_crc;
@@ -98,6 +99,10 @@ struct Board {
     uint8_t move_body[34];   // proto::Move::kSize
     uint8_t move_reply[13];  // proto::Moving::kSize
     path::Limits motion[hand::kFingers];  // cfg's motion, compiled for path::plan()
+    // Each finger's window of JOINT2_ANGLE set_targets values, micro-radians
+    // (dispatch::target_window(), with its limits).
+    int32_t urad_lo[hand::kFingers];
+    int32_t urad_hi[hand::kFingers];
 };
 
 Board& board();
@@ -117,6 +122,10 @@ void loop();   // one pass: link, dispatch, reports, telemetry, EEPROM, watchdog
 // written, or a tick or timer 0 came during the pass (its work, or the tick-alive check at
 // the new millisecond, is not left for the next interrupt).
 bool idle();
+// Between passes, while a frame comes in (the AVR layer's sleep, interrupts on): the bytes
+// received so far, up to any 0x00, into the decoder, which decodes them as they come; the
+// 0x00 and what it completes are left to loop(). Nothing while a reply waits.
+void take_bytes();
 void tick();   // the control tick (timer interrupt context)
 // After each tick, from the hardware layer that timed it: its length in CPU cycles, and
 // whether the next period began before it ended (an overrun).
@@ -141,6 +150,9 @@ void note_status(Board& b, const uint8_t* mode, const uint8_t* faults);
 // The status snapshot brought up to the fingers' modes and faults now (noted if changed).
 void poll_status(Board& b);
 void reply_written(uint8_t seq, uint8_t len);
+// The reply waiting into the transmit buffer now, if it has room (a handler that has work left
+// after its reply: the reply goes on the line meanwhile).
+void flush_reply();
 // Board time in microseconds (the tick count, refined by the tick timer).
 uint32_t board_time_us();
 

@@ -24,6 +24,11 @@ void ack(app::Board& b, uint8_t seq, uint8_t msg_id);
 uint8_t write_state_frame(app::Board& b, uint8_t seq, const hand::StateSample& s, uint8_t* out,
                           uint8_t start = 0);
 void fill_status(const app::Board& b, proto::Status& m);
+// The JOINT2_ANGLE set_targets values (micro-radians) a finger with these joint limits (BU)
+// accepts, [lo, hi]: exactly those whose count lies within a count of the limits (lo > hi:
+// none). Worked out when the limits change, so that set_targets checks its values before it
+// converts them, and acks before.
+void target_window(int16_t theta_min, int16_t theta_max, int32_t& lo, int32_t& hi);
 void fill_boot(const app::Board& b, proto::Boot& m);
 
 }  // namespace dispatch

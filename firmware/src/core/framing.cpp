@@ -28,10 +28,22 @@ uint8_t encode_frame(uint8_t seq, uint8_t msg_id, const uint8_t* body, uint8_t l
   return w.finish();
 }
 
-FrameDecoder::FrameDecoder() : len_(0), body_len_(0), discarding_(false) {}
+FrameDecoder::FrameDecoder() : body_len_(0), discarding_(false) { start(); }
+
+void FrameDecoder::start() {
+  len_ = 0;
+  out_ = 0;
+  left_ = 0;
+  hi_ = 0xFF;
+  lo_ = 0xFF;
+  d1_ = 0;
+  d2_ = 0;
+  lag_ = kCrcBytes;
+  zero_ = false;
+}
 
 void FrameDecoder::reset() {
-  len_ = 0;
+  start();
   body_len_ = 0;
   discarding_ = false;
 }
@@ -40,12 +52,12 @@ RxEvent FrameDecoder::feed_rest(uint8_t byte) {
   if (byte == 0x00) {
     if (discarding_) {
       discarding_ = false;
-      len_ = 0;
+      start();
       return RxEvent::NONE;
     }
     if (len_ == 0) return RxEvent::NONE;  // empty frame: a spare delimiter
     RxEvent ev = finish();
-    len_ = 0;
+    start();
     return ev;
   }
   if (discarding_) return RxEvent::NONE;
@@ -53,49 +65,22 @@ RxEvent FrameDecoder::feed_rest(uint8_t byte) {
     discarding_ = true;
     return RxEvent::OVERSIZE;
   }
-  buf_[len_++] = byte;
+  ++len_;
+  take(byte);
   return RxEvent::NONE;
 }
 
-// Decodes the COBS bytes in place (the output never overtakes the input) and checks the CRC,
-// in one pass over the bytes with pointers (an index a byte cost the AVR twice the cycles).
-// A frame holds fewer than 254 bytes, so every valid block is shorter than 255 and stands for
-// a zero after it (except the last, whose zero is the delimiter): the decoded frame is one
-// byte shorter than the encoded, and the CRC covers all of it but its last two bytes. (A code
-// 0xFF would claim 254 bytes, more than any frame holds: it fails the length check.)
+// The frame's 0x00: its bytes are decoded and the CRC run over all but the last two. A block
+// whose code claims more bytes than came before the 0x00 is a framing error. A frame holds
+// fewer than 254 bytes, so a code 0xFF (254 bytes, no zero after them) can never be complete.
 RxEvent FrameDecoder::finish() {
-  const uint8_t* in = buf_;
-  const uint8_t* const end = buf_ + len_;
-  uint8_t* out = buf_;
-  uint8_t crc_left = static_cast<uint8_t>(len_ - 1u - kCrcBytes);  // wraps when too short
-  uint8_t hi = 0xFF;
-  uint8_t lo = 0xFF;
-  while (in != end) {
-    const uint8_t code = *in++;
-    // A code counts itself and the code-1 bytes after it; none of them may be past the end.
-    if (code - 1 > end - in) return RxEvent::FRAMING_ERROR;
-    for (uint8_t k = code; k > 1; --k) {
-      const uint8_t byte = *in++;
-      *out++ = byte;
-      if (crc_left != 0) {
-        --crc_left;
-        crc_step(hi, lo, byte);
-      }
-    }
-    if (in != end) {
-      *out++ = 0x00;
-      if (crc_left != 0) {
-        --crc_left;
-        crc_step(hi, lo, 0x00);
-      }
-    }
-  }
-  const uint8_t n = static_cast<uint8_t>(out - buf_);
+  if (left_ != 0) return RxEvent::FRAMING_ERROR;
+  const uint8_t n = out_;
   if (n < kMinRawBytes) return RxEvent::FRAMING_ERROR;
   const uint8_t payload = static_cast<uint8_t>(n - kCrcBytes);
   const uint16_t got = static_cast<uint16_t>(buf_[payload] | (buf_[payload + 1] << 8));
   body_len_ = static_cast<uint8_t>(payload - kHeaderBytes);
-  if (static_cast<uint16_t>((static_cast<uint16_t>(hi) << 8) | lo) != got) {
+  if (static_cast<uint16_t>((static_cast<uint16_t>(hi_) << 8) | lo_) != got) {
     return RxEvent::CRC_ERROR;
   }
   return RxEvent::FRAME;

@@ -101,32 +101,75 @@ enum class RxEvent : uint8_t {
 // Empty frames (0x00 right after 0x00) are ignored, so a sender may send a lone 0x00 to end
 // whatever partial frame the receiver holds. OVERSIZE is reported once, at the first byte that
 // does not fit; the bytes up to and including the next 0x00 are then dropped silently.
+// Each byte is decoded as it is taken: its COBS undone (a block's zero is written when the
+// next block's code comes, so the last block's, which is the delimiter's, never is) and the
+// CRC run over the decoded bytes two behind (the last two are the CRC itself). What is left
+// for the 0x00 is a few checks, so a request whose bytes were taken while they came is ready
+// for dispatch at once.
 class FrameDecoder {
  public:
   FrameDecoder();
   RxEvent feed(uint8_t byte) {
     // The common case inline: one more byte of a frame that still fits.
     if (byte != 0 && len_ < kMaxEncodedBytes && !discarding_) {
-      buf_[len_++] = byte;
+      ++len_;
+      take(byte);
       return RxEvent::NONE;
     }
     return feed_rest(byte);
   }
   // Several bytes of a frame at once, as feed() would take them: data[0..n) up to the first
   // 0x00 (not taken: feed() it), and no further than the buffer holds (the byte that does not
-  // fit goes to feed() too, which reports OVERSIZE). Returns how many it took. A tight copy:
-  // the receive path's per-byte cost, with the CRC left to the 0x00.
+  // fit goes to feed() too, which reports OVERSIZE). Returns how many it took. Inline, with
+  // the state in locals (through the members, every store to buf_ made the compiler load them
+  // all again): the receive path's per-byte cost.
   uint8_t feed_run(const uint8_t* data, uint8_t n) {
     if (discarding_) return 0;
     const uint8_t room = static_cast<uint8_t>(kMaxEncodedBytes - len_);
     if (n > room) n = room;
-    uint8_t* out = buf_ + len_;
-    uint8_t k = 0;
-    while (k < n && data[k] != 0) {
-      out[k] = data[k];
-      ++k;
+    const uint8_t* p = data;
+    const uint8_t* const end = data + n;
+    uint8_t* out = buf_ + out_;
+    uint8_t left = left_;
+    uint8_t hi = hi_;
+    uint8_t lo = lo_;
+    uint8_t d1 = d1_;
+    uint8_t d2 = d2_;
+    uint8_t lag = lag_;
+    bool zero = zero_;
+    while (p != end) {
+      uint8_t byte = *p;
+      if (byte == 0) break;
+      ++p;
+      if (left == 0) {  // a code: the block before it stood for a zero
+        left = static_cast<uint8_t>(byte - 1u);
+        if (!zero) {
+          zero = true;
+          continue;
+        }
+        byte = 0x00;
+      } else {
+        --left;
+      }
+      if (lag != 0) {
+        --lag;
+      } else {
+        crc_step(hi, lo, d2);
+      }
+      d2 = d1;
+      d1 = byte;
+      *out++ = byte;
     }
+    const uint8_t k = static_cast<uint8_t>(p - data);
     len_ = static_cast<uint8_t>(len_ + k);
+    out_ = static_cast<uint8_t>(out - buf_);
+    left_ = left;
+    hi_ = hi;
+    lo_ = lo;
+    d1_ = d1;
+    d2_ = d2;
+    lag_ = lag;
+    zero_ = zero;
     return k;
   }
   // Forget any partial frame (e.g. after the UART reported an overrun).
@@ -147,11 +190,42 @@ class FrameDecoder {
   }
 
  private:
+  // One COBS byte of a frame (len_ already counts it): a code starts a block (and writes the
+  // zero the block before it stands for), any other is a decoded byte.
+  void take(uint8_t byte) {
+    if (left_ == 0) {
+      left_ = static_cast<uint8_t>(byte - 1u);
+      if (!zero_) {
+        zero_ = true;
+        return;
+      }
+      byte = 0x00;
+    } else {
+      --left_;
+    }
+    if (lag_ != 0) {
+      --lag_;
+    } else {
+      crc_step(hi_, lo_, d2_);
+    }
+    d2_ = d1_;
+    d1_ = byte;
+    buf_[out_++] = byte;
+  }
+  void start();  // a new frame: nothing taken
   RxEvent feed_rest(uint8_t byte);
   RxEvent finish();
 
-  uint8_t buf_[kMaxEncodedBytes];
-  uint8_t len_;
+  uint8_t buf_[kMaxEncodedBytes];  // the decoded bytes (never more than the encoded)
+  uint8_t len_;   // encoded bytes taken
+  uint8_t out_;   // decoded bytes
+  uint8_t left_;  // bytes of the current COBS block still to come (0: the next is a code)
+  uint8_t hi_;    // the CRC so far, over buf_[0 .. out_ - 2)
+  uint8_t lo_;
+  uint8_t d1_;    // the last decoded byte and the one before it (not yet in the CRC)
+  uint8_t d2_;
+  uint8_t lag_;   // decoded bytes still to come before the CRC takes one (2 at the start)
+  bool zero_;     // a block was begun: the next code writes its zero
   uint8_t body_len_;
   bool discarding_;
 };

@@ -51,6 +51,36 @@ int32_t utrf_decoder_feed(void* decoder, const uint8_t* data, uint32_t len, Utrf
   return static_cast<int32_t>(n);
 }
 
+// The same through feed_run(), as the firmware's receive loop takes the bytes waiting in its
+// ring: a run of a frame's bytes at once, and feed() for the byte that ends it (a 0x00, or the
+// one that does not fit).
+int32_t utrf_decoder_feed_runs(void* decoder, const uint8_t* data, uint32_t len,
+                               UtrfRxRecord* records, uint32_t max_records) {
+  framing::FrameDecoder& d = *static_cast<framing::FrameDecoder*>(decoder);
+  uint32_t n = 0;
+  uint32_t i = 0;
+  while (i < len) {
+    const uint32_t left = len - i;
+    i += d.feed_run(data + i, static_cast<uint8_t>(left > 255 ? 255 : left));
+    if (i == len) break;
+    const framing::RxEvent ev = d.feed(data[i++]);
+    if (ev == framing::RxEvent::NONE) continue;
+    if (n == max_records) return -1;
+    UtrfRxRecord& r = records[n++];
+    r.event = static_cast<uint8_t>(ev);
+    r.seq = r.msg_id = r.body_len = 0;
+    if (ev == framing::RxEvent::FRAME || ev == framing::RxEvent::CRC_ERROR) {
+      r.seq = d.seq();
+      r.msg_id = d.msg_id();
+    }
+    if (ev == framing::RxEvent::FRAME) {
+      r.body_len = d.body_len();
+      for (uint8_t k = 0; k < r.body_len; ++k) r.body[k] = d.body()[k];
+    }
+  }
+  return static_cast<int32_t>(n);
+}
+
 void* utrf_decoder_new() { return new framing::FrameDecoder(); }
 void utrf_decoder_free(void* decoder) { delete static_cast<framing::FrameDecoder*>(decoder); }
 void utrf_decoder_reset(void* decoder) { static_cast<framing::FrameDecoder*>(decoder)->reset(); }

@@ -210,6 +210,11 @@ static const uint8_t kWake = 0;
 // GPIOR0 bit 1, set by every tick: timer 0's overflow wakes loop() only when no tick came
 // since the last one (below).
 static const uint8_t kTickSeen = 1;
+// GPIOR0 bit 2, set by every other byte received: while a frame comes in, its bytes are taken
+// into the decoder (decoded, their CRC run) in the sleep, kRxEarly at a time, so that its
+// 0x00 finds it all but done.
+static const uint8_t kRxByte = 2;
+static const uint8_t kRxEarly = 8;
 namespace {
 uint8_t g_rx_buf[128];
 uint8_t g_tx_buf[256];
@@ -352,7 +357,11 @@ ISR(USART0_RX_vect) {
     // A frame's 0x00 wakes loop(): it reads the whole frame then (the bytes before it wait in
     // the ring, and hold the stream's next frame back meanwhile). A pass a byte would cost more
     // than the frame's decoding.
-    if (byte == 0) GPIOR0 |= _BV(kWake);
+    if (byte == 0) {
+        GPIOR0 |= _BV(kWake);
+    } else {
+        GPIOR0 |= _BV(kRxByte);
+    }
 }
 
 // The next byte of the ring into UDR0; when the ring is empty, this interrupt goes off.
@@ -591,7 +600,7 @@ uint16_t serial_take_overruns() {
     return n;
 }
 
-void sleep_until_interrupt(bool (*idle)()) {
+void sleep_until_interrupt(bool (*idle)(), void (*take_bytes)()) {
     set_sleep_mode(SLEEP_MODE_IDLE);
     cli();
     GPIOR0 &= (uint8_t)~_BV(kWake);  // before the check: what comes after it wakes us
@@ -604,6 +613,17 @@ void sleep_until_interrupt(bool (*idle)()) {
             sleep_disable();
             cli();
             if (GPIOR0 & _BV(kWake)) break;
+            if (GPIOR0 & _BV(kRxByte)) {
+                // A byte of a frame (not its end): once kRxEarly wait, they are taken now,
+                // with interrupts on, and the sleep goes on.
+                GPIOR0 &= (uint8_t)~_BV(kRxByte);
+                if ((uint8_t)((GPIOR1 - GPIOR2) & 0x7F) >= kRxEarly) {
+                    sei();
+                    take_bytes();
+                    cli();
+                    if (GPIOR0 & _BV(kWake)) break;
+                }
+            }
             const uint8_t now = (uint8_t)timer0_overflow_count;
             if (now == ms) continue;
             // Timer 0's overflow: a new millisecond for the tick-alive check. While the tick

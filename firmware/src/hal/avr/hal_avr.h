@@ -20,8 +20,10 @@ void avr_init();
 // enabled by the instruction just before SLEEP, and one pending then is taken only after
 // SLEEP has begun). An interrupt that gives loop() nothing to do (an ADC conversion, a byte
 // of a frame going out) costs the check, not a pass. The sleep saves power on the board, and
-// simavr skips the slept cycles instead of running loop()'s empty passes.
-void sleep_until_interrupt(bool (*idle)());
+// simavr skips the slept cycles instead of running loop()'s empty passes. While a frame comes
+// in, `take_bytes` (app::take_bytes) takes its bytes into the decoder, a few at a time, in the
+// sleep: its 0x00 then finds it decoded.
+void sleep_until_interrupt(bool (*idle)(), void (*take_bytes)());
 
 }  // namespace hal
 }  // namespace utrf
