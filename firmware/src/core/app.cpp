@@ -371,6 +371,7 @@ void loop() {
     Board& b = g_board;
     watchdog(b);
     b.hand.plan_paths();  // first: a segment is due every 5 ticks (core/path.h)
+    b.hand.stall_rules();  // about every 5 ticks a finger (core/hand.h)
     if (!b.boot_sent && hal::serial_tx_room() >= framing::kMaxFrameBytes) {
         // Before any reply: the host learns of the reset first.
         proto::Boot m;

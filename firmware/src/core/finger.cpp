@@ -33,9 +33,8 @@ Params compile(const config::Finger& cfg, float dt_s, pid::Coeffs& coeffs) {
     p.fault_high = fx::sat16((int32_t)p.theta_max + margin);
     p.stall_error = fx::bu(cfg.limits.stall_error);
     p.stall_motion = fx::bu(cfg.limits.stall_motion);
-    const uint32_t checks =
-        (uint32_t)((float)cfg.limits.stall_time * 1e-3f / (dt_s * kStallEvery) + 0.5f);
-    p.stall_checks = (uint16_t)(checks < 1 ? 1 : (checks > 65535u ? 65535u : checks));
+    const uint32_t ticks = (uint32_t)((float)cfg.limits.stall_time * 1e-3f / dt_s + 0.5f);
+    p.stall_ticks = (uint16_t)(ticks < 1 ? 1 : (ticks > 65535u ? 65535u : ticks));
     p.jump = fx::bu(cfg.limits.encoder_jump);
     p.zero_turn = encoder::turn_from_rad(cfg.hw.encoder_offset);
     p.encoder_invert = cfg.hw.encoder_invert != 0;
@@ -199,12 +198,6 @@ void Finger::halt() {
     duty_a_ = duty_b_ = 0;
 }
 
-void Finger::stop_now(hal::MotorCommand& out) {
-    duty_a_ = duty_b_ = 0;
-    out.a_counts = out.b_counts = 0;
-    out.drives = hal::drives(hal::Drive::COAST, hal::Drive::COAST, false);
-}
-
 void Finger::idle_outputs(uint8_t mode, hal::MotorCommand& out) {
     duty_a_ = duty_b_ = 0;
     out.a_counts = out.b_counts = 0;
@@ -223,10 +216,13 @@ int16_t Finger::duty_step(int16_t th) {
     return pid_.step_open(limit_, d, th);
 }
 
-bool Finger::stall_rule(int16_t u, int16_t th, hal::MotorCommand& out) {
+void Finger::stall_rule(uint8_t elapsed) {
     // Pushing (a large error, or a commanded duty, with the output at its limit) without
-    // moving for the stall time.
+    // moving for the stall time. The output and the angle are the last tick's.
     const uint8_t mode = mode_;
+    if (mode != POSITION && mode != DUTY && mode != GRASP) return;
+    const int16_t u = pid_.output();
+    const int16_t th = theta_;
     bool pushing;
     if (mode == DUTY) {
         pushing = u != 0 && fx::abs16(u) >= pid_.coeffs().deadband;
@@ -238,14 +234,14 @@ bool Finger::stall_rule(int16_t u, int16_t th, hal::MotorCommand& out) {
         if (fx::abs16((int16_t)(th - stall_ref_)) > params_.stall_motion) {
             stall_ref_ = th;
             stall_count_ = 0;
-        } else if (stall_count_ < params_.stall_checks) {
-            ++stall_count_;
+        } else {
+            const uint16_t n = (uint16_t)(stall_count_ + elapsed);
+            stall_count_ = n < stall_count_ || n > params_.stall_ticks ? params_.stall_ticks : n;
         }
-        if (stall_count_ >= params_.stall_checks) {
+        if (stall_count_ >= params_.stall_ticks) {
             if (mode != GRASP) {
-                latch(STALL);
-                stop_now(out);
-                return false;
+                latch(STALL);  // COAST: the next tick turns the motors off
+                return;
             }
             contact_ = true;  // closed on an object: hold it, the effort bounds the force
         }
@@ -254,7 +250,6 @@ bool Finger::stall_rule(int16_t u, int16_t th, hal::MotorCommand& out) {
         stall_count_ = 0;
         contact_ = false;
     }
-    return true;
 }
 
 }  // namespace finger

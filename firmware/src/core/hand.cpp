@@ -15,7 +15,7 @@ Hand::Hand()
       loop_idle_ticks_(0),
       halted_(0),
       overrun_pending_(false),
-      stall_turn_(0),
+      stall_seen_(0),
       worst_cycles_(0),
       timing_base_(0),
       window_sum_(0),
@@ -30,6 +30,22 @@ Hand::Hand()
     timing_.overruns = 0;
     timing_.worst_cycles = 0;
     timing_.mean_cycles = 0;
+    // Staggered: one finger's check a tick while loop() keeps up.
+    for (uint8_t f = 0; f < kFingers; ++f) stall_at_[f] = f;
+}
+
+void Hand::stall_rules() {
+    const uint8_t now = (uint8_t)ticks();
+    if (now == stall_seen_) return;
+    stall_seen_ = now;
+    for (uint8_t f = 0; f < kFingers; ++f) {
+        const uint8_t elapsed = (uint8_t)(now - stall_at_[f]);
+        if (elapsed < finger::kStallEvery) continue;
+        stall_at_[f] = now;
+        hal::tick_lock();
+        fingers_[f].stall_rule(elapsed);
+        hal::tick_unlock();
+    }
 }
 
 void Hand::set_safety(uint16_t timeout_ms, uint8_t safe_action) {

@@ -62,6 +62,10 @@ class Hand {
         for (uint8_t f = 0; f < kFingers; ++f) fingers_[f].plan_path();
     }
     const finger::Finger& finger(uint8_t f) const { return fingers_[f]; }
+    // loop() context, every pass, without the lock (it takes it for a check): each finger's
+    // stall rule about every kStallEvery ticks, counting the ticks that passed since its last
+    // check (a late loop() delays a stop by its lateness, at most kLoopHangTicks).
+    void stall_rules();
     void reset_timing();
     TickTiming timing() const {
         TickTiming t = timing_;
@@ -123,7 +127,8 @@ class Hand {
     uint16_t loop_idle_ticks_;
     volatile uint8_t halted_;
     bool overrun_pending_;
-    uint8_t stall_turn_;  // the finger whose stall rule runs this tick
+    uint8_t stall_seen_;              // ticks_' low byte at stall_rules()' last look
+    uint8_t stall_at_[kFingers];      // ... at each finger's last stall check
     TickTiming timing_;     // its ticks and worst_cycles fields unused: see timing()
     uint16_t worst_cycles_;
     uint32_t timing_base_;  // ticks_ at reset_timing()
@@ -183,17 +188,15 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
     }
 
     hal::MotorCommand out[kFingers];
-    const uint8_t turn = stall_turn_;
-    stall_turn_ = (uint8_t)(turn + 1 == finger::kStallEvery ? 0 : turn + 1);
     // Five written-out ticks, not a loop: each Finger's fields at a fixed address (lds/sts),
     // no pointer kept and spilled. Measured: about 600 cycles a tick less (mean and worst),
     // for some 7.5 KB of flash (firmware/README.md, Timing).
     static_assert(kFingers == 5, "five finger ticks written out");
-    fingers_[0].tick(enc[0], out[0], turn == 0);
-    fingers_[1].tick(enc[1], out[1], turn == 1);
-    fingers_[2].tick(enc[2], out[2], turn == 2);
-    fingers_[3].tick(enc[3], out[3], turn == 3);
-    fingers_[4].tick(enc[4], out[4], turn == 4);
+    fingers_[0].tick(enc[0], out[0]);
+    fingers_[1].tick(enc[1], out[1]);
+    fingers_[2].tick(enc[2], out[2]);
+    fingers_[3].tick(enc[3], out[3]);
+    fingers_[4].tick(enc[4], out[4]);
     hal::motors_write(out);
 }
 
