@@ -38,12 +38,12 @@ struct StateSample {
     uint8_t skipped;  // samples dropped just before this one (the ring was full)
     int16_t theta[kFingers];
     int16_t target[kFingers];
-    int8_t duty_a[kFingers];  // the state message's 1/128 counts (fx::duty_counts)
-    int8_t duty_b[kFingers];
+    int16_t duty_a[kFingers];  // Q15, as the finger has them: loop() turns them into the
+    int16_t duty_b[kFingers];  // state message's 1/128 counts (fx::duty_counts) as it writes
 };
 // Samples waiting for loop(): loop() may fall this many periods behind (a long request, a
 // busy line) before one is dropped. Measured: a move's request holds loop() up to 5 ms at
-// 1 kHz with five paths running (docs/benchmarks.md); 8 slots of 33 bytes.
+// 1 kHz with five paths running (docs/benchmarks.md); 8 slots of 43 bytes.
 static const uint8_t kStreamSlots = 8;
 
 class Hand {
@@ -214,7 +214,7 @@ UTRF_HOT void Hand::stream_tick() {
         return;
     }
     // The slot is kept as a pointer (stream_put_), not worked out from head: the compiler
-    // would work out the slot's address (head * 33) anew for each field it writes.
+    // would work out the slot's address (head * 43) anew for each field it writes.
     StateSample& s = *stream_put_;
     s.tick = (uint16_t)ticks_;
     s.skipped = stream_skip_;
@@ -234,8 +234,8 @@ UTRF_HOT void Hand::sample_finger(StateSample& s, uint8_t f) const {
     const finger::Finger& fg = fingers_[f];
     s.theta[f] = fg.theta();
     s.target[f] = fg.target();
-    s.duty_a[f] = fx::duty_counts(fg.duty_a());
-    s.duty_b[f] = fx::duty_counts(fg.duty_b());
+    s.duty_a[f] = fg.duty_a();
+    s.duty_b[f] = fg.duty_b();
 }
 
 UTRF_HOT void Hand::record_timing(uint16_t cycles, bool overran) {
