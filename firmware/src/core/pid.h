@@ -112,8 +112,17 @@ UTRF_HOT int16_t add_deadband(int16_t v, int16_t db) {
     return (int16_t)(v + fx::prod_mid16(fx::prod_su(v, (uint16_t)db)));
 }
 
-// The same on the unlimited sum (int32, before the limit).
-UTRF_HOT int32_t add_deadband32(int32_t v, int16_t db) {
+// The PID's sum before the limit: |P - D| 2 + |I| + |ff| < 2^18 fits 24 bits. On the AVR a
+// 24-bit integer (avr-gcc's __int24: three bytes a value, an add or compare a byte shorter
+// than int32's), elsewhere int32_t: the same values either way.
+#if defined(__AVR__)
+typedef __int24 sum_t;
+#else
+typedef int32_t sum_t;
+#endif
+
+// The same on the unlimited sum (before the limit).
+UTRF_HOT sum_t add_deadband32(sum_t v, int16_t db) {
     if (v >= kDeadbandRamp15) return v + db;
     if (v <= -kDeadbandRamp15) return v - db;
     return v + fx::prod_mid16(fx::prod_su((int16_t)v, (uint16_t)db));
@@ -144,9 +153,9 @@ UTRF_HOT int16_t Pid::step(int16_t limit, int16_t target, int16_t measured, int1
 
     // P and D in Q14 (+-2 duty each), the integrator's high word and the feedforward in Q15:
     // the sum fits int32 with room to spare.
-    const int32_t p_d =
-        (int32_t)fx::apply16(c.kp, e, kTermMax14) - fx::apply16(c.kd, v8_, kTermMax14);
-    int32_t v = p_d * 2 + (int16_t)(i31_ >> 16) + ff;
+    const sum_t p_d =
+        (sum_t)fx::apply16(c.kp, e, kTermMax14) - fx::apply16(c.kd, v8_, kTermMax14);
+    sum_t v = p_d * 2 + (int16_t)(i31_ >> 16) + ff;
     if (c.deadband) v = add_deadband32(v, c.deadband);
     int16_t u = v > limit ? limit : (v < -limit ? (int16_t)-limit : (int16_t)v);
     u = slew_limit(u, u_, c.slew);
@@ -156,14 +165,19 @@ UTRF_HOT int16_t Pid::step(int16_t limit, int16_t target, int16_t measured, int1
     // direction the error pushes it; integrate when it is free or when the error unwinds it.
     saturated_ = (v > u && e > 0) || (v < u && e < 0);
     if (!saturated_ && e != 0) {
-        // i31 + step could overflow int32 near the limit: saturate before adding.
-        const int32_t lim31 = (int32_t)((uint32_t)(uint16_t)limit << 16);
+        // min(i31 + step, limit) for a step up, max(i31 + step, -limit) for a step down, the
+        // sum exact: i31 + step may overflow int32 near the limit (the add's overflow flag),
+        // and the limit is a whole Q15 duty (low word 0), so the compare is of the high word.
         const int32_t step = fx::apply(c.ki, e, kIStepMax31);
+        int32_t sum;
+        const bool over = __builtin_add_overflow(i31_, step, &sum);
+        const int16_t hi = (int16_t)(sum >> 16);
         if (step >= 0) {
-            i31_ = i31_ > lim31 - step ? lim31 : i31_ + step;
-        } else {
-            i31_ = i31_ < -lim31 - step ? -lim31 : i31_ + step;
+            if (over || hi >= limit) sum = (int32_t)((uint32_t)(uint16_t)limit << 16);
+        } else if (over || hi < -limit) {
+            sum = -(int32_t)((uint32_t)(uint16_t)limit << 16);
         }
+        i31_ = sum;
     }
     return u;
 }
