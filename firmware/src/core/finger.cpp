@@ -198,8 +198,9 @@ void Finger::halt() {
     duty_a_ = duty_b_ = 0;
 }
 
-void Finger::idle_outputs(uint8_t mode, hal::MotorCommand& out) {
+hal::MotorCommand Finger::idle_outputs(uint8_t mode) {
     duty_a_ = duty_b_ = 0;
+    hal::MotorCommand out;
     out.a_counts = out.b_counts = 0;
     // Short brake needs the driver enabled: refused to a finger with a stop fault other than
     // JOINT_LIMIT (an encoder or stall fault, an overrun: nothing of it is trusted).
@@ -207,6 +208,7 @@ void Finger::idle_outputs(uint8_t mode, hal::MotorCommand& out) {
                              (mode == BRAKE && !params_.rotary) ? hal::Drive::BRAKE
                                                                 : hal::Drive::COAST,
                              mode == BRAKE && (faults_ & (kStopFaults & ~JOINT_LIMIT)) == 0);
+    return out;
 }
 
 int16_t Finger::duty_step(int16_t th) {

@@ -161,7 +161,7 @@ class Finger {
     // DUTY: the commanded duty, never further past a joint limit, through the PID's limit and
     // slew limiter.
     int16_t duty_step(int16_t th);
-    void idle_outputs(uint8_t mode, hal::MotorCommand& out);
+    hal::MotorCommand idle_outputs(uint8_t mode);  // by value: the tick's command stays in registers
 
     // The tick's working state first, then the PID (its state and coefficients), then the
     // configuration (Params: the fields the tick reads first): all that a tick in closed loop
@@ -236,7 +236,7 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
 
     const uint8_t mode = mode_;  // after the latches: a stop fault has made it COAST
     if (UTRF_UNLIKELY(mode == COAST || mode == BRAKE)) {
-        idle_outputs(mode, out);
+        out = idle_outputs(mode);
         return;
     }
 

@@ -187,17 +187,23 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
         return;
     }
 
-    hal::MotorCommand out[kFingers];
     // Five written-out ticks, not a loop: each Finger's fields at a fixed address (lds/sts),
     // no pointer kept and spilled. Measured: about 600 cycles a tick less (mean and worst),
-    // for some 7.5 KB of flash (firmware/README.md, Timing).
+    // for some 7.5 KB of flash (firmware/README.md, Timing). Each finger's driver command goes
+    // to its driver as soon as it is worked out: from registers, never stored (on the AVR the
+    // write is inline: hal/avr/motors_inline.h).
     static_assert(kFingers == 5, "five finger ticks written out");
-    fingers_[0].tick(enc[0], out[0]);
-    fingers_[1].tick(enc[1], out[1]);
-    fingers_[2].tick(enc[2], out[2]);
-    fingers_[3].tick(enc[3], out[3]);
-    fingers_[4].tick(enc[4], out[4]);
-    hal::motors_write(out);
+    hal::MotorCommand out;
+    fingers_[0].tick(enc[0], out);
+    hal::motor_write<0>(out);
+    fingers_[1].tick(enc[1], out);
+    hal::motor_write<1>(out);
+    fingers_[2].tick(enc[2], out);
+    hal::motor_write<2>(out);
+    fingers_[3].tick(enc[3], out);
+    hal::motor_write<3>(out);
+    fingers_[4].tick(enc[4], out);
+    hal::motor_write<4>(out);
 }
 
 UTRF_HOT void Hand::stream_tick() {
