@@ -67,16 +67,6 @@ Finger::Finger()
     params_ = Params();
 }
 
-#if defined(__AVR__)
-// The layout the tick relies on (finger.h): what it reads and writes in closed loop, the Pid
-// and Params up to pretension_counts (read once a tick), within the first 64 bytes. (AVR only:
-// the host pads for alignment.)
-struct LayoutCheck {
-    static_assert(offsetof(Finger, params_) + offsetof(Params, pretension_counts) <= 64,
-                  "the tick's fields must stay within ldd/std reach of the Finger's address");
-};
-#endif
-
 int16_t Finger::limit_for(uint8_t mode) const {
     int16_t lim = params_.limit();
     if (mode == GRASP) {

@@ -47,8 +47,7 @@ static const uint8_t kStopFaults = ENCODER_RANGE | ENCODER_JUMP | STALL | JOINT_
 
 // A finger's configuration, ready for the tick (built in loop() context by compile(); the
 // PID's coefficients go to its Pid). Angles in BU (core/fixed.h: 2 pi / 32768 rad), duties in
-// Q15. The fields every tick reads come first: with the finger's working state and its Pid
-// before them they sit in the first 64 bytes of the Finger (see there).
+// Q15. The fields every tick reads come first (see Finger's fields).
 struct Params {
     int16_t pretension;    // antagonistic pretension
     int16_t fault_low;     // JOINT_LIMIT below this (theta_min - margin)
@@ -164,11 +163,10 @@ class Finger {
     hal::MotorCommand idle_outputs(uint8_t mode);  // by value: the tick's command stays in registers
 
     // The tick's working state first, then the PID (its state and coefficients), then the
-    // configuration (Params: the fields the tick reads first): all that a tick in closed loop
-    // touches lies within the object's first 64 bytes, which the AVR's ldd/std reach by
-    // displacement from one pointer (beyond them, each access needs an address computed
-    // first). static_assert in finger.cpp. (The hand's tick now reaches each finger at a fixed
-    // address, hand.h; the layout is kept for code that reaches a finger through a pointer.)
+    // configuration (Params: the fields the tick reads first). The hand's tick reaches each
+    // finger at a fixed address (hand.h: lds/sts), so the layout no longer has to keep what
+    // it touches within ldd/std reach (64 bytes) of one pointer; it stays close to that for
+    // the code that reaches a finger through a pointer.
     int16_t theta_;
     int16_t target_;
     int16_t limit_;  // limit_for(mode_), kept current
@@ -191,7 +189,6 @@ class Finger {
     int16_t effort_;
     path::Path path_;  // a move under way: the setpoint and feedforward each tick
 
-    friend struct LayoutCheck;
 };
 
 // Q15 duty magnitude (0..32767) to PWM counts, rounded: (mag * 2 kPwmPeriod + 2^15) >> 16, which
