@@ -5,10 +5,9 @@ namespace hand {
 
 Hand::Hand()
     : ticks_(0),
-      last_frame_tick_(0),
+      silence_left_(500),
       timeout_ticks_(500),
       safe_action_(0),
-      timed_out_(false),
       frame_seen_(0),
       loop_count_(0),
       loop_seen_(0),
@@ -50,6 +49,7 @@ void Hand::stall_rules() {
 
 void Hand::set_safety(uint16_t timeout_ms, uint8_t safe_action) {
     timeout_ticks_ = (uint16_t)(((uint32_t)timeout_ms * kTickHz + 999u) / 1000u);
+    if (timeout_ticks_ == 0) timeout_ticks_ = 1;
     safe_action_ = safe_action;
 }
 

@@ -117,10 +117,9 @@ class Hand {
    private:
     finger::Finger fingers_[kFingers];
     uint32_t ticks_;
-    uint32_t last_frame_tick_;
-    uint16_t timeout_ticks_;
+    uint16_t silence_left_;  // ticks until the host-silence timeout; 0: timed out
+    uint16_t timeout_ticks_;  // >= 1 (heartbeat_timeout >= 50 ms)
     uint8_t safe_action_;
-    bool timed_out_;
     volatile uint8_t frame_seen_;
     volatile uint8_t loop_count_;
     uint8_t loop_seen_;
@@ -147,13 +146,12 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
     ++ticks_;
 
     // ---- host silence: any valid frame feeds it; the safe action once per silence ----
+    // A countdown from the last frame's tick: the timeout falls timeout_ticks_ ticks after it
+    // (0: fallen, until the next frame).
     if (frame_seen_) {
         frame_seen_ = 0;
-        last_frame_tick_ = ticks_;
-        timed_out_ = false;
-    }
-    if (UTRF_UNLIKELY(!timed_out_ && ticks_ - last_frame_tick_ >= timeout_ticks_)) {
-        timed_out_ = true;
+        silence_left_ = timeout_ticks_;
+    } else if (UTRF_UNLIKELY(silence_left_ != 0 && --silence_left_ == 0)) {
         for (uint8_t f = 0; f < kFingers; ++f) {
             finger::Finger& fg = fingers_[f];
             if (!fg.active()) continue;  // nothing runs unsupervised on an idle finger
