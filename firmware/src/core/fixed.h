@@ -45,6 +45,15 @@ inline int16_t sat_add16(int16_t a, int16_t b) {
     return r == -32768 ? (int16_t)-32767 : r;
 }
 
+// A 24-bit signed integer for values known to fit (|x| < 2^23): on the AVR avr-gcc's __int24
+// (three bytes: an add, a compare or a copy a byte shorter than int32's), elsewhere int32_t.
+// The same values either way (each use states its bound).
+#if defined(__AVR__)
+typedef __int24 int24;
+#else
+typedef int32_t int24;
+#endif
+
 // Branch hints for the tick's usual paths (they change no result).
 #define UTRF_LIKELY(x) __builtin_expect(!!(x), 1)
 #define UTRF_UNLIKELY(x) __builtin_expect(!!(x), 0)

@@ -101,14 +101,18 @@ class Path {
     void evaluate(uint32_t acc, uint16_t left_after, int16_t& goal, int16_t& ff) const;
 
     // ---- the tick's ----
-    int32_t pos8_;    // the setpoint, BU in Q8
-    int32_t step8_;   // its change a tick, BU in Q8
+    // 24 bits (fx::int24): the setpoint is within +-pi (|pos8| <= 2^22), a step at most the
+    // distance of a segment (|goal - at| < 2^15 BU) and in practice max_speed (<= 100 rad/s,
+    // 521 BU a tick) allows; a late loop() carries the setpoint on by a step a tick for at
+    // most kLoopHangTicks (20) ticks, 2^14 BU more at worst: |pos8| < 2^23 throughout.
+    fx::int24 pos8_;    // the setpoint, BU in Q8
+    fx::int24 step8_;   // its change a tick, BU in Q8
     int16_t ff_;
     int16_t end_;
     uint16_t left_;      // ticks to the path's end; 0: no path
     uint8_t seg_left_;   // ticks left in this segment; 0: take the next one
     // ---- the next segment, from loop(): taken by the tick at the segment's end ----
-    int32_t next_step8_;
+    fx::int24 next_step8_;
     int16_t next_ff_;
     uint8_t next_len_;
     volatile uint8_t next_ready_;

@@ -112,14 +112,8 @@ UTRF_HOT int16_t add_deadband(int16_t v, int16_t db) {
     return (int16_t)(v + fx::prod_mid16(fx::prod_su(v, (uint16_t)db)));
 }
 
-// The PID's sum before the limit: |P - D| 2 + |I| + |ff| < 2^18 fits 24 bits. On the AVR a
-// 24-bit integer (avr-gcc's __int24: three bytes a value, an add or compare a byte shorter
-// than int32's), elsewhere int32_t: the same values either way.
-#if defined(__AVR__)
-typedef __int24 sum_t;
-#else
-typedef int32_t sum_t;
-#endif
+// The PID's sum before the limit: |P - D| 2 + |I| + |ff| < 2^18 fits 24 bits (fx::int24).
+typedef fx::int24 sum_t;
 
 // The same on the unlimited sum (before the limit).
 UTRF_HOT sum_t add_deadband32(sum_t v, int16_t db) {
