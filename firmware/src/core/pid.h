@@ -151,13 +151,26 @@ UTRF_HOT int16_t Pid::step(int16_t limit, int16_t target, int16_t measured, int1
         (sum_t)fx::apply16(c.kp, e, kTermMax14) - fx::apply16(c.kd, v8_, kTermMax14);
     sum_t v = p_d * 2 + (int16_t)(i31_ >> 16) + ff;
     if (c.deadband) v = add_deadband32(v, c.deadband);
-    int16_t u = v > limit ? limit : (v < -limit ? (int16_t)-limit : (int16_t)v);
-    u = slew_limit(u, u_, c.slew);
+    // `free`: the output is the sum itself (neither the limit nor the slew limiter cut it), so
+    // nothing holds it back and the test below needs no compare of the 24-bit sum.
+    int16_t u;
+    bool free = false;
+    if (v > limit) {
+        u = limit;
+    } else if (v < -limit) {
+        u = (int16_t)-limit;
+    } else {
+        u = (int16_t)v;
+        free = true;
+    }
+    const int16_t s = slew_limit(u, u_, c.slew);
+    if (s != u) free = false;
+    u = s;
     u_ = u;
 
     // Conditional integration: hold the integrator while the output is held back in the
     // direction the error pushes it; integrate when it is free or when the error unwinds it.
-    saturated_ = (v > u && e > 0) || (v < u && e < 0);
+    saturated_ = !free && ((v > u && e > 0) || (v < u && e < 0));
     if (!saturated_ && e != 0) {
         // min(i31 + step, limit) for a step up, max(i31 + step, -limit) for a step down, the
         // sum exact: i31 + step may overflow int32 near the limit (the add's overflow flag),
