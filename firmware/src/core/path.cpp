@@ -80,19 +80,6 @@ void Path::start(const Plan& p, int16_t from_bu, uint8_t first) {
     plan_n_ = (first < 1 || first > kEvery) ? kEvery : first;
 }
 
-void Path::next_segment() {
-    // A straight step to the path's point at the segment's end, worked out by loop() with the
-    // segment. Without one (loop() late), the same step goes on for another tick.
-    if (UTRF_LIKELY(next_ready_)) {
-        step8_ = next_step8_;
-        ff_ = next_ff_;
-        seg_left_ = next_len_;
-        next_ready_ = 0;
-    } else {
-        seg_left_ = 1;
-    }
-}
-
 void Path::plan_next_work() {
     // Only loop() writes the planning fields and sets next_ready_; the tick clears it and
     // stop() ends the path: read the flag and the path's state under the lock.

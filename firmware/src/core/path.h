@@ -93,9 +93,10 @@ class Path {
     inline int16_t tick(int16_t& target);
 
    private:
-    // The tick, at a segment's end: take the one loop() worked out, its step included (out
-    // of line: once in kEvery ticks).
-    void next_segment();
+    // The tick, at a segment's end: take the one loop() worked out, its step included (inline:
+    // a call with its register saves cost more than the copy, and in the worst tick several
+    // fingers take theirs).
+    inline void next_segment();
     // The path's point `ahead` ticks after the phase `acc` (the end for the last segment),
     // and the feedforward there.
     void evaluate(uint32_t acc, uint16_t left_after, int16_t& goal, int16_t& ff) const;
@@ -129,6 +130,19 @@ class Path {
 
 // 65536 / n for the steps toward a point n ticks ahead (n <= kEvery).
 extern const uint16_t kRecip[kEvery + 1];
+
+__attribute__((always_inline)) inline void Path::next_segment() {
+    // A straight step to the path's point at the segment's end, worked out by loop() with the
+    // segment. Without one (loop() late), the same step goes on for another tick.
+    if (UTRF_LIKELY(next_ready_)) {
+        step8_ = next_step8_;
+        ff_ = next_ff_;
+        seg_left_ = next_len_;
+        next_ready_ = 0;
+    } else {
+        seg_left_ = 1;
+    }
+}
 
 __attribute__((always_inline)) inline int16_t Path::tick(int16_t& target) {
     if (--left_ == 0) {  // the end: exactly there, at rest
