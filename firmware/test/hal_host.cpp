@@ -55,6 +55,13 @@ void motor_write_at(uint8_t f, const MotorCommand& c) {
     if (f == 4) ++g_state.motor_writes;  // a tick's five
 }
 
+void motor_off(uint8_t f) {
+    MotorCommand c;
+    c.a_counts = c.b_counts = 0;
+    c.drives = drives(Drive::COAST, Drive::COAST, false);
+    motor_write_at(f, c);
+}
+
 void motors_all_off() {
     for (uint8_t f = 0; f < 5; ++f) {
         g_state.motor[f][0].drive = g_state.motor[f][1].drive = Drive::COAST;

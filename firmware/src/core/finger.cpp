@@ -208,11 +208,11 @@ int16_t Finger::duty_step(int16_t th) {
     return pid_.step_open(limit_, d, th);
 }
 
-void Finger::stall_rule(uint8_t elapsed) {
+bool Finger::stall_rule(uint8_t elapsed) {
     // Pushing (a large error, or a commanded duty, with the output at its limit) without
     // moving for the stall time. The output and the angle are the last tick's.
     const uint8_t mode = mode_;
-    if (mode != POSITION && mode != DUTY && mode != GRASP) return;
+    if (mode != POSITION && mode != DUTY && mode != GRASP) return false;
     const int16_t u = pid_.output();
     const int16_t th = theta_;
     bool pushing;
@@ -232,8 +232,9 @@ void Finger::stall_rule(uint8_t elapsed) {
         }
         if (stall_count_ >= params_.stall_ticks) {
             if (mode != GRASP) {
-                latch(STALL);  // COAST: the next tick turns the motors off
-                return;
+                latch(STALL);  // COAST; the motors go off with the caller's motor_off()
+                duty_a_ = duty_b_ = 0;
+                return true;
             }
             contact_ = true;  // closed on an object: hold it, the effort bounds the force
         }
@@ -242,6 +243,7 @@ void Finger::stall_rule(uint8_t elapsed) {
         stall_count_ = 0;
         contact_ = false;
     }
+    return false;
 }
 
 }  // namespace finger

@@ -117,9 +117,10 @@ class Finger {
     // ---- from loop(), under the tick lock ----
     // The stall rule, `elapsed` ticks (1..255) after its last check, on the output and angle
     // of the last tick: pushing (a large error, or a commanded duty, with the output at its
-    // limit) with less motion than stall_motion for the stall time latches STALL (COAST: the
-    // next tick turns the motors off); in GRASP it is contact, held.
-    void stall_rule(uint8_t elapsed);
+    // limit) with less motion than stall_motion for the stall time latches STALL and returns
+    // true: the finger is in COAST, and the caller turns its motors off at once
+    // (hal::motor_off()); in GRASP it is contact, held.
+    bool stall_rule(uint8_t elapsed);
 
     // ---- state ----
     uint8_t mode() const { return mode_; }

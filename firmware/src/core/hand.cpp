@@ -42,7 +42,7 @@ void Hand::stall_rules() {
         if (elapsed < finger::kStallEvery) continue;
         stall_at_[f] = now;
         hal::tick_lock();
-        fingers_[f].stall_rule(elapsed);
+        if (fingers_[f].stall_rule(elapsed)) hal::motor_off(f);  // stopped now, not next tick
         hal::tick_unlock();
     }
 }

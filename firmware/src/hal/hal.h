@@ -60,6 +60,9 @@ inline void motor_write(const MotorCommand& c) {
 
 // Every channel to COAST and every STBY low. Safe from any context, interrupts included.
 void motors_all_off();
+// One finger's channels to COAST and its STBY low, at once (loop() context, under the tick
+// lock: the stall rule, which runs there, stops its finger without waiting for the tick).
+void motor_off(uint8_t finger);
 
 // ---- encoders ----------------------------------------------------------------------------------
 // One Joint-2 encoder reading, already checked by its driver (and judged: the angle and the

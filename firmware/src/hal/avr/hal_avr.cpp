@@ -440,6 +440,11 @@ void avr_init() {
     UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
 }
 
+void motor_off(uint8_t f) {
+    // The compare outputs are disconnected by the change to COAST: the counts do not matter.
+    avr_motors::drives_change(f, drives(Drive::COAST, Drive::COAST, false));
+}
+
 void motors_all_off() {
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
         for (uint8_t f = 0; f < UTRF_FINGER_COUNT; ++f) {
