@@ -78,8 +78,8 @@ MUTANTS = [
         "host-silence-off",
         "host silence",
         "firmware/src/core/hand.h",
-        "if (UTRF_UNLIKELY(!timed_out_ && ticks_ - last_frame_tick_ >= timeout_ticks_)) {",
-        "if (false) {",
+        "} else if (UTRF_UNLIKELY(silence_left_ != 0 && --silence_left_ == 0)) {",
+        "} else if (false) {",
     ),
     Mutant(
         "host-silence-always-hold",
@@ -139,7 +139,8 @@ MUTANTS = [
         "stall-off",
         "stall",
         "firmware/src/core/finger.cpp",
-        "latch(STALL);\n                stop_now(out);\n                return false;",
+        "latch(STALL);  // COAST; the motors go off with the caller's motor_off()\n"
+        "                duty_a_ = duty_b_ = 0;\n                return true;",
         "contact_ = true;",
     ),
     Mutant(

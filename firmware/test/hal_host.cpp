@@ -39,23 +39,27 @@ void power_on() {
 
 using host::g_state;
 
-void motors_write(const MotorCommand* cmd) {
-    for (uint8_t f = 0; f < 5; ++f) {
-        const MotorOut ch[2] = {{drive_a(cmd[f].drives), cmd[f].a_counts},
-                                {drive_b(cmd[f].drives), cmd[f].b_counts}};
-        // The rule the AVR layer relies on: a driving channel has at least one count; and the
-        // core's: a channel that does not drive has none.
-        for (uint8_t k = 0; k < 2; ++k) {
-            const MotorOut& m = ch[k];
-            const bool drives = m.drive == Drive::FORWARD || m.drive == Drive::REVERSE;
-            if (drives ? (m.on_counts == 0 || m.on_counts > kPwmPeriod) : m.on_counts != 0) {
-                ++g_state.lock_errors;
-            }
-            g_state.motor[f][k] = m;
+void motor_write_at(uint8_t f, const MotorCommand& c) {
+    const MotorOut ch[2] = {{drive_a(c.drives), c.a_counts}, {drive_b(c.drives), c.b_counts}};
+    // The rule the AVR layer relies on: a driving channel has at least one count; and the
+    // core's: a channel that does not drive has none.
+    for (uint8_t k = 0; k < 2; ++k) {
+        const MotorOut& m = ch[k];
+        const bool drives = m.drive == Drive::FORWARD || m.drive == Drive::REVERSE;
+        if (drives ? (m.on_counts == 0 || m.on_counts > kPwmPeriod) : m.on_counts != 0) {
+            ++g_state.lock_errors;
         }
-        g_state.stby[f] = stby_of(cmd[f].drives);
+        g_state.motor[f][k] = m;
     }
-    ++g_state.motor_writes;
+    g_state.stby[f] = stby_of(c.drives);
+    if (f == 4) ++g_state.motor_writes;  // a tick's five
+}
+
+void motor_off(uint8_t f) {
+    MotorCommand c;
+    c.a_counts = c.b_counts = 0;
+    c.drives = drives(Drive::COAST, Drive::COAST, false);
+    motor_write_at(f, c);
 }
 
 void motors_all_off() {

@@ -383,6 +383,7 @@ void setup() {
 void loop() {
     Board& b = g_board;
     watchdog(b);
+    b.hand.stall_rules();  // about every 5 ticks a finger (core/hand.h)
     if (!b.boot_sent && hal::serial_tx_room() >= framing::kMaxFrameBytes) {
         // Before any reply: the host learns of the reset first.
         proto::Boot m;

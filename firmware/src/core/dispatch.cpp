@@ -484,8 +484,8 @@ void get_state(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
             const finger::Finger& fg = b.hand.finger(f);
             s.theta[f] = fg.theta();
             s.target[f] = fg.target();
-            s.duty_a[f] = duty_counts(fg.duty_a());
-            s.duty_b[f] = duty_counts(fg.duty_b());
+            s.duty_a[f] = fg.duty_a();
+            s.duty_b[f] = fg.duty_b();
             mode[f] = fg.mode();
             faults[f] = fg.faults();
         }
@@ -564,14 +564,14 @@ void ack(app::Board& b, uint8_t seq, uint8_t msg_id) {
 uint8_t write_state_frame(app::Board& b, uint8_t seq, const hand::StateSample& s, uint8_t* out,
                           uint8_t start) {
     // The angles go out in the board's own units and the duties as their rounded high bytes
-    // (taken by the tick): no arithmetic per field.
+    // (the sample has them in Q15: the tick only copies).
     framing::FrameWriter w(out, start, seq, State::kId);
     put_u16(w, s.tick);
     w.put(b.status_change);
     for (uint8_t f = 0; f < kFingerCount; ++f) put_i16(w, s.theta[f]);
     for (uint8_t f = 0; f < kFingerCount; ++f) put_i16(w, s.target[f]);
-    for (uint8_t f = 0; f < kFingerCount; ++f) w.put((uint8_t)s.duty_a[f]);
-    for (uint8_t f = 0; f < kFingerCount; ++f) w.put((uint8_t)s.duty_b[f]);
+    for (uint8_t f = 0; f < kFingerCount; ++f) w.put((uint8_t)duty_counts(s.duty_a[f]));
+    for (uint8_t f = 0; f < kFingerCount; ++f) w.put((uint8_t)duty_counts(s.duty_b[f]));
     return w.finish();
 }
 

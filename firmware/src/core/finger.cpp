@@ -33,9 +33,8 @@ Params compile(const config::Finger& cfg, float dt_s, pid::Coeffs& coeffs) {
     p.fault_high = fx::sat16((int32_t)p.theta_max + margin);
     p.stall_error = fx::bu(cfg.limits.stall_error);
     p.stall_motion = fx::bu(cfg.limits.stall_motion);
-    const uint32_t checks =
-        (uint32_t)((float)cfg.limits.stall_time * 1e-3f / (dt_s * kStallEvery) + 0.5f);
-    p.stall_checks = (uint16_t)(checks < 1 ? 1 : (checks > 65535u ? 65535u : checks));
+    const uint32_t ticks = (uint32_t)((float)cfg.limits.stall_time * 1e-3f / dt_s + 0.5f);
+    p.stall_ticks = (uint16_t)(ticks < 1 ? 1 : (ticks > 65535u ? 65535u : ticks));
     p.jump = fx::bu(cfg.limits.encoder_jump);
     p.zero_turn = encoder::turn_from_rad(cfg.hw.encoder_offset);
     p.encoder_invert = cfg.hw.encoder_invert != 0;
@@ -67,16 +66,6 @@ Finger::Finger()
       effort_(0) {
     params_ = Params();
 }
-
-#if defined(__AVR__)
-// The layout the tick relies on (finger.h): what it reads and writes in closed loop, the Pid
-// and Params up to pretension_counts (read once a tick), within the first 64 bytes. (AVR only:
-// the host pads for alignment.)
-struct LayoutCheck {
-    static_assert(offsetof(Finger, params_) + offsetof(Params, pretension_counts) <= 64,
-                  "the tick's fields must stay within ldd/std reach of the Finger's address");
-};
-#endif
 
 int16_t Finger::limit_for(uint8_t mode) const {
     int16_t lim = params_.limit();
@@ -199,14 +188,9 @@ void Finger::halt() {
     duty_a_ = duty_b_ = 0;
 }
 
-void Finger::stop_now(hal::MotorCommand& out) {
+hal::MotorCommand Finger::idle_outputs(uint8_t mode) {
     duty_a_ = duty_b_ = 0;
-    out.a_counts = out.b_counts = 0;
-    out.drives = hal::drives(hal::Drive::COAST, hal::Drive::COAST, false);
-}
-
-void Finger::idle_outputs(uint8_t mode, hal::MotorCommand& out) {
-    duty_a_ = duty_b_ = 0;
+    hal::MotorCommand out;
     out.a_counts = out.b_counts = 0;
     // Short brake needs the driver enabled: refused to a finger with a stop fault other than
     // JOINT_LIMIT (an encoder or stall fault, an overrun: nothing of it is trusted).
@@ -214,6 +198,7 @@ void Finger::idle_outputs(uint8_t mode, hal::MotorCommand& out) {
                              (mode == BRAKE && !params_.rotary) ? hal::Drive::BRAKE
                                                                 : hal::Drive::COAST,
                              mode == BRAKE && (faults_ & (kStopFaults & ~JOINT_LIMIT)) == 0);
+    return out;
 }
 
 int16_t Finger::duty_step(int16_t th) {
@@ -223,10 +208,13 @@ int16_t Finger::duty_step(int16_t th) {
     return pid_.step_open(limit_, d, th);
 }
 
-bool Finger::stall_rule(int16_t u, int16_t th, hal::MotorCommand& out) {
+bool Finger::stall_rule(uint8_t elapsed) {
     // Pushing (a large error, or a commanded duty, with the output at its limit) without
-    // moving for the stall time.
+    // moving for the stall time. The output and the angle are the last tick's.
     const uint8_t mode = mode_;
+    if (mode != POSITION && mode != DUTY && mode != GRASP) return false;
+    const int16_t u = pid_.output();
+    const int16_t th = theta_;
     bool pushing;
     if (mode == DUTY) {
         pushing = u != 0 && fx::abs16(u) >= pid_.coeffs().deadband;
@@ -238,14 +226,15 @@ bool Finger::stall_rule(int16_t u, int16_t th, hal::MotorCommand& out) {
         if (fx::abs16((int16_t)(th - stall_ref_)) > params_.stall_motion) {
             stall_ref_ = th;
             stall_count_ = 0;
-        } else if (stall_count_ < params_.stall_checks) {
-            ++stall_count_;
+        } else {
+            const uint16_t n = (uint16_t)(stall_count_ + elapsed);
+            stall_count_ = n < stall_count_ || n > params_.stall_ticks ? params_.stall_ticks : n;
         }
-        if (stall_count_ >= params_.stall_checks) {
+        if (stall_count_ >= params_.stall_ticks) {
             if (mode != GRASP) {
-                latch(STALL);
-                stop_now(out);
-                return false;
+                latch(STALL);  // COAST; the motors go off with the caller's motor_off()
+                duty_a_ = duty_b_ = 0;
+                return true;
             }
             contact_ = true;  // closed on an object: hold it, the effort bounds the force
         }
@@ -254,7 +243,7 @@ bool Finger::stall_rule(int16_t u, int16_t th, hal::MotorCommand& out) {
         stall_count_ = 0;
         contact_ = false;
     }
-    return true;
+    return false;
 }
 
 }  // namespace finger

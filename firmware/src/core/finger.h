@@ -33,9 +33,11 @@ enum Fault : uint8_t {
     HOST_TIMEOUT = 1u << 4,
     OVERRUN = 1u << 5,
 };
-// The stall rule runs for each finger every kStallEvery ticks (one finger a tick). (Running the
-// integrator so too was tried: Ki's step five times larger every 5 ms doubled the settling
-// time against friction, tests/firmware/test_fw_pid.py.)
+// The stall rule runs for each finger about every kStallEvery ticks, in loop() (Hand::
+// stall_rules(): its window, the stall time, is some hundreds of ticks; loop() runs within
+// kLoopHangTicks or the tick halts the hand). (Running the integrator every 5 ticks was
+// tried: Ki's step five times larger every 5 ms doubled the settling time against friction,
+// tests/firmware/test_fw_pid.py.)
 static const uint8_t kStallEvery = 5;
 
 // Faults that stop the finger: COAST, motors off; JOINT_LIMIT alone short-brakes them instead
@@ -45,8 +47,7 @@ static const uint8_t kStopFaults = ENCODER_RANGE | ENCODER_JUMP | STALL | JOINT_
 
 // A finger's configuration, ready for the tick (built in loop() context by compile(); the
 // PID's coefficients go to its Pid). Angles in BU (core/fixed.h: 2 pi / 32768 rad), duties in
-// Q15. The fields every tick reads come first: with the finger's working state and its Pid
-// before them they sit in the first 64 bytes of the Finger (see there).
+// Q15. The fields every tick reads come first (see Finger's fields).
 struct Params {
     int16_t pretension;    // antagonistic pretension
     int16_t fault_low;     // JOINT_LIMIT below this (theta_min - margin)
@@ -56,8 +57,7 @@ struct Params {
     bool encoder_invert;
     hal::Drive pull;       // the drive that pulls a tendon: FORWARD, or REVERSE (motor_invert)
     bool rotary;
-    // Read by the antagonistic output mapping every tick, by the stall rule (a finger's turn
-    // every kStallEvery ticks), DUTY and loop().
+    // Read by the antagonistic output mapping every tick, by the stall rule, DUTY and loop().
     uint16_t pretension_counts;  // PWM counts of the pretension alone
     uint8_t hold_drives;         // hal::drives() of both channels holding the pretension alone
 
@@ -66,7 +66,7 @@ struct Params {
     int16_t theta_max;
     int16_t stall_error;
     int16_t stall_motion;
-    uint16_t stall_checks;  // stall time in stall-rule turns (kStallEvery ticks each)
+    uint16_t stall_ticks;  // stall time in ticks
     // The controller's output limit: max_duty, less the pretension when antagonistic.
     int16_t limit() const {
         const int16_t l = rotary ? max_duty : (int16_t)(max_duty - pretension);
@@ -112,9 +112,15 @@ class Finger {
     void halt();
     // One control period: read the encoder, check the safety rules, run the mode, and fill
     // the driver command. Inline (below): the hand's tick runs it for five fingers.
-    // `stall_check`: this tick also runs the stall rule (the hand gives each finger its turn
-    // every kStallEvery ticks, which keeps the tick within its time budget).
-    inline void tick(const hal::EncoderReading& enc, hal::MotorCommand& out, bool stall_check);
+    inline void tick(const hal::EncoderReading& enc, hal::MotorCommand& out);
+
+    // ---- from loop(), under the tick lock ----
+    // The stall rule, `elapsed` ticks (1..255) after its last check, on the output and angle
+    // of the last tick: pushing (a large error, or a commanded duty, with the output at its
+    // limit) with less motion than stall_motion for the stall time latches STALL and returns
+    // true: the finger is in COAST, and the caller turns its motors off at once
+    // (hal::motor_off()); in GRASP it is contact, held.
+    bool stall_rule(uint8_t elapsed);
 
     // ---- state ----
     uint8_t mode() const { return mode_; }
@@ -152,21 +158,16 @@ class Finger {
     // configuration. Updates the angle; returns the faults found.
     uint8_t judge_reading(const hal::EncoderReading& enc);
     void enter_closed_loop(uint8_t mode);
-    // The stall rule, on the finger's turn: false when it stopped the finger (STALL latched,
-    // the motors off in `out`).
-    bool stall_rule(int16_t u, int16_t th, hal::MotorCommand& out);
     // DUTY: the commanded duty, never further past a joint limit, through the PID's limit and
     // slew limiter.
     int16_t duty_step(int16_t th);
-    void idle_outputs(uint8_t mode, hal::MotorCommand& out);
-    void stop_now(hal::MotorCommand& out);
+    hal::MotorCommand idle_outputs(uint8_t mode);  // by value: the tick's command stays in registers
 
     // The tick's working state first, then the PID (its state and coefficients), then the
-    // configuration (Params: the fields the tick reads first): all that a tick in closed loop
-    // touches lies within the object's first 64 bytes, which the AVR's ldd/std reach by
-    // displacement from one pointer (beyond them, each access needs an address computed
-    // first). static_assert in finger.cpp. (The hand's tick now reaches each finger at a fixed
-    // address, hand.h; the layout is kept for code that reaches a finger through a pointer.)
+    // configuration (Params: the fields the tick reads first). The hand's tick reaches each
+    // finger at a fixed address (hand.h: lds/sts), so the layout no longer has to keep what
+    // it touches within ldd/std reach (64 bytes) of one pointer; it stays close to that for
+    // the code that reaches a finger through a pointer.
     int16_t theta_;
     int16_t target_;
     int16_t limit_;  // limit_for(mode_), kept current
@@ -184,12 +185,11 @@ class Finger {
     bool contact_;       // GRASP: closed on something and holding
     bool target_valid_;  // a target was set since the finger last left closed loop
     int16_t stall_ref_;
-    uint16_t stall_count_;
+    uint16_t stall_count_;  // ticks pushing without moving
     int16_t duty_cmd_;
     int16_t effort_;
     path::Path path_;  // a move under way: the setpoint and feedforward each tick
 
-    friend struct LayoutCheck;
 };
 
 // Q15 duty magnitude (0..32767) to PWM counts, rounded: (mag * 2 kPwmPeriod + 2^15) >> 16, which
@@ -205,8 +205,7 @@ UTRF_HOT uint16_t pwm_counts(uint16_t mag) {
     return (uint16_t)((uint16_t)(hi + (uint16_t)((uint16_t)(lo + 512u) >> 8)) >> 2);
 }
 
-UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& out,
-                           bool stall_check) {
+UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& out) {
     // ---- encoder: band and plausibility; joint limits ----
     // Angles are BU within +-pi, so every difference below fits int16. The faults found are
     // latched together, after theta_ took the new reading: the same bits as one at a time, and
@@ -235,7 +234,7 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
 
     const uint8_t mode = mode_;  // after the latches: a stop fault has made it COAST
     if (UTRF_UNLIKELY(mode == COAST || mode == BRAKE)) {
-        idle_outputs(mode, out);
+        out = idle_outputs(mode);
         return;
     }
 
@@ -248,10 +247,6 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
         const int16_t ff = UTRF_UNLIKELY(path_.active()) ? path_.tick(target_) : 0;
         u = pid_.step(limit_, target_, th, ff);
     }
-
-    // ---- stall: the finger's turn comes every kStallEvery ticks ----
-    // The only rule that can stop the finger after its mode was read above.
-    if (UTRF_UNLIKELY(stall_check) && !stall_rule(u, th, out)) return;
 
     // ---- driver channels (the finger drives: no stop fault, or its mode would be COAST) ----
     const hal::Drive pull = params_.pull;

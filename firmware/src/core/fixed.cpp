@@ -21,6 +21,7 @@ Gain make_gain(float value, int32_t ymax) {
     g.m = 0;
     g.shift = 0;
     g.xlim = 32767;
+    g.xspan = 65534u;
     if (!(value > 0.0f)) return g;
     // The smallest exponent whose mantissa still fits 16 bits keeps the most precision.
     for (int8_t s = -16; s <= 16; s = (int8_t)(s + 8)) {
@@ -35,6 +36,7 @@ Gain make_gain(float value, int32_t ymax) {
     // The largest |x| whose product stays within ymax.
     const float lim = (float)ymax / gain_value(g);
     g.xlim = lim >= 32767.0f ? (int16_t)32767 : (int16_t)lim;
+    g.xspan = (uint16_t)(2u * (uint16_t)g.xlim);
     return g;
 }
 

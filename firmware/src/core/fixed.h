@@ -45,6 +45,15 @@ inline int16_t sat_add16(int16_t a, int16_t b) {
     return r == -32768 ? (int16_t)-32767 : r;
 }
 
+// A 24-bit signed integer for values known to fit (|x| < 2^23): on the AVR avr-gcc's __int24
+// (three bytes: an add, a compare or a copy a byte shorter than int32's), elsewhere int32_t.
+// The same values either way (each use states its bound).
+#if defined(__AVR__)
+typedef __int24 int24;
+#else
+typedef int32_t int24;
+#endif
+
 // Branch hints for the tick's usual paths (they change no result).
 #define UTRF_LIKELY(x) __builtin_expect(!!(x), 1)
 #define UTRF_UNLIKELY(x) __builtin_expect(!!(x), 0)
@@ -122,16 +131,21 @@ __attribute__((always_inline)) inline int16_t prod_lo16(const ProdSU& q) {
 struct Gain {
     uint16_t m;
     int8_t shift;
-    int16_t xlim;  // |x| > xlim: the product is beyond ymax
+    int16_t xlim;    // |x| > xlim: the product is beyond ymax
+    uint16_t xspan;  // 2 xlim: |x| > xlim is (uint16_t)(x + xlim) > xspan, one compare
 };
+// |x| > g.xlim (0 <= xlim <= 32767) in one unsigned compare: x + xlim lies in [0, 2 xlim]
+// exactly when |x| <= xlim; below -xlim it wraps to 32768 + xlim or more, above 2 xlim.
+__attribute__((always_inline)) inline bool beyond(const Gain& g, int16_t x) {
+    return (uint16_t)((uint16_t)x + (uint16_t)g.xlim) > g.xspan;
+}
 
 Gain make_gain(float value, int32_t ymax);
 float gain_value(const Gain& g);
 
 // x * gain, saturated to +-ymax (the ymax the gain was made for).
 __attribute__((always_inline)) inline int32_t apply(const Gain& g, int16_t x, int32_t ymax) {
-    if (x > g.xlim) return ymax;
-    if (x < -g.xlim) return -ymax;
+    if (__builtin_expect(beyond(g, x), 0)) return x > 0 ? ymax : -ymax;
     const int32_t p = mul_su(x, g.m);  // |p| < 2^31
     switch (g.shift) {
         case 16:
@@ -151,8 +165,7 @@ __attribute__((always_inline)) inline int32_t apply(const Gain& g, int16_t x, in
 // result is a byte-aligned slice of the product; a larger gain saturates every x but 0
 // (its xlim is 0).
 __attribute__((always_inline)) inline int16_t apply16(const Gain& g, int16_t x, int16_t ymax) {
-    if (x > g.xlim) return ymax;
-    if (x < -g.xlim) return (int16_t)-ymax;
+    if (__builtin_expect(beyond(g, x), 0)) return x > 0 ? ymax : (int16_t)-ymax;
     const ProdSU q = prod_su(x, g.m);  // |p >> -shift| <= ymax
     if (g.shift == -16) return prod_hi16(q);
     if (g.shift == -8) return prod_mid16(q);

@@ -5,17 +5,16 @@ namespace hand {
 
 Hand::Hand()
     : ticks_(0),
-      last_frame_tick_(0),
+      silence_left_(500),
       timeout_ticks_(500),
       safe_action_(0),
-      timed_out_(false),
       frame_seen_(0),
       loop_count_(0),
       loop_seen_(0),
       loop_idle_ticks_(0),
       halted_(0),
       overrun_pending_(false),
-      stall_turn_(0),
+      stall_seen_(0),
       worst_cycles_(0),
       timing_base_(0),
       window_sum_(0),
@@ -30,10 +29,27 @@ Hand::Hand()
     timing_.overruns = 0;
     timing_.worst_cycles = 0;
     timing_.mean_cycles = 0;
+    // Staggered: one finger's check a tick while loop() keeps up.
+    for (uint8_t f = 0; f < kFingers; ++f) stall_at_[f] = f;
+}
+
+void Hand::stall_rules() {
+    const uint8_t now = (uint8_t)ticks();
+    if (now == stall_seen_) return;
+    stall_seen_ = now;
+    for (uint8_t f = 0; f < kFingers; ++f) {
+        const uint8_t elapsed = (uint8_t)(now - stall_at_[f]);
+        if (elapsed < finger::kStallEvery) continue;
+        stall_at_[f] = now;
+        hal::tick_lock();
+        if (fingers_[f].stall_rule(elapsed)) hal::motor_off(f);  // stopped now, not next tick
+        hal::tick_unlock();
+    }
 }
 
 void Hand::set_safety(uint16_t timeout_ms, uint8_t safe_action) {
     timeout_ticks_ = (uint16_t)(((uint32_t)timeout_ms * kTickHz + 999u) / 1000u);
+    if (timeout_ticks_ == 0) timeout_ticks_ = 1;
     safe_action_ = safe_action;
 }
 

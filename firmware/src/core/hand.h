@@ -38,12 +38,12 @@ struct StateSample {
     uint8_t skipped;  // samples dropped just before this one (the ring was full)
     int16_t theta[kFingers];
     int16_t target[kFingers];
-    int8_t duty_a[kFingers];  // the state message's 1/128 counts (fx::duty_counts)
-    int8_t duty_b[kFingers];
+    int16_t duty_a[kFingers];  // Q15, as the finger has them: loop() turns them into the
+    int16_t duty_b[kFingers];  // state message's 1/128 counts (fx::duty_counts) as it writes
 };
 // Samples waiting for loop(): loop() may fall this many periods behind (a long request, a
 // busy line) before one is dropped. Measured: a move's request holds loop() up to 5 ms at
-// 1 kHz with five paths running (docs/benchmarks.md); 8 slots of 33 bytes.
+// 1 kHz with five paths running (docs/benchmarks.md); 8 slots of 43 bytes.
 static const uint8_t kStreamSlots = 8;
 
 class Hand {
@@ -62,6 +62,10 @@ class Hand {
         for (uint8_t f = 0; f < kFingers; ++f) fingers_[f].plan_path();
     }
     const finger::Finger& finger(uint8_t f) const { return fingers_[f]; }
+    // loop() context, every pass, without the lock (it takes it for a check): each finger's
+    // stall rule about every kStallEvery ticks, counting the ticks that passed since its last
+    // check (a late loop() delays a stop by its lateness, at most kLoopHangTicks).
+    void stall_rules();
     void reset_timing();
     TickTiming timing() const {
         TickTiming t = timing_;
@@ -113,17 +117,17 @@ class Hand {
    private:
     finger::Finger fingers_[kFingers];
     uint32_t ticks_;
-    uint32_t last_frame_tick_;
-    uint16_t timeout_ticks_;
+    uint16_t silence_left_;  // ticks until the host-silence timeout; 0: timed out
+    uint16_t timeout_ticks_;  // >= 1 (heartbeat_timeout >= 50 ms)
     uint8_t safe_action_;
-    bool timed_out_;
     volatile uint8_t frame_seen_;
     volatile uint8_t loop_count_;
     uint8_t loop_seen_;
     uint16_t loop_idle_ticks_;
     volatile uint8_t halted_;
     bool overrun_pending_;
-    uint8_t stall_turn_;  // the finger whose stall rule runs this tick
+    uint8_t stall_seen_;              // ticks_' low byte at stall_rules()' last look
+    uint8_t stall_at_[kFingers];      // ... at each finger's last stall check
     TickTiming timing_;     // its ticks and worst_cycles fields unused: see timing()
     uint16_t worst_cycles_;
     uint32_t timing_base_;  // ticks_ at reset_timing()
@@ -142,13 +146,12 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
     ++ticks_;
 
     // ---- host silence: any valid frame feeds it; the safe action once per silence ----
+    // A countdown from the last frame's tick: the timeout falls timeout_ticks_ ticks after it
+    // (0: fallen, until the next frame).
     if (frame_seen_) {
         frame_seen_ = 0;
-        last_frame_tick_ = ticks_;
-        timed_out_ = false;
-    }
-    if (UTRF_UNLIKELY(!timed_out_ && ticks_ - last_frame_tick_ >= timeout_ticks_)) {
-        timed_out_ = true;
+        silence_left_ = timeout_ticks_;
+    } else if (UTRF_UNLIKELY(silence_left_ != 0 && --silence_left_ == 0)) {
         for (uint8_t f = 0; f < kFingers; ++f) {
             finger::Finger& fg = fingers_[f];
             if (!fg.active()) continue;  // nothing runs unsupervised on an idle finger
@@ -182,19 +185,23 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
         return;
     }
 
-    hal::MotorCommand out[kFingers];
-    const uint8_t turn = stall_turn_;
-    stall_turn_ = (uint8_t)(turn + 1 == finger::kStallEvery ? 0 : turn + 1);
     // Five written-out ticks, not a loop: each Finger's fields at a fixed address (lds/sts),
     // no pointer kept and spilled. Measured: about 600 cycles a tick less (mean and worst),
-    // for some 7.5 KB of flash (firmware/README.md, Timing).
+    // for some 7.5 KB of flash (firmware/README.md, Timing). Each finger's driver command goes
+    // to its driver as soon as it is worked out: from registers, never stored (on the AVR the
+    // write is inline: hal/avr/motors_inline.h).
     static_assert(kFingers == 5, "five finger ticks written out");
-    fingers_[0].tick(enc[0], out[0], turn == 0);
-    fingers_[1].tick(enc[1], out[1], turn == 1);
-    fingers_[2].tick(enc[2], out[2], turn == 2);
-    fingers_[3].tick(enc[3], out[3], turn == 3);
-    fingers_[4].tick(enc[4], out[4], turn == 4);
-    hal::motors_write(out);
+    hal::MotorCommand out;
+    fingers_[0].tick(enc[0], out);
+    hal::motor_write<0>(out);
+    fingers_[1].tick(enc[1], out);
+    hal::motor_write<1>(out);
+    fingers_[2].tick(enc[2], out);
+    hal::motor_write<2>(out);
+    fingers_[3].tick(enc[3], out);
+    hal::motor_write<3>(out);
+    fingers_[4].tick(enc[4], out);
+    hal::motor_write<4>(out);
 }
 
 UTRF_HOT void Hand::stream_tick() {
@@ -211,7 +218,7 @@ UTRF_HOT void Hand::stream_tick() {
         return;
     }
     // The slot is kept as a pointer (stream_put_), not worked out from head: the compiler
-    // would work out the slot's address (head * 33) anew for each field it writes.
+    // would work out the slot's address (head * 43) anew for each field it writes.
     StateSample& s = *stream_put_;
     s.tick = (uint16_t)ticks_;
     s.skipped = stream_skip_;
@@ -231,8 +238,8 @@ UTRF_HOT void Hand::sample_finger(StateSample& s, uint8_t f) const {
     const finger::Finger& fg = fingers_[f];
     s.theta[f] = fg.theta();
     s.target[f] = fg.target();
-    s.duty_a[f] = fx::duty_counts(fg.duty_a());
-    s.duty_b[f] = fx::duty_counts(fg.duty_b());
+    s.duty_a[f] = fg.duty_a();
+    s.duty_b[f] = fg.duty_b();
 }
 
 UTRF_HOT void Hand::record_timing(uint16_t cycles, bool overran) {

@@ -69,7 +69,7 @@ void Path::start(const Plan& p, int16_t from_bu, uint8_t first) {
     inc_ = p.inc;
     cv_ = p.cv;
     ca_ = p.ca;
-    pos8_ = (int32_t)from_bu * 256;  // Q8 (a multiply: a left shift of a negative is UB)
+    pos8_ = (fx::int24)((int32_t)from_bu * 256);  // Q8 (a multiply: a left shift of a negative is UB)
     step8_ = 0;
     ff_ = 0;
     left_ = p.ticks;
@@ -78,19 +78,6 @@ void Path::start(const Plan& p, int16_t from_bu, uint8_t first) {
     plan_acc_ = 0;
     plan_left_ = p.ticks;
     plan_n_ = (first < 1 || first > kEvery) ? kEvery : first;
-}
-
-void Path::next_segment() {
-    // A straight step to the path's point at the segment's end, worked out by loop() with the
-    // segment. Without one (loop() late), the same step goes on for another tick.
-    if (UTRF_LIKELY(next_ready_)) {
-        step8_ = next_step8_;
-        ff_ = next_ff_;
-        seg_left_ = next_len_;
-        next_ready_ = 0;
-    } else {
-        seg_left_ = 1;
-    }
 }
 
 void Path::plan_next_work() {
@@ -118,7 +105,7 @@ void Path::plan_next_work() {
         // that point is known now, and the tick only copies the step (no multiply in it).
         int32_t at = pos8_;
         for (uint8_t k = seg_left_; k != 0; --k) at += step8_;
-        next_step8_ = fx::mul_q16((int32_t)goal * 256 - at, kRecip[n]);
+        next_step8_ = (fx::int24)fx::mul_q16((int32_t)goal * 256 - at, kRecip[n]);
         next_ff_ = ff;
         next_len_ = n;
         next_ready_ = 1;

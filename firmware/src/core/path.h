@@ -93,22 +93,27 @@ class Path {
     inline int16_t tick(int16_t& target);
 
    private:
-    // The tick, at a segment's end: take the one loop() worked out, its step included (out
-    // of line: once in kEvery ticks).
-    void next_segment();
+    // The tick, at a segment's end: take the one loop() worked out, its step included (inline:
+    // a call with its register saves cost more than the copy, and in the worst tick several
+    // fingers take theirs).
+    inline void next_segment();
     // The path's point `ahead` ticks after the phase `acc` (the end for the last segment),
     // and the feedforward there.
     void evaluate(uint32_t acc, uint16_t left_after, int16_t& goal, int16_t& ff) const;
 
     // ---- the tick's ----
-    int32_t pos8_;    // the setpoint, BU in Q8
-    int32_t step8_;   // its change a tick, BU in Q8
+    // 24 bits (fx::int24): the setpoint is within +-pi (|pos8| <= 2^22), a step at most the
+    // distance of a segment (|goal - at| < 2^15 BU) and in practice max_speed (<= 100 rad/s,
+    // 521 BU a tick) allows; a late loop() carries the setpoint on by a step a tick for at
+    // most kLoopHangTicks (20) ticks, 2^14 BU more at worst: |pos8| < 2^23 throughout.
+    fx::int24 pos8_;    // the setpoint, BU in Q8
+    fx::int24 step8_;   // its change a tick, BU in Q8
     int16_t ff_;
     int16_t end_;
     uint16_t left_;      // ticks to the path's end; 0: no path
     uint8_t seg_left_;   // ticks left in this segment; 0: take the next one
     // ---- the next segment, from loop(): taken by the tick at the segment's end ----
-    int32_t next_step8_;
+    fx::int24 next_step8_;
     int16_t next_ff_;
     uint8_t next_len_;
     volatile uint8_t next_ready_;
@@ -125,6 +130,19 @@ class Path {
 
 // 65536 / n for the steps toward a point n ticks ahead (n <= kEvery).
 extern const uint16_t kRecip[kEvery + 1];
+
+__attribute__((always_inline)) inline void Path::next_segment() {
+    // A straight step to the path's point at the segment's end, worked out by loop() with the
+    // segment. Without one (loop() late), the same step goes on for another tick.
+    if (UTRF_LIKELY(next_ready_)) {
+        step8_ = next_step8_;
+        ff_ = next_ff_;
+        seg_left_ = next_len_;
+        next_ready_ = 0;
+    } else {
+        seg_left_ = 1;
+    }
+}
 
 __attribute__((always_inline)) inline int16_t Path::tick(int16_t& target) {
     if (--left_ == 0) {  // the end: exactly there, at rest

@@ -112,8 +112,11 @@ UTRF_HOT int16_t add_deadband(int16_t v, int16_t db) {
     return (int16_t)(v + fx::prod_mid16(fx::prod_su(v, (uint16_t)db)));
 }
 
-// The same on the unlimited sum (int32, before the limit).
-UTRF_HOT int32_t add_deadband32(int32_t v, int16_t db) {
+// The PID's sum before the limit: |P - D| 2 + |I| + |ff| < 2^18 fits 24 bits (fx::int24).
+typedef fx::int24 sum_t;
+
+// The same on the unlimited sum (before the limit).
+UTRF_HOT sum_t add_deadband32(sum_t v, int16_t db) {
     if (v >= kDeadbandRamp15) return v + db;
     if (v <= -kDeadbandRamp15) return v - db;
     return v + fx::prod_mid16(fx::prod_su((int16_t)v, (uint16_t)db));
@@ -144,26 +147,44 @@ UTRF_HOT int16_t Pid::step(int16_t limit, int16_t target, int16_t measured, int1
 
     // P and D in Q14 (+-2 duty each), the integrator's high word and the feedforward in Q15:
     // the sum fits int32 with room to spare.
-    const int32_t p_d =
-        (int32_t)fx::apply16(c.kp, e, kTermMax14) - fx::apply16(c.kd, v8_, kTermMax14);
-    int32_t v = p_d * 2 + (int16_t)(i31_ >> 16) + ff;
+    const sum_t p_d =
+        (sum_t)fx::apply16(c.kp, e, kTermMax14) - fx::apply16(c.kd, v8_, kTermMax14);
+    sum_t v = p_d * 2 + (int16_t)(i31_ >> 16) + ff;
     if (c.deadband) v = add_deadband32(v, c.deadband);
-    int16_t u = v > limit ? limit : (v < -limit ? (int16_t)-limit : (int16_t)v);
-    u = slew_limit(u, u_, c.slew);
+    // `free`: the output is the sum itself (neither the limit nor the slew limiter cut it), so
+    // nothing holds it back and the test below needs no compare of the 24-bit sum.
+    int16_t u;
+    bool free = false;
+    if (v > limit) {
+        u = limit;
+    } else if (v < -limit) {
+        u = (int16_t)-limit;
+    } else {
+        u = (int16_t)v;
+        free = true;
+    }
+    const int16_t s = slew_limit(u, u_, c.slew);
+    if (s != u) free = false;
+    u = s;
     u_ = u;
 
     // Conditional integration: hold the integrator while the output is held back in the
     // direction the error pushes it; integrate when it is free or when the error unwinds it.
-    saturated_ = (v > u && e > 0) || (v < u && e < 0);
+    saturated_ = !free && ((v > u && e > 0) || (v < u && e < 0));
     if (!saturated_ && e != 0) {
-        // i31 + step could overflow int32 near the limit: saturate before adding.
-        const int32_t lim31 = (int32_t)((uint32_t)(uint16_t)limit << 16);
+        // min(i31 + step, limit) for a step up, max(i31 + step, -limit) for a step down, the
+        // sum exact: i31 + step may overflow int32 near the limit (the add's overflow flag),
+        // and the limit is a whole Q15 duty (low word 0), so the compare is of the high word.
         const int32_t step = fx::apply(c.ki, e, kIStepMax31);
+        int32_t sum;
+        const bool over = __builtin_add_overflow(i31_, step, &sum);
+        const int16_t hi = (int16_t)(sum >> 16);
         if (step >= 0) {
-            i31_ = i31_ > lim31 - step ? lim31 : i31_ + step;
-        } else {
-            i31_ = i31_ < -lim31 - step ? -lim31 : i31_ + step;
+            if (over || hi >= limit) sum = (int32_t)((uint32_t)(uint16_t)limit << 16);
+        } else if (over || hi < -limit) {
+            sum = -(int32_t)((uint32_t)(uint16_t)limit << 16);
         }
+        i31_ = sum;
     }
     return u;
 }

@@ -43,14 +43,26 @@ inline Drive drive_a(uint8_t d) { return (Drive)(d & 3u); }
 inline Drive drive_b(uint8_t d) { return (Drive)((d >> 2) & 3u); }
 inline bool stby_of(uint8_t d) { return (d & kStbyBit) != 0; }
 
-// Drive every finger's channels and STBY pin (called once per tick with all five). The core
-// sends FORWARD/REVERSE only with counts >= 1; COAST and BRAKE disconnect the compare output,
-// so fast PWM's one-count spike at OCR = 0 never reaches the driver (the AVR layer writes
-// every channel's compare register every tick, whatever its drive).
-void motors_write(const MotorCommand* cmd /* [UTRF_FINGER_COUNT] */);
+// Drive finger F's channels and STBY pin (the tick calls it for each finger, as it has the
+// finger's command). The core sends FORWARD/REVERSE only with counts >= 1; COAST and BRAKE
+// disconnect the compare output, so fast PWM's one-count spike at OCR = 0 never reaches the
+// driver (the AVR layer writes every channel's compare register every tick, whatever its
+// drive). On the AVR inline (avr/motors_inline.h, included at the end of this file).
+template <uint8_t F>
+inline void motor_write(const MotorCommand& c);
+#if !defined(__AVR__)
+void motor_write_at(uint8_t finger, const MotorCommand& c);
+template <uint8_t F>
+inline void motor_write(const MotorCommand& c) {
+    motor_write_at(F, c);
+}
+#endif
 
 // Every channel to COAST and every STBY low. Safe from any context, interrupts included.
 void motors_all_off();
+// One finger's channels to COAST and its STBY low, at once (loop() context, under the tick
+// lock: the stall rule, which runs there, stops its finger without waiting for the tick).
+void motor_off(uint8_t finger);
 
 // ---- encoders ----------------------------------------------------------------------------------
 // One Joint-2 encoder reading, already checked by its driver (and judged: the angle and the
@@ -152,5 +164,9 @@ uint8_t reset_cause();
 
 }  // namespace hal
 }  // namespace utrf
+
+#if defined(__AVR__)
+#include "avr/motors_inline.h"
+#endif
 
 #endif  // UTRF_HAL_HAL_H

@@ -58,7 +58,6 @@ struct FingerHw {
     MotorHw m[2];
     Pin stby;
     uint8_t stby_last;
-    uint8_t drives_last;  // the last MotorCommand::drives written, 0xFF: unknown
 };
 FingerHw g_hw[UTRF_FINGER_COUNT];
 
@@ -154,7 +153,7 @@ void __attribute__((noinline)) motor_change(MotorHw& m, Drive drive) {
 
 // A change of a finger's drive byte (a channel's drive or STBY): rare, so not inlined. STBY
 // goes low before the channels change and high after them.
-void __attribute__((noinline)) drives_change(FingerHw& h, uint8_t d) {
+void drives_change_hw(FingerHw& h, uint8_t& last, uint8_t d) {
     const uint8_t stby = stby_of(d) ? 1 : 0;
     if (!stby && h.stby_last) {
         pin_set(h.stby, false);  // off first
@@ -166,7 +165,7 @@ void __attribute__((noinline)) drives_change(FingerHw& h, uint8_t d) {
         pin_set(h.stby, true);
         h.stby_last = 1;
     }
-    h.drives_last = d;
+    last = d;
 }
 
 // ---- ADC: one round over the five encoder channels between two ticks ------------------------
@@ -195,6 +194,18 @@ void adc_select(uint8_t finger) {
 }
 
 }  // namespace
+
+// motors_inline.h's register addresses are <avr/io.h>'s.
+static_assert(_SFR_MEM_ADDR(OCR1A) == 0x88 && _SFR_MEM_ADDR(OCR3A) == 0x98 &&
+                  _SFR_MEM_ADDR(OCR4A) == 0xA8 && _SFR_MEM_ADDR(OCR5A) == 0x128 &&
+                  _SFR_MEM_ADDR(OCR5C) == 0x12C,
+              "motors_inline.h's OCR addresses");
+
+// motors_inline.h: the tick's per-finger writes, inline; a change of drive comes here.
+namespace avr_motors {
+uint8_t g_drives_last[UTRF_FINGER_COUNT];
+void drives_change(uint8_t f, uint8_t d) { drives_change_hw(g_hw[f], g_drives_last[f], d); }
+}  // namespace avr_motors
 
 // ---- UART0 ---------------------------------------------------------------------------------
 // Ring buffers shared with the interrupt routines below. The receive ring's head and tail live
@@ -384,7 +395,7 @@ void avr_init() {
         g_hw[f].m[1] = motor_hw(p.b);
         g_hw[f].stby = output_pin(p.stby);
         g_hw[f].stby_last = 0;
-        g_hw[f].drives_last = 0xFF;
+        avr_motors::g_drives_last[f] = 0xFF;
         g_adc_mux[f] = p.adc_channel;
         if (p.adc_channel < 8) DIDR0 |= (uint8_t)(1u << p.adc_channel);  // analog only
     }
@@ -438,51 +449,9 @@ void avr_init() {
     UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
 }
 
-namespace {
-
-// The registers of finger F's pins are constants of board_pins.h: with F a template argument
-// the compiler folds the table and the switches below into fixed addresses, so each tick writes
-// the compare registers with plain stores (no pointer loaded from g_hw, no loop). Only a change
-// of drive (direction, coast, brake), which is rare, goes through g_hw in motor_change().
-volatile uint16_t* ocr_reg(uint8_t timer, char channel) {
-    const uint8_t ch = (uint8_t)(channel - 'A');
-    switch (timer) {
-        case 1: return ch == 0 ? &OCR1A : ch == 1 ? &OCR1B : &OCR1C;
-        case 3: return ch == 0 ? &OCR3A : ch == 1 ? &OCR3B : &OCR3C;
-        case 4: return ch == 0 ? &OCR4A : ch == 1 ? &OCR4B : &OCR4C;
-        default: return ch == 0 ? &OCR5A : ch == 1 ? &OCR5B : &OCR5C;
-    }
-}
-
-// OCRnx from a channel's counts: counts - 1 (fast PWM: OCR + 1 counts high). 1..kPwmPeriod
-// is the core's range when the channel drives; anything else is clamped into it, one compare
-// for both ends (0, a channel that does not drive, would wrap to 0xFFFF: 0 instead; its compare
-// output is disconnected, so the value does not reach the pin).
-__attribute__((always_inline)) inline uint16_t ocr_of(uint16_t counts) {
-    uint16_t ocr = (uint16_t)(counts - 1u);
-    if (__builtin_expect(ocr >= kPwmPeriod, 0)) ocr = counts == 0 ? 0 : kPwmPeriod - 1;
-    return ocr;
-}
-
-template <uint8_t F>
-__attribute__((always_inline)) inline void finger_write(const MotorCommand& c) {
-    // OCRnx is double-buffered in fast PWM: the new duty starts with the next period.
-    const utrf_finger_pins_t& pins = UTRF_FINGER_PINS[F];
-    *ocr_reg(pins.a.pwm.timer, pins.a.pwm.channel) = ocr_of(c.a_counts);
-    *ocr_reg(pins.b.pwm.timer, pins.b.pwm.channel) = ocr_of(c.b_counts);
-    FingerHw& h = g_hw[F];
-    if (__builtin_expect(c.drives != h.drives_last, 0)) drives_change(h, c.drives);
-}
-
-}  // namespace
-
-void motors_write(const MotorCommand* cmd) {
-    static_assert(UTRF_FINGER_COUNT == 5, "motors_write() writes five fingers");
-    finger_write<0>(cmd[0]);
-    finger_write<1>(cmd[1]);
-    finger_write<2>(cmd[2]);
-    finger_write<3>(cmd[3]);
-    finger_write<4>(cmd[4]);
+void motor_off(uint8_t f) {
+    // The compare outputs are disconnected by the change to COAST: the counts do not matter.
+    avr_motors::drives_change(f, drives(Drive::COAST, Drive::COAST, false));
 }
 
 void motors_all_off() {
@@ -491,7 +460,7 @@ void motors_all_off() {
             FingerHw& h = g_hw[f];
             *h.stby.port &= (uint8_t)~h.stby.mask;
             h.stby_last = 0;
-            h.drives_last = drives(Drive::COAST, Drive::COAST, false);
+            avr_motors::g_drives_last[f] = drives(Drive::COAST, Drive::COAST, false);
             for (uint8_t k = 0; k < 2; ++k) {
                 MotorHw& m = h.m[k];
                 *m.tccra &= (uint8_t)~m.com;
