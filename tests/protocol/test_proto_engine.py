@@ -176,6 +176,27 @@ def test_a_bad_crc_hint_resends_an_idempotent_request_at_once() -> None:
     assert done.error.code is M.ErrorCode.BAD_CRC
 
 
+def test_bad_crc_hints_do_not_spend_the_resends_of_the_timeouts() -> None:
+    # A burst of damage answers attempt after attempt with BAD_CRC within milliseconds; the
+    # request keeps its resends after a timeout (at 1e-2 damaged bytes four hints once spent
+    # half of them and a set_gains failed after 0.5 s).
+    engine = Engine(retries=2)
+    seq = start(engine, TARGETS, 0.0)
+    for k in range(2):  # two hints: two resends at once
+        engine.receive(frame(seq, bad_crc(TARGETS.ID)), 0.01 * (k + 1))
+        assert seq_of(send(engine, 0.01 * (k + 1))) == seq
+    engine.receive(frame(seq, bad_crc(M.SetMode.ID)), 0.03)  # no hint's resend left: waits
+    assert engine.poll(0.03) == Wait(0.02 + T)
+    t = 0.02 + T
+    for _ in range(2):  # the timeouts' two resends are still there
+        assert seq_of(send(engine, t)) == seq
+        t += T
+    done = engine.poll(t)
+    assert isinstance(done, Done) and isinstance(done.error, ReplyTimeout)
+    assert done.error.attempts == 5  # the first, two on hints, two on timeouts
+    assert engine.stats().retries == 4
+
+
 def test_a_bad_crc_hint_ends_a_request_that_is_not_idempotent_only_when_it_names_it() -> None:
     engine = Engine()
     seq = start(engine, M.CalibrateZero(mask=1), 0.0)
@@ -353,9 +374,10 @@ def test_attempts_refused_damaged_are_known_not_applied() -> None:
     seq = start(engine, TARGETS, 0.0)
     engine.receive(frame(seq, bad_crc(TARGETS.ID)), 0.01)
     assert send(engine, 0.01).data == frame(seq, TARGETS)  # resent at once, same bytes
-    done = engine.poll(0.01 + T)
+    assert send(engine, 0.01 + T).data == frame(seq, TARGETS)  # the timeout's resend
+    done = engine.poll(0.01 + 2 * T)
     assert isinstance(done.error, ReplyTimeout)  # type: ignore[union-attr]
-    assert done.error.outcome is Outcome.UNKNOWN  # type: ignore[union-attr]  # the 2nd: silence
+    assert done.error.outcome is Outcome.UNKNOWN  # type: ignore[union-attr]  # silence after
     engine = Engine(retries=0)
     seq = start(engine, TARGETS, 0.0)
     pending = engine._pending

@@ -133,8 +133,8 @@ Action = Transmit | Wait | Done
 
 @dataclass(frozen=True, slots=True)
 class _Hint:
-    """A BAD_CRC nack while an idempotent request waits: resend now if an attempt is left,
-    else end with ``error`` (None: keep waiting)."""
+    """A BAD_CRC nack while an idempotent request waits: resend now if a hint's resend is
+    left, else end with ``error`` (None: keep waiting)."""
 
     error: NackError | None
 
@@ -147,8 +147,11 @@ class _Pending:
     seq: int
     frame: bytes
     timeout_s: float
-    allowed: int  # attempts in all
-    attempt: int = 0
+    allowed: int  # attempts on timeouts: the first and the resends after a timeout
+    attempt: int = 0  # attempts sent, on timeouts and on hints
+    #: resends at once on a BAD_CRC hint: they take a millisecond, not a timeout, so they have
+    #: their own budget (as many as the retries) and leave the timeouts' resends whole
+    hinted: int = 0
     #: attempts written out that no BAD_CRC nack naming this request accounts for: each
     #: may have been applied (its reply lost)
     maybe_applied: int = 0
@@ -168,7 +171,8 @@ class Engine:
     heartbeats and statistics. Not thread-safe: a threaded driver holds its own lock around
     every call.
 
-    ``retries``: resends of an idempotent request after the first attempt.
+    ``retries``: resends of an idempotent request after a timeout; as many again at once on
+    BAD_CRC nacks naming it (the board saw a damaged frame: a millisecond, not a timeout).
     ``heartbeat_period_s``: after a successful handshake, a heartbeat falls due when nothing
     went out for this long (None: never). ``now``: the driver's clock at the start.
     """
@@ -309,7 +313,8 @@ class Engine:
             if isinstance(outcome, Frame):
                 return self._done(value=outcome)
             if isinstance(outcome, _Hint):
-                if p.attempt < p.allowed:
+                if p.hinted < p.allowed - 1:
+                    p.hinted += 1
                     return self._transmit(p)  # resend now rather than at the timeout
                 if outcome.error is not None:
                     return self._done(error=outcome.error)
@@ -319,7 +324,7 @@ class Engine:
             return self._transmit(p)
         if now < p.deadline:
             return Wait(p.deadline)
-        if p.attempt < p.allowed:
+        if p.attempt - p.hinted < p.allowed:
             return self._transmit(p)
         self._counts["timeouts"] += 1
         applied = Outcome.UNKNOWN if p.maybe_applied else Outcome.NOT_APPLIED

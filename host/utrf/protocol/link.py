@@ -2,8 +2,9 @@
 
 One request is in flight at a time; its reply echoes its seq. A request that gets no reply
 within its ``REPLY_TIMEOUT_S`` is resent (same seq, same bytes) when it is idempotent, up to
-``retries`` times, and raises :class:`ReplyTimeout` after that; a request that is not
-idempotent is never resent. The board's own frames (``state`` stream, ``fault``, ``boot``)
+``retries`` times (a ``BAD_CRC`` nack naming it has it resent at once, up to as many times
+again), and raises :class:`ReplyTimeout` after that; a request that is not idempotent is
+never resent. The board's own frames (``state`` stream, ``fault``, ``boot``)
 carry seqs with ``BOARD_SEQ_FLAG`` set from a running counter; they go to :attr:`Link.telemetry`
 (a queue) and to callbacks, from the reader thread, so they never wait for a request and a
 request never waits for them. A gap in their seqs counts as lost frames.
@@ -55,7 +56,7 @@ class Link(EngineDriver):
 
     ``heartbeat_period_s``: after a successful :meth:`handshake`, send a ``heartbeat`` when
     nothing else went out for this long (None: never), so the board's host-silence watchdog
-    stays fed. ``retries``: resends of an idempotent request after the first attempt.
+    stays fed. ``retries``: resends of an idempotent request after a timeout.
     ``telemetry_queue_size``: when :attr:`telemetry` is full the oldest items are dropped
     (counted as ``telemetry_dropped``); 0: no queue, the callbacks only (what a Hand uses).
     Callbacks (``on_telemetry``) run on the reader thread: keep them short.
