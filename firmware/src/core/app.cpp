@@ -383,7 +383,6 @@ void setup() {
 void loop() {
     Board& b = g_board;
     watchdog(b);
-    b.hand.stall_rules();  // about every 5 ticks a finger (core/hand.h)
     if (!b.boot_sent && hal::serial_tx_room() >= framing::kMaxFrameBytes) {
         // Before any reply: the host learns of the reset first.
         proto::Boot m;
@@ -394,6 +393,9 @@ void loop() {
     flush_reply(b);
     receive(b);
     flush_reply(b);
+    // After the requests: a request that came in meanwhile is not held up by the stall checks
+    // (its reply is in the transmit buffer by now), and a check waits at most for one dispatch.
+    b.hand.stall_rules();  // about every 5 ticks a finger (core/hand.h)
     board_frames(b);
     b.hand.plan_paths();  // a segment is due every 5 ticks, planned one ahead (core/path.h)
     save_progress(b);

@@ -546,8 +546,11 @@ uint16_t serial_tx_room() {
 }
 
 void serial_write(const uint8_t* data, uint16_t len) {
+    // At most the ring's 255 free bytes (room checked): an 8-bit count and a moving pointer,
+    // a reply's bytes copied in about half the cycles of the 16-bit indexed loop.
     uint8_t head = g_tx_head;
-    for (uint16_t i = 0; i < len; ++i) g_tx_buf[head++] = data[i];
+    const uint8_t* const end = data + (uint8_t)len;
+    while (data != end) g_tx_buf[head++] = *data++;
     g_tx_head = head;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { UCSR0B |= _BV(UDRIE0); }
 }
