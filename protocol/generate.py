@@ -1409,7 +1409,10 @@ def render_readme_tables(spec: Spec) -> str:
     w(f"| default baud | {p['default_baud']} | 8N1 |")
     timeout = p["reply_timeout_s"]
     w(f"| reply timeout | {timeout:g} s | per attempt, unless a message says otherwise |")
-    w(f"| retries | {p['retries']} | resends of an idempotent request after a timeout (as many again at once on `BAD_CRC` hints) |")
+    w(
+        f"| retries | {p['retries']} | resends of an idempotent request after a timeout "
+        "(as many again at once on `BAD_CRC` hints) |"
+    )
     period = p["heartbeat_period_s"]
     w(f"| heartbeat period | {period:g} s | host: longest silence before a heartbeat |")
     w(f"| max telemetry rate | {p['max_telemetry_hz']} Hz | fastest state stream |")
