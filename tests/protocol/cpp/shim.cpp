@@ -26,6 +26,20 @@ uint8_t utrf_encode_frame(uint8_t seq, uint8_t msg_id, const uint8_t* body, uint
   return framing::encode_frame(seq, msg_id, body, len, out);
 }
 
+// One event's record: the frame's (or the damaged frame's) header, and a frame's body.
+static void take_record(const framing::FrameDecoder& d, framing::RxEvent ev, UtrfRxRecord& r) {
+  r.event = static_cast<uint8_t>(ev);
+  r.seq = r.msg_id = r.body_len = 0;
+  if (ev == framing::RxEvent::FRAME || ev == framing::RxEvent::CRC_ERROR) {
+    r.seq = d.seq();
+    r.msg_id = d.msg_id();
+  }
+  if (ev == framing::RxEvent::FRAME) {
+    r.body_len = d.body_len();
+    for (uint8_t k = 0; k < r.body_len; ++k) r.body[k] = d.body()[k];
+  }
+}
+
 // Feeds `data` to `decoder` byte by byte and records every event other than NONE. Returns the
 // number of events, or -1 if there were more than max_records.
 int32_t utrf_decoder_feed(void* decoder, const uint8_t* data, uint32_t len, UtrfRxRecord* records,
@@ -36,17 +50,7 @@ int32_t utrf_decoder_feed(void* decoder, const uint8_t* data, uint32_t len, Utrf
     const framing::RxEvent ev = d.feed(data[i]);
     if (ev == framing::RxEvent::NONE) continue;
     if (n == max_records) return -1;
-    UtrfRxRecord& r = records[n++];
-    r.event = static_cast<uint8_t>(ev);
-    r.seq = r.msg_id = r.body_len = 0;
-    if (ev == framing::RxEvent::FRAME || ev == framing::RxEvent::CRC_ERROR) {
-      r.seq = d.seq();
-      r.msg_id = d.msg_id();
-    }
-    if (ev == framing::RxEvent::FRAME) {
-      r.body_len = d.body_len();
-      for (uint8_t k = 0; k < r.body_len; ++k) r.body[k] = d.body()[k];
-    }
+    take_record(d, ev, records[n++]);
   }
   return static_cast<int32_t>(n);
 }
@@ -66,17 +70,7 @@ int32_t utrf_decoder_feed_runs(void* decoder, const uint8_t* data, uint32_t len,
     const framing::RxEvent ev = d.feed(data[i++]);
     if (ev == framing::RxEvent::NONE) continue;
     if (n == max_records) return -1;
-    UtrfRxRecord& r = records[n++];
-    r.event = static_cast<uint8_t>(ev);
-    r.seq = r.msg_id = r.body_len = 0;
-    if (ev == framing::RxEvent::FRAME || ev == framing::RxEvent::CRC_ERROR) {
-      r.seq = d.seq();
-      r.msg_id = d.msg_id();
-    }
-    if (ev == framing::RxEvent::FRAME) {
-      r.body_len = d.body_len();
-      for (uint8_t k = 0; k < r.body_len; ++k) r.body[k] = d.body()[k];
-    }
+    take_record(d, ev, records[n++]);
   }
   return static_cast<int32_t>(n);
 }
