@@ -94,3 +94,18 @@ class LinkClient:
                 self.link.handshake()
                 return boots[-1]
         raise TimeoutError(f"no boot frame within {timeout} s (simulated)")
+
+
+ALL_FINGERS = 0b11111
+
+
+def ready_client(board: EmulatedBoard) -> tuple[LinkClient, m.Boot]:
+    """A client on a board that has booted, 20 ms on, every finger's faults cleared and the
+    stream's frames so far dropped; with the boot frame it saw."""
+    c = LinkClient(board)
+    boot = c.wait_boot()
+    board.run_for(0.02)
+    reply = c.request(m.ClearFaults(mask=ALL_FINGERS))
+    assert isinstance(reply, m.Ack), reply
+    c.stream.clear()
+    return c, boot

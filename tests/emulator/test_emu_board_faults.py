@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from emu_helpers import QUIET, LinkClient
+from emu_helpers import QUIET, LinkClient, ready_client
 
 from utrf.emulator import EmulatedBoard, EmulatorError
 from utrf.protocol import messages as m
@@ -18,11 +18,7 @@ TICK_S = 1e-3
 
 @pytest.fixture
 def client(board: EmulatedBoard) -> LinkClient:
-    c = LinkClient(board)
-    c.wait_boot()
-    board.run_for(0.02)
-    assert isinstance(c.request(m.ClearFaults(mask=ALL)), m.Ack)
-    return c
+    return ready_client(board)[0]
 
 
 def drive_all(client: LinkClient, duty: float = 0.3) -> None:

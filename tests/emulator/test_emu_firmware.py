@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from emu_helpers import QUIET, LinkClient
+from emu_helpers import QUIET, LinkClient, ready_client
 
 from utrf.emulator import EmulatedBoard
 from utrf.protocol import messages as m
@@ -38,12 +38,8 @@ def faults_seen(client: LinkClient, finger: int) -> m.FaultBits:
 
 @pytest.fixture
 def client(board: EmulatedBoard) -> LinkClient:
-    c = LinkClient(board)
-    boot = c.wait_boot()
+    c, boot = ready_client(board)
     assert boot.reset_cause == m.ResetCause.POWER_ON
-    board.run_for(0.02)
-    assert isinstance(c.request(m.ClearFaults(mask=ALL)), m.Ack)
-    c.stream.clear()
     return c
 
 

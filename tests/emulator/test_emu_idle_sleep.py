@@ -7,7 +7,7 @@ from __future__ import annotations
 import itertools
 
 import pytest
-from emu_helpers import LinkClient
+from emu_helpers import LinkClient, ready_client
 
 from utrf.emulator import EmulatedBoard
 from utrf.protocol import messages as m
@@ -18,10 +18,7 @@ CPU_HZ = 16e6
 
 @pytest.fixture
 def client(board: EmulatedBoard) -> LinkClient:
-    c = LinkClient(board)
-    c.wait_boot()
-    board.run_for(0.02)
-    assert isinstance(c.request(m.ClearFaults(mask=ALL)), m.Ack)
+    c = ready_client(board)[0]
     reply = c.request(
         m.SetMode(mask=ALL, mode=(m.ControlMode.DUTY,) * 5, duty=(0.3,) * 5, effort=(0.0,) * 5)
     )

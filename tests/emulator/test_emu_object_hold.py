@@ -45,18 +45,23 @@ def test_too_little_effort_drops_the_ball(firmware_elf: Path, tmp_path: Path) ->
     assert "DROPPED" in oh.describe(result)
 
 
+def _library(tmp_path: Path, base: str, name: str, **changes: object) -> Path:
+    """An object library of one's own: the package's ``base`` object as ``name``, changed."""
+    fields = {k: v for k, v in oh.asdict(objects.get_object(base)).items() if k != "name"}
+    fields.update(changes)
+    library = tmp_path / "objects.toml"
+    library.write_text(
+        f"[object.{name}]\n"
+        + "".join(f"{k} = {json.dumps(list(v) if isinstance(v, tuple) else v)}\n"
+                  for k, v in fields.items() if v is not None)
+    )  # fmt: skip
+    return library
+
+
 def test_a_shell_weaker_than_the_grasp_breaks(firmware_elf: Path, tmp_path: Path) -> None:
     """An egg whose shell gives at 1 N (an object library of one's own) breaks under the grasp
     that leaves the package's egg (25 N) intact."""
-    library = tmp_path / "objects.toml"
-    egg = objects.get_object("egg")
-    fields = {k: v for k, v in oh.asdict(egg).items() if k != "name" and v is not None}
-    fields["breaking_force_n"] = 1.0
-    library.write_text(
-        "[object.blown-egg]\n"
-        + "".join(f"{k} = {json.dumps(list(v) if isinstance(v, tuple) else v)}\n"
-                  for k, v in fields.items())
-    )  # fmt: skip
+    library = _library(tmp_path, "egg", "blown-egg", breaking_force_n=1.0)
     config = oh.ObjectHoldConfig(
         object="blown-egg", library=str(library), duration_s=2.0, hits=0, picture=False
     )
@@ -69,15 +74,9 @@ def test_a_shell_weaker_than_the_grasp_breaks(firmware_elf: Path, tmp_path: Path
 def test_grasp_thumb_closes_the_thumb_on_the_object(firmware_elf: Path, tmp_path: Path) -> None:
     """An object that asks for the thumb (``grasp_thumb``; the ball 10 mm nearer the heel of
     the palm, where the thumb meets it) is closed on by the thumb too: it presses on it."""
-    library = tmp_path / "objects.toml"
-    ball = objects.get_object("ball")
-    fields = {k: v for k, v in oh.asdict(ball).items() if k != "name" and v is not None}
-    fields.update(grasp_thumb=True, rest_position_m=(-0.050, -0.005, 0.0326))
-    library.write_text(
-        "[object.ball]\n"
-        + "".join(f"{k} = {json.dumps(list(v) if isinstance(v, tuple) else v)}\n"
-                  for k, v in fields.items())
-    )  # fmt: skip
+    library = _library(
+        tmp_path, "ball", "ball", grasp_thumb=True, rest_position_m=(-0.050, -0.005, 0.0326)
+    )
     config = oh.ObjectHoldConfig(
         object="ball", library=str(library), duration_s=2.0, hits=0, picture=False
     )
