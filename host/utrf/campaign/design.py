@@ -47,12 +47,31 @@ OPTIONS = {
     "min_safety_factor": _L.min_safety_factor,
     "actuator_rated_force_n": _L.actuator_rated_force_n,
 }
-OUTPUTS = (
-    "valid q_max_m theta2_max_rad theta3_max_rad coupling_q_max_m coupled_whole_range reach_m "
-    "link1_area_m2 link2_area_m2 link3_area_m2 deflection_straight_m stiffness_straight_n_per_m "
-    "deflection_flexed_m stiffness_flexed_n_per_m largest_tension_n safety_factor motor_force_n "
-    "converged tendons_ok motor_ok theta1_ok wraps_ok plan_safe"
-).split()
+OUTPUTS = [
+    "valid",
+    "q_max_m",
+    "theta2_max_rad",
+    "theta3_max_rad",
+    "coupling_q_max_m",
+    "coupled_whole_range",
+    "reach_m",
+    "link1_area_m2",
+    "link2_area_m2",
+    "link3_area_m2",
+    "deflection_straight_m",
+    "stiffness_straight_n_per_m",
+    "deflection_flexed_m",
+    "stiffness_flexed_n_per_m",
+    "largest_tension_n",
+    "safety_factor",
+    "motor_force_n",
+    "converged",
+    "tendons_ok",
+    "motor_ok",
+    "theta1_ok",
+    "wraps_ok",
+    "plan_safe",
+]
 
 
 def check(campaign: Campaign) -> None:
@@ -67,21 +86,23 @@ def check(campaign: Campaign) -> None:
         for v in values:
             if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
                 raise campaign.error(
-                    where, f"{p.name} = {v!r} is outside what the finger models describe "
-                    f"[{lo:g}, {hi:g}]",
-                )  # fmt: skip
+                    where,
+                    f"{p.name} = {v!r} is outside what the finger models describe [{lo:g}, {hi:g}]",
+                )
     for key, value in campaign.options.items():
         if key not in OPTIONS:
-            raise campaign.error(f"options.{key}", f"unknown design option {key!r}; known: "
-                                 f"{', '.join(OPTIONS)}")  # fmt: skip
+            raise campaign.error(
+                f"options.{key}", f"unknown design option {key!r}; known: {', '.join(OPTIONS)}"
+            )
         if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
             raise campaign.error(f"options.{key}", f"{key} must be a number > 0, got {value!r}")
     for name in campaign.objectives:
         if name not in OUTPUTS:
             raise campaign.error(
-                f"objectives.{name}", f"unknown objective {name!r}; a design has "
+                f"objectives.{name}",
+                f"unknown objective {name!r}; a design has "
                 f"{', '.join(o for o in OUTPUTS if not o.endswith('_ok'))}",
-            )  # fmt: skip
+            )
 
 
 def designs(cols: Columns) -> tuple[design_batch.Designs, np.ndarray, np.ndarray]:
@@ -128,8 +149,11 @@ def geometry(params: dict[str, Any], source: str = "<campaign design>") -> Finge
         tendon_diameter_m=p["tendon_diameter_m"],
         tendon_youngs_modulus_pa=p["tendon_youngs_modulus_pa"],
         actuating_tendon_length_m=p["actuating_tendon_length_m"],
-        link_masses_kg=(lengths[0] * p["link_mass_per_m"], lengths[1] * p["link_mass_per_m"],
-                        lengths[2] * p["link_mass_per_m"]),  # fmt: skip
+        link_masses_kg=(
+            lengths[0] * p["link_mass_per_m"],
+            lengths[1] * p["link_mass_per_m"],
+            lengths[2] * p["link_mass_per_m"],
+        ),
         link_com_fraction=(0.5, 0.5, 0.5),
         theta1_range_rad=(-math.radians(p["theta1_max_deg"]), math.radians(p["theta1_max_deg"])),
         source=source,

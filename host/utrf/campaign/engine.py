@@ -91,7 +91,7 @@ def cluster(address: str | None, workers: int | None) -> Iterator[Any]:
 def _duration(seconds: float) -> str:
     if not math.isfinite(seconds):
         return "unknown"
-    s = int(round(seconds))
+    s = round(seconds)
     return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
 
 
@@ -127,9 +127,14 @@ def _table(cols: Columns) -> pa.Table:
 
 def _failed(cols: Columns, keys: np.ndarray, reason: str) -> Columns:
     n = len(keys)
-    return {"run_key": keys, "worker": np.full(n, ""), "status": np.full(n, "failed"),
-            "error": np.full(n, reason, dtype=object), "compute_s": np.zeros(n),
-            **cols}  # fmt: skip
+    return {
+        "run_key": keys,
+        "worker": np.full(n, ""),
+        "status": np.full(n, "failed"),
+        "error": np.full(n, reason, dtype=object),
+        "compute_s": np.zeros(n),
+        **cols,
+    }
 
 
 def salt(campaign: Campaign) -> str:
@@ -165,8 +170,18 @@ def run(
     with cluster(address, workers) as client:
         startup = time.monotonic() - t0
         n_workers = max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
-        summary = _drive(client, campaign, cols, keys, tasks, store, total, total - len(todo),
-                         n_workers, progress)  # fmt: skip
+        summary = _drive(
+            client,
+            campaign,
+            cols,
+            keys,
+            tasks,
+            store,
+            total,
+            total - len(todo),
+            n_workers,
+            progress,
+        )
     summary.startup_s = startup
     store.consolidate()
     return summary
@@ -196,14 +211,21 @@ def _drive(
     start = time.perf_counter()
     ac = as_completed()
 
+    options = {**campaign.options, "firmware_paths": campaign.firmware}
+
     def submit() -> None:
         while queue and len(by_future) < window:
             idx = queue.pop()
             part = {k: v[idx] for k, v in cols.items()}
             fut = client.submit(
-                kinds.execute, campaign.kind, campaign.options, part, keys[idx],
-                key=f"utrf-{campaign.kind}-{keys[idx[0]]}-{len(idx)}", retries=0,
-            )  # fmt: skip
+                kinds.execute,
+                campaign.kind,
+                options,
+                part,
+                keys[idx],
+                key=f"utrf-{campaign.kind}-{keys[idx[0]]}-{len(idx)}",
+                retries=0,
+            )
             by_future[fut] = idx
             ac.add(fut)
 
@@ -233,5 +255,6 @@ def _drive(
         if time.monotonic() - prog.last >= TICK_S:
             prog.tick(sum(len(v) for v in client.processing().values()))
     prog.tick(0, force=True)
-    return Summary(total, skipped, prog.ok, prog.failed, time.perf_counter() - start, busy,
-                   n_workers, 0.0)  # fmt: skip
+    return Summary(
+        total, skipped, prog.ok, prog.failed, time.perf_counter() - start, busy, n_workers, 0.0
+    )

@@ -59,7 +59,7 @@ def _resolve(spec: object) -> Callable[..., Any]:
     fn = getattr(importlib.import_module(module), name)
     if not callable(fn):
         raise ValueError(f"{spec} is not callable")
-    return fn  # type: ignore[no-any-return]
+    return fn
 
 
 def _check_function(campaign: Campaign) -> None:
@@ -104,8 +104,9 @@ def execute(kind_name: str, options: dict[str, Any], cols: Columns, keys: np.nda
             result, status_i, error_i = kind.run_one(options, row(cols, i)), "ok", ""
         except Exception as exc:
             result, status_i, error_i = {}, "failed", _reason(exc)
-        rows.append({"status": status_i, "error": error_i,
-                     "compute_s": time.perf_counter() - t0, **result})  # fmt: skip
+        rows.append(
+            {"status": status_i, "error": error_i, "compute_s": time.perf_counter() - t0, **result}
+        )
     names: list[str] = []
     for r in rows:
         names += [k for k in r if k not in names]

@@ -42,8 +42,23 @@ def grid_size(campaign: Campaign) -> int:
 
 
 def columns(campaign: Campaign) -> Columns:
-    """Every run of the campaign's sampler, one array per parameter (equal lengths)."""
-    params = campaign.params
+    """Every run of the campaign's sampler, one array per parameter (equal lengths); each
+    sampled row once with every combination of the ``cross`` parameters' values."""
+    crossed = [p for p in campaign.params if p.name in campaign.cross]
+    cols = _sampled(campaign, [p for p in campaign.params if p.name not in campaign.cross])
+    if not crossed:
+        return cols
+    n = row_count(cols) if cols else 1
+    combos = list(itertools.product(*(p.values or () for p in crossed)))
+    out = {k: np.tile(v, len(combos)) for k, v in cols.items()}
+    for j, p in enumerate(crossed):
+        out[p.name] = np.repeat(np.asarray([c[j] for c in combos]), n)
+    return out
+
+
+def _sampled(campaign: Campaign, params: list[Param]) -> Columns:
+    if not params:
+        return {}
     if campaign.method == "grid":
         axes = [_grid_values(p) for p in params]
         index = np.array(list(itertools.product(*(range(len(a)) for a in axes))), dtype=np.intp)

@@ -8,6 +8,7 @@
     [sampler]
     method = "lhs"               # grid | random | lhs | optuna
     samples = 100000             # random, lhs; optuna: trials
+    cross = ["firmware"]         # every sampled row once with each of these values (A/B)
 
     [parameters]
     link1_m = { min = 0.05, max = 0.09 }          # a range (grid: add steps = N)
@@ -82,6 +83,7 @@ class Campaign:
     chunk: int
     params: tuple[Param, ...]
     objectives: dict[str, str]
+    cross: tuple[str, ...] = ()  # run every sampled row with each value of these
     firmware: dict[str, str] = field(default_factory=dict)
     options: dict[str, Any] = field(default_factory=dict)
     lines: dict[str, int] = field(default_factory=dict, compare=False)
@@ -99,8 +101,12 @@ class Campaign:
 
     @property
     def digest(self) -> str:
-        """What makes runs comparable: the kind and the options (not the sampler)."""
-        blob = json.dumps([self.kind, self.options, self.firmware], sort_keys=True, default=str)
+        """What makes runs comparable: the kind, the options and the firmware's contents (not
+        the sampler, nor where the ELFs lie)."""
+        elfs = {
+            k: hashlib.sha256(Path(v).read_bytes()).hexdigest() for k, v in self.firmware.items()
+        }
+        blob = json.dumps([self.kind, self.options, elfs], sort_keys=True, default=str)
         return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
@@ -133,9 +139,10 @@ def _param(name: str, value: Any, line: int, where: str) -> Param:
                 f"{where}: {name}: unknown range key(s) {unknown}; a range has min, max and "
                 "optionally steps (grid), log, integer"
             )
-        lo, hi = value.get("min"), value.get("max")
-        if not (_number(lo) and _number(hi) and lo < hi):
+        low, high = value.get("min"), value.get("max")
+        if not (_number(low) and _number(high)) or not low < high:  # type: ignore[operator]
             raise CampaignError(f"{where}: {name}: a range needs numbers min < max, got {value}")
+        lo, hi = float(low), float(high)  # type: ignore[arg-type]
         steps = value.get("steps")
         if steps is not None and not (isinstance(steps, int) and steps >= 2):
             raise CampaignError(f"{where}: {name}: steps must be an integer >= 2, got {steps!r}")
@@ -144,9 +151,7 @@ def _param(name: str, value: Any, line: int, where: str) -> Param:
             raise CampaignError(f"{where}: {name}: a log range needs min > 0, got {lo}")
         integer = bool(value.get("integer", False))
         return Param(name, line, range=Range(float(lo), float(hi), steps, log, integer))
-    values = (
-        list(value) if isinstance(value, Sequence) and not isinstance(value, str) else [value]
-    )
+    values = list(value) if isinstance(value, Sequence) and not isinstance(value, str) else [value]
     if not values:
         raise CampaignError(f"{where}: {name}: an empty list of values")
     for v in values:
@@ -171,8 +176,14 @@ def _int(table: Mapping[str, Any], key: str, default: int, lowest: int, where: s
     return v
 
 
-def parse(text: str, source: str = "<campaign>", base: Path | None = None) -> Campaign:
-    """The campaign in ``text``; ``base`` is where relative firmware paths start."""
+def parse(
+    text: str,
+    source: str = "<campaign>",
+    base: Path | None = None,
+    firmware: Mapping[str, str] | None = None,
+) -> Campaign:
+    """The campaign in ``text``; ``base`` is where relative firmware paths start;
+    ``firmware`` (label -> ELF path) replaces or adds entries of its ``[firmware]`` table."""
     lines = key_lines(text)
 
     def at(key: str) -> str:
@@ -197,7 +208,7 @@ def parse(text: str, source: str = "<campaign>", base: Path | None = None) -> Ca
         raise CampaignError(f"{at('campaign.kind')}: kind must be one of {KINDS}, got {kind!r}")
     sampler = _table(doc, "sampler", source, lines)
     for key in sampler:
-        if key not in {"method", "samples", "trials"}:
+        if key not in {"method", "samples", "trials", "cross"}:
             raise CampaignError(f"{at('sampler.' + key)}: unknown key {key!r} in [sampler]")
     method = sampler.get("method", "grid")
     if method not in METHODS:
@@ -205,8 +216,13 @@ def parse(text: str, source: str = "<campaign>", base: Path | None = None) -> Ca
             f"{at('sampler.method')}: method must be one of {METHODS}, got {method!r}"
         )
     samples_key = "trials" if method == "optuna" else "samples"
-    samples = _int(sampler, samples_key, 0 if method == "grid" else 100, 1 if method != "grid"
-                   else 0, at(f"sampler.{samples_key}"))  # fmt: skip
+    samples = _int(
+        sampler,
+        samples_key,
+        0 if method == "grid" else 100,
+        1 if method != "grid" else 0,
+        at(f"sampler.{samples_key}"),
+    )
     params_table = _table(doc, "parameters", source, lines)
     if not params_table:
         raise CampaignError(f"{at('parameters')}: [parameters] names no parameter")
@@ -214,25 +230,38 @@ def parse(text: str, source: str = "<campaign>", base: Path | None = None) -> Ca
         _param(name, value, lines.get(f"parameters.{name}", 0), at(f"parameters.{name}"))
         for name, value in params_table.items()
     )
+    cross = sampler.get("cross", [])
+    names = {p.name: p for p in params}
+    if not (isinstance(cross, list) and all(isinstance(c, str) for c in cross)):
+        raise CampaignError(f"{at('sampler.cross')}: cross must be a list of parameter names")
+    for c in cross:
+        if c not in names or names[c].values is None:
+            raise CampaignError(
+                f"{at('sampler.cross')}: cross names {c!r}, which is not a parameter with a "
+                "list of values"
+            )
     objectives = _table(doc, "objectives", source, lines)
     for key, sense in objectives.items():
         if sense not in ("min", "max"):
             raise CampaignError(
-                f"{at('objectives.' + key)}: objective {key} must be \"min\" or \"max\", "
-                f"got {sense!r}"
+                f'{at("objectives." + key)}: objective {key} must be "min" or "max", got {sense!r}'
             )
-    firmware: dict[str, str] = {}
-    for label, path in _table(doc, "firmware", source, lines).items():
+    elfs: dict[str, Any] = dict(_table(doc, "firmware", source, lines))
+    for label, path in (firmware or {}).items():
+        elfs[label] = path
+        lines[f"firmware.{label}"] = 0  # given on the command line: no line to name
+    found: dict[str, str] = {}
+    for label, path in elfs.items():
         if not isinstance(path, str):
             raise CampaignError(f"{at('firmware.' + label)}: firmware {label} must be a path")
         resolved = Path(path).expanduser()
-        if not resolved.is_absolute() and base is not None:
+        if not resolved.is_absolute() and base is not None and label not in (firmware or {}):
             resolved = base / resolved
         if not resolved.is_file():
             raise CampaignError(
                 f"{at('firmware.' + label)}: firmware {label!r}: no such ELF file {resolved}"
             )
-        firmware[label] = str(resolved.resolve())
+        found[label] = str(resolved.resolve())
     campaign = Campaign(
         source=source,
         text=text,
@@ -244,7 +273,8 @@ def parse(text: str, source: str = "<campaign>", base: Path | None = None) -> Ca
         chunk=_int(head, "chunk", 0, 0, at("campaign.chunk")),
         params=params,
         objectives=dict(objectives),
-        firmware=firmware,
+        cross=tuple(cross),
+        firmware=found,
         options=dict(_table(doc, "options", source, lines)),
         lines=lines,
     )
@@ -259,10 +289,10 @@ def parse(text: str, source: str = "<campaign>", base: Path | None = None) -> Ca
     return campaign
 
 
-def load(path: str | Path) -> Campaign:
+def load(path: str | Path, firmware: Mapping[str, str] | None = None) -> Campaign:
     path = Path(path)
     try:
         text = path.read_text()
     except FileNotFoundError:
         raise CampaignError(f"{path}: no such campaign file") from None
-    return parse(text, str(path), base=path.parent)
+    return parse(text, str(path), base=path.parent, firmware=firmware)

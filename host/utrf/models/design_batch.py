@@ -175,13 +175,13 @@ def assess(
     valid = d.valid()
     if not valid.all():  # the others are no finger: NaN figures, every check False
         part = assess(_subset(d, valid), payload_kg[valid], flexion[valid], _limits_at(lim, valid))
-        out = {}
+        filled: dict[str, np.ndarray] = {}
         for name, col in part.items():
             full = np.zeros(d.n, dtype=bool) if col.dtype == bool else np.full(d.n, np.nan)
             full[valid] = col
-            out[name] = full
-        out["valid"] = valid
-        return out
+            filled[name] = full
+        filled["valid"] = valid
+        return filled
     wraps = straight_wraps(d)
     R = d.guide_radii_m
     q_max = d.theta1_max_rad * R[:, 0]
