@@ -17,3 +17,8 @@ def square(x: float, y: float = 0.0, sleep_s: float = 0.0) -> dict[str, float]:
     if x < 0:
         raise ValueError(f"x must be >= 0, got {x}")
     return {"f": x * x + y, "g": (x - 1) ** 2}
+
+
+def set_trace(path: str) -> None:
+    """On a worker (``client.run``): where ``square`` leaves its trace."""
+    os.environ["UTRF_TEST_TRACE"] = path

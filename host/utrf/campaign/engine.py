@@ -137,6 +137,13 @@ def _failed(cols: Columns, keys: np.ndarray, reason: str) -> Columns:
     }
 
 
+def running(client: Any) -> int:
+    """Runs executing now: tasks the scheduler has placed, at most a thread's worth each
+    (a worker also holds the next one or two it will run)."""
+    threads = client.nthreads()
+    return sum(min(len(keys), threads.get(w, 1)) for w, keys in client.processing().items())
+
+
 def salt(campaign: Campaign) -> str:
     return f"{campaign.kind}|{campaign.digest}"
 
@@ -253,7 +260,7 @@ def _drive(
             store.append(pa.concat_tables(buffer, promote_options="default"))
             buffer, last_flush = [], time.monotonic()
         if time.monotonic() - prog.last >= TICK_S:
-            prog.tick(sum(len(v) for v in client.processing().values()))
+            prog.tick(running(client))
     prog.tick(0, force=True)
     return Summary(
         total, skipped, prog.ok, prog.failed, time.perf_counter() - start, busy, n_workers, 0.0

@@ -137,7 +137,7 @@ def run(
             prog.ok += int(ok)
             prog.failed += int(not ok)
             busy += float(row["compute_s"])
-            prog.tick(len(trials))
+            prog.tick(engine.running(client))
         prog.tick(0, force=True)
         wall = time.perf_counter() - start
     store.consolidate()
