@@ -238,3 +238,26 @@ def test_no_scheduler_at_the_address_is_a_clear_error(tmp_path: Path) -> None:
     code = main(["campaign", "run", str(path), "--out", str(tmp_path / "o"), "--address",
                  f"tcp://127.0.0.1:{port}"])  # fmt: skip
     assert code == 3
+
+
+@pytest.mark.slow
+def test_a_grasp_campaign_on_the_twin_records_holds_and_a_broken_firmware(
+    tmp_path: Path, address: str
+) -> None:
+    from utrf.artifacts import firmware_elf
+
+    (tmp_path / "broken.elf").write_bytes(b"not an ELF at all")
+    path = tmp_path / "g.toml"
+    path.write_text(
+        '[campaign]\nkind = "grasp"\n[sampler]\nmethod = "grid"\n[parameters]\n'
+        'firmware = ["real", "broken"]\nobject = ["ball"]\nmass_kg = 0.15\nduration_s = 3.0\n'
+        f'hits = 1\nkp = 25.0\n[firmware]\nreal = "{firmware_elf()}"\nbroken = "broken.elf"\n'
+    )
+    s = engine.run(spec.load(path), tmp_path / "g", address=address, progress=lambda _: None)
+    rows = {r["firmware"]: r for r in run_rows(tmp_path / "g")}
+    assert s.ok == 1 and s.failed == 1
+    real, broken = rows["real"], rows["broken"]
+    assert real["status"] == "ok" and isinstance(real["held"], bool)
+    assert real["largest_contact_force_n"] > 0 and real["firmware_build_id"]
+    assert real["largest_tracking_error_rad"] >= 0 and real["slip_mm"] >= 0
+    assert broken["status"] == "failed" and broken["error"]
