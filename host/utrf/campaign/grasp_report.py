@@ -54,7 +54,9 @@ def grasps(campaign: Campaign, table: pa.Table, root: Path, plots: bool) -> dict
     out: dict[str, Any] = {"runs": int(ran.sum()), "held": int(success.sum()), "by": per}
     if "firmware" in table.column_names and len(campaign.firmware) == 2:
         out["ab"] = _ab(campaign, table, ran, success, varied)
-    axes = [n for n in varied if n not in ("seed", "firmware")][:2]
+    # the map's axes: two varied numeric parameters (mass and friction, say), else the object
+    numeric = [n for n in varied if n not in ("seed", "firmware", "object")]
+    axes = (numeric + [n for n in varied if n == "object"])[:2]
     if plots and len(axes) == 2:
         out["picture"] = str(_map(table, ran, success, axes, root / "grasp_map.png"))
     return out
