@@ -33,7 +33,7 @@ import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 KINDS = ("design", "grasp", "function")
 METHODS = ("grid", "random", "lhs", "optuna")
@@ -140,9 +140,11 @@ def _param(name: str, value: Any, line: int, where: str) -> Param:
                 "optionally steps (grid), log, integer"
             )
         low, high = value.get("min"), value.get("max")
-        if not (_number(low) and _number(high)) or not low < high:  # type: ignore[operator]
+        if not (_number(low) and _number(high)):
             raise CampaignError(f"{where}: {name}: a range needs numbers min < max, got {value}")
-        lo, hi = float(low), float(high)  # type: ignore[arg-type]
+        lo, hi = float(cast(float, low)), float(cast(float, high))
+        if not lo < hi:
+            raise CampaignError(f"{where}: {name}: a range needs numbers min < max, got {value}")
         steps = value.get("steps")
         if steps is not None and not (isinstance(steps, int) and steps >= 2):
             raise CampaignError(f"{where}: {name}: steps must be an integer >= 2, got {steps!r}")
