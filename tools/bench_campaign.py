@@ -67,9 +67,9 @@ def design_cpu_per_design() -> float:
 
 def run_design(tmp: Path, designs: int, chunk: int, workers: int, name: str) -> dict[str, Any]:
     c = spec.load(_design_file(tmp, designs, chunk, name))
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     s = engine.run(c, tmp / name, workers=workers, progress=_quiet)
-    total = time.perf_counter() - t0
+    total, driver_cpu = time.perf_counter() - t0, time.process_time() - c0
     size = sum(p.stat().st_size for p in (tmp / name / "runs").glob("*.parquet"))
     return {
         "designs": designs,
@@ -81,21 +81,26 @@ def run_design(tmp: Path, designs: int, chunk: int, workers: int, name: str) -> 
         "runs_per_h": 3600 * s.ok / s.wall_s,
         "parquet_bytes_per_row": size / max(s.ok, 1),
         "ok": s.ok,
+        "workers_cpu_s": s.cpu_s,
+        "driver_cpu_s": driver_cpu,
     }
 
 
-def run_grasp(tmp: Path, runs: int) -> dict[str, Any]:
-    path = tmp / "grasp.toml"
+def run_grasp(tmp: Path, runs: int, workers: int) -> dict[str, Any]:
+    path = tmp / f"grasp{workers}.toml"
     seeds = ", ".join(str(i) for i in range(runs))
     path.write_text(
         '[campaign]\nname = "bench-grasp"\nkind = "grasp"\n[sampler]\nmethod = "grid"\n'
         f'[parameters]\nobject = ["ball"]\nseed = [{seeds}]\nduration_s = 3.0\nhits = 1\n'
     )
-    s = engine.run(spec.load(path), tmp / "grasp", workers=2, progress=_quiet)
+    s = engine.run(spec.load(path), tmp / f"grasp{workers}", workers=workers, progress=_quiet)
     return {
         "runs": s.ok + s.failed,
         "failed": s.failed,
+        "workers": workers,
         "wall_s": s.wall_s,
+        "runs_per_h": 3600 * s.ok / s.wall_s,
+        "run_cpu_s": s.cpu_s / max(s.ok, 1),
         "busy_s": s.busy_s,
         "overhead": s.overhead,
         "run_s": s.busy_s / max(s.ok, 1),
@@ -109,8 +114,15 @@ def run_noop(tmp: Path, tasks: int) -> dict[str, Any]:
         '[campaign]\nname = "noop"\nkind = "function"\n[sampler]\nmethod = "grid"\n'
         f'[parameters]\nx = [{xs}]\n[options]\nfunction = "tools.bench_campaign:noop"\n'
     )
+    c0 = time.process_time()
     s = engine.run(spec.load(path), tmp / "noop", workers=2, progress=_quiet)
-    return {"tasks": tasks, "wall_s": s.wall_s, "per_task_s": s.wall_s / tasks}
+    cpu = time.process_time() - c0
+    return {
+        "tasks": tasks,
+        "wall_s": s.wall_s,
+        "per_task_s": s.wall_s / tasks,
+        "driver_cpu_per_task_s": cpu / tasks,
+    }
 
 
 def noop(x: float) -> dict[str, float]:
@@ -119,34 +131,30 @@ def noop(x: float) -> dict[str, float]:
 
 def on_paper(m: dict[str, Any]) -> list[str]:
     """The largest cluster kept busy: workers x (1 / task time) tasks a second against what
-    the scheduler and the driver take."""
+    the scheduler, the driver and the driver's link take."""
     sched_rate = 1.0 / DASK_TASK_OVERHEAD_S
-    driver_rate = 1.0 / m["noop"]["per_task_s"]
-    run_s = m["grasp"]["run_s"] if m.get("grasp") else 15.0
-    row_bytes = m["scaling"][1]["parquet_bytes_per_row"]
+    driver_rate = 1.0 / m["noop"]["driver_cpu_per_task_s"]
+    rate = min(sched_rate, driver_rate)
+    run_s = m["grasp"][1]["run_cpu_s"] if m.get("grasp") else 15.0
+    row_bytes = m["design"]["parquet_bytes_per_row"]
     chunk_s = 20_000 * m["cpu_per_design_s"]
     chunk_bytes = 20_000 * row_bytes
-    grasp_workers = min(sched_rate, driver_rate) * run_s
-    design_workers_cpu = min(sched_rate, driver_rate) * chunk_s
-    design_workers_link = LINK_BYTES_S / chunk_bytes * chunk_s
+    driver_per_chunk = m["design"]["driver_cpu_s"] / (m["design"]["designs"] / 20_000)
     return [
-        f"- Scheduler: Dask documents about 1 ms of overhead a task, so about "
-        f"{sched_rate:.0f} tasks/s; the driver here handled one task every "
-        f"{m['noop']['per_task_s'] * 1e3:.1f} ms end to end with empty tasks on this "
-        f"machine ({driver_rate:.0f} tasks/s, the driver, the scheduler and two workers "
-        "sharing 2 cores).",
-        f"- Grasp Monte Carlo: one twin run took {run_s:.1f} s of a core here (3 s holds, "
-        f"machine loaded) and moves a row of about 1 kB: {min(sched_rate, driver_rate):.0f} "
-        f"tasks/s keep about {grasp_workers:,.0f} workers busy; a 120 s hold (about 10x the "
-        "work) ten times more. What breaks first: the driver's loop (one result at a time, a "
-        "Parquet part every 2 s), then Dask's scheduler near 1,000 tasks/s.",
-        f"- Design sweeps: a 20,000-design task is {chunk_s:.2f} s of CPU and returns "
-        f"{chunk_bytes / 1e6:.1f} MB of results (Parquet, {row_bytes:.0f} B a design; in "
-        "memory about 4x that). Into one driver on a 1 Gb/s link that is about "
-        f"{design_workers_link:.0f} busy workers; the scheduler alone would allow "
-        f"{design_workers_cpu:,.0f}. What breaks first: the results' bytes into the driver "
-        "(remedy: larger tasks that write their own Parquet parts to shared storage, or "
-        "fewer columns).",
+        f"- Dask documents about 1 ms of scheduler overhead a task ({sched_rate:.0f} tasks/s). "
+        f"The driver's own CPU per task, measured with {m['noop']['tasks']} empty tasks, is "
+        f"{m['noop']['driver_cpu_per_task_s'] * 1e3:.1f} ms ({driver_rate:.0f} tasks/s; the "
+        "local cluster's scheduler runs in the driver's process, so this includes it).",
+        f"- Grasp Monte Carlo: a twin run here costs {run_s:.1f} s of CPU (3 s holds); at "
+        f"{rate:.0f} tasks/s the engine keeps about {rate * run_s:,.0f} single-threaded "
+        "workers busy, ten times more for 120 s holds. What breaks first: the driver's one "
+        "loop (results, Parquet parts, Optuna's ask/tell for a search), then the scheduler.",
+        f"- Design sweeps: a 20,000-design task is {chunk_s:.2f} s of a worker's CPU and "
+        f"{driver_per_chunk:.2f} s of the driver's (receiving, converting and writing "
+        f"{chunk_bytes / 1e6:.1f} MB of Parquet, {row_bytes:.0f} B a design). The driver keeps "
+        f"about {chunk_s / max(driver_per_chunk, 1e-9):.1f} workers busy; a 1 Gb/s link into it "
+        f"about {125e6 / chunk_bytes * chunk_s:.0f}. What breaks first: the driver, on results' "
+        "bytes (remedy: tasks that write their own Parquet parts to shared storage).",
     ]
 
 
@@ -154,6 +162,7 @@ def section(m: dict[str, Any]) -> str:
     one, two = m["scaling"]
     big = m["design"]
     load = m["load"]
+    bound = max(big["workers_cpu_s"] / 2, big["driver_cpu_s"])
     lines = [
         "## Campaigns",
         "",
@@ -167,21 +176,25 @@ def section(m: dict[str, Any]) -> str:
         "|---|---|---|",
         f"| {big['designs']:,} designs, 2 workers, from the cluster being up | "
         f"{big['wall_s']:.1f} s (the whole command {big['command_s']:.1f} s) | < 120 s |",
-        f"| CPU per design, one worker | {m['cpu_per_design_s'] * 1e6:.1f} us: "
-        f"{1e6 * m['cpu_per_design_s'] / 2:.1f} s of 2 cores for 1e6 | |",
-        f"| scaling, {one['designs']:,} designs: 1 worker / 2 workers | "
+        f"| the same, CPU: workers / driver (with the scheduler) | {big['workers_cpu_s']:.1f} s / "
+        f"{big['driver_cpu_s']:.1f} s: at least {bound:.1f} s of wall on 2 idle cores | |",
+        f"| CPU per design in one task (20,000 designs) | {m['cpu_per_design_s'] * 1e6:.1f} us | |",
+        f"| scaling, {one['designs']:,} designs (10,000 a task): 1 worker / 2 workers | "
         f"{one['runs_per_h']:,.0f} / {two['runs_per_h']:,.0f} runs/h: "
         f"**{two['runs_per_h'] / one['runs_per_h']:.2f}x** | >= 1.8x |",
         f"| engine and idle share of wall, design sweep (2 workers) | "
         f"{big['overhead'] * 100:.1f} % | <= 2 % |",
     ]
     if m.get("grasp"):
-        g = m["grasp"]
-        lines.append(
-            f"| engine and idle share of wall, {g['runs']} twin grasp holds (2 workers) | "
-            f"{g['overhead'] * 100:.1f} % ({g['wall_s']:.1f} s wall, {g['run_s']:.1f} s a run) "
-            "| <= 2 % |"
-        )
+        g1, g2 = m["grasp"]
+        lines += [
+            f"| scaling, {g1['runs']} twin grasp holds (3 s): 1 worker / 2 workers | "
+            f"{g1['runs_per_h']:,.0f} / {g2['runs_per_h']:,.0f} runs/h: "
+            f"**{g2['runs_per_h'] / g1['runs_per_h']:.2f}x** | >= 1.8x |",
+            f"| engine and idle share of wall, {g2['runs']} twin grasp holds (2 workers) | "
+            f"{g2['overhead'] * 100:.1f} % ({g2['wall_s']:.1f} s wall, {g2['run_s']:.1f} s a "
+            "run) | <= 2 % |",
+        ]
     lines += [
         f"| engine per task, {m['noop']['tasks']} empty tasks | "
         f"{m['noop']['per_task_s'] * 1e3:.2f} ms | |",
@@ -218,7 +231,11 @@ def main(argv: list[str] | None = None) -> int:
         ]
         m["design"] = run_design(t, args.designs, 20_000, 2, "million")
         m["noop"] = run_noop(t, args.noop_tasks)
-        m["grasp"] = run_grasp(t, args.grasp_runs) if args.grasp_runs else None
+        m["grasp"] = (
+            [run_grasp(t, args.grasp_runs, 1), run_grasp(t, args.grasp_runs, 2)]
+            if args.grasp_runs
+            else None
+        )
     m["load"].append(os.getloadavg()[0])
     text = section(m)
     print(text)

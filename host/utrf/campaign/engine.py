@@ -43,6 +43,7 @@ class Summary:
     busy_s: float  # the runs' own compute time, summed over workers
     workers: int
     startup_s: float  # making (or reaching) the cluster
+    cpu_s: float = 0.0  # the runs' CPU time, summed over workers
 
     @property
     def overhead(self) -> float:
@@ -133,6 +134,7 @@ def _failed(cols: Columns, keys: np.ndarray, reason: str) -> Columns:
         "status": np.full(n, "failed"),
         "error": np.full(n, reason, dtype=object),
         "compute_s": np.zeros(n),
+        "cpu_s": np.zeros(n),
         **cols,
     }
 
@@ -214,7 +216,7 @@ def _drive(
     by_future: dict[Any, np.ndarray] = {}
     buffer: list[pa.Table] = []
     last_flush = time.monotonic()
-    busy = 0.0
+    busy = cpu = 0.0
     start = time.perf_counter()
     ac = as_completed()
 
@@ -254,6 +256,7 @@ def _drive(
             prog.ok += int(ok.sum())
             prog.failed += int((~ok).sum())
             busy += float(np.sum(result["compute_s"]))
+            cpu += float(np.sum(result["cpu_s"]))
             buffer.append(_table(result))
         submit()
         if buffer and (time.monotonic() - last_flush >= FLUSH_S or not by_future):
@@ -263,5 +266,5 @@ def _drive(
             prog.tick(running(client))
     prog.tick(0, force=True)
     return Summary(
-        total, skipped, prog.ok, prog.failed, time.perf_counter() - start, busy, n_workers, 0.0
+        total, skipped, prog.ok, prog.failed, time.perf_counter() - start, busy, n_workers, 0.0, cpu
     )

@@ -85,7 +85,7 @@ def execute(kind_name: str, options: dict[str, Any], cols: Columns, keys: np.nda
     Runs inside a Dask worker; never raises for a run's own failure."""
     kind = get(kind_name)
     n = row_count(cols)
-    start = time.perf_counter()
+    start, start_cpu = time.perf_counter(), time.process_time()
     meta: Columns = {"run_key": keys, "worker": np.full(n, worker_name())}
     if kind.evaluate is not None:
         try:
@@ -95,17 +95,32 @@ def execute(kind_name: str, options: dict[str, Any], cols: Columns, keys: np.nda
             out, status = {}, np.full(n, "failed")
             error = np.full(n, _reason(exc), dtype=object)
         elapsed = np.full(n, (time.perf_counter() - start) / max(n, 1))
-        return {**meta, "status": status, "error": error, "compute_s": elapsed, **cols, **out}
+        cpu = np.full(n, (time.process_time() - start_cpu) / max(n, 1))
+        return {
+            **meta,
+            "status": status,
+            "error": error,
+            "compute_s": elapsed,
+            "cpu_s": cpu,
+            **cols,
+            **out,
+        }
     assert kind.run_one is not None
     rows: list[dict[str, Any]] = []
     for i in range(n):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         try:
             result, status_i, error_i = kind.run_one(options, row(cols, i)), "ok", ""
         except Exception as exc:
             result, status_i, error_i = {}, "failed", _reason(exc)
         rows.append(
-            {"status": status_i, "error": error_i, "compute_s": time.perf_counter() - t0, **result}
+            {
+                "status": status_i,
+                "error": error_i,
+                "compute_s": time.perf_counter() - t0,
+                "cpu_s": time.process_time() - c0,
+                **result,
+            }
         )
     names: list[str] = []
     for r in rows:

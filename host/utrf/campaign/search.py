@@ -88,7 +88,7 @@ def run(
     prog = engine._Progress(total, skipped, progress)
     options = {**campaign.options, "firmware_paths": campaign.firmware}
     kind = kinds.get(campaign.kind)
-    busy = 0.0
+    busy = cpu = 0.0
     t0 = time.monotonic()
     with engine.cluster(address, workers) as client:
         startup = time.monotonic() - t0
@@ -137,8 +137,9 @@ def run(
             prog.ok += int(ok)
             prog.failed += int(not ok)
             busy += float(row["compute_s"])
+            cpu += float(row["cpu_s"])
             prog.tick(engine.running(client))
         prog.tick(0, force=True)
         wall = time.perf_counter() - start
     store.consolidate()
-    return engine.Summary(total, skipped, prog.ok, prog.failed, wall, busy, n_workers, startup)
+    return engine.Summary(total, skipped, prog.ok, prog.failed, wall, busy, n_workers, startup, cpu)
