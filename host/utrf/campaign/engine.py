@@ -22,11 +22,12 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from utrf.campaign import kinds, sampling
 from utrf.campaign.sampling import Columns
 from utrf.campaign.spec import Campaign, CampaignError
-from utrf.campaign.store import Store
+from utrf.campaign.store import Store, columns_table
 
 ProgressFn = Callable[[str], None]
 FLUSH_S = 2.0  # results reach the disk at least this often
@@ -123,7 +124,7 @@ class _Progress:
 
 
 def _table(cols: Columns) -> pa.Table:
-    return pa.table({k: pa.array(v.tolist() if v.dtype == object else v) for k, v in cols.items()})
+    return columns_table(cols)
 
 
 def _failed(cols: Columns, keys: np.ndarray, reason: str) -> Columns:
@@ -175,6 +176,10 @@ def run(
     total = len(first)
     chunk = campaign.chunk or kind.chunk
     tasks = [todo[i : i + chunk] for i in range(0, len(todo), chunk)]
+    if not tasks:  # everything is done: no cluster to start
+        progress(f"done {total}/{total} ({total} from before)")
+        store.consolidate()
+        return Summary(total, total, 0, 0, 0.0, 0.0, 0, 0.0)
     t0 = time.monotonic()
     with cluster(address, workers) as client:
         startup = time.monotonic() - t0
@@ -250,14 +255,14 @@ def _drive(
             else:  # the task itself died (a worker lost too often): its runs failed
                 exc = fut.exception()
                 part = {k: v[idx] for k, v in cols.items()}
-                result = _failed(part, keys[idx], f"{type(exc).__name__}: {exc}")
+                result = _table(_failed(part, keys[idx], f"{type(exc).__name__}: {exc}"))
             fut.release()
-            ok = result["status"] == "ok"
-            prog.ok += int(ok.sum())
-            prog.failed += int((~ok).sum())
-            busy += float(np.sum(result["compute_s"]))
-            cpu += float(np.sum(result["cpu_s"]))
-            buffer.append(_table(result))
+            ok = pc.sum(pc.equal(result.column("status"), "ok")).as_py() or 0
+            prog.ok += ok
+            prog.failed += result.num_rows - ok
+            busy += pc.sum(result.column("compute_s")).as_py() or 0.0
+            cpu += pc.sum(result.column("cpu_s")).as_py() or 0.0
+            buffer.append(result)
         submit()
         if buffer and (time.monotonic() - last_flush >= FLUSH_S or not by_future):
             store.append(pa.concat_tables(buffer, promote_options="default"))

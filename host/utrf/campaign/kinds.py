@@ -24,9 +24,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 
 from utrf.campaign.sampling import Columns, row, row_count
 from utrf.campaign.spec import Campaign, CampaignError
+from utrf.campaign.store import columns_table
 
 
 @dataclass(frozen=True)
@@ -80,9 +82,14 @@ def worker_name() -> str:
     return f"{socket.gethostname()}:{os.getpid()}"
 
 
-def execute(kind_name: str, options: dict[str, Any], cols: Columns, keys: np.ndarray) -> Columns:
-    """One task: the runs ``cols`` (keys ``keys``) of a kind, with status and timing columns.
-    Runs inside a Dask worker; never raises for a run's own failure."""
+def execute(kind_name: str, options: dict[str, Any], cols: Columns, keys: np.ndarray) -> pa.Table:
+    """One task: the runs ``cols`` (keys ``keys``) of a kind, with status and timing columns,
+    as an Arrow table (made here, on the worker, not in the driver). Runs inside a Dask
+    worker; never raises for a run's own failure."""
+    return columns_table(_execute(kind_name, options, cols, keys))
+
+
+def _execute(kind_name: str, options: dict[str, Any], cols: Columns, keys: np.ndarray) -> Columns:
     kind = get(kind_name)
     n = row_count(cols)
     start, start_cpu = time.perf_counter(), time.process_time()

@@ -179,7 +179,12 @@ def _front_plot(
     ax.set_xlabel(names[0])
     ax.set_ylabel(names[1])
     ax.legend(fontsize=8)
-    ax.set_title(f"{feasible.sum()} designs the planner accepts", fontsize=9)
+    extra = len(names) - 2
+    ax.set_title(
+        f"{feasible.sum()} designs the planner accepts"
+        + (f"; the front of {len(names)} objectives, seen on the first two" if extra else ""),
+        fontsize=9,
+    )
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

@@ -118,14 +118,12 @@ def run(
             fut = next(ac)
             trial = trials.pop(fut)
             if fut.status == "finished":
-                result = fut.result()
+                table = fut.result()
             else:
                 exc = fut.exception()
                 cols = {k: np.array([v]) for k, v in {**fixed, **trial.params}.items()}
-                result = engine._failed(
-                    cols, sampling.run_keys(cols, salt), f"{type(exc).__name__}: {exc}"
-                )
-            table = engine._table(result)
+                reason = f"{type(exc).__name__}: {exc}"
+                table = engine._table(engine._failed(cols, sampling.run_keys(cols, salt), reason))
             store.append(table)
             row = table.to_pylist()[0]
             values = _values(campaign, row)

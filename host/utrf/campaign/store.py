@@ -87,6 +87,11 @@ class Store:
         return path
 
 
+def columns_table(cols: Mapping[str, Any]) -> pa.Table:
+    """Columns (numpy arrays, one per name) as a table; object columns through Python."""
+    return pa.table({k: pa.array(v.tolist() if v.dtype == object else v) for k, v in cols.items()})
+
+
 def rows_table(rows: list[Mapping[str, Any]]) -> pa.Table:
     """Rows (dicts) as a table; columns missing from some rows are nulls there."""
     names: list[str] = []
