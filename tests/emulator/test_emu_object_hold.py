@@ -30,7 +30,7 @@ def test_the_object_grasp_holds_it_through_a_tap(
     assert result["broke"] is (False if name == "egg" else None)
     saved = json.loads((tmp_path / "run" / "results.json").read_text())
     assert saved["slip_mm"] == pytest.approx(result["slip_mm"])
-    rows = oh._read(tmp_path / "run" / "object_samples.csv")
+    rows = oh._read(tmp_path / "run" / "object_samples.csv", oh.SAMPLE_COLUMNS)
     assert {"close", "release", "turn", "baseline", "hold"} <= set(rows["phase"])
 
 
