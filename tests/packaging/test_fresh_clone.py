@@ -73,6 +73,7 @@ def _sh(cmd: str, clone: Path, timeout: float) -> subprocess.CompletedProcess[st
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # a new .venv (pip) and the whole build: minutes on a loaded machine
 def test_a_fresh_clone_sets_up_builds_and_runs_the_readme(tmp_path: Path) -> None:
     clone = tmp_path / "clone"
     subprocess.run(["git", "clone", "-q", str(REPO), str(clone)], check=True)
