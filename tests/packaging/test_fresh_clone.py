@@ -59,8 +59,8 @@ def test_readme_commands_are_found() -> None:
 
 def _env(clone: Path) -> dict[str, str]:
     """A user's shell in the clone with its .venv activated: nothing of this test's make."""
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("MAKEFLAGS", "MFLAGS", "MAKELEVEL", "VIRTUAL_ENV", "PYTHONPATH")}  # fmt: skip
+    drop = ("MAKEFLAGS", "MFLAGS", "MAKELEVEL", "VIRTUAL_ENV", "PYTHONPATH")
+    env = {k: v for k, v in os.environ.items() if k not in drop}
     path = [p for p in env.get("PATH", "").split(os.pathsep) if ".venv" not in p]
     env["PATH"] = os.pathsep.join([str(clone / ".venv" / "bin"), *path])
     env["PYTHONUNBUFFERED"] = "1"

@@ -104,7 +104,9 @@ def draw_pose(
     return path
 
 
-def _label_fingers(ax: Any, shape: tuple[int, ...], tips: Mapping[str, tuple[float, float]]) -> None:
+def _label_fingers(
+    ax: Any, shape: tuple[int, ...], tips: Mapping[str, tuple[float, float]]
+) -> None:
     """Each finger's name in a row under the rendered image, in the order of the fingertips
     across it, with a line to its tip: the names never overlap, however close the tips."""
     height, width = shape[0], shape[1]
