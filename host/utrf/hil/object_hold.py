@@ -303,11 +303,12 @@ def _hold(s: _Sampler, config: ObjectHoldConfig, hit_log: Any, progress: Any) ->
 def _picture(plant: Any, path: Path) -> Path | None:
     """The hand holding the object, rendered off-screen; None when this machine cannot."""
     try:
-        from utrf.models.render import RenderError, render_png
+        from utrf.models.render import RenderError, framed_camera, hand_camera, render_png
     except ImportError:
         return None
-    try:
-        return render_png(plant.model, plant.data, path)
+    try:  # framed: the hand and the object fill the picture
+        camera = framed_camera(plant.model, plant.data, hand_camera())
+        return render_png(plant.model, plant.data, path, camera=camera)
     except RenderError:
         return None
 
