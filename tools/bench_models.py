@@ -265,9 +265,9 @@ def markdown(result: dict[str, Any]) -> str:
         "`statics.solve` runs the passes' fast path (`statics_passes.passes_one`: one case on "
         "plain floats, the general path's passes bit for bit); `statics.solve_batch` the general "
         "path (`statics_passes.passes`, numpy over the cases); targets (issue 11 goal 6): one "
-        "solve at most 20 µs, the batch at least "
-        "200,000 solves/s. On the shared 2-core machine the wall-clock figures move with the "
-        "other jobs' load: a 16 µs call is rarely interrupted, a 50 ms batch often is, so the "
+        "solve at most 20 µs, the batch at least 200,000 solves/s. On the shared 2-core "
+        "machine the wall-clock figures move with the other jobs' load: a call of some µs is "
+        "rarely interrupted, a batch of tens of ms often is, so the "
         "CPU time (`time.process_time`: time spent waiting for a core left out) is given too.",
         "",
         "| figure | serial (default) | printed |",
