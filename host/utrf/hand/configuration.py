@@ -3,7 +3,7 @@ the host-silence rule, hardware configuration; saving and loading them; zeroing;
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import replace
 from typing import Any, TypeVar
 
@@ -12,7 +12,7 @@ from utrf.hand.goals import Goals
 from utrf.hand.limits import JointLimits
 from utrf.hand.session import HandSession
 from utrf.protocol import messages as m
-from utrf.protocol.codec import Message
+from utrf.protocol.codec import Message, Request
 
 M = TypeVar("M", bound=Message)
 
@@ -38,13 +38,7 @@ class HandConfiguration:
         """Change some of a finger's controller gains (``kp``, ``ki``, ``kd``,
         ``d_cutoff_hz``, ``deadband_duty``, ``slew_per_s``, ``max_duty``, ``pretension_duty``);
         the others keep their values. Returns the gains now in use."""
-        i = self._fingers.index(finger)
-        current = self.gains(i)
-        new = self._changed(current, changes, "set_gains")
-        self._session.request(
-            m.SetGains(**{f.name: getattr(new, f.name) for f in m.SetGains.FIELDS})
-        )
-        return self.gains(i)
+        return self._update(self.gains, m.SetGains, finger, changes, "set_gains")
 
     def motion(self, finger: FingerKey) -> m.Motion:
         """A finger's move limits (``max_speed`` rad/s, ``max_accel`` rad/s^2) and feedforward
@@ -54,12 +48,7 @@ class HandConfiguration:
     def set_motion(self, /, finger: FingerKey, **changes: float) -> m.Motion:
         """Change some of a finger's move limits and feedforward gains (``max_speed``,
         ``max_accel``, ``kv``, ``ka``; SI); they apply from the next move. Returns them."""
-        i = self._fingers.index(finger)
-        new = self._changed(self.motion(i), changes, "set_motion")
-        self._session.request(
-            m.SetMotion(**{f.name: getattr(new, f.name) for f in m.SetMotion.FIELDS})
-        )
-        return self.motion(i)
+        return self._update(self.motion, m.SetMotion, finger, changes, "set_motion")
 
     def limits(self, finger: FingerKey) -> m.Limits:
         return self._session.request(m.GetLimits(finger=self._fingers.index(finger)))
@@ -72,13 +61,7 @@ class HandConfiguration:
         """Change some of a finger's supervision limits (``theta2_min``, ``theta2_max``,
         ``limit_margin``, ``stall_error``, ``stall_motion``, ``stall_time``,
         ``encoder_jump``; SI). Returns the limits now in use."""
-        i = self._fingers.index(finger)
-        current = self.limits(i)
-        new = self._changed(current, changes, "set_limits")
-        self._session.request(
-            m.SetLimits(**{f.name: getattr(new, f.name) for f in m.SetLimits.FIELDS})
-        )
-        lim = self.limits(i)
+        lim = self._update(self.limits, m.SetLimits, finger, changes, "set_limits")
         self._limits.take(lim)
         return lim
 
@@ -118,21 +101,29 @@ class HandConfiguration:
     def set_finger_config(self, /, finger: FingerKey, **changes: Any) -> m.FingerConfig:
         """Change a finger's hardware configuration (``actuation``, ``encoder_offset``,
         ``encoder_invert``, ``motor_invert``). The finger must be idle (COAST or BRAKE)."""
-        i = self._fingers.index(finger)
-        current = self.finger_config(i)
-        new = self._changed(current, changes, "set_finger_config")
-        self._session.request(
-            m.SetFingerConfig(**{f.name: getattr(new, f.name) for f in m.SetFingerConfig.FIELDS})
+        return self._update(
+            self.finger_config, m.SetFingerConfig, finger, changes, "set_finger_config"
         )
-        return self.finger_config(i)
 
-    @staticmethod
-    def _changed(current: M, changes: Mapping[str, Any], during: str) -> M:
+    def _update(
+        self,
+        get: Callable[[int], M],
+        setter: type[Request[Any]],
+        finger: FingerKey,
+        changes: Mapping[str, Any],
+        during: str,
+    ) -> M:
+        """Every setter's rule: the finger's settings as they are, the fields named changed
+        (an unknown one refused, naming the fields), all sent, and read back."""
+        i = self._fingers.index(finger)
+        current = get(i)
         names = {f.name for f in type(current).FIELDS} - {"finger"}
         unknown = sorted(set(changes) - names)
         if unknown:
             raise TypeError(f"{during}: unknown field(s) {unknown}; fields are {sorted(names)}")
-        return replace(current, **changes)
+        new = replace(current, **changes)
+        self._session.request(setter(**{f.name: getattr(new, f.name) for f in setter.FIELDS}))
+        return get(i)
 
     # --- saved configuration, zero, faults ------------------------------------------------------
 
