@@ -73,3 +73,9 @@ def test_via_refuses_a_name_other_than_its_methods() -> None:
     via = Via("_motion", HandMotion.move)
     with pytest.raises(TypeError, match=r"Probe\.stop shows a method named move"):
         via.__set_name__(type("Probe", (), {}), "stop")
+
+
+def test_help_shows_each_methods_signature_without_self() -> None:
+    shown = repr(Hand.move)
+    assert shown.startswith("HandMotion.move(targets") and "duration" in shown
+    assert "self" not in repr(Hand.set_gains) and "finger" in repr(Hand.set_gains)

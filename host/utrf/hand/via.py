@@ -4,6 +4,7 @@ its signature and docstring; the method has one home, the part."""
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
 from typing import Any, Concatenate, Generic, ParamSpec, Self, TypeVar, overload
 
@@ -25,6 +26,12 @@ class Via(Generic[S, P, R]):
     def __set_name__(self, owner: type, name: str) -> None:
         if name != self.name:  # one name for one thing, on the Hand and on its part
             raise TypeError(f"{owner.__name__}.{name} shows a method named {self.name}")
+
+    def __repr__(self) -> str:
+        """The part's method and its signature, as ``help(Hand)`` shows it."""
+        sig = inspect.signature(self.method)
+        call = sig.replace(parameters=list(sig.parameters.values())[1:])
+        return f"{self.method.__qualname__}{call}"
 
     @overload
     def __get__(self, hand: None, owner: type | None = None) -> Self: ...
