@@ -113,3 +113,14 @@ def test_analyse_works_on_a_run_killed_anywhere(finished, tmp_path: Path, capsys
             before = json.loads((out / "results.json").read_text().replace(str(out), str(run)))
             before.pop("render", None), result.pop("render", None)  # written mid-run: removed
             assert result == before
+
+
+def test_analyse_names_what_it_cannot_read(tmp_path: Path, capsys) -> None:
+    assert main(["hil", "analyse", str(tmp_path)]) == 2
+    assert "holds no run (no meta.json)" in capsys.readouterr().err
+    (tmp_path / "meta.json").write_text('{"config": {"speed": 1}}')
+    assert main(["hil", "analyse", str(tmp_path)]) == 2
+    assert "of no known run (fields ['speed'])" in capsys.readouterr().err
+    (tmp_path / "meta.json").write_text('{"config": ')  # cut by a kill: not a run's meta
+    assert main(["hil", "analyse", str(tmp_path)]) == 2
+    assert "meta.json" in capsys.readouterr().err
