@@ -103,11 +103,11 @@ def test_a_fresh_clone_sets_up_builds_and_runs_the_readme(tmp_path: Path) -> Non
                 p = subprocess.Popen(["bash", "-c", f"exec {run}"], cwd=clone, env=_env(clone),
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      text=True)  # fmt: skip
-                time.sleep(4.0)
+                first = _line_with(p, "index")  # it shows the fingers, then Ctrl-C
                 p.send_signal(signal.SIGINT)
-                out, err = p.communicate(timeout=30)
+                out, err = p.communicate(timeout=60)
                 assert p.returncode in (0, 130) and "Traceback" not in err, (cmd, out, err)
-                assert "index" in out, (cmd, out)
+                assert first, (cmd, out, err)
                 continue
             r = _sh(run, clone, timeout=600)  # a minute of CPU; the machine may be loaded
             assert r.returncode == 0, (cmd, r.stdout[-3000:], r.stderr[-3000:])
@@ -123,6 +123,19 @@ def test_a_fresh_clone_sets_up_builds_and_runs_the_readme(tmp_path: Path) -> Non
                 server.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 server.kill()
+
+
+def _line_with(proc: subprocess.Popen[str], text: str, timeout_s: float = 180) -> str:
+    """The first line of ``proc``'s output holding ``text`` ('' if none came in time)."""
+    assert proc.stdout is not None
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if text in line:
+            return line
+        if not line and proc.poll() is not None:
+            break
+    return ""
 
 
 def _served_pty(server: subprocess.Popen[str]) -> str:
