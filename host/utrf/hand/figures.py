@@ -111,7 +111,7 @@ def _label_fingers(
     across it, with a line to its tip: the names never overlap, however close the tips."""
     height, width = shape[0], shape[1]
     order = sorted(tips, key=lambda n: tips[n][0])
-    slots = np.linspace(0.1 * width, 0.9 * width, len(order)) if order else []
+    slots = np.linspace(0.1 * width, 0.9 * width, len(order))
     for name, x in zip(order, slots, strict=True):
         ax.annotate(name, tips[name], xytext=(x, height * 1.08), textcoords="data",
                     ha="center", va="top", fontsize=9, annotation_clip=False,
