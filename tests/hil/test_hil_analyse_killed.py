@@ -109,6 +109,9 @@ def test_analyse_works_on_a_run_killed_anywhere(finished, tmp_path: Path, capsys
             assert result["samples"] == _whole_rows(run / SAMPLES[kind]), (kind, fraction)
             if fraction < 0.9 and result["samples"]:
                 assert not result["complete"]
+            if kind == "object-hold":  # displacement, slip, forces: drawn when there are samples
+                assert (result["figure"] is not None) is (result["samples"] > 0)
+                assert result["figure"] is None or Path(result["figure"]).stat().st_size > 0
         if fraction == 1.0:  # nothing cut: the run's own results
             before = json.loads((out / "results.json").read_text().replace(str(out), str(run)))
             before.pop("render", None), result.pop("render", None)  # written mid-run: removed
