@@ -44,14 +44,15 @@ $(EMU_CONFIG): FORCE_EMU_CONFIG | $(NEEDS_SETUP)
 .PHONY: FORCE_EMU_CONFIG
 FORCE_EMU_CONFIG:
 
+# Read from EMU_CONFIG when the recipe runs (after EMU_CONFIG is made).
+EMU_MJ_INC    = $(shell sed -n 's/^mujoco_include=\([^ ]*\) .*/\1/p' $(EMU_CONFIG))
+EMU_MJ_FLAGS  = $(if $(filter none,$(EMU_MJ_INC)),,-DUTRF_WITH_MUJOCO -isystem $(EMU_MJ_INC))
+
 $(EMU_LIB): $(EMU_SRCS) $(EMU_HDRS) $(EMU_DIR)/harness.mk $(EMU_CONFIG)
 	@mkdir -p $(@D)
-	@inc=$$(sed -n 's/^mujoco_include=\([^ ]*\) .*/\1/p' $(EMU_CONFIG)); \
-	 if [ "$$inc" = none ]; then flags=; \
-	   echo "emulator: building the harness without MuJoCo (no mujoco package for $(PY))"; \
-	 else flags="-DUTRF_WITH_MUJOCO -isystem $$inc"; fi; \
-	 echo "$(EMU_CC) $(EMU_CFLAGS) $$flags -shared -o $@ $(EMU_SRCS) $(EMU_LDLIBS)"; \
-	 $(EMU_CC) $(EMU_CFLAGS) $$flags -shared -o $@ $(EMU_SRCS) $(EMU_LDLIBS)
+	@$(if $(EMU_MJ_FLAGS),true,echo "emulator: building the harness without MuJoCo (no mujoco \
+	  package for $(PY))")
+	$(EMU_CC) $(EMU_CFLAGS) $(EMU_MJ_FLAGS) -shared -o $@ $(EMU_SRCS) $(EMU_LDLIBS)
 
 $(EMU_FIXTURE): tests/emulator/fixtures/fixture.c firmware/src/board_pins.h $(EMU_DIR)/harness.mk \
                 | $(NEEDS_SETUP)
