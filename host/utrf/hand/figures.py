@@ -91,7 +91,7 @@ def draw_pose(
         0.5,
         0.015,
         "Side views: each finger's Joints 1-3 and tip from the kinematics model "
-        "(θ_i = q / R_i) at the measured Joint-2 angle (solid) and the target (dashed); mm."
+        "(θ_i = q / R_i) at the measured Joint-2 angle (wide band) and the target (dashed); mm."
         + (f"\n{note}" if note else ""),
         ha="center",
         fontsize=8,
