@@ -176,6 +176,8 @@ def run_one(options: dict[str, Any], params: dict[str, Any]) -> dict[str, Any]:
         result = object_hold.run(
             config, Path(tmp) / "run", elf=elf, progress=lambda _: None, on_hand=on_hand
         )
+    if not result.get("complete", True):  # neither held to the end nor dropped: no verdict
+        raise RuntimeError(f"the hold was cut short at {result.get('duration_s', 0.0):.2f} s")
     forces = result["largest_contact_force_n"]
     identity = seen["identity"]
     return {
