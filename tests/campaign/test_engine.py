@@ -230,6 +230,7 @@ def test_the_cluster_path_with_a_separate_scheduler_and_worker(tmp_path: Path) -
                 p.kill()
 
 
+@pytest.mark.slow  # the client waits its 10 s connect timeout
 def test_no_scheduler_at_the_address_is_a_clear_error(tmp_path: Path) -> None:
     from utrf.cli import main
 
