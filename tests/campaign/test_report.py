@@ -91,3 +91,12 @@ def test_grasp_tables_and_the_ab_verdict(tmp_path: Path) -> None:
     assert ab["rate_a"] == 0.5 and ab["rate_b"] == 0.8
     text = "\n".join(grasp_report.describe_grasps(out))
     assert "b minus a = +30.0%" in text
+
+
+def test_a_sampled_parameter_is_tabled_by_quartiles() -> None:
+    col = np.asarray(np.random.default_rng(0).uniform(0.1, 0.6, 100).tolist(), dtype=object)
+    binned = grasp_report._binned(col)
+    labels = sorted(set(binned.tolist()))
+    assert len(labels) == 4 and all(20 <= (binned == b).sum() <= 30 for b in labels)
+    few = np.asarray([0.1, 0.3, 0.1], dtype=object)
+    assert grasp_report._binned(few).tolist() == [0.1, 0.3, 0.1]

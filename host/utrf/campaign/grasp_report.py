@@ -34,7 +34,7 @@ def grasps(campaign: Campaign, table: pa.Table, root: Path, plots: bool) -> dict
     varied = [p.name for p in campaign.params if not p.fixed and p.name in table.column_names]
     per: dict[str, list[dict[str, Any]]] = {}
     for name in varied:
-        col = np.asarray(table.column(name).to_pylist(), dtype=object)
+        col = _binned(np.asarray(table.column(name).to_pylist(), dtype=object))
         rows = []
         for value in sorted(set(col[ran].tolist()), key=str):
             sel = ran & (col == value)
@@ -60,6 +60,22 @@ def grasps(campaign: Campaign, table: pa.Table, root: Path, plots: bool) -> dict
     if plots and len(axes) == 2:
         out["picture"] = str(_map(table, ran, success, axes, root / "grasp_map.png"))
     return out
+
+
+BINS = 4  # a sampled (continuous) parameter's table: its quartiles
+
+
+def _binned(col: np.ndarray) -> np.ndarray:
+    """A numeric column of many values (a random or Latin hypercube sample) as quartile
+    ranges ("0.1-0.23"); lists of a few values stay as they are."""
+    numeric = all(isinstance(v, int | float) and not isinstance(v, bool) for v in col)
+    if not numeric or len(set(col.tolist())) <= 2 * BINS:
+        return col
+    x = col.astype(float)
+    edges = np.quantile(x, np.linspace(0, 1, BINS + 1))
+    which = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, BINS - 1)
+    labels = [f"{edges[i]:.3g}-{edges[i + 1]:.3g}" for i in range(BINS)]
+    return np.asarray([labels[i] for i in which], dtype=object)
 
 
 def _ab(
@@ -138,7 +154,7 @@ def describe_grasps(g: dict[str, Any]) -> list[str]:
     lines = [f"grasps: {g['held']} of {g['runs']} held (and did not break)"]
     for name, rows in g["by"].items():
         cells = [
-            f"{r['value']}: {r['held']}/{r['runs']} ({r['ci_low']:.0%}-{r['ci_high']:.0%})"
+            f"{_label(r['value'])}: {r['held']}/{r['runs']} ({r['ci_low']:.0%}-{r['ci_high']:.0%})"
             for r in rows
         ]
         lines.append(f"  by {name}: " + ", ".join(cells))
@@ -153,3 +169,7 @@ def describe_grasps(g: dict[str, Any]) -> list[str]:
     if g.get("picture"):
         lines.append(f"map: {g['picture']}")
     return lines
+
+
+def _label(v: Any) -> str:
+    return f"{v:.3g}" if isinstance(v, float) else str(v)
