@@ -324,19 +324,14 @@ inline __attribute__((always_inline)) void run_due_ticks() {
 }
 }  // namespace
 
-// Its register saves and restores (some 40 cycles each: it calls the tick) run with the
-// interrupts on (ISR_NOBLOCK), so that a byte the UART received does not wait for them; the
-// decision and the tick's set-up run with them off, as run_due_ticks() asks.
-ISR(TIMER2_COMPA_vect, ISR_NOBLOCK) {
-    cli();
+ISR(TIMER2_COMPA_vect) {
     GPIOR0 |= _BV(kWake) | _BV(kTickSeen);  // loop() after the tick (sleep_until_interrupt)
     if (g_tick_running || g_tick_locked) {
         if (g_tick_deferred) g_tick_lost = 1;
         g_tick_deferred = 1;
-    } else {
-        run_due_ticks();
+        return;
     }
-    sei();
+    run_due_ticks();
 }
 
 // With the interrupts on from its first instruction (ISR_NOBLOCK, before the register saves):
