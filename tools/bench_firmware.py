@@ -232,7 +232,7 @@ def receive_path(loads: list[dict], what: dict[str, str]) -> list[str]:
         f"Worst wait {worst['rx_wait_worst_cycles']} cycles ({what[worst['scenario']]}, at "
         f"{worst['rx_wait_worst_at_s']:.6f} s), {lost} bytes lost in all rows: the goal is "
         + ("**met**." if met else "**not met**.")
-        + " See firmware/README.md (Timing) for what holds a byte up.",
+        + " See firmware/README.md (The receive path) for what holds a byte up.",
     ]
     return lines
 

@@ -34,7 +34,6 @@ from utrf.hand import FaultEvent, Hand, HandState
 from utrf.hand.view import state_line, state_table
 from utrf.protocol import messages as m
 
-
 STATS_EVERY_S = 2.0  # the board's counters (get_stats) are read this often
 
 
