@@ -5,7 +5,9 @@ target Joint-2 angles in degrees, the motor duties in percent, the fingertip in 
 latched faults, with the stream's measured rate and the frames lost. Elsewhere (a pipe, CI),
 one line every ``--every`` seconds, or with ``--json`` one JSON object (SI) per sample.
 Faults and board resets are printed as they happen; after a reset the monitor says so and
-handshakes again (the board forgot the telemetry rate).
+handshakes again (the board forgot the telemetry rate). Every 2 s it reads the board's
+counters (``get_stats``) and says when the board's UART lost bytes (overruns of its two-byte
+receive buffer, frame errors); the footer shows them with the ring's overflows and bad CRCs.
 
 The monitor connects without resetting the board (no DTR pulse; ``--reset`` to reset it),
 changes no mode and leaves the hand as it finds it: a pose held stays held. The first
