@@ -10,7 +10,9 @@ harness (build/emulator/libutrf_sim.so) first. Every figure is measured here:
 - the control tick on the emulated board (tools.tick_bench, on the harness's simavr): the
   firmware's own measurement (get_stats: tick_mean over 1024 ticks, tick_worst) and the
   harness's cycle profiles of app::tick(), with five fingers in closed loop and the state
-  stream on, under six kinds of host traffic;
+  stream on, under seven kinds of host traffic; with each, the receive path (issue 19): the
+  harness models the ATmega2560's two-byte receive FIFO and times each byte from its stop bit
+  to the firmware's read of UDR0, and counts the bytes lost;
 - the step response of the default gains on the reference finger plant (tests/firmware/
   fwsim.py), through the host build of the firmware core.
 """
