@@ -128,7 +128,7 @@ def _cached(relative: Path, what: str, tools: dict[str, str], files: dict[Path, 
         cmd = ["make", "-s", "--no-print-directory",
                "-f", str(fw_dir / "firmware.mk"), "-f", str(harness_dir / "harness.mk"),
                f"FW_DIR={fw_dir}", f"EMU_DIR={harness_dir}", f"BUILD={out}",
-               f"FW_GIT_ID={out.name[:8]}",  # the build id: the sources' hash
+               f"FW_GIT_ID={out.name[:8]}",  # the build id: the cache's hash of the sources
                f"PY={sys.executable}",  # harness.mk asks it for MuJoCo's headers
                str(target)]  # fmt: skip
         proc = subprocess.run(cmd, cwd=out, capture_output=True, text=True, check=False)
