@@ -213,6 +213,31 @@ def test_bad_crc_is_refused_with_the_frames_seq(sim: Sim) -> None:
     assert sim.ok(m.GetStats()).rx_crc_errors == 1
 
 
+@pytest.mark.parametrize("seq", [0x42, 0x00, 0x7F])
+def test_a_damaged_frame_whose_seq_reads_as_a_board_seq_is_counted_not_answered(
+    sim: Sim, seq: int
+) -> None:
+    """A BAD_CRC nack echoes the damaged frame's seq; one with bit 7 set would read as a board
+    frame (protocol/README.md, Sequence numbers): the board counts the frame and says nothing."""
+    frame = bytearray(encode_frame(seq, m.SetMode.ID, VALID[m.SetMode].encode()))
+    damaged = bytearray(frame)
+    if seq == 0:  # seq 0 is a COBS code's zero: damage the msg_id's place instead, then flip
+        damaged = bytearray(encode_frame(0x80, m.SetMode.ID, VALID[m.SetMode].encode()))
+        damaged[-2] ^= 0x01  # a CRC byte: the frame is damaged, its seq reads 0x80
+    else:
+        assert damaged[1] == seq
+        damaged[1] ^= 0x80  # the seq byte, bit 7 flipped on the line
+    sim.take()
+    sim.send_raw(bytes(damaged))
+    sim.run(3)
+    assert [r for r in sim.frames if r.msg_id == m.Nack.ID] == []
+    assert sim.ok(m.GetStats()).rx_crc_errors == 1
+    # the link goes on: the undamaged frame is answered
+    sim.send_raw(bytes(frame))
+    sim.run(2)
+    assert any(r.seq == seq and r.msg_id == m.Ack.ID for r in sim.frames)
+
+
 def test_framing_errors_are_counted_not_answered(sim: Sim) -> None:
     before = snapshot(sim)
     sim.take()

@@ -187,19 +187,18 @@ __attribute__((noinline)) void set_targets(app::Board& b, uint8_t seq, const uin
         for (uint8_t f = 0; f < kFingerCount; ++f, bit = (uint8_t)(bit << 1)) {
             if (!(m.mask & bit)) continue;
             const finger::Params& p = b.hand.finger(f).params();
-            bu[f] = (int16_t)fx::clamp32(bu_from_urad(m.value[f]), p.theta_min, p.theta_max);
+            bu[f] = p.clamp(bu_from_urad(m.value[f]));
         }
     } else {
         for (uint8_t f = 0; f < kFingerCount; ++f, bit = (uint8_t)(bit << 1)) {
             if (!(m.mask & bit)) continue;
             const finger::Params& p = b.hand.finger(f).params();
             const int32_t a = kin_target_bu(m.kind, f, m.value[f]);
-            // The exact limit is allowed: the float round trip may land a count beyond it.
-            if (a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1) {
+            if (!p.accepts(a)) {
                 nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
                 return;
             }
-            bu[f] = (int16_t)fx::clamp32(a, p.theta_min, p.theta_max);
+            bu[f] = p.clamp(a);
         }
     }
     {
@@ -234,11 +233,11 @@ void move(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
         if (!(m.mask & (1u << f))) continue;
         const finger::Params& p = b.hand.finger(f).params();
         const int32_t a = target_bu(m.kind, f, m.value[f]);
-        if (a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1) {
+        if (!p.accepts(a)) {
             nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
             return;
         }
-        end[f] = (int16_t)fx::clamp32(a, p.theta_min, p.theta_max);
+        end[f] = p.clamp(a);
     }
     // The paths start from the setpoints in use: read them (a moving finger's changes a few
     // counts before its new path starts, which moves its start by as much), plan outside the

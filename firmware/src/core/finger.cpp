@@ -77,13 +77,21 @@ int16_t Finger::limit_for(uint8_t mode) const {
     return lim < 0 ? (int16_t)0 : lim;
 }
 
-void Finger::configure(const Params& p, const pid::Coeffs& c) {
+bool Finger::configure(const Params& p, const pid::Coeffs& c) {
     const bool encoder_changed =
         p.zero_turn != params_.zero_turn || p.encoder_invert != params_.encoder_invert;
     params_ = p;
     if (encoder_changed) have_theta_ = false;  // the next reading is not a jump
     limit_ = limit_for(mode_);
     pid_.set_coeffs(c, limit_);
+    // Ended, not clamped: the rest of a path lies between its setpoint now and its end (the
+    // profile is monotonic), so it stays within the limits only if both do; a path bent to
+    // new limits would be a move nobody asked for.
+    const bool end_path =
+        path_.active() && (target_ != p.clamp(target_) || path_.end() != p.clamp(path_.end()));
+    if (end_path) path_.stop();
+    target_ = p.clamp(target_);
+    return end_path;
 }
 
 void Finger::enter_closed_loop(uint8_t mode) {

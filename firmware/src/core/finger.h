@@ -67,6 +67,13 @@ struct Params {
     int16_t stall_error;
     int16_t stall_motion;
     uint16_t stall_ticks;  // stall time in ticks
+    // The limits rule for setpoints (set_targets, move, new limits): a target asked for, in BU
+    // as converted, is accepted within a count of a limit (a float round trip may land the
+    // exact limit a count beyond), and every setpoint in use lies within the limits.
+    bool accepts(int32_t bu) const {
+        return bu >= (int32_t)theta_min - 1 && bu <= (int32_t)theta_max + 1;
+    }
+    int16_t clamp(int32_t bu) const { return (int16_t)fx::clamp32(bu, theta_min, theta_max); }
     // The controller's output limit: max_duty, less the pretension when antagonistic.
     int16_t limit() const {
         const int16_t l = rotary ? max_duty : (int16_t)(max_duty - pretension);
@@ -81,7 +88,9 @@ class Finger {
     Finger();
 
     // ---- from loop(), under the tick lock, after validation ----
-    void configure(const Params& p, const pid::Coeffs& c);  // bumpless when gains or limits change
+    // Bumpless when gains or limits change. New limits hold every setpoint at once: the target
+    // is clamped in, and a path that would leave them is ended (true: one was).
+    bool configure(const Params& p, const pid::Coeffs& c);
     // Enter `mode`. duty (DUTY) and effort (GRASP) are Q15 fractions.
     void set_mode(uint8_t mode, int16_t duty, int16_t effort);
     void set_target(int16_t theta_bu);  // a step: ends a move's path

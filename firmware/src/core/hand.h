@@ -51,9 +51,11 @@ class Hand {
     Hand();
 
     // loop() context, under the tick lock.
-    void configure_finger(uint8_t f, const finger::Params& p, const pid::Coeffs& c) {
-        fingers_[f].configure(p, c);
+    // True when the new limits ended the finger's path (Finger::configure()).
+    bool configure_finger(uint8_t f, const finger::Params& p, const pid::Coeffs& c) {
+        const bool ended = fingers_[f].configure(p, c);
         hal::encoder_setup(f, fingers_[f].encoder_setup());  // the sampler judges with it
+        return ended;
     }
     void set_safety(uint16_t timeout_ms, uint8_t safe_action);
     finger::Finger& finger(uint8_t f) { return fingers_[f]; }

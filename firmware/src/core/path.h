@@ -74,6 +74,7 @@ class Path {
     Path() : left_(0), seg_left_(0), next_ready_(0), plan_left_(0) {}
     bool active() const { return left_ != 0; }
     uint16_t left() const { return left_; }  // ticks to go
+    int16_t end() const { return end_; }      // BU: where it ends (valid while active())
     int16_t feedforward() const { return ff_; }
     // loop() context, under the tick lock: start from the setpoint `from_bu` (the finger's
     // present one), at rest. Cheap: plan_next() works out the first segment.
