@@ -87,6 +87,9 @@ void fw_advance_ms(uint32_t ms) { state().ms += ms; }
 void fw_set_adc(uint8_t f, uint16_t sample) { state().adc[f] = sample; }
 // The sampler stops (no new ADC rounds): every encoder goes stale.
 void fw_freeze_adc(int frozen) { state().adc_frozen = frozen != 0; }
+// Every reading through the tick's general encoder path (Finger::judge_reading()), not its
+// fast one: the two must judge alike.
+void fw_encoder_general_path(int on) { state().adc_rejudge = on != 0; }
 void fw_set_tick_cycles(uint32_t c) { state().tick_cycles = c; }
 void fw_set_period_elapsed(int on) { state().period_elapsed = on != 0; }
 
@@ -254,7 +257,7 @@ void fw_pid_state(int32_t* i31, int32_t* v8, int32_t* saturated) {
     *v8 = g_pid.velocity8();
     *saturated = g_pid.saturated() ? 1 : 0;
 }
-int16_t fw_pid_add_deadband(int16_t v, int16_t db) { return db ? pid::add_deadband(v, db) : v; }
+int32_t fw_pid_add_deadband(int32_t v, int16_t db) { return db ? pid::add_deadband(v, db) : v; }
 int16_t fw_pid_remove_deadband(int16_t u, int16_t db) {
     pid::Gains g = gains(0, 0, 0, 10, db / 32768.0, 1);
     const pid::Coeffs c = pid::compile(g, 1e-3f);
@@ -310,6 +313,15 @@ uint16_t fw_encoder_turn_from_rad(double rad) { return encoder::turn_from_rad((f
 
 void fw_target_window(int16_t theta_min, int16_t theta_max, int32_t* lo, int32_t* hi) {
     dispatch::target_window(theta_min, theta_max, *lo, *hi);
+}
+// The general target range rule (finger::Params::accepts()) on a JOINT2_ANGLE value, as move
+// applies it: the set_targets window (the fast path) must accept exactly these.
+int fw_target_accepts(int16_t theta_min, int16_t theta_max, int32_t urad) {
+    finger::Params p = finger::Params();
+    p.theta_min = theta_min;
+    p.theta_max = theta_max;
+    if (urad < -dispatch::kMaxUrad || urad > dispatch::kMaxUrad) return 0;
+    return p.accepts(dispatch::bu_from_urad(urad)) ? 1 : 0;
 }
 
 uint16_t fw_config_image_bytes(void) { return config::kImageBytes; }

@@ -10,6 +10,7 @@ import itertools
 import math
 import struct
 
+import numpy as np
 import pytest
 from fwsim import Sim, m, raw_body
 
@@ -717,6 +718,27 @@ def test_the_set_targets_window_is_exactly_the_values_the_count_check_accepts(si
         assert (lo.value, hi.value) == (want_lo, want_hi), (t_min, t_max)
         assert bu(want_lo) >= t_min - 1 and (want_lo == -k or bu(want_lo - 1) < t_min - 1)
         assert bu(want_hi) <= t_max + 1 and (want_hi == k or bu(want_hi + 1) > t_max + 1)
+
+
+def test_the_set_targets_window_and_the_general_range_rule_accept_alike(sim: Sim) -> None:
+    """The target range rule has one home (finger::Params::accepts(), which move and the
+    other kinds take); set_targets' micro-radian window is its fast path for JOINT2_ANGLE.
+    Fed the same values (each window's edges and either side of them, random ones, the ends
+    of the range), the two agree."""
+    import ctypes
+
+    rng = np.random.default_rng(23)
+    lo, hi = ctypes.c_int32(), ctypes.c_int32()
+    limits = [(-16384, 16384), (-100, 100), (0, 0), (12000, 12345), (-32768, 32767)]
+    limits += [tuple(sorted(rng.integers(-20000, 20000, size=2))) for _ in range(20)]
+    for t_min, t_max in limits:
+        sim.lib.fw_target_window(int(t_min), int(t_max), ctypes.byref(lo), ctypes.byref(hi))
+        values = [lo.value + d for d in (-2, -1, 0, 1)] + [hi.value + d for d in (-1, 0, 1, 2)]
+        values += [int(v) for v in rng.integers(-4_100_000, 4_100_000, size=200)]
+        values += [-4_000_001, -4_000_000, 4_000_000, 4_000_001, 0]
+        for v in values:
+            fast = lo.value <= v <= hi.value
+            assert bool(sim.lib.fw_target_accepts(int(t_min), int(t_max), v)) == fast, (t_min, v)
 
 
 def test_joint2_angle_targets_are_the_exact_nearest_count(sim: Sim) -> None:

@@ -181,6 +181,8 @@ def test_deadband_compensation(fwlib: ctypes.CDLL) -> None:
     # Outside the ramp the deadband is added in the output's direction ...
     assert fwlib.fw_pid_add_deadband(5000, db) == 5000 + db
     assert fwlib.fw_pid_add_deadband(-5000, db) == -5000 - db
+    # on the PID's unlimited sum: beyond a duty, unsaturated (the limit comes after)
+    assert fwlib.fw_pid_add_deadband(40000, db) == 40000 + db
     # ... continuous through zero (no chatter between +db and -db) ...
     values = [fwlib.fw_pid_add_deadband(v, db) for v in range(-2 * ramp, 2 * ramp + 1)]
     assert values[2 * ramp] == 0

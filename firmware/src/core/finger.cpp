@@ -94,17 +94,19 @@ bool Finger::configure(const Params& p, const pid::Coeffs& c) {
     return end_path;
 }
 
-void Finger::enter_closed_loop(uint8_t mode) {
-    if (!target_valid_) {
-        target_ = fx::clamp16(theta_, params_.theta_min, params_.theta_max);
-        target_valid_ = true;
-    }
-    // Bumpless: the PID starts from the output the motors have now.
-    const int16_t present = idle() ? (int16_t)0 : pid_.output();
+void Finger::restart(uint8_t mode, int16_t u) {
     limit_ = limit_for(mode);
-    pid_.reset(limit_, present, theta_);
+    pid_.reset(limit_, u, theta_);
     stall_count_ = 0;
     stall_ref_ = theta_;
+}
+
+void Finger::enter_closed_loop(uint8_t mode) {
+    if (!target_valid_) {
+        target_ = params_.clamp(theta_);
+        target_valid_ = true;
+    }
+    restart(mode, present_output());
     contact_ = false;
 }
 
@@ -119,15 +121,10 @@ void Finger::set_mode(uint8_t mode, int16_t duty, int16_t effort) {
     if (mode == POSITION || mode == GRASP) {
         enter_closed_loop(mode);
     } else if (mode == DUTY) {
-        const int16_t present = idle() ? (int16_t)0 : pid_.output();
-        limit_ = limit_for(DUTY);
-        pid_.reset(limit_, present, theta_);
-        stall_count_ = 0;
-        stall_ref_ = theta_;
+        restart(DUTY, present_output());
     } else {
         target_valid_ = false;
-        limit_ = limit_for(mode);
-        pid_.reset(limit_, 0, theta_);
+        restart(mode, 0);
     }
     contact_ = false;
     mode_ = mode;
@@ -147,19 +144,15 @@ void Finger::clear_faults() {
 }
 
 uint8_t Finger::judge_reading(const hal::EncoderReading& enc) {
-    if (enc.status != hal::EncoderStatus::OK) {
+    const hal::EncoderReading r = encoder::judge(enc, encoder_setup());
+    if (r.flags & hal::kReadingOut) {
         encoder_ok_ = false;
         return ENCODER_RANGE;
     }
     encoder_ok_ = true;
-    last_turn_ = enc.turn;
-    const int16_t th = encoder::angle_bu(enc.turn, params_.zero_turn, params_.encoder_invert);
-    uint8_t found = 0;
-    if (have_theta_ && fx::abs16((int16_t)(th - theta_)) > params_.jump) found = ENCODER_JUMP;
-    theta_ = th;
-    have_theta_ = true;
-    if (th < params_.fault_low || th > params_.fault_high) found |= JOINT_LIMIT;
-    return found;
+    last_turn_ = r.turn;
+    const uint8_t found = take_angle(r.angle);
+    return (r.flags & hal::kReadingLimit) ? (uint8_t)(found | JOINT_LIMIT) : found;
 }
 
 void Finger::latch(uint8_t bits) {
@@ -173,21 +166,16 @@ void Finger::latch(uint8_t bits) {
         mode_ = (faults_ & kStopFaults) == JOINT_LIMIT ? BRAKE : COAST;
         target_valid_ = false;
         contact_ = false;
-        limit_ = limit_for(COAST);
-        pid_.reset(limit_, 0, theta_);
+        restart(COAST, 0);
     }
 }
 
 void Finger::hold_here() {
     const uint8_t mode = mode_ == GRASP ? GRASP : POSITION;
     path_.stop();
-    target_ = fx::clamp16(theta_, params_.theta_min, params_.theta_max);
+    target_ = params_.clamp(theta_);
     target_valid_ = true;
-    const int16_t present = pid_.output();
-    limit_ = limit_for(mode);
-    pid_.reset(limit_, present, theta_);
-    stall_count_ = 0;
-    stall_ref_ = theta_;
+    restart(mode, present_output());
     mode_ = mode;
 }
 

@@ -162,10 +162,18 @@ class Finger {
 
    private:
     int16_t limit_for(uint8_t mode) const;
-    // A reading the sampler flagged (out of band, beyond a joint limit, or judged with an
-    // earlier setup): every encoder rule from its turn and status, with this finger's
-    // configuration. Updates the angle; returns the faults found.
+    // The encoder's rule that needs the last angle (the jump), on a reading's angle: takes it
+    // as theta_; returns ENCODER_JUMP or 0. The tick's both paths call it.
+    inline uint8_t take_angle(int16_t th);
+    // The tick's general path, for a reading the sampler flagged (out of band, beyond a joint
+    // limit, or judged with an earlier setup): judged again with this finger's setup
+    // (encoder::judge()), then its faults. The tick's fast path takes an unflagged reading.
     uint8_t judge_reading(const hal::EncoderReading& enc);
+    // Bumpless re-entry into `mode`: its output limit, the PID restarted from the output `u`
+    // at the measured angle, the stall watch from here. Every mode change goes through it.
+    void restart(uint8_t mode, int16_t u);
+    // The output the motors have now (0 when idle): where a bumpless start begins.
+    int16_t present_output() const { return idle() ? (int16_t)0 : pid_.output(); }
     void enter_closed_loop(uint8_t mode);
     // DUTY: the commanded duty, never further past a joint limit, through the PID's limit and
     // slew limiter.
@@ -214,6 +222,17 @@ UTRF_HOT uint16_t pwm_counts(uint16_t mag) {
     return (uint16_t)((uint16_t)(hi + (uint16_t)((uint16_t)(lo + 512u) >> 8)) >> 2);
 }
 
+UTRF_HOT uint8_t Finger::take_angle(int16_t th) {
+    uint8_t found = 0;
+    if (UTRF_LIKELY(have_theta_) &&
+        UTRF_UNLIKELY(fx::abs16((int16_t)(th - theta_)) > params_.jump)) {
+        found = ENCODER_JUMP;
+    }
+    theta_ = th;
+    have_theta_ = true;
+    return found;
+}
+
 UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& out) {
     // ---- encoder: band and plausibility; joint limits ----
     // Angles are BU within +-pi, so every difference below fits int16. The faults found are
@@ -222,21 +241,16 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
     // (The band and the limits were judged by the sampler: hal.h, EncoderReading.)
     // The usual paths are told to the compiler (UTRF_LIKELY), so they run straight through.
     int16_t th;
-    uint8_t found = 0;
+    uint8_t found;
     if (UTRF_LIKELY(enc.flags == 0)) {
-        // In band and within the joint limits, its angle worked out by the sampler with this
-        // finger's setup (core/encoder.h, judge()): only the jump rule is left.
+        // Fast path: in band and within the joint limits, its angle worked out by the sampler
+        // with this finger's setup (core/encoder.h, judge()): only the jump rule is left.
         encoder_ok_ = true;
         last_turn_ = enc.turn;
         th = enc.angle;
-        if (UTRF_LIKELY(have_theta_) &&
-            UTRF_UNLIKELY(fx::abs16((int16_t)(th - theta_)) > params_.jump)) {
-            found = ENCODER_JUMP;
-        }
-        theta_ = th;
-        have_theta_ = true;
+        found = take_angle(th);
     } else {
-        found = judge_reading(enc);  // every rule, from the reading's turn and status
+        found = judge_reading(enc);  // general path: every rule, from turn and status
         th = theta_;
     }
     if (UTRF_UNLIKELY(found)) latch(found);

@@ -49,16 +49,12 @@ void Pid::reset(int16_t limit, int16_t u, int16_t measured) {
     saturated_ = false;
 }
 
-// The Q15 output the P and D terms give (the step's sum, before the deadband and the limit).
-static int32_t pd_sum15(const Coeffs& c, int16_t e, int16_t v8) {
-    return 2 * ((int32_t)fx::apply16(c.kp, e, kTermMax14) - fx::apply16(c.kd, v8, kTermMax14));
-}
-
 void Pid::set_coeffs(const Coeffs& c, int16_t new_limit) {
     // The output before the change, less the new P and D terms, is the new integrator.
-    const int32_t before = pd_sum15(c_, e_last_, v8_) + (int16_t)(i31_ >> 16);
+    const int32_t before = (int32_t)p_minus_d(c_, e_last_, v8_) * 2 + (int16_t)(i31_ >> 16);
     c_ = c;
-    const int32_t i15 = fx::clamp32(before - pd_sum15(c, e_last_, v8_), -new_limit, new_limit);
+    const int32_t i15 =
+        fx::clamp32(before - (int32_t)p_minus_d(c, e_last_, v8_) * 2, -new_limit, new_limit);
     i31_ = (int32_t)((uint32_t)i15 << 16);
     u_ = fx::clamp16(u_, (int16_t)-new_limit, new_limit);
 }
