@@ -33,8 +33,8 @@ static const int32_t kMaxUrad = 4000000L;  // beyond +-pi: refused before the co
 // Micro-radians (set_targets' JOINT2_ANGLE) to BU, to the nearest count, in integers:
 // x 32768 / (2 pi 1e6) as x * M / 2^32. M is within 2e-9 of exact: below 1e-4 count off for
 // any angle the board can hold.
-// The 64-bit product is formed from 32-bit ones (avr-gcc's 64-bit multiply and shift took
-// ~600 cycles a finger, a fifth of set_targets' dispatch): with M = 2^16 Mh + Ml and
+// The 64-bit product is formed from 32-bit ones (avr-gcc's 64-bit arithmetic is slow:
+// firmware/README.md, Timing): with M = 2^16 Mh + Ml and
 // x = 2^16 xh + xl (xl the low 16 bits, unsigned; xh = x >> 16, floor),
 // x M + 2^31 = 2^16 (x Mh + xh Ml + 2^15) + xl Ml, and since xl Ml < 2^32,
 // floor((x M + 2^31) / 2^32) = (x Mh + xh Ml + (xl Ml >> 16) + 2^15) >> 16 exactly.

@@ -16,14 +16,7 @@ int16_t q15_milli(uint16_t milli) {
 
 Params compile(const config::Finger& cfg, float dt_s, pid::Coeffs& coeffs) {
     Params p;
-    pid::Gains g;
-    g.kp = cfg.gains.kp;
-    g.ki = cfg.gains.ki;
-    g.kd = cfg.gains.kd;
-    g.d_cutoff_hz = cfg.gains.d_cutoff_hz;
-    g.deadband = cfg.gains.deadband_duty * 1e-3f;
-    g.slew_per_s = cfg.gains.slew_per_s;
-    coeffs = pid::compile(g, dt_s);
+    coeffs = pid::compile(cfg.gains, dt_s);
     p.max_duty = q15_milli(cfg.gains.max_duty);
     p.pretension = q15_milli(cfg.gains.pretension_duty);
     p.theta_min = fx::bu(cfg.limits.theta2_min);
@@ -94,7 +87,8 @@ bool Finger::configure(const Params& p, const pid::Coeffs& c) {
     return end_path;
 }
 
-void Finger::restart(uint8_t mode, int16_t u) {
+// Inline: the host-silence HOLD runs it from the tick for every finger (hold_here()).
+__attribute__((always_inline)) inline void Finger::restart(uint8_t mode, int16_t u) {
     limit_ = limit_for(mode);
     pid_.reset(limit_, u, theta_);
     stall_count_ = 0;
@@ -160,9 +154,8 @@ void Finger::latch(uint8_t bits) {
     faults_ |= bits;
     if ((bits & kStopFaults) && mode_ != COAST) {
         path_.stop();
-        // Beyond a joint limit (and nothing else wrong) the motors short-brake: passive, no
-        // energy in, and it resists an outside force carrying the finger further (measured on
-        // the emulated board, test_fw_limit_brake.py). Any other stop fault coasts.
+        // JOINT_LIMIT alone short-brakes (firmware/README.md, Safety, says why); any other stop
+        // fault coasts.
         mode_ = (faults_ & kStopFaults) == JOINT_LIMIT ? BRAKE : COAST;
         target_valid_ = false;
         contact_ = false;
@@ -175,7 +168,7 @@ void Finger::hold_here() {
     path_.stop();
     target_ = params_.clamp(theta_);
     target_valid_ = true;
-    restart(mode, present_output());
+    restart(mode, pid_.output());  // a driving finger's (the tick holds only those)
     mode_ = mode;
 }
 

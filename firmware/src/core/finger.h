@@ -35,9 +35,7 @@ enum Fault : uint8_t {
 };
 // The stall rule runs for each finger about every kStallEvery ticks, in loop() (Hand::
 // stall_rules(): its window, the stall time, is some hundreds of ticks; loop() runs within
-// kLoopHangTicks or the tick halts the hand). (Running the integrator every 5 ticks was
-// tried: Ki's step five times larger every 5 ms doubled the settling time against friction,
-// tests/firmware/test_fw_pid.py.)
+// kLoopHangTicks or the tick halts the hand).
 static const uint8_t kStallEvery = 5;
 
 // Faults that stop the finger: COAST, motors off; JOINT_LIMIT alone short-brakes them instead
@@ -74,6 +72,7 @@ struct Params {
         return bu >= (int32_t)theta_min - 1 && bu <= (int32_t)theta_max + 1;
     }
     int16_t clamp(int32_t bu) const { return (int16_t)fx::clamp32(bu, theta_min, theta_max); }
+    int16_t clamp(int16_t bu) const { return fx::clamp16(bu, theta_min, theta_max); }
     // The controller's output limit: max_duty, less the pretension when antagonistic.
     int16_t limit() const {
         const int16_t l = rotary ? max_duty : (int16_t)(max_duty - pretension);
@@ -181,10 +180,8 @@ class Finger {
     hal::MotorCommand idle_outputs(uint8_t mode);  // by value: the tick's command stays in registers
 
     // The tick's working state first, then the PID (its state and coefficients), then the
-    // configuration (Params: the fields the tick reads first). The hand's tick reaches each
-    // finger at a fixed address (hand.h: lds/sts), so the layout no longer has to keep what
-    // it touches within ldd/std reach (64 bytes) of one pointer; it stays close to that for
-    // the code that reaches a finger through a pointer.
+    // configuration (Params: the fields the tick reads first): close together for the code
+    // that reaches a finger through a pointer (ldd/std reach 64 bytes).
     int16_t theta_;
     int16_t target_;
     int16_t limit_;  // limit_for(mode_), kept current

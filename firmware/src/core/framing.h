@@ -121,8 +121,8 @@ class FrameDecoder {
   // Fast path: several bytes of a frame at once, as feed() would take them: data[0..n) up to
   // the first 0x00 (not taken: feed() it), and no further than the buffer holds (the byte
   // that does not fit goes to feed() too, which reports OVERSIZE). Returns how many it took.
-  // The same rule as take() (decode()), its state copied into a local for the run (through
-  // the members, every store to buf_ made the compiler load them all again).
+  // The same rule as take() (decode()), its state in a local for the run: a store to buf_
+  // may alias the members, so the compiler would reload them after each.
   uint8_t feed_run(const uint8_t* data, uint8_t n) {
     if (discarding_) return 0;
     const uint8_t room = static_cast<uint8_t>(kMaxEncodedBytes - len_);

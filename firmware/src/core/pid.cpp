@@ -11,8 +11,8 @@ const float kRadPerBu = 1.0f / fx::kBuPerRad;
 int16_t q15(float duty) { return fx::sat16(fx::round_sat(duty * 32768.0f)); }
 }  // namespace
 
-Coeffs compile(const Gains& g, float dt_s) {
-    Coeffs c;
+Coeffs compile(const config::Gains& g, float dt_s) {
+    Coeffs c = Coeffs();
     c.kp = fx::make_gain(g.kp * kRadPerBu * 16384.0f, kTermMax14);
     c.ki = fx::make_gain(g.ki * dt_s * kRadPerBu * 2147483648.0f, kIStepMax31);
     // v is Q8 BU per tick: rad/s = v / 256 * kRadPerBu / dt.
@@ -21,11 +21,16 @@ Coeffs compile(const Gains& g, float dt_s) {
     const float a = 1.0f - expf(-2.0f * 3.14159265f * g.d_cutoff_hz * dt_s);
     c.alpha = (uint16_t)fx::clamp32(fx::round_sat(a * 65536.0f), 1, 65535);
     c.slew = (int16_t)fx::clamp32(fx::round_sat(g.slew_per_s * dt_s * 32768.0f), 1, 32767);
-    c.deadband = (int16_t)fx::clamp32(q15(g.deadband), 0, 16384);
-    c.db_inverse = (uint16_t)fx::clamp32(
-        fx::round_sat(65536.0f * kDeadbandRamp15 / (float)(kDeadbandRamp15 + c.deadband)), 0,
-        65535);
+    c.deadband = (int16_t)fx::clamp32(
+        q15(g.deadband_duty * proto::SetGains::kDeadbandDutyScale), 0, 16384);
+    c.db_inverse = deadband_inverse(c.deadband);
     return c;
+}
+
+uint16_t deadband_inverse(int16_t deadband) {
+    return (uint16_t)fx::clamp32(
+        fx::round_sat(65536.0f * kDeadbandRamp15 / (float)(kDeadbandRamp15 + deadband)), 0,
+        65535);
 }
 
 int16_t remove_deadband(int16_t u, int16_t db, uint16_t db_inverse) {

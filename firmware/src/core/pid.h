@@ -27,22 +27,15 @@
 
 #include <stdint.h>
 
+#include "../generated/config_layout.h"
 #include "fixed.h"
 
 namespace utrf {
 namespace pid {
 
-// SI gains, as configured (set_gains).
-struct Gains {
-    float kp;           // duty per rad
-    float ki;           // duty per rad s
-    float kd;           // duty s per rad
-    float d_cutoff_hz;  // derivative filter cut-off
-    float deadband;     // duty added in the output's direction
-    float slew_per_s;   // largest output change per second (duty/s)
-};
-
-// The same, ready for the tick. Built by compile() in loop() context (floats live here only).
+// The gains as configured (config::Gains, generated from spec.toml's set_gains), ready for
+// the tick. Built by compile() in loop() context (floats live there only). A gain of the law
+// is a line in the spec, a field here with its line in compile(), and its use in step().
 struct Coeffs {
     fx::Gain kp;          // e [BU] -> Q14 duty
     fx::Gain ki;          // e [BU] -> Q31 duty per tick
@@ -59,7 +52,9 @@ static const int32_t kIStepMax31 = 1L << 29;  // integrator step: +-0.25 duty pe
 static const int16_t kMaxDm = 63;                // d(measured) clamp, BU per tick
 static const int16_t kDeadbandRamp15 = 256;      // 1/128 duty: the compensation ramps in
 
-Coeffs compile(const Gains& g, float dt_s);
+Coeffs compile(const config::Gains& g, float dt_s);
+// ramp / (ramp + deadband), Q16: undoes the deadband's compensation (remove_deadband()).
+uint16_t deadband_inverse(int16_t deadband);
 
 class Pid {
    public:
