@@ -4,10 +4,10 @@ Every row is written and flushed to the kernel as it arrives, so a run killed at
 keeps every sample it took; an fsync every ``fsync_period_s`` bounds the loss on power
 failure. The periodic fsync runs in a thread of its own, so a slow disk does not hold up the
 run that writes (an emulated run writes ten times faster than real time); ``close()`` waits
-for it and syncs the rest. Reopening a log appends to it when the header matches. A row cut short by a kill
-is skipped, and counted, by :func:`read_log`; reopening the log drops it (it was never a
-whole sample, and a row cut inside its last field would otherwise read as a full row with a
-shortened number).
+for it and syncs the rest. Reopening a log appends to it when the header matches. A row cut
+short by a kill is skipped, and counted, by :func:`read_log`; reopening the log drops it (it
+was never a whole sample, and a row cut inside its last field would otherwise read as a full
+row with a shortened number).
 """
 
 from __future__ import annotations
