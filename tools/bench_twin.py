@@ -171,6 +171,11 @@ def report(ref: str, runs: dict[str, list[dict]], alone: dict, seconds: float, r
     new, old = runs["new"], runs["ref"]
     ratio_wall = median(new, "wall") / median(old, "wall")
     ratio_cpu = median(new, "cpu") / median(old, "cpu")
+
+    def paired(key: str) -> str:  # each run against the other tree's run beside it
+        each = [a[key] / b[key] for a, b in zip(new, old, strict=True)]
+        return f"median {statistics.median(each):.2f} ({', '.join(f'{x:.2f}' for x in each)})"
+
     loads = [r["load"] for r in new + old]
 
     def cell(rows: list[dict], key: str) -> str:
@@ -196,10 +201,12 @@ def report(ref: str, runs: dict[str, list[dict]], alone: dict, seconds: float, r
         f"{min(loads):.1f}–{max(loads):.1f} during the runs), which moves wall time more than "
         "CPU time.",
         "",
-        f"| | this checkout | `{ref}` | ratio |",
+        f"| | this checkout | `{ref}` | ratio of the medians; of each pair run side by side |",
         "|---|---|---|---|",
-        f"| wall time | {cell(new, 'wall')} | {cell(old, 'wall')} | **{ratio_wall:.2f}** |",
-        f"| CPU time | {cell(new, 'cpu')} | {cell(old, 'cpu')} | **{ratio_cpu:.2f}** |",
+        f"| wall time | {cell(new, 'wall')} | {cell(old, 'wall')} | **{ratio_wall:.2f}**; "
+        f"pairs: {paired('wall')} |",
+        f"| CPU time | {cell(new, 'cpu')} | {cell(old, 'cpu')} | **{ratio_cpu:.2f}**; "
+        f"pairs: {paired('cpu')} |",
         f"| each engine alone, CPU: the ELF on simavr with no plant / the MJCF stepped alone / "
         f"the rest of the hold (Python, start-up, the figure, the crossings) | {engines('new')} "
         f"| {engines('ref')} | |",
