@@ -108,6 +108,8 @@ def reference_tree(commit: str) -> Path:
     """A worktree of ``commit`` under build/, built with its own make (reused when there)."""
     tree = REPO_ROOT / "build" / f"ref-{commit}"
     if not (tree / ".git").exists():
+        # a build/ removed since (make clean) leaves its worktree registered: forget it first
+        subprocess.run(["git", "worktree", "prune"], cwd=REPO_ROOT, check=True)
         subprocess.run(
             ["git", "worktree", "add", "--detach", str(tree), commit], cwd=REPO_ROOT, check=True
         )
