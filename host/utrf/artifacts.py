@@ -67,12 +67,24 @@ def cache_root() -> Path:
 
 
 def _source_hash(fw_dir: Path, harness_dir: Path) -> str:
+    """The sources' hash, and the MuJoCo the harness is built against (its headers come from
+    the mujoco package: installed or upgraded later, the harness is built anew)."""
     h = hashlib.sha256()
+    h.update(f"mujoco {_mujoco_version()}\0".encode())
     for root in (fw_dir, harness_dir):
         files = [*root.glob("*.mk"), *root.glob("src/**/*.[ch]*"), *root.glob("*.[ch]")]
         for p in sorted(set(files)):
             h.update(str(p.relative_to(root)).encode() + b"\0" + p.read_bytes() + b"\0")
     return h.hexdigest()[:16]
+
+
+def _mujoco_version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("mujoco")
+    except metadata.PackageNotFoundError:
+        return "none"
 
 
 def _check_tools(tools: dict[str, str], files: dict[Path, str], what: str) -> None:
