@@ -32,7 +32,7 @@ KINDS: dict[str, tuple[str, str]] = {
     "invert-magnet": ("the encoder's magnet glued the other way round", ""),
     "magnet-offset": ("the magnet glued turned by VALUE rad", "rad"),
     "off-centre": ("the magnet off-centre: a once-per-turn error of VALUE rad", "rad"),
-    "slack": ("Tendon 1 longer by VALUE m (slack before the joint moves)", "m"),
+    "slack": ("Tendon 2 longer by VALUE m: Joint 1 (the motor) moves that far before Joint 2", "m"),
     "weak-motor": ("both motors give VALUE times the model's stall force", "factor"),
     "slow-motor": ("both motors run at VALUE times the model's no-load speed", "factor"),
     "narrow-range": ("the closed stop at Joint-2 angle VALUE rad (flexion stops early)", "rad"),
@@ -53,7 +53,7 @@ class FingerBuild:
     magnet_inverted: bool = False
     magnet_offset_rad: float = 0.0
     magnet_eccentric_rad: float = 0.0
-    slack_m: float = 0.0  # Tendon 1
+    slack_m: float = 0.0  # Tendon 2 (the Joint-1-to-Joint-2 flexion coupling)
     force_scale: float = 1.0  # stall force, times the model's
     speed_scale: float = 1.0  # no-load speed, times the model's
     closed_stop_rad: float | None = None  # Joint-2 angle of the closed stop; None: the model's
@@ -209,7 +209,7 @@ class BuildFaults:
             fs = [int(free.pop()) for _ in range(need)]
             value = {
                 "magnet-offset": rng.uniform(0.15, 0.6) * rng.choice([-1, 1]),
-                "slack": rng.uniform(0.002, 0.005),
+                "slack": rng.uniform(0.001, 0.002),
                 "narrow-range": rng.uniform(1.45, 1.55),
                 "friction": rng.uniform(5.0, 12.0),
             }.get(str(kind))
@@ -235,7 +235,7 @@ class BuildFaults:
             st["build_encoder_eccentric"][f] = b.magnet_eccentric_rad
             name = plant.names[f]
             if b.slack_m:
-                t = m.tendon(f"{name}_t1").id
+                t = m.tendon(f"{name}_t2").id
                 m.tendon_lengthspring[t, 1] = b.slack_m  # the spring engages past the slack
             if b.friction_n:
                 for side in ("xa", "xb"):
