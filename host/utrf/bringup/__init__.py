@@ -4,4 +4,4 @@ from utrf.bringup.findings import Finding, FingerConfig
 from utrf.bringup.procedure import BringupResult, FingerResult, bringup
 from utrf.bringup.pulses import Bounds
 
-__all__ = ["Bounds", "BringupResult", "FingerConfig", "FingerResult", "Finding", "bringup"]
+__all__ = ["Bounds", "BringupResult", "Finding", "FingerConfig", "FingerResult", "bringup"]

@@ -20,8 +20,13 @@ MOVED_RAD = 0.05
 #: pulse duties tried in turn to see a finger move (a stiff or weak finger needs more)
 TRY_DUTIES = (0.2, 0.35)
 WIRING_PULSE_S = 0.25
+#: both motors pull this hard, balanced, this long, to take up what a pushing motor let out
+TAKE_UP = 0.3
+TAKE_UP_S = 1.2
+#: a rest (both motors at the pretension) that moves the reading more: the finger is not held
+HELD_RAD = 0.1
 #: a stop is searched for at this duty, for at most this long per leg
-STOP_DUTY = 0.3
+STOP_DUTY = 0.35
 STOP_LEG_S = 4.0
 
 
@@ -31,6 +36,8 @@ class Wiring:
     moved and its sign, or None."""
 
     moved: dict[tuple[int, int], tuple[int, int] | None] = field(default_factory=dict)
+    held: dict[int, bool] = field(default_factory=dict)  # the pretension held it at rest
+    drift: dict[int, float] = field(default_factory=dict)  # how far it ran when not held
     motor_invert: int = 0
     encoder_invert: int = 0
     findings: list[Finding] = field(default_factory=list)
@@ -68,13 +75,26 @@ def _moved(rest: Trace, drive: Trace) -> tuple[int, int] | None:
     return ch, int(np.sign(extra[ch]))
 
 
-def wiring(hand: Hand, rec: Recorder, f: int, name: str, names: list[str], bounds: Bounds) -> Wiring:
-    """Pulse each motor alone (pretension 0: A pulls at duty > 0, B at duty < 0), with the
-    configuration's motor direction as built and then swapped, and see which channel moves
-    which way against a rest of the same length."""
+def wiring(
+    hand: Hand, rec: Recorder, f: int, name: str, names: list[str], bounds: Bounds
+) -> Wiring:
+    """Pulse each motor on top of the pretension (A pulls harder at duty > 0, B at duty < 0)
+    with the configuration's motor direction as built, and, unless that moved the finger both
+    ways while the pretension held it at rest, swapped; see which channel moves which way
+    against a rest of the same length just before."""
     w = Wiring()
+    pretension = hand.gains(f).pretension_duty
     for invert in (0, 1):
         hand.set_finger_config(f, motor_invert=invert, encoder_invert=0)
+        if invert:
+            # the first round pushed the carriages away if the leads are swapped: both motors
+            # pull at TAKE_UP duty, balanced, until the tendons are taut again
+            hand.set_gains(f, pretension_duty=TAKE_UP)
+            take_up = pulse(hand, rec, f, 0.0, bounds, seconds=TAKE_UP_S, travel=3.0)
+            w.traces.append(take_up)
+            w.drift[1] = float(take_up.delta()[f])
+            hand.set_gains(f, pretension_duty=pretension)
+        held = True
         for sign in (1, -1):
             w.moved[(invert, sign)] = None
             for duty in TRY_DUTIES:
@@ -84,12 +104,16 @@ def wiring(hand: Hand, rec: Recorder, f: int, name: str, names: list[str], bound
                 w.traces += [rest, drive]
                 settle(hand, 0.05)
                 hand.clear_faults([f])
+                if abs(rest.delta()[f]) > HELD_RAD:
+                    held = False  # the pretension does not hold it: a motor pushes, or none pulls
+                    w.drift.setdefault(invert, float(rest.delta()[f]))
                 got = _moved(rest, drive)
-                if got is not None:
+                if got is not None and (held or got[0] != f):
                     w.moved[(invert, sign)] = got
                     break
-        if invert == 0 and w.moved[(0, 1)] and w.moved[(0, -1)]:
-            break  # both motors move it: the direction as built is known
+        w.held[invert] = held
+        if invert == 0 and held and w.moved[(0, 1)] and w.moved[(0, -1)]:
+            break  # both motors move it and the pretension holds it: the wiring is known
     _interpret(w, f, name, names)
     return w
 
@@ -116,38 +140,41 @@ def _interpret(w: Wiring, f: int, name: str, names: list[str]) -> None:
         return
     a0, b0 = w.moved.get((0, 1)), w.moved.get((0, -1))
     a1, b1 = w.moved.get((1, 1)), w.moved.get((1, -1))
-    if a0 and b0 and a0[1] == b0[1]:
-        # both motors turn it the same way: one pushes where it should pull, and a pushing
-        # motor only lets the other one (or gravity) have its way
-        bad = "A" if a0[1] < 0 else "B"
-        w.findings.append(
-            Finding(
-                name,
-                "lead-a-swapped" if bad == "A" else "lead-b-swapped",
-                f"driving motor {bad} to pull moves the finger the same way as the other motor: "
-                f"motor {bad} pushes, its two leads are swapped at the driver or the motor",
-                f"swap motor {bad}'s two wires ({'AO1/AO2' if bad == 'A' else 'BO1/BO2'} on "
-                f"{name}'s TB6612); the configuration turns both motors together and cannot "
-                "fix one",
-                False,
-            )
-        )
-        return
-    if a0 and b0:
-        w.motor_invert, sa, sb = 0, a0[1], b0[1]
-    elif a1 and b1 and a1[1] != b1[1]:
-        w.motor_invert, sa, sb = 1, a1[1], b1[1]
+    d0, d1 = w.drift.get(0, 0.0), w.drift.get(1, 0.0)
+    if w.held.get(0) and a0 and b0 and a0[1] != b0[1]:
+        w.motor_invert, sa = 0, a0[1]
+    elif w.held.get(1) and a1 and b1 and a1[1] != b1[1]:
+        w.motor_invert, sa = 1, a1[1]
         w.findings.append(
             Finding(
                 name,
                 "leads-swapped",
-                "the motors do not move the finger as they should when driven to pull, and do "
-                "when driven the other way: both motors' leads are swapped (the driver's "
-                "outputs wired the other way round)",
+                "the pretension does not hold the finger and the motors do not move it as they "
+                "should; driven the other way, both do: both motors' leads are swapped (the "
+                "driver's outputs wired the other way round)",
                 "motor_invert = 1 (the firmware drives both the other way)",
                 True,
             )
         )
+    elif abs(d0) > HELD_RAD and abs(d1) > HELD_RAD and d0 * d1 < 0:
+        # at rest one motor pulls and the other pushes: the finger runs to the puller's side,
+        # and to the other side once both are driven the other way
+        bad = "A" if d0 < 0 else "B"
+        w.findings.append(
+            Finding(
+                name,
+                "lead-a-swapped" if bad == "A" else "lead-b-swapped",
+                f"at rest the finger runs {'open' if bad == 'A' else 'closed'} and, with the "
+                f"motors driven the other way, {'closed' if bad == 'A' else 'open'}: motor "
+                f"{bad} pushes where it should pull, its two leads are swapped",
+                f"swap motor {bad}'s two wires ({'AO1/AO2' if bad == 'A' else 'BO1/BO2'} on "
+                f"{name}'s TB6612); the configuration turns both motors together and cannot "
+                "fix one",
+                False,
+                {"drift_rad": [d0, d1]},
+            )
+        )
+        return
     else:
         w.findings.append(
             Finding(
@@ -158,7 +185,7 @@ def _interpret(w: Wiring, f: int, name: str, names: list[str]) -> None:
                 "the encoder's magnet does not turn with Joint 2",
                 "check the motor supply and STBY, the motor wires and the magnet's fixing",
                 False,
-                {"moved": {f"{k}": v for k, v in w.moved.items()}},
+                {"moved": {f"{k}": v for k, v in w.moved.items()}, "drift_rad": [d0, d1]},
             )
         )
         return

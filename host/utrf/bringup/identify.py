@@ -33,8 +33,8 @@ from utrf.bringup.pulses import Bounds, Recorder, Trace, brake, pulse, settle
 from utrf.hand import Hand
 from utrf.hand.errors import FingerFaultError, NotControlledError, NotSettledError
 
-STEP_DUTIES = (0.12, 0.24)
-STEP_S = 0.22
+STEP_DUTIES = (0.15, 0.3)
+STEP_S = 0.3
 MAX_CROSSOVER = 30.0  # rad/s
 PHASE_BUDGET = math.pi / 6  # of the 90° margin a PD with a cancelled pole gives
 
@@ -64,20 +64,35 @@ def _fit_step(t: np.ndarray, th: np.ndarray, u: float) -> tuple[float, float] | 
         v, tau = p[0], max(p[1], 1e-4)
         return v * t + (v0 - v) * tau * (1 - np.exp(-t / tau))
 
-    r = least_squares(lambda p: model(p) - th, x0=[th[-1] / t[-1], 0.02], bounds=([-50, 1e-3], [50, 0.5]))
+    r = least_squares(
+        lambda p: model(p) - th, x0=[th[-1] / t[-1], 0.02], bounds=([-50, 1e-3], [50, 0.5])
+    )
     return float(r.x[0]), float(r.x[1])
 
 
-def identify(hand: Hand, rec: Recorder, f: int, bounds: Bounds, mid: float) -> tuple[Plant, list[Trace]]:
+def _mean_speed(speeds: dict[tuple[float, int], list[float]], u: float) -> float:
+    up, down = speeds[(u, 1)], speeds[(u, -1)]
+    if not up or not down:
+        return math.nan
+    return 0.5 * (float(np.median(up)) + float(np.median(down)))
+
+
+def identify(
+    hand: Hand, rec: Recorder, f: int, bounds: Bounds, mid: float
+) -> tuple[Plant, list[Trace]]:
     """Square-wave duty steps about ``mid`` (rad), two sizes, each way."""
     traces: list[Trace] = []
-    speeds: dict[float, list[float]] = {u: [] for u in STEP_DUTIES}
+    speeds: dict[tuple[float, int], list[float]] = {
+        (u, d): [] for u in STEP_DUTIES for d in (1, -1)
+    }
     taus: list[float] = []
     dead: dict[int, list[float]] = {1: [], -1: []}
     for u in STEP_DUTIES:
         for sign in (1, -1, 1, -1):
             room = 0.5
-            tr = pulse(hand, rec, f, sign * u, bounds, seconds=STEP_S, travel=room, stop_on_stall=True)
+            tr = pulse(
+                hand, rec, f, sign * u, bounds, seconds=STEP_S, travel=room, stop_on_stall=True
+            )
             traces.append(tr)
             th = tr.theta2[:, f]
             if len(th) > 40:
@@ -85,25 +100,35 @@ def identify(hand: Hand, rec: Recorder, f: int, bounds: Bounds, mid: float) -> t
                 moved = np.nonzero(sign * (th - th[0]) > 0.01)[0]
                 if len(moved):
                     dead[sign].append(float(tr.t[moved[0]] - tr.t[0]))
-                    got = _fit_step(tr.t[moved[0]:], th[moved[0]:], u)
+                    got = _fit_step(tr.t[moved[0] :], th[moved[0] :], u)
                     if got is not None:
-                        speeds[u].append(abs(got[0]))
+                        speeds[(u, sign)].append(abs(got[0]))
                         taus.append(got[1])
             settle(hand, 0.0)
             # toward the middle again if the steps walked away from it
             here = hand.state().fingers[f].theta2
             if abs(here - mid) > 0.35:
-                pulse(hand, rec, f, math.copysign(0.2, mid - here), bounds, seconds=1.0, travel=1.0, until=mid)
+                pulse(
+                    hand,
+                    rec,
+                    f,
+                    math.copysign(0.2, mid - here),
+                    bounds,
+                    seconds=1.0,
+                    travel=1.0,
+                    until=mid,
+                )
     brake(hand, [f])
-    v1 = float(np.median(speeds[STEP_DUTIES[0]])) if speeds[STEP_DUTIES[0]] else math.nan
-    v2 = float(np.median(speeds[STEP_DUTIES[1]])) if speeds[STEP_DUTIES[1]] else math.nan
+    # each duty's speed: its flexing and extending steps averaged (gravity helps one and
+    # hinders the other); a line K (u - u_f) through the two duties
+    v1, v2 = (_mean_speed(speeds, u) for u in STEP_DUTIES)
     K = (v2 - v1) / (STEP_DUTIES[1] - STEP_DUTIES[0])
     u_f = max(0.0, STEP_DUTIES[0] - v1 / K) if K > 0 else math.nan
     tau = float(np.median(taus)) if taus else math.nan
     flex, ext = dead[1][1:], dead[-1]  # the first flexion step starts from rest
     extra = (np.median(flex) - np.median(ext)) if flex and ext else 0.0
     backlash = max(0.0, float(extra)) * v2
-    return Plant(float(K), tau, float(u_f), backlash, sum(len(v) for v in speeds.values())), traces
+    return Plant(float(K), tau, float(u_f), backlash, sum(map(len, speeds.values()))), traces
 
 
 @dataclass

@@ -11,6 +11,7 @@ the one ``save_config`` after the confirmation. Resumable: each finger's result 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 from collections.abc import Callable, Iterable
@@ -23,8 +24,6 @@ from utrf.bringup.findings import Finding, FingerConfig
 from utrf.bringup.identify import Check, Plant, check, identify, tune
 from utrf.bringup.pulses import Bounds, Recorder, brake, pulse, settle
 from utrf.hand import Hand
-from utrf.hand.errors import HandError
-from utrf.protocol import messages as m
 
 #: the limits go this far inside the stops found
 STOP_MARGIN_RAD = 0.05
@@ -33,6 +32,10 @@ SAME_ANGLE_RAD = 0.03
 SAME_GAIN = 0.3
 #: set_finger_config's default encoder_offset (protocol/spec.toml): the straight finger mid-turn
 DEFAULT_OFFSET = 3.14159265
+#: more friction (duty) than the model's, and more backlash (rad), make findings
+FRICTION_DUTY = 0.03
+SLACK_RAD = 0.06
+SLOW = 0.55  # of the model motors' speed gain
 #: the steps of a finger's bring-up, in order
 UPTO = ("wiring", "stops", "plant", "check")
 
@@ -250,7 +253,7 @@ def _plant_findings(name: str, p: Plant, hand: Hand, f: int) -> list[Finding]:
     """The plant against the model's motors (``model_plant``)."""
     ref = model_plant(hand, f)
     out = []
-    if p.K < 0.6 * ref.K:
+    if p.K < SLOW * ref.K:
         out.append(
             Finding(
                 name,
@@ -262,39 +265,29 @@ def _plant_findings(name: str, p: Plant, hand: Hand, f: int) -> list[Finding]:
                 {"K": p.K, "K_model": ref.K},
             )
         )
-    if p.tau > 1.8 * ref.tau and p.K >= 0.6 * ref.K:
-        out.append(
-            Finding(
-                name,
-                "weak-motor",
-                f"its speed rises with a time constant of {p.tau * 1e3:.0f} ms, the model's "
-                f"{ref.tau * 1e3:.0f} ms: a weaker motor (less force per amp)",
-                "gains and feedforward tuned for it",
-                True,
-                {"tau": p.tau, "tau_model": ref.tau},
-            )
-        )
-    elif p.u_f > ref.u_f + 0.06:
+    if p.u_f > ref.u_f + FRICTION_DUTY:
         out.append(
             Finding(
                 name,
                 "friction",
                 f"it takes {p.u_f:.2f} duty to move (the model: {ref.u_f:.2f}): friction in a "
-                "guide, a tight tendon or a carriage",
-                "deadband_duty set to it; free the tendon if it is much more",
+                "guide, a tight tendon or a carriage, or a weaker motor (less force per amp: "
+                "the steps cannot tell the two apart)",
+                "deadband_duty set to it; free the tendon or the guide if it is much more",
                 True,
                 {"u_f": p.u_f, "u_f_model": ref.u_f},
             )
         )
-    if p.backlash_rad > 0.06:
+    if p.backlash_rad > SLACK_RAD:
         out.append(
             Finding(
                 name,
                 "slack",
-                f"reversing toward flexion, the motor moves about {math.degrees(p.backlash_rad):.0f}° "
-                "of Joint 2 before the joint follows: slack in the coupling tendon (Tendon 2)",
-                "tighten Tendon 2; the gains were tuned with it",
-                True,
+                "reversing toward flexion, the motor moves about "
+                f"{math.degrees(p.backlash_rad):.0f}° of Joint 2 before the joint follows: "
+                "slack in the coupling tendon (Tendon 2)",
+                "tighten Tendon 2 (Joint 2 is loose between its strands: no gain holds it)",
+                False,
                 {"backlash_rad": p.backlash_rad},
             )
         )
@@ -384,7 +377,11 @@ def bringup(
     if resume and progress_path is not None and progress_path.exists():
         for d in json.loads(progress_path.read_text())["fingers"]:
             done[d["index"]] = FingerResult.from_dict(d)
-    idx = sorted({hand.finger_index(k) for k in fingers}) if fingers is not None else list(range(len(hand.fingers)))
+    idx = (
+        sorted({hand.finger_index(k) for k in fingers})
+        if fingers is not None
+        else list(range(len(hand.fingers)))
+    )
     step = on_step or (lambda text: None)
     rec = Recorder(hand)
     t_start = hand.state().board_time
@@ -426,7 +423,9 @@ def bringup(
                 result.message = "saved to the board's EEPROM"
             else:
                 hand.load_config("eeprom")
-                result.message = "not confirmed: nothing saved (the board runs its saved configuration)"
+                result.message = (
+                    "not confirmed: nothing saved (the board runs its saved configuration)"
+                )
         result.board_time_s = hand.state().board_time - t_start
     except BaseException:
         _safe_stop(hand)
@@ -445,7 +444,5 @@ def _safe_stop(hand: Hand) -> None:
     """Motors off and the running configuration the saved one, as far as the link allows (a
     lost link leaves it to the board's host-silence rule)."""
     for action in (lambda: brake(hand), lambda: hand.load_config("eeprom")):
-        try:
+        with contextlib.suppress(Exception):  # best effort while stopping
             action()
-        except (HandError, OSError, Exception):  # noqa: BLE001 - best effort while stopping
-            pass

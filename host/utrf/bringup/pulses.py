@@ -31,7 +31,7 @@ class Bounds:
     duty: float = 0.5
     pulse_s: float = 0.4
     travel_rad: float = 0.6
-    stall_s: float = 0.1
+    stall_s: float = 0.15
     stall_motion_rad: float = 0.02
     jump_rad: float = 0.15
     #: the firmware's stall time while bringing up (its own rule behind the host's)

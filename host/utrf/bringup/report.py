@@ -32,8 +32,13 @@ def _plot(r: FingerResult, path: Path) -> Path | None:
         ax.plot([t - t0 for t in c.t], [math.degrees(v) for v in c.theta2], label=c.label)
     c = r.checks[-1]
     if c.t:
-        ax.plot([t - c.t[0] for t in c.t], [math.degrees(v) for v in c.target], "k--", lw=0.8,
-                label="setpoint")
+        ax.plot(
+            [t - c.t[0] for t in c.t],
+            [math.degrees(v) for v in c.target],
+            "k--",
+            lw=0.8,
+            label="setpoint",
+        )
     ax.set_xlabel("time (s)")
     ax.set_ylabel("Joint-2 angle (deg)")
     ax.set_title(f"{r.name}: closed-loop check before and after tuning")
@@ -91,10 +96,15 @@ def write_report(result: BringupResult, out: Path, samples: list[HandState]) -> 
                 f"margin {tn['phase_margin_deg']:.0f}°; gains {tn['gains']}, motion {tn['motion']}."
             )
         if r.checks:
-            lines += ["", "| check | RMS (°) | worst (°) | overshoot (°) | settling (s) |", "|---|---|---|---|---|"]
+            lines += [
+                "",
+                "| check | RMS (°) | worst (°) | overshoot (°) | settling (s) |",
+                "|---|---|---|---|---|",
+            ]
             for c in r.checks:
                 lines.append(
-                    f"| {c.label} | {math.degrees(c.rms_rad):.2f} | {math.degrees(c.worst_rad):.2f} "
+                    f"| {c.label} | {math.degrees(c.rms_rad):.2f} "
+                    f"| {math.degrees(c.worst_rad):.2f} "
                     f"| {math.degrees(c.overshoot_rad):.2f} | {c.settle_s:.2f} |"
                 )
         pic = _plot(r, out / f"{r.name}.png")

@@ -27,7 +27,6 @@ from utrf.emulator.board_driven import BoardDriven
 from utrf.emulator.board_faults import BoardFaults
 from utrf.emulator.board_plant import BoardPlant
 from utrf.emulator.board_probes import BoardProbes
-from utrf.emulator.build_faults import BuildFaults
 from utrf.emulator.board_types import (
     EEPROM_SIZE,
     RESET_FLAGS,
@@ -36,6 +35,7 @@ from utrf.emulator.board_types import (
     EmulatorError,
     PinState,
 )
+from utrf.emulator.build_faults import BuildFaults
 from utrf.emulator.plant_params import PlantParams
 from utrf.emulator.sim_serial import SimSerial
 from utrf.models.geometry import HandGeometry

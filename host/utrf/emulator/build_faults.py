@@ -138,11 +138,13 @@ class BuildFaults:
 
     # -- from words ------------------------------------------------------------------------------
     @classmethod
-    def parse(cls, specs: list[str] | tuple[str, ...]) -> BuildFaults:
+    def parse(
+        cls, specs: list[str] | tuple[str, ...], base: BuildFaults | None = None
+    ) -> BuildFaults:
         """From ``KIND:FINGER[=VALUE]`` or ``KIND:F1,F2`` words (fingers by name or 0..4), e.g.
         ``swap-leads:index``, ``slack:2=0.003``, ``swap-cables:1,2``. A bad word raises
-        PlantError naming it and the kinds."""
-        build = cls()
+        PlantError naming it and the kinds. ``base``: the build they add to."""
+        build = base if base is not None else cls()
         for spec in specs:
             build = build._add(spec)
         return build
@@ -159,7 +161,9 @@ class BuildFaults:
             if len(fingers) != 2 or value:
                 raise PlantError(f"build fault {spec!r}: {kind} names two fingers, no value")
             pair = (fingers[0], fingers[1])
-            return replace(self, **{"motor_swap" if kind == "swap-cables" else "encoder_swap": pair})
+            return replace(
+                self, **{"motor_swap" if kind == "swap-cables" else "encoder_swap": pair}
+            )
         if len(fingers) != 1:
             raise PlantError(f"build fault {spec!r}: {kind} names one finger")
         unit = KINDS[kind][1]
@@ -237,6 +241,9 @@ class BuildFaults:
             if b.slack_m:
                 t = m.tendon(f"{name}_t2").id
                 m.tendon_lengthspring[t, 1] = b.slack_m  # the spring engages past the slack
+                # a slack strand damps nothing (the coupling's damping acts on its speed)
+                for k in ("t2", "t5"):
+                    m.tendon_damping[m.tendon(f"{name}_{k}").id] = 0.0
             if b.friction_n:
                 for side in ("xa", "xb"):
                     m.dof_frictionloss[m.jnt_dofadr[m.joint(f"{name}_{side}").id]] += b.friction_n
@@ -244,7 +251,10 @@ class BuildFaults:
                 plant.set_closed_stop(f, b.closed_stop_rad)
             if b.unplugged:
                 plant.unplug_encoder(f)
-        for key, pair in (("build_motor_from", self.motor_swap), ("build_encoder_from", self.encoder_swap)):
+        for key, pair in (
+            ("build_motor_from", self.motor_swap),
+            ("build_encoder_from", self.encoder_swap),
+        ):
             if pair is not None:
                 st[key][pair[0]], st[key][pair[1]] = pair[1], pair[0]
 
