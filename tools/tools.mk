@@ -51,3 +51,10 @@ bench-client: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
 # Moves on the board's clock: tracking over the whole demo and the tick with paths running.
 bench-moves: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
 	$(PY) -m tools.bench_moves $(BENCH_MOVES_ARGS)
+
+# Seeded builds of the twin brought up: faults against findings, into docs/bringup.md
+# (BUILDS=50 by default; each whole-hand bring-up is minutes of wall time on a loaded machine).
+.PHONY: bringup-campaign
+BUILDS ?= 50
+bringup-campaign: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
+	$(PY) -m tools.bringup_campaign --builds $(BUILDS) --update docs/bringup.md --json $(BUILD)/bench/bringup-campaign.json

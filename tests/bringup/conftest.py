@@ -22,8 +22,8 @@ def built(firmware_elf: Path, make: Callable[..., None]) -> Built:
     @contextmanager
     def open_(*faults: str, seed: int = 0, **kw: object) -> Iterator[tuple[EmulatedBoard, Hand]]:
         build = BuildFaults.parse(list(faults))
-        with EmulatedBoard(firmware_elf, realtime=False, seed=seed, build=build, **kw) as board:
-            with Hand.emulated(board) as hand:
-                yield board, hand
+        board = EmulatedBoard(firmware_elf, realtime=False, seed=seed, build=build, **kw)
+        with board, Hand.emulated(board) as hand:
+            yield board, hand
 
     return open_

@@ -46,7 +46,7 @@ def _kinds(result: object) -> list[str]:
 @pytest.mark.parametrize(
     ("fault", "upto", "kind", "fixable"),
     CASES,
-    ids=[c[0] if isinstance(c, tuple) else c.values[0] for c in CASES],
+    ids=[str(c[0] if isinstance(c, tuple) else c.values[0]) for c in CASES],
 )
 def test_a_build_fault_is_named(
     built: Built, fault: str, upto: str, kind: str, fixable: bool

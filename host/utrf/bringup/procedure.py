@@ -389,6 +389,9 @@ def bringup(
     try:
         hand.set_telemetry(1000)
         brake(hand)
+        # a host that dies mid-pulse leaves the motors off, not holding (the board's
+        # host-silence rule); load_config puts the saved safe action back
+        hand.set_safety(safe_action="coast")
         saved = {f: _saved_config(hand, f) for f in range(len(hand.fingers))}
         for f in idx:
             if f in done:
