@@ -24,7 +24,7 @@ CASES = [
     ("narrow-range:1=1.3", "stops", "narrow-range", True),
     ("slow-motor:1=0.45", "plant", "slow-motor", True),
     # a weaker motor needs more duty to move, as friction does: named together
-    ("weak-motor:1=0.4", "plant", "friction", True),
+    ("weak-motor:1=0.3", "plant", "friction", True),
     ("friction:1=8", "plant", "friction", True),
     pytest.param(
         "slack:1=0.003",

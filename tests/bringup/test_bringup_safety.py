@@ -108,6 +108,6 @@ def test_a_whole_finger_is_brought_up_saved_and_then_left_alone(
         assert (tmp_path / "first" / "index.png").exists()
         saved = board.eeprom
         again = bringup(hand, fingers=[INDEX], confirm=lambda text: True)
-        assert again.unchanged and not again.saved, again.message
+        assert again.unchanged and not again.saved, (again.message, again.changes)
         assert "nothing to change" in again.message
         assert board.eeprom == saved

@@ -33,8 +33,9 @@ from utrf.bringup.pulses import Bounds, Recorder, Trace, brake, pulse, settle
 from utrf.hand import Hand
 from utrf.hand.errors import FingerFaultError, NotControlledError, NotSettledError
 
-STEP_DUTIES = (0.15, 0.3)
+STEP_DUTIES = (0.15, 0.3, 0.4)  # the third only when one of the first does not move it
 STEP_S = 0.3
+MOVING_RAD_S = 0.05
 MAX_CROSSOVER = 30.0  # rad/s
 PHASE_BUDGET = math.pi / 6  # of the 90° margin a PD with a cancelled pole gives
 
@@ -72,8 +73,8 @@ def _fit_step(t: np.ndarray, th: np.ndarray, u: float) -> tuple[float, float] | 
 
 def _mean_speed(speeds: dict[tuple[float, int], list[float]], u: float) -> float:
     up, down = speeds[(u, 1)], speeds[(u, -1)]
-    if not up or not down:
-        return math.nan
+    if not up or not down or min(np.median(up), np.median(down)) < MOVING_RAD_S:
+        return math.nan  # it did not move both ways at this duty
     return 0.5 * (float(np.median(up)) + float(np.median(down)))
 
 
@@ -87,7 +88,11 @@ def identify(
     }
     taus: list[float] = []
     dead: dict[int, list[float]] = {1: [], -1: []}
+    pretension = hand.gains(f).pretension_duty
+    good: list[float] = []
     for u in STEP_DUTIES:
+        if len(good) == 2 or u + pretension > bounds.duty:
+            break
         for sign in (1, -1, 1, -1):
             room = 0.5
             tr = pulse(
@@ -118,12 +123,17 @@ def identify(
                     travel=1.0,
                     until=mid,
                 )
+        if math.isfinite(_mean_speed(speeds, u)):
+            good.append(u)
     brake(hand, [f])
     # each duty's speed: its flexing and extending steps averaged (gravity helps one and
     # hinders the other); a line K (u - u_f) through the two duties
-    v1, v2 = (_mean_speed(speeds, u) for u in STEP_DUTIES)
-    K = (v2 - v1) / (STEP_DUTIES[1] - STEP_DUTIES[0])
-    u_f = max(0.0, STEP_DUTIES[0] - v1 / K) if K > 0 else math.nan
+    good = [u for u in STEP_DUTIES if math.isfinite(_mean_speed(speeds, u))][:2]
+    K, u_f, v2 = math.nan, math.nan, 0.0
+    if len(good) == 2:
+        v1, v2 = (_mean_speed(speeds, u) for u in good)
+        K = (v2 - v1) / (good[1] - good[0])
+        u_f = max(0.0, good[0] - v1 / K) if K > 0 else math.nan
     tau = float(np.median(taus)) if taus else math.nan
     flex, ext = dead[1][1:], dead[-1]  # the first flexion step starts from rest
     extra = (np.median(flex) - np.median(ext)) if flex and ext else 0.0

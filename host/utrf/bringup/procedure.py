@@ -81,6 +81,7 @@ class BringupResult:
     board_time_s: float = 0.0
     bounds: Bounds = field(default_factory=Bounds)
     out_dir: Path | None = None
+    changes: list[str] = field(default_factory=list)  # what the proposal changes, if anything
 
     @property
     def findings(self) -> list[Finding]:
@@ -95,6 +96,7 @@ class BringupResult:
             "saved": self.saved,
             "unchanged": self.unchanged,
             "message": self.message,
+            "changes": self.changes,
             "board_time_s": self.board_time_s,
             "bounds": asdict(self.bounds),
             "fingers": [r.to_dict() for r in self.fingers],
@@ -311,19 +313,31 @@ def model_plant(hand: Hand, f: int) -> Plant:
     )
 
 
-def _same(proposed: FingerConfig, saved: dict[str, dict[str, Any]]) -> bool:
+#: per field, how far a proposal may be from the saved value and still be the same (absolute
+#: for angles and duties; relative for the gains): the identification's spread between runs
+_ABS = {
+    "encoder_offset": SAME_ANGLE_RAD,
+    "theta2_min": SAME_ANGLE_RAD,
+    "theta2_max": SAME_ANGLE_RAD,
+    "deadband_duty": 0.02,
+}
+
+
+def changes(proposed: FingerConfig, saved: dict[str, dict[str, Any]]) -> list[str]:
+    """The fields a proposal changes, as ``group.field: saved -> proposed``."""
+    out = []
     for group, values in asdict(proposed).items():
         for k, v in values.items():
-            old = saved[group][k]
-            if k in ("encoder_invert", "motor_invert"):
-                if int(old) != int(v):
-                    return False
-            elif group in ("finger_config", "limits"):
-                if abs(math.remainder(float(old) - float(v), 2 * math.pi)) > SAME_ANGLE_RAD:
-                    return False
-            elif abs(float(old) - float(v)) > SAME_GAIN * max(abs(float(v)), 1e-3):
-                return False
-    return True
+            old = float(saved[group][k])
+            if k in _ABS:
+                diff = abs(math.remainder(old - float(v), 2 * math.pi)) > _ABS[k]
+            elif k in ("encoder_invert", "motor_invert"):
+                diff = int(old) != int(v)
+            else:
+                diff = abs(old - float(v)) > SAME_GAIN * max(abs(float(v)), 1e-3)
+            if diff:
+                out.append(f"{group}.{k}: {old:.4g} -> {float(v):.4g}")
+    return out
 
 
 def _apply(hand: Hand, f: int, c: FingerConfig) -> None:
@@ -413,13 +427,17 @@ def bringup(
                 + "; ".join(f"{fd.finger}: {fd.kind}" for fd in bad)
                 + ". Fix those and run the bring-up again (the motors are off)."
             )
-        elif all(_same(r.config, saved[r.index]) for r in result.fingers):
+        elif not any(changes(r.config, saved[r.index]) for r in result.fingers):
             result.unchanged = True
             result.message = "this hand is already brought up: nothing to change, nothing saved"
         else:
+            result.changes = [
+                f"{r.name} {c}" for r in result.fingers for c in changes(r.config, saved[r.index])
+            ]
             for r in result.fingers:
                 _apply(hand, r.index, r.config)
-            if confirm(summary(result.fingers)):
+            text = summary(result.fingers) + "\nchanges:\n  " + "\n  ".join(result.changes)
+            if confirm(text):
                 step("saving the configuration to the board's EEPROM")
                 hand.save_config()
                 result.saved = True

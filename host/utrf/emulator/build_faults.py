@@ -115,7 +115,9 @@ class BuildFaults:
 
     def faults(self) -> list[tuple[str, tuple[int, ...]]]:
         """Every fault as (kind, fingers)."""
-        out = [(k, (f,)) for f, b in enumerate(self.fingers) for k in b.faults()]
+        out: list[tuple[str, tuple[int, ...]]] = [
+            (k, (f,)) for f, b in enumerate(self.fingers) for k in b.faults()
+        ]
         if self.motor_swap is not None:
             out.append(("swap-cables", tuple(sorted(self.motor_swap))))
         if self.encoder_swap is not None:
@@ -161,9 +163,9 @@ class BuildFaults:
             if len(fingers) != 2 or value:
                 raise PlantError(f"build fault {spec!r}: {kind} names two fingers, no value")
             pair = (fingers[0], fingers[1])
-            return replace(
-                self, **{"motor_swap" if kind == "swap-cables" else "encoder_swap": pair}
-            )
+            if kind == "swap-cables":
+                return replace(self, motor_swap=pair)
+            return replace(self, encoder_swap=pair)
         if len(fingers) != 1:
             raise PlantError(f"build fault {spec!r}: {kind} names one finger")
         unit = KINDS[kind][1]
@@ -174,7 +176,7 @@ class BuildFaults:
             v = float(value) if value else 0.0
         except ValueError:
             raise PlantError(f"build fault {spec!r}: {value!r} is not a number") from None
-        changes: dict[str, Any] = {
+        every: dict[str, dict[str, Any]] = {
             "swap-leads": {"leads": "swapped"},
             "swap-lead-a": {"leads": "a"},
             "invert-magnet": {"magnet_inverted": True},
@@ -187,8 +189,8 @@ class BuildFaults:
             "friction": {"friction_n": v},
             "unpowered": {"unpowered": True},
             "unplugged": {"unplugged": True},
-        }[kind]
-        return self.with_finger(fingers[0], **changes)
+        }
+        return self.with_finger(fingers[0], **every[kind])
 
     # -- seeded builds ---------------------------------------------------------------------------
     @classmethod
