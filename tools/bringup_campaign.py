@@ -17,6 +17,7 @@ import argparse
 import json
 import time
 from pathlib import Path
+from typing import Any
 
 from tools.doc_sections import cpu_name, write_section
 from utrf.bringup import bringup
@@ -43,7 +44,7 @@ EXPECTED = {
 BEGIN, END = "<!-- BEGIN bringup-campaign -->", "<!-- END bringup-campaign -->"
 
 
-def run_build(seed: int, faults: int) -> dict[str, object]:
+def run_build(seed: int, faults: int) -> dict[str, Any]:
     build = BuildFaults.random(seed, faults)
     truth = {(EXPECTED[k], f) for k, fs in build.faults() for f in fs}
     t0 = time.monotonic()
@@ -64,7 +65,7 @@ def run_build(seed: int, faults: int) -> dict[str, object]:
     }
 
 
-def table(rows: list[dict[str, object]], command: str) -> str:
+def table(rows: list[dict[str, Any]], command: str) -> str:
     lines = [
         BEGIN,
         f"Measured with `{command}` on {cpu_name()} (2 cores shared with other jobs); board "
@@ -75,13 +76,13 @@ def table(rows: list[dict[str, object]], command: str) -> str:
     ]
     for r in rows:
         lines.append(
-            f"| {r['seed']} | {' '.join(r['faults']) or '-'} | {' '.join(r['missed']) or '-'} "  # type: ignore[arg-type]
-            f"| {' '.join(r['false']) or '-'} | {'yes' if r['saved'] else 'no'} "  # type: ignore[arg-type]
+            f"| {r['seed']} | {' '.join(r['faults']) or '-'} | {' '.join(r['missed']) or '-'} "
+            f"| {' '.join(r['false']) or '-'} | {'yes' if r['saved'] else 'no'} "
             f"| {r['board_time_s']:.1f} |"
         )
-    missed = sum(len(r["missed"]) for r in rows)  # type: ignore[arg-type, misc]
-    false = sum(len(r["false"]) for r in rows)  # type: ignore[arg-type, misc]
-    worst = max(float(r["board_time_s"]) for r in rows)  # type: ignore[arg-type]
+    missed = sum(len(r["missed"]) for r in rows)
+    false = sum(len(r["false"]) for r in rows)
+    worst = max(float(r["board_time_s"]) for r in rows)
     lines += [
         "",
         f"{len(rows)} builds: {missed} faults missed, {false} false diagnoses; the longest "

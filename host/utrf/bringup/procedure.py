@@ -181,7 +181,8 @@ def _bring_up_finger(
             Finding(
                 name,
                 "magnet-offset",
-                f"at the open stop the encoder reads {math.degrees(offset - DEFAULT_OFFSET):+.1f}° "
+                "at the open stop the encoder reads "
+                f"{math.degrees(math.remainder(offset - DEFAULT_OFFSET, 2 * math.pi)):+.1f}° "
                 "off the model's zero: the magnet is glued turned on its shaft (or the AS5600 "
                 "turned on its board)",
                 f"encoder_offset = {offset:.4f} rad (the open stop reads the model's "
@@ -416,7 +417,7 @@ def bringup(
             brake(hand, [f])
             result.fingers.append(r)
             if progress_path is not None:
-                out.mkdir(parents=True, exist_ok=True)  # type: ignore[union-attr]
+                progress_path.parent.mkdir(parents=True, exist_ok=True)
                 progress_path.write_text(json.dumps(result.to_dict(), indent=1))
         # every finger's temporary settings back to the saved ones, then the proposal on top
         hand.load_config("eeprom")
