@@ -11,7 +11,8 @@ takes (a deadband). Fitted by least squares on the angle of each step (scipy), K
 two step sizes. Backlash: the extra time a reversal toward flexion takes to move the joint,
 against a reversal toward extension, times the speed.
 
-Tuning (model-based, stated): a PD whose zero cancels the plant's pole (kd = kp τ) leaves the
+Tuning (model-based, stated; τ the model motors' scaled by the measured K, see :func:`tune`):
+a PD whose zero cancels the plant's pole (kd = kp τ) leaves the
 loop kp K / s, crossover ωc = kp K; ωc is chosen so the loop's delays (the 1 ms tick, the
 derivative filter, the stream's hold: T ≈ 1.5 ms + 1 / (2π d_cutoff)) cost at most 30° of the
 90° phase margin (ωc ≤ (π/6) / T), and at most ``MAX_CROSSOVER`` rad/s for the encoder's noise;
@@ -147,14 +148,22 @@ class Tuned:
     motion: dict[str, float]
     crossover_rad_s: float
     phase_margin_deg: float
+    tau_s: float  # the time constant the gains were tuned for
     method: str = "PD zero on the plant's pole, crossover within the delay budget, PI zero ωc/10"
 
 
-def tune(plant: Plant, d_cutoff_hz: float, pretension: float, max_duty: float) -> Tuned:
+def tune(
+    plant: Plant, model: Plant, d_cutoff_hz: float, pretension: float, max_duty: float
+) -> Tuned:
+    """Gains for ``plant``. Its time constant is taken from the ``model`` motors' scaled by the
+    speed gain measured (τ = m v_no_load / F_stall: a slower motor's is shorter in proportion):
+    the fitted τ is reported, not used, since the 10-bit reading does not resolve a lag of
+    v τ (a few mrad at these speeds, under one count)."""
+    tau = model.tau * plant.K / model.K
     delay = 1.5e-3 + 1.0 / (2 * math.pi * d_cutoff_hz)
     wc = min(MAX_CROSSOVER, PHASE_BUDGET / delay)
     kp = wc / plant.K
-    kd = kp * plant.tau
+    kd = kp * tau
     ki = kp * wc / 10.0
     pm = 90.0 - math.degrees(wc * delay) - math.degrees(math.atan(1 / 10.0))
     room = max(0.1, max_duty - pretension - plant.u_f)
@@ -166,10 +175,10 @@ def tune(plant: Plant, d_cutoff_hz: float, pretension: float, max_duty: float) -
     }
     motion = {
         "kv": round(min(10.0, 1.0 / plant.K), 4),
-        "ka": round(min(1.0, plant.tau / plant.K), 5),
+        "ka": round(min(1.0, tau / plant.K), 5),
         "max_speed": round(max(0.2, min(3.0, 0.7 * room * plant.K)), 3),
     }
-    return Tuned(gains, motion, wc, pm)
+    return Tuned(gains, motion, wc, pm, tau)
 
 
 @dataclass

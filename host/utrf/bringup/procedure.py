@@ -229,7 +229,7 @@ def _bring_up_finger(
         )
         return res
     g = saved["gains"]
-    tuned = tune(plant, g["d_cutoff_hz"], g["pretension_duty"], g["max_duty"])
+    tuned = tune(plant, model_plant(hand, f), g["d_cutoff_hz"], g["pretension_duty"], g["max_duty"])
     res.tuning = asdict(tuned)
     res.config.gains = dict(tuned.gains)
     res.config.motion = dict(tuned.motion)
