@@ -4,15 +4,14 @@ built with those faults (``utrf.emulator.build_faults``) and a Hand on it."""
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from contextlib import AbstractContextManager, contextmanager
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+from bringup_helpers import Built
 
 from utrf.emulator import BuildFaults, EmulatedBoard
 from utrf.hand import Hand
-
-Built = Callable[..., AbstractContextManager[tuple[EmulatedBoard, Hand]]]
 
 
 @pytest.fixture

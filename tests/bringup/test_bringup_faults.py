@@ -5,7 +5,7 @@ the wiring faults stop after the wiring, the stops' after the stops)."""
 from __future__ import annotations
 
 import pytest
-from conftest import Built
+from bringup_helpers import Built
 
 from utrf.bringup import bringup
 

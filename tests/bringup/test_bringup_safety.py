@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import Built
+from bringup_helpers import Built
 
 from utrf.bringup import Bounds, bringup, procedure
 from utrf.emulator import EmulatedBoard
