@@ -111,3 +111,26 @@ def test_a_whole_finger_is_brought_up_saved_and_then_left_alone(
         assert again.unchanged and not again.saved, (again.message, again.changes)
         assert "nothing to change" in again.message
         assert board.eeprom == saved
+
+
+@pytest.mark.slow
+def test_a_bring_up_resumes_after_the_fingers_done(built: Built, tmp_path: Path) -> None:
+    steps: list[str] = []
+
+    def stop_at_index(text: str) -> None:
+        steps.append(text)
+        if text.startswith("index"):
+            raise KeyboardInterrupt
+
+    with built("invert-magnet:0") as (board, hand):
+        with pytest.raises(KeyboardInterrupt):
+            bringup(hand, tmp_path, fingers=[0, 1], upto="wiring", on_step=stop_at_index)
+        assert _motors_off(board)
+        steps.clear()
+        result = bringup(
+            hand, tmp_path, fingers=[0, 1], upto="wiring", on_step=steps.append, resume=True
+        )
+    assert "thumb: done before (resumed)" in steps
+    assert not any(s.startswith("thumb: wiring") for s in steps)
+    assert [f.kind for f in result.fingers[0].findings] == ["encoder-inverted"]  # from the file
+    assert [r.name for r in result.fingers] == ["thumb", "index"]
