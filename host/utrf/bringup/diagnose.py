@@ -20,9 +20,10 @@ MOVED_RAD = 0.05
 #: pulse duties tried in turn to see a finger move (a stiff or weak finger needs more)
 TRY_DUTIES = (0.2, 0.35)
 WIRING_PULSE_S = 0.25
-#: both motors pull this hard, balanced, this long, to take up what a pushing motor let out
-TAKE_UP = 0.3
-TAKE_UP_S = 1.2
+#: both motors pull this hard, balanced, this long (as built; then the other way, after a
+#: round that may have pushed the carriages to their ends) to take up the tendons
+TAKE_UP = (0.1, 0.35)
+TAKE_UP_S = (1.2, 3.0)
 #: a rest (both motors at the pretension) that moves the reading more: the finger is not held
 HELD_RAD = 0.1
 #: a stop is searched for at this duty, for at most this long per leg
@@ -37,7 +38,7 @@ class Wiring:
 
     moved: dict[tuple[int, int], tuple[int, int] | None] = field(default_factory=dict)
     held: dict[int, bool] = field(default_factory=dict)  # the pretension held it at rest
-    drift: dict[int, float] = field(default_factory=dict)  # how far it ran when not held
+    drift: dict[int, float] = field(default_factory=dict)  # how far the take-up ran it
     motor_invert: int = 0
     encoder_invert: int = 0
     findings: list[Finding] = field(default_factory=list)
@@ -86,14 +87,14 @@ def wiring(
     pretension = hand.gains(f).pretension_duty
     for invert in (0, 1):
         hand.set_finger_config(f, motor_invert=invert, encoder_invert=0)
-        if invert:
-            # the first round pushed the carriages away if the leads are swapped: both motors
-            # pull at TAKE_UP duty, balanced, until the tendons are taut again
-            hand.set_gains(f, pretension_duty=TAKE_UP)
-            take_up = pulse(hand, rec, f, 0.0, bounds, seconds=TAKE_UP_S, travel=3.0)
-            w.traces.append(take_up)
-            w.drift[1] = float(take_up.delta()[f])
-            hand.set_gains(f, pretension_duty=pretension)
+        # both motors pull at TAKE_UP duty, balanced, until the tendons are taut (a finger
+        # that sagged while braked, or carriages a first round pushed away): a finger wired
+        # right comes to rest; one motor pushing runs it to the other one's side
+        hand.set_gains(f, pretension_duty=TAKE_UP[invert])
+        take_up = pulse(hand, rec, f, 0.0, bounds, seconds=TAKE_UP_S[invert], travel=1.0)
+        w.traces.append(take_up)
+        w.drift[invert] = float(take_up.delta()[f])
+        hand.set_gains(f, pretension_duty=pretension)
         held = True
         for sign in (1, -1):
             w.moved[(invert, sign)] = None
@@ -106,7 +107,6 @@ def wiring(
                 hand.clear_faults([f])
                 if abs(rest.delta()[f]) > HELD_RAD:
                     held = False  # the pretension does not hold it: a motor pushes, or none pulls
-                    w.drift.setdefault(invert, float(rest.delta()[f]))
                 got = _moved(rest, drive)
                 if got is not None and (held or got[0] != f):
                     w.moved[(invert, sign)] = got
@@ -157,14 +157,15 @@ def _interpret(w: Wiring, f: int, name: str, names: list[str]) -> None:
             )
         )
     elif abs(d0) > HELD_RAD and abs(d1) > HELD_RAD and d0 * d1 < 0:
-        # at rest one motor pulls and the other pushes: the finger runs to the puller's side,
-        # and to the other side once both are driven the other way
+        # taking up, one motor pulls and the other pushes: the finger runs to the puller's
+        # side, and to the other side once both are driven the other way
         bad = "A" if d0 < 0 else "B"
         w.findings.append(
             Finding(
                 name,
                 "lead-a-swapped" if bad == "A" else "lead-b-swapped",
-                f"at rest the finger runs {'open' if bad == 'A' else 'closed'} and, with the "
+                f"with both motors pulling, the finger runs {'open' if bad == 'A' else 'closed'} "
+                "and, with the "
                 f"motors driven the other way, {'closed' if bad == 'A' else 'open'}: motor "
                 f"{bad} pushes where it should pull, its two leads are swapped",
                 f"swap motor {bad}'s two wires ({'AO1/AO2' if bad == 'A' else 'BO1/BO2'} on "
