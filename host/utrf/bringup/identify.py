@@ -92,7 +92,7 @@ def identify(
     pretension = hand.gains(f).pretension_duty
     good: list[float] = []
     for u in STEP_DUTIES:
-        if len(good) == 2 or u + pretension > bounds.duty:
+        if len(good) == 2 or u + pretension > bounds.duty + 1e-9:
             break
         for sign in (1, -1, 1, -1):
             room = 0.5
@@ -118,7 +118,7 @@ def identify(
                     hand,
                     rec,
                     f,
-                    math.copysign(0.2, mid - here),
+                    math.copysign(0.35, mid - here),
                     bounds,
                     seconds=1.0,
                     travel=1.0,

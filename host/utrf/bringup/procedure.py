@@ -218,7 +218,7 @@ def _bring_up_finger(
     mid = min(max(0.3, th_min + 0.6), th_max - 0.6)
     hand.clear_faults([f])
     here = hand.state().fingers[f].theta2
-    pulse(hand, rec, f, math.copysign(0.25, mid - here), bounds, seconds=3.0, travel=3.5, until=mid)
+    pulse(hand, rec, f, math.copysign(0.35, mid - here), bounds, seconds=3.0, travel=3.5, until=mid)
     settle(hand, 0.1)
     plant, _ = identify(hand, rec, f, bounds, mid)
     res.plant = plant.to_dict()
