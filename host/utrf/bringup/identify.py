@@ -100,6 +100,7 @@ def identify(
                 hand, rec, f, sign * u, bounds, seconds=STEP_S, travel=room, stop_on_stall=True
             )
             traces.append(tr)
+            hand.clear_faults([f])  # a step too small to move it may have stalled it
             th = tr.theta2[:, f]
             if len(th) > 40:
                 # the reversal: time until it has moved 0.01 rad back from where it started
