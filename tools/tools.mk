@@ -58,3 +58,10 @@ bench-moves: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
 bench-campaign: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
 	$(PY) -m tools.bench_campaign --update docs/benchmarks.md --json $(BUILD)/bench/campaign.json \
 	  $(BENCH_CAMPAIGN_ARGS)
+
+# Seeded builds of the twin brought up: faults against findings, into docs/bringup.md
+# (BUILDS=50 by default; each whole-hand bring-up is minutes of wall time on a loaded machine).
+.PHONY: bringup-campaign
+BUILDS ?= 50
+bringup-campaign: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
+	$(PY) -m tools.bringup_campaign --builds $(BUILDS) --update docs/bringup.md --json $(BUILD)/bench/bringup-campaign.json

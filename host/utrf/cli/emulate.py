@@ -27,7 +27,7 @@ from typing import Any, TextIO
 
 from utrf import artifacts
 from utrf.cli import error
-from utrf.emulator import EmulatedBoard, EmulatorError, HarnessError, PlantError
+from utrf.emulator import EmulatedBoard, EmulatorError, HarnessError, PlantError, build_faults
 from utrf.models.geometry import GeometryError, HandGeometry
 
 EXIT_BAD_INPUT = 2
@@ -218,7 +218,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     f.add_argument(
         "--reset-every", type=float, metavar="S", help="reset the board every S simulated seconds"
     )
+    b = p.add_argument_group("build faults (hidden from the wire; docs/mujoco.md)")
+    b.add_argument(
+        "--build", action="append", default=[], metavar="KIND:FINGER[=VALUE]",
+        help="a mistake in building the hand, e.g. swap-leads:index, slack:2=0.002, "
+        "swap-cables:1,2 (kinds: " + ", ".join(build_faults.KINDS) + ")",
+    )  # fmt: skip
+    b.add_argument(
+        "--build-seed", type=int, metavar="N",
+        help="a seeded random build (--build-faults faults, motors within ±30 %%)",
+    )  # fmt: skip
+    b.add_argument("--build-faults", type=int, default=3, metavar="K", help="with --build-seed")
     p.set_defaults(handler=run)
+
+
+def _build(args: argparse.Namespace) -> build_faults.BuildFaults:
+    base = None
+    if getattr(args, "build_seed", None) is not None:
+        base = build_faults.BuildFaults.random(args.build_seed, args.build_faults)
+    return build_faults.BuildFaults.parse(getattr(args, "build", []), base)
 
 
 def build_board(args: argparse.Namespace) -> EmulatedBoard:
@@ -240,6 +258,7 @@ def build_board(args: argparse.Namespace) -> EmulatedBoard:
         pty=not args.no_pty,
         auto_reset=not args.no_auto_reset,
         auto_reset_hold=args.auto_reset_hold,
+        build=_build(args),
     )
     try:
         for finger, volts in args.unplug_encoder:

@@ -16,6 +16,7 @@ from utrf.emulator.board import (
     SimSerial,
     check_elf,
 )
+from utrf.emulator.build_faults import BuildFaults, FingerBuild
 from utrf.emulator.plant_params import EncoderParams, MotorParams, PlantError, PlantParams
 from utrf.emulator.process import BoardProcess
 
@@ -23,10 +24,12 @@ __all__ = [
     "DEFAULT_ELF",
     "VECTORS",
     "BoardProcess",
+    "BuildFaults",
     "CycleProfile",
     "EmulatedBoard",
     "EmulatorError",
     "EncoderParams",
+    "FingerBuild",
     "HarnessError",
     "MotorParams",
     "PinState",

@@ -35,6 +35,7 @@ from utrf.emulator.board_types import (
     EmulatorError,
     PinState,
 )
+from utrf.emulator.build_faults import BuildFaults
 from utrf.emulator.plant_params import PlantParams
 from utrf.emulator.sim_serial import SimSerial
 from utrf.models.geometry import HandGeometry
@@ -115,6 +116,7 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
         capture: bool | None = None,
         exchange_period: float | None = None,
         plant: str | MujocoPlant = "mujoco",
+        build: BuildFaults | None = None,
     ) -> None:
         if elf is None:
             try:
@@ -152,6 +154,9 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
             raise EmulatorError(f"plant must be 'mujoco' or a MujocoPlant, got {plant!r}")
         else:
             self.plant = plant
+        #: how this hand was built (build faults, hidden from the wire): build_faults.py
+        self.build = build if build is not None else BuildFaults()
+        self.build.apply(self.plant)
         # MuJoCo cuts the exchange into its steps
         self.plant.set_timestep(round(exchange_period * F_CPU_HZ) / F_CPU_HZ)
         self._lock = threading.RLock()

@@ -15,7 +15,7 @@ from typing import Any
 
 from utrf import artifacts
 
-ABI = 14
+ABI = 15
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -167,6 +167,15 @@ MJ_STATE_FIELDS: tuple[tuple[str, tuple[int, ...]], ...] = (
     ("load_from", (MJ_LOADS, 3)),
     ("load_t0", (MJ_LOADS,)),
     ("load_t1", (MJ_LOADS,)),
+    ("build_motor_from", (5,)),
+    ("build_lead", (5, 2)),
+    ("build_powered", (5, 2)),
+    ("build_k_scale", (5, 2)),
+    ("build_r_scale", (5, 2)),
+    ("build_encoder_from", (5,)),
+    ("build_encoder_invert", (5,)),
+    ("build_encoder_offset", (5,)),
+    ("build_encoder_eccentric", (5,)),
 )
 
 

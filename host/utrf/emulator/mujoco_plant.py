@@ -376,6 +376,17 @@ class MujocoPlant(_FingerPlant):
             rng[j] = (at[k], at[k]) if direction == "both" else (self._range0[f, k, 0], at[k])
         self._block[f] = (q, q) if direction == "both" else (lo, q)
 
+    def set_closed_stop(self, finger: int, theta2: float) -> None:
+        """This build's closed stop: the finger's joints stop flexing at the coupled pose of
+        Joint-2 angle ``theta2`` (rad), inside the model's range (a build fault)."""
+        f = _finger_index(finger)
+        q = self._q_at_theta2(f, theta2)
+        at = q / self.R[f]
+        for k in range(3):
+            self.model.jnt_range[self._jid[f, k], 1] = self._range0[f, k, 1] = at[k]
+        self.q_limits[f, 1] = q
+        self._block[f] = self.q_limits[f]
+
     def unblock(self, finger: int) -> None:
         f = _finger_index(finger)
         self.model.jnt_range[self._jid[f]] = self._range0[f]

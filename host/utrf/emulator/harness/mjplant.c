@@ -98,6 +98,12 @@ utrf_mjplant_t *utrf_mjplant_new(const char *libmujoco, void *model, void *data,
     for (int f = 0; f < F; f++) {
         mp->st.plugged[f] = 1.0;
         mp->st.unplugged_v[f] = params->enc_unplugged_v;
+        mp->st.build_motor_from[f] = f; /* built as designed */
+        mp->st.build_encoder_from[f] = f;
+        for (int c = 0; c < 2; c++) {
+            mp->st.build_lead[f][c] = mp->st.build_powered[f][c] = 1.0;
+            mp->st.build_k_scale[f][c] = mp->st.build_r_scale[f][c] = 1.0;
+        }
     }
     utrf_rng_init(&mp->rng, seed);
     mp->enc = (utrf_as5600_t){params->enc_supply, params->enc_offset,
@@ -121,11 +127,20 @@ utrf_mjplant_state_t *utrf_mjplant_state(utrf_mjplant_t *mp)
     return &mp->st;
 }
 
+/* A finger index from a build field (a double in the shared state), or f when out of range. */
+static int build_finger(double v, int f)
+{
+    int g = (int)v;
+    return g >= 0 && g < F ? g : f;
+}
+
 static void decode(utrf_mjplant_t *mp, const double *pins)
 {
+    const utrf_mjplant_state_t *st = &mp->st;
     for (int f = 0; f < F; f++) {
+        int src = build_finger(st->build_motor_from[f], f); /* the driver its cable goes to */
         for (int c = 0; c < 2; c++) {
-            const double *b = &pins[(f * 2 + c) * UTRF_SIM_PIN_FIELDS];
+            const double *b = &pins[(src * 2 + c) * UTRF_SIM_PIN_FIELDS];
             double sd;
             int mode = utrf_tb6612(b, &sd);
             if (mp->p.actuator[f][c] < 0) {
@@ -134,8 +149,9 @@ static void decode(utrf_mjplant_t *mp, const double *pins)
             }
             mp->st.drive_mode[f][c] = mode;
             mp->st.drive_duty[f][c] = sd;
-            mp->connected[f][c] = mode != UTRF_DRIVE_COAST;
-            mp->voltage[f][c] = sd * mp->p.supply_v;
+            double powered = st->build_powered[f][c] > 0.5;
+            mp->connected[f][c] = mode != UTRF_DRIVE_COAST && powered;
+            mp->voltage[f][c] = sd * mp->p.supply_v * powered * (st->build_lead[f][c] < 0 ? -1 : 1);
         }
     }
 }
@@ -238,11 +254,12 @@ void utrf_mjplant_step(utrf_mjplant_t *mp, double dt, const double *pins)
                 if (act < 0)
                     continue;
                 double v = mp->p.gear[f][c] * mp->d->qvel[mp->p.dof[f][c]]; /* pulling speed */
-                double i_ss = (mp->voltage[f][c] - K * v) / R;
+                double km = K * mp->st.build_k_scale[f][c], rm = R * mp->st.build_r_scale[f][c];
+                double i_ss = (mp->voltage[f][c] - km * v) / rm;
                 double i = (i_ss + (mp->st.current[f][c] - i_ss) * mp->decay) *
                            mp->connected[f][c];
                 mp->st.current[f][c] = i;
-                double force = K * i; /* within the driver's peak current (params) */
+                double force = km * i; /* within the driver's peak current (params) */
                 mp->d->ctrl[act] = force > limit ? limit : force < -limit ? -limit : force;
             }
         }
@@ -260,8 +277,14 @@ void utrf_mjplant_step(utrf_mjplant_t *mp, double dt, const double *pins)
 void utrf_mjplant_encoder_volts(utrf_mjplant_t *mp, double *out)
 {
 #ifdef UTRF_WITH_MUJOCO
+    const utrf_mjplant_state_t *st = &mp->st;
     for (int f = 0; f < F; f++) {
-        double theta2 = mp->d->qpos[mp->p.j2_qpos[f]] + mp->st.encoder_shift[f];
+        int src = build_finger(st->build_encoder_from[f], f); /* the encoder its cable is */
+        double theta2 = mp->d->qpos[mp->p.j2_qpos[src]] + st->encoder_shift[src];
+        if (st->build_encoder_invert[src] > 0.5)
+            theta2 = -theta2; /* the magnet glued the other way round */
+        theta2 += st->build_encoder_offset[src] +
+                  st->build_encoder_eccentric[src] * sin(theta2 + st->build_encoder_offset[src]);
         double v = utrf_as5600_volts(&mp->enc, theta2, &mp->rng);
         out[f] = mp->st.plugged[f] > 0.5 ? v : mp->st.unplugged_v[f];
     }

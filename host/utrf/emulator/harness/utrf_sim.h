@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 14
+#define UTRF_SIM_ABI 15
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -285,6 +285,16 @@ typedef struct {
      * (load_t1 <= load_t0: load_force at once) */
     double load_from[UTRF_MJPLANT_LOADS][3];
     double load_t0[UTRF_MJPLANT_LOADS], load_t1[UTRF_MJPLANT_LOADS];
+    /* build faults (utrf.emulator.build_faults), where the physical fault is: finger f's
+     * motors are wired to the driver of finger build_motor_from[f]; each motor's lead
+     * polarity (+1, -1: swapped leads), supply (0: unpowered) and force constant and
+     * resistance scales (weaker, slower); ADC channel f reads the encoder of finger
+     * build_encoder_from[f], its magnet inverted (1), turned by build_encoder_offset rad, off
+     * centre by build_encoder_eccentric rad (a once-per-turn error of that amplitude) */
+    double build_motor_from[5], build_lead[5][2], build_powered[5][2];
+    double build_k_scale[5][2], build_r_scale[5][2];
+    double build_encoder_from[5], build_encoder_invert[5], build_encoder_offset[5];
+    double build_encoder_eccentric[5];
 } utrf_mjplant_state_t;
 
 typedef struct utrf_mjplant utrf_mjplant_t;

@@ -1,0 +1,262 @@
+"""The first steps on a finger: is its encoder read, which way do its motors turn it and on
+which channel, and where are this build's stops (and so the encoder's zero and the limits).
+Every move is a bounded pulse (``pulses.pulse``); the finger's configuration is changed only
+while it is braked."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from utrf.bringup.findings import Finding
+from utrf.bringup.pulses import Bounds, Recorder, Trace, brake, pulse, settle
+from utrf.hand import Hand
+from utrf.protocol import messages as m
+
+#: a channel whose reading moves this much more under a pulse than at rest has moved
+MOVED_RAD = 0.05
+#: pulse duties tried in turn to see a finger move (a stiff or weak finger needs more)
+TRY_DUTIES = (0.2, 0.35)
+WIRING_PULSE_S = 0.25
+#: both motors pull this hard, balanced, this long (as built; then the other way, after a
+#: round that may have pushed the carriages to their ends) to take up the tendons
+TAKE_UP = (0.1, 0.35)
+TAKE_UP_S = (1.2, 3.0)
+#: a rest (both motors at the pretension) that moves the reading more: the finger is not held
+HELD_RAD = 0.1
+#: a stop is searched for at this duty, for at most this long per leg
+STOP_DUTY = 0.35
+STOP_LEG_S = 4.0
+
+
+@dataclass
+class Wiring:
+    """Per motor-invert setting (0, 1) and direction (+1 A pulls, -1 B pulls): the channel that
+    moved and its sign, or None."""
+
+    moved: dict[tuple[int, int], tuple[int, int] | None] = field(default_factory=dict)
+    held: dict[int, bool] = field(default_factory=dict)  # the pretension held it at rest
+    drift: dict[int, float] = field(default_factory=dict)  # how far the take-up ran it
+    motor_invert: int = 0
+    encoder_invert: int = 0
+    findings: list[Finding] = field(default_factory=list)
+    traces: list[Trace] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return all(f.fixable for f in self.findings)
+
+
+def encoder_check(hand: Hand, rec: Recorder, f: int, name: str) -> Finding | None:
+    """The reading in band with the motors off (ENCODER_RANGE otherwise)."""
+    hand.clear_faults([f])
+    settle(hand, 0.02)
+    st = hand.state().fingers[f]
+    if st.faults & m.FaultBits.ENCODER_RANGE:
+        return Finding(
+            name,
+            "encoder-signal",
+            "the encoder's reading is outside the AS5600's 10-90 % band with the motors off: "
+            "its cable is unplugged or broken, it has no 5 V, or the magnet is missing or too "
+            "far from the chip",
+            "check the encoder's three wires (5 V, GND, OUT to A0-A4) and the magnet's gap",
+            False,
+        )
+    return None
+
+
+def _moved(rest: Trace, drive: Trace) -> tuple[int, int] | None:
+    """The channel the pulse moved (beyond what it drifts at rest, e.g. under gravity)."""
+    extra = drive.delta() - rest.delta()
+    ch = int(np.argmax(np.abs(extra)))
+    if abs(extra[ch]) < MOVED_RAD:
+        return None
+    return ch, int(np.sign(extra[ch]))
+
+
+def wiring(
+    hand: Hand, rec: Recorder, f: int, name: str, names: list[str], bounds: Bounds
+) -> Wiring:
+    """Pulse each motor on top of the pretension (A pulls harder at duty > 0, B at duty < 0)
+    with the configuration's motor direction as built, and, unless that moved the finger both
+    ways while the pretension held it at rest, swapped; see which channel moves which way
+    against a rest of the same length just before."""
+    w = Wiring()
+    pretension = hand.gains(f).pretension_duty
+    for invert in (0, 1):
+        hand.set_finger_config(f, motor_invert=invert, encoder_invert=0)
+        # both motors pull at TAKE_UP duty, balanced, until the tendons are taut (a finger
+        # that sagged while braked, or carriages a first round pushed away): a finger wired
+        # right comes to rest; one motor pushing runs it to the other one's side
+        hand.set_gains(f, pretension_duty=TAKE_UP[invert])
+        take_up = pulse(hand, rec, f, 0.0, bounds, seconds=TAKE_UP_S[invert], travel=1.0)
+        w.traces.append(take_up)
+        w.drift[invert] = float(take_up.delta()[f])
+        hand.set_gains(f, pretension_duty=pretension)
+        held = True
+        for sign in (1, -1):
+            w.moved[(invert, sign)] = None
+            for duty in TRY_DUTIES:
+                rest = pulse(hand, rec, f, 0.0, bounds, seconds=WIRING_PULSE_S)
+                settle(hand, 0.05)
+                drive = pulse(hand, rec, f, sign * duty, bounds, seconds=WIRING_PULSE_S)
+                w.traces += [rest, drive]
+                settle(hand, 0.05)
+                hand.clear_faults([f])
+                if abs(rest.delta()[f]) > HELD_RAD:
+                    held = False  # the pretension does not hold it: a motor pushes, or none pulls
+                got = _moved(rest, drive)
+                if got is not None and (held or got[0] != f):
+                    w.moved[(invert, sign)] = got
+                    break
+        w.held[invert] = held
+        if invert == 0 and held and w.moved[(0, 1)] and w.moved[(0, -1)]:
+            break  # both motors move it and the pretension holds it: the wiring is known
+    _interpret(w, f, name, names)
+    return w
+
+
+def _interpret(w: Wiring, f: int, name: str, names: list[str]) -> None:
+    seen = [v for v in w.moved.values() if v is not None]
+    others = sorted({ch for ch, _ in seen if ch != f})
+    if others:
+        g = others[0]
+        w.findings.append(
+            Finding(
+                name,
+                "cable-swap",
+                f"driving {name}'s motor channel moves the reading of input {g} ({names[g]}): "
+                f"{name}'s and {names[g]}'s motor cables, or their encoder cables, are swapped "
+                "between the driver channels or the analog inputs",
+                f"watch which finger moves when {name} is driven: if it is {names[g]}, swap the "
+                f"two fingers' motor cables; if it is {name}, swap their encoder cables "
+                f"(A{f} and A{g})",
+                False,
+                {"channel": f, "moves": g},
+            )
+        )
+        return
+    a0, b0 = w.moved.get((0, 1)), w.moved.get((0, -1))
+    a1, b1 = w.moved.get((1, 1)), w.moved.get((1, -1))
+    d0, d1 = w.drift.get(0, 0.0), w.drift.get(1, 0.0)
+    if w.held.get(0) and a0 and b0 and a0[1] != b0[1]:
+        w.motor_invert, sa = 0, a0[1]
+    elif w.held.get(1) and a1 and b1 and a1[1] != b1[1]:
+        w.motor_invert, sa = 1, a1[1]
+        w.findings.append(
+            Finding(
+                name,
+                "leads-swapped",
+                "the pretension does not hold the finger and the motors do not move it as they "
+                "should; driven the other way, both do: both motors' leads are swapped (the "
+                "driver's outputs wired the other way round)",
+                "motor_invert = 1 (the firmware drives both the other way)",
+                True,
+            )
+        )
+    elif abs(d0) > HELD_RAD and abs(d1) > HELD_RAD and d0 * d1 < 0:
+        # taking up, one motor pulls and the other pushes: the finger runs to the puller's
+        # side, and to the other side once both are driven the other way
+        bad = "A" if d0 < 0 else "B"
+        w.findings.append(
+            Finding(
+                name,
+                "lead-a-swapped" if bad == "A" else "lead-b-swapped",
+                f"with both motors pulling, the finger runs {'open' if bad == 'A' else 'closed'} "
+                "and, with the "
+                f"motors driven the other way, {'closed' if bad == 'A' else 'open'}: motor "
+                f"{bad} pushes where it should pull, its two leads are swapped",
+                f"swap motor {bad}'s two wires ({'AO1/AO2' if bad == 'A' else 'BO1/BO2'} on "
+                f"{name}'s TB6612); the configuration turns both motors together and cannot "
+                "fix one",
+                False,
+                {"drift_rad": [d0, d1]},
+            )
+        )
+        return
+    else:
+        w.findings.append(
+            Finding(
+                name,
+                "no-motion",
+                "no encoder movement when either motor is driven, either way: the motors have "
+                "no supply (VM), the driver's STBY is low, a motor or driver wire is open, or "
+                "the encoder's magnet does not turn with Joint 2",
+                "check the motor supply and STBY, the motor wires and the magnet's fixing",
+                False,
+                {"moved": {f"{k}": v for k, v in w.moved.items()}, "drift_rad": [d0, d1]},
+            )
+        )
+        return
+    if sa < 0:
+        w.encoder_invert = 1
+        w.findings.append(
+            Finding(
+                name,
+                "encoder-inverted",
+                "the finger flexes when driven to flex but its reading goes down: the motor and "
+                "the encoder turn opposite ways (the magnet glued the other way round, or the "
+                "AS5600's DIR pin on the other level)",
+                "encoder_invert = 1",
+                True,
+            )
+        )
+
+
+@dataclass
+class Stop:
+    raw: float  # the encoder's reading there (rad of turn, the configuration's frame undone)
+    trace: Trace
+
+
+def _raw(theta: float, offset: float, invert: int) -> float:
+    """The encoder's own reading from an angle the board reports: θ = s (raw - offset)."""
+    return offset + (-theta if invert else theta)
+
+
+def find_stop(
+    hand: Hand, rec: Recorder, f: int, direction: int, invert: int, bounds: Bounds
+) -> Stop | None:
+    """Drive toward the open (-1) or closed (+1) stop at low duty until the finger stops
+    (the host's stall rule). The board's limits would stop it first if its reading passed
+    them: the encoder offset is moved so the reading starts mid-range, again each time a
+    limit (not a stop) ended the leg."""
+    lim = hand.limits(f)
+    trace = None
+    for _ in range(3):
+        st = hand.state().fingers[f]
+        cfg = hand.finger_config(f)
+        here = _raw(st.theta2, cfg.encoder_offset, invert)
+        hand.set_finger_config(f, encoder_offset=_wrap(here))  # the reading here is 0
+        hand.clear_faults([f])
+        trace = pulse(
+            hand,
+            rec,
+            f,
+            direction * STOP_DUTY,
+            bounds,
+            seconds=STOP_LEG_S,
+            travel=4.0,
+        )
+        settle(hand, 0.05)
+        end = trace.end
+        at_limit = end >= lim.theta2_max - 0.03 if direction > 0 else end <= lim.theta2_min + 0.03
+        stalled = trace.stop == "stall" or (
+            trace.stop == "fault" and hand.state().fingers[f].faults == m.FaultBits.STALL
+        )  # the host's stall rule, or the board's own behind it
+        hand.clear_faults([f])
+        if stalled and not at_limit:
+            return Stop(_raw(end, _wrap(here), invert), trace)
+        if not stalled and trace.stop not in ("time", "travel"):
+            return None
+    return None
+
+
+def _wrap(a: float) -> float:
+    """An offset within the configuration's ±6.3 rad."""
+    return math.remainder(a, 2 * math.pi)
+
+
+__all__ = ["Stop", "Wiring", "brake", "encoder_check", "find_stop", "wiring"]

@@ -1,0 +1,470 @@
+"""``bringup(hand)``: a new hand's first power-on, finger by finger: its encoder, its wiring,
+its stops (the encoder's zero and the limits), its plant and gains, checked closed loop; the
+configuration saved only after the person confirms it, and a report.
+
+Safe at every step: the only open-loop drive is a bounded pulse (``pulses.py``), the motors are
+braked between steps, and any exception (Ctrl-C included) brakes every finger and puts the
+running configuration back to the saved one (``load_config``): the EEPROM is written only by
+the one ``save_config`` after the confirmation. Resumable: each finger's result goes into
+``progress.json`` of the report folder as it is done, and ``resume=True`` skips those fingers.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from utrf.bringup.diagnose import encoder_check, find_stop, wiring
+from utrf.bringup.findings import Finding, FingerConfig
+from utrf.bringup.identify import Check, Plant, check, identify, tune
+from utrf.bringup.pulses import Bounds, Recorder, brake, pulse, settle
+from utrf.hand import Hand
+
+#: the limits go this far inside the stops found
+STOP_MARGIN_RAD = 0.05
+#: beyond these, a proposed value differs from the saved one
+SAME_ANGLE_RAD = 0.03
+SAME_GAIN = 0.3
+#: set_finger_config's default encoder_offset (protocol/spec.toml): the straight finger mid-turn
+DEFAULT_OFFSET = 3.14159265
+#: more friction (duty) than the model's, and more backlash (rad), make findings
+FRICTION_DUTY = 0.03
+SLACK_RAD = 0.06
+SLOW = 0.55  # of the model motors' speed gain
+#: the steps of a finger's bring-up, in order
+UPTO = ("wiring", "stops", "plant", "check")
+
+
+@dataclass
+class FingerResult:
+    name: str
+    index: int
+    findings: list[Finding] = field(default_factory=list)
+    config: FingerConfig = field(default_factory=FingerConfig)
+    stops: dict[str, float] = field(default_factory=dict)
+    plant: dict[str, float] = field(default_factory=dict)
+    tuning: dict[str, Any] = field(default_factory=dict)
+    checks: list[Check] = field(default_factory=list)
+    board_time_s: float = 0.0
+
+    @property
+    def fixable(self) -> bool:
+        return all(f.fixable for f in self.findings)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["findings"] = [f.to_dict() for f in self.findings]
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> FingerResult:
+        r = cls(d["name"], d["index"])
+        r.findings = [Finding(**x) for x in d["findings"]]
+        r.config = FingerConfig.from_dict(d["config"])
+        r.stops, r.plant, r.tuning = d["stops"], d["plant"], d["tuning"]
+        r.checks = [Check(**c) for c in d["checks"]]
+        r.board_time_s = d.get("board_time_s", 0.0)
+        return r
+
+
+@dataclass
+class BringupResult:
+    fingers: list[FingerResult]
+    saved: bool = False
+    unchanged: bool = False
+    message: str = ""
+    board_time_s: float = 0.0
+    bounds: Bounds = field(default_factory=Bounds)
+    out_dir: Path | None = None
+    changes: list[str] = field(default_factory=list)  # what the proposal changes, if anything
+
+    @property
+    def findings(self) -> list[Finding]:
+        return [f for r in self.fingers for f in r.findings]
+
+    @property
+    def ok(self) -> bool:
+        return all(r.fixable for r in self.fingers)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "saved": self.saved,
+            "unchanged": self.unchanged,
+            "message": self.message,
+            "changes": self.changes,
+            "board_time_s": self.board_time_s,
+            "bounds": asdict(self.bounds),
+            "fingers": [r.to_dict() for r in self.fingers],
+        }
+
+
+Confirm = Callable[[str], bool]
+
+
+def _saved_config(hand: Hand, f: int) -> dict[str, dict[str, Any]]:
+    def fields(msg: Any) -> dict[str, Any]:
+        return {k: v for k, v in asdict(msg).items() if k != "finger"}
+
+    return {
+        "finger_config": fields(hand.finger_config(f)),
+        "limits": fields(hand.limits(f)),
+        "gains": fields(hand.gains(f)),
+        "motion": fields(hand.motion(f)),
+    }
+
+
+def _bring_up_finger(
+    hand: Hand,
+    rec: Recorder,
+    f: int,
+    saved: dict[str, dict[str, Any]],
+    bounds: Bounds,
+    step: Callable[[str], None],
+    upto: str = "check",
+) -> FingerResult:
+    names = list(hand.fingers)
+    name = names[f]
+    res = FingerResult(name, f)
+    t0 = hand.state().board_time
+    geo = hand.geometry.fingers[f].geometry
+    lo, hi = geo.theta2_range_rad
+    step(f"{name}: encoder")
+    brake(hand, [f])
+    # the saved pretension: both motors pull, the finger is held against gravity between pulses
+    hand.set_gains(f, pretension_duty=max(0.1, saved["gains"]["pretension_duty"]))
+    hand.set_limits(
+        f, theta2_min=lo, theta2_max=hi, limit_margin=0.5, stall_time=bounds.board_stall_s
+    )
+    hand.set_finger_config(f, motor_invert=0, encoder_invert=0, encoder_offset=DEFAULT_OFFSET)
+    found = encoder_check(hand, rec, f, name)
+    if found is not None:
+        res.findings.append(found)
+        return res
+    step(f"{name}: wiring")
+    w = wiring(hand, rec, f, name, names, bounds)
+    res.findings += w.findings
+    if not w.ok:
+        return res
+    hand.set_finger_config(f, motor_invert=w.motor_invert, encoder_invert=w.encoder_invert)
+    hand.set_gains(f, pretension_duty=saved["gains"]["pretension_duty"])
+    res.config.finger_config = {"encoder_invert": w.encoder_invert, "motor_invert": w.motor_invert}
+    if upto == "wiring":
+        return res
+    step(f"{name}: stops")
+    open_ = find_stop(hand, rec, f, -1, w.encoder_invert, bounds)
+    closed = find_stop(hand, rec, f, 1, w.encoder_invert, bounds) if open_ else None
+    if open_ is None or closed is None:
+        res.findings.append(
+            Finding(
+                name,
+                "no-motion",
+                "the search for the joint's stops did not end at a stop (the finger stopped "
+                "moving before one, or faulted): a jammed joint, a broken tendon or a motor "
+                "too weak to move it",
+                "free the joint and check its tendons",
+                False,
+            )
+        )
+        return res
+    s = -1.0 if w.encoder_invert else 1.0
+    span = math.remainder(s * (closed.raw - open_.raw) - math.pi, 2 * math.pi) + math.pi
+    offset = math.remainder(open_.raw - s * lo, 2 * math.pi)
+    closed_at = lo + span
+    res.stops = {"open_rad": lo, "closed_rad": closed_at, "span_rad": span, "offset_rad": offset}
+    if abs(math.remainder(offset - DEFAULT_OFFSET, 2 * math.pi)) > 0.05:
+        res.findings.append(
+            Finding(
+                name,
+                "magnet-offset",
+                "at the open stop the encoder reads "
+                f"{math.degrees(math.remainder(offset - DEFAULT_OFFSET, 2 * math.pi)):+.1f}° "
+                "off the model's zero: the magnet is glued turned on its shaft (or the AS5600 "
+                "turned on its board)",
+                f"encoder_offset = {offset:.4f} rad (the open stop reads the model's "
+                f"{math.degrees(lo):.1f}°)",
+                True,
+                {"offset_rad": offset},
+            )
+        )
+    if span < (hi - lo) - 0.08:
+        res.findings.append(
+            Finding(
+                name,
+                "narrow-range",
+                f"this build's joint closes only to {math.degrees(closed_at):.1f}° (the model's "
+                f"{math.degrees(hi):.1f}°): a knuckle, a guide or a short tendon stops it early",
+                f"theta2_max = {math.degrees(closed_at - STOP_MARGIN_RAD):.1f}° (inside the stop)",
+                True,
+                {"closed_rad": closed_at},
+            )
+        )
+    th_min, th_max = lo + STOP_MARGIN_RAD, min(hi, closed_at) - STOP_MARGIN_RAD
+    hand.set_finger_config(f, encoder_offset=offset)
+    hand.set_limits(f, theta2_min=th_min, theta2_max=th_max)
+    res.config.finger_config = {
+        "encoder_offset": offset,
+        "encoder_invert": w.encoder_invert,
+        "motor_invert": w.motor_invert,
+    }
+    res.config.limits = {"theta2_min": th_min, "theta2_max": th_max}
+    if upto == "stops":
+        return res
+    step(f"{name}: plant")
+    mid = min(max(0.3, th_min + 0.6), th_max - 0.6)
+    hand.clear_faults([f])
+    here = hand.state().fingers[f].theta2
+    pulse(hand, rec, f, math.copysign(0.35, mid - here), bounds, seconds=3.0, travel=3.5, until=mid)
+    settle(hand, 0.1)
+    plant, _ = identify(hand, rec, f, bounds, mid)
+    res.plant = plant.to_dict()
+    res.findings += _plant_findings(name, plant, hand, f)
+    if not (plant.K > 0 and math.isfinite(plant.tau)):
+        res.findings.append(
+            Finding(name, "no-motion", "the duty steps gave no usable response", "-", False)
+        )
+        return res
+    g = saved["gains"]
+    tuned = tune(plant, model_plant(hand, f), g["d_cutoff_hz"], g["pretension_duty"], g["max_duty"])
+    res.tuning = asdict(tuned)
+    res.config.gains = dict(tuned.gains)
+    res.config.motion = dict(tuned.motion)
+    if upto == "plant":
+        return res
+    step(f"{name}: closed loop")
+    a, b = mid - 0.25, mid + 0.25
+    hand.set_gains(f, max_duty=min(g["max_duty"], bounds.duty))
+    hand.set_gains(f, **{k: g[k] for k in tuned.gains})
+    hand.set_motion(f, **{k: saved["motion"][k] for k in tuned.motion})
+    hand.clear_faults([f])
+    res.checks.append(check(hand, rec, f, a, b, "before (saved gains)"))
+    hand.set_gains(f, **tuned.gains)
+    hand.set_motion(f, **tuned.motion)
+    hand.clear_faults([f])
+    res.checks.append(check(hand, rec, f, a, b, "after (tuned)"))
+    hand.set_gains(f, max_duty=g["max_duty"])
+    brake(hand, [f])
+    res.board_time_s = hand.state().board_time - t0
+    return res
+
+
+def _plant_findings(name: str, p: Plant, hand: Hand, f: int) -> list[Finding]:
+    """The plant against the model's motors (``model_plant``)."""
+    ref = model_plant(hand, f)
+    out = []
+    if p.K < SLOW * ref.K:
+        out.append(
+            Finding(
+                name,
+                "slow-motor",
+                f"the finger moves at {p.K:.2f} rad/s per unit duty, the model's motors at "
+                f"{ref.K:.2f}: a slower motor (another gear ratio or winding), or a low supply",
+                "gains, feedforward and max_speed tuned for it",
+                True,
+                {"K": p.K, "K_model": ref.K},
+            )
+        )
+    if p.u_f > ref.u_f + FRICTION_DUTY:
+        out.append(
+            Finding(
+                name,
+                "friction",
+                f"it takes {p.u_f:.2f} duty to move (the model: {ref.u_f:.2f}): friction in a "
+                "guide, a tight tendon or a carriage, or a weaker motor (less force per amp: "
+                "the steps cannot tell the two apart)",
+                "deadband_duty set to it; free the tendon or the guide if it is much more",
+                True,
+                {"u_f": p.u_f, "u_f_model": ref.u_f},
+            )
+        )
+    if p.backlash_rad > SLACK_RAD:
+        out.append(
+            Finding(
+                name,
+                "slack",
+                "reversing toward flexion, the motor moves about "
+                f"{math.degrees(p.backlash_rad):.0f}° of Joint 2 before the joint follows: "
+                "slack in the coupling tendon (Tendon 2)",
+                "tighten Tendon 2 (Joint 2 is loose between its strands: no gain holds it)",
+                False,
+                {"backlash_rad": p.backlash_rad},
+            )
+        )
+    return out
+
+
+def model_plant(hand: Hand, f: int) -> Plant:
+    """The plant the hand's model motors make (``MotorParams`` defaults, the finger's guide
+    radius): two motors resisting (one pulls, the antagonist is back-driven at its pretension),
+    so K = v_no_load / (2 R2), τ = m v_no_load / F_stall, u_f = 2 F_coulomb / F_stall."""
+    from utrf.emulator.plant_params import MotorParams  # constants only: no MuJoCo
+
+    mot = MotorParams()
+    r2 = hand.geometry.fingers[f].geometry.guide_radii_m[1]
+    return Plant(
+        K=mot.no_load_speed_m_s / (2 * r2),
+        tau=mot.moving_mass_kg * mot.no_load_speed_m_s / mot.stall_force_n,
+        u_f=2 * mot.coulomb_friction_n / mot.stall_force_n,
+        backlash_rad=0.0,
+        steps=0,
+    )
+
+
+#: per field, how far a proposal may be from the saved value and still be the same (absolute
+#: for angles and duties; relative for the gains): the identification's spread between runs
+_ABS = {
+    "encoder_offset": SAME_ANGLE_RAD,
+    "theta2_min": SAME_ANGLE_RAD,
+    "theta2_max": SAME_ANGLE_RAD,
+    "deadband_duty": 0.02,
+}
+
+
+def changes(proposed: FingerConfig, saved: dict[str, dict[str, Any]]) -> list[str]:
+    """The fields a proposal changes, as ``group.field: saved -> proposed``."""
+    out = []
+    for group, values in asdict(proposed).items():
+        for k, v in values.items():
+            old = float(saved[group][k])
+            if k in _ABS:
+                diff = abs(math.remainder(old - float(v), 2 * math.pi)) > _ABS[k]
+            elif k in ("encoder_invert", "motor_invert"):
+                diff = int(old) != int(v)
+            else:
+                diff = abs(old - float(v)) > SAME_GAIN * max(abs(float(v)), 1e-3)
+            if diff:
+                out.append(f"{group}.{k}: {old:.4g} -> {float(v):.4g}")
+    return out
+
+
+def _apply(hand: Hand, f: int, c: FingerConfig) -> None:
+    if c.finger_config:
+        hand.set_finger_config(f, **c.finger_config)
+    if c.limits:
+        hand.set_limits(f, **c.limits)
+    if c.gains:
+        hand.set_gains(f, **c.gains)
+    if c.motion:
+        hand.set_motion(f, **c.motion)
+
+
+def summary(results: list[FingerResult]) -> str:
+    lines = []
+    for r in results:
+        lines.append(f"{r.name}:")
+        for fd in r.findings:
+            lines.append(f"  - {fd.message}\n    fix: {fd.fix}")
+        if not r.findings:
+            lines.append("  - built as the model says")
+        for group, values in asdict(r.config).items():
+            if values:
+                pretty = ", ".join(f"{k}={v:.4g}" for k, v in values.items())
+                lines.append(f"    {group}: {pretty}")
+    return "\n".join(lines)
+
+
+def bringup(
+    hand: Hand,
+    out_dir: str | Path | None = None,
+    *,
+    fingers: Iterable[int | str] | None = None,
+    confirm: Confirm = lambda text: False,
+    bounds: Bounds | None = None,
+    on_step: Callable[[str], None] | None = None,
+    resume: bool = False,
+    upto: str = "check",
+) -> BringupResult:
+    """Bring up ``fingers`` (default all) of a connected hand; see the module's text.
+    ``confirm(summary)`` is asked before anything is saved (the CLI asks the person;
+    ``--yes`` answers yes). ``on_step(text)`` is told each step as it starts. ``upto``: the
+    last step to take on each finger (``"wiring"``, ``"stops"``, ``"plant"`` or ``"check"``,
+    the default: all of them)."""
+    if upto not in UPTO:
+        raise ValueError(f"upto must be one of {UPTO}, got {upto!r}")
+    bounds = bounds or Bounds()
+    out = Path(out_dir) if out_dir is not None else None
+    progress_path = out / "progress.json" if out is not None else None
+    done: dict[int, FingerResult] = {}
+    if resume and progress_path is not None and progress_path.exists():
+        for d in json.loads(progress_path.read_text())["fingers"]:
+            done[d["index"]] = FingerResult.from_dict(d)
+    idx = (
+        sorted({hand.finger_index(k) for k in fingers})
+        if fingers is not None
+        else list(range(len(hand.fingers)))
+    )
+    step = on_step or (lambda text: None)
+    rec = Recorder(hand)
+    t_start = hand.state().board_time
+    result = BringupResult([], bounds=bounds, out_dir=out)
+    try:
+        hand.set_telemetry(1000)
+        brake(hand)
+        # a host that dies mid-pulse leaves the motors off, not holding (the board's
+        # host-silence rule); load_config puts the saved safe action back
+        hand.set_safety(safe_action="coast")
+        saved = {f: _saved_config(hand, f) for f in range(len(hand.fingers))}
+        for f in idx:
+            if f in done:
+                step(f"{hand.fingers[f]}: done before (resumed)")
+                result.fingers.append(done[f])
+                continue
+            r = _bring_up_finger(hand, rec, f, saved[f], bounds, step, upto)
+            brake(hand, [f])
+            result.fingers.append(r)
+            if progress_path is not None:
+                progress_path.parent.mkdir(parents=True, exist_ok=True)
+                progress_path.write_text(json.dumps(result.to_dict(), indent=1))
+        # every finger's temporary settings back to the saved ones, then the proposal on top
+        hand.load_config("eeprom")
+        bad = [fd for fd in result.findings if not fd.fixable]
+        if bad:
+            result.message = (
+                "NOT saved: configuration cannot fix "
+                + "; ".join(f"{fd.finger}: {fd.kind}" for fd in bad)
+                + ". Fix those and run the bring-up again (the motors are off)."
+            )
+        elif not any(changes(r.config, saved[r.index]) for r in result.fingers):
+            result.unchanged = True
+            result.message = "this hand is already brought up: nothing to change, nothing saved"
+        else:
+            result.changes = [
+                f"{r.name} {c}" for r in result.fingers for c in changes(r.config, saved[r.index])
+            ]
+            for r in result.fingers:
+                _apply(hand, r.index, r.config)
+            text = summary(result.fingers) + "\nchanges:\n  " + "\n  ".join(result.changes)
+            if confirm(text):
+                step("saving the configuration to the board's EEPROM")
+                hand.save_config()
+                result.saved = True
+                result.message = "saved to the board's EEPROM"
+            else:
+                hand.load_config("eeprom")
+                result.message = (
+                    "not confirmed: nothing saved (the board runs its saved configuration)"
+                )
+        result.board_time_s = hand.state().board_time - t_start
+    except BaseException:
+        _safe_stop(hand)
+        raise
+    finally:
+        rec.close()
+    brake(hand)
+    if out is not None:
+        from utrf.bringup.report import write_report  # matplotlib: only when a report is asked
+
+        write_report(result, out, rec.samples)
+    return result
+
+
+def _safe_stop(hand: Hand) -> None:
+    """Motors off and the running configuration the saved one, as far as the link allows (a
+    lost link leaves it to the board's host-silence rule)."""
+    for action in (lambda: brake(hand), lambda: hand.load_config("eeprom")):
+        with contextlib.suppress(Exception):  # best effort while stopping
+            action()
