@@ -19,6 +19,7 @@ from selenium.webdriver.common.action_chains import ActionChains
 from selenium.webdriver.common.by import By
 from selenium.webdriver.common.keys import Keys
 from selenium.webdriver.remote.webdriver import WebDriver
+from selenium.webdriver.support.ui import WebDriverWait
 
 pytestmark = pytest.mark.slow  # a served emulated board and chromium: seconds each
 
@@ -35,9 +36,10 @@ def first(dashboard: Dashboard, browser: Callable[[], WebDriver]) -> WebDriver:
 
 def test_page_loads_live_against_the_emulated_board(first: WebDriver) -> None:
     t0 = wait_text(first, ".utrf-board-time", "board time ")
-    time.sleep(0.5)
+    # the board's clock runs on the page
+    WebDriverWait(first, 60).until(lambda d: text_of(d, ".utrf-board-time") != t0)
     t1 = text_of(first, ".utrf-board-time")
-    assert float(t1.split()[2]) > float(t0.split()[2])  # the board's clock runs on the page
+    assert float(t1.split()[2]) > float(t0.split()[2])
     assert first.find_element(By.CSS_SELECTOR, ".utrf-chart-index canvas")
     assert "HOST_TIMEOUT" in first.find_element(By.TAG_NAME, "body").text
 

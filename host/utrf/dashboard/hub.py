@@ -35,7 +35,7 @@ T = TypeVar("T")
 LOST_GRACE_S = 1.0
 #: seconds of samples kept for the plots
 WINDOW_S = 10.0
-#: the board-to-wall-clock offset is the smallest delay over this many seconds
+#: the board's clock is mapped to the host's over this many seconds of samples
 OFFSET_WINDOW_S = 2.0
 
 
@@ -107,7 +107,10 @@ class DashboardHub:
         rate = max(hand.telemetry_hz, 1)
         self.ring = SampleRing(len(self.fingers), int(WINDOW_S * rate) + 1)
         self.latest: HandState | None = None
-        self._offsets: collections.deque[tuple[float, float]] = collections.deque()
+        # (board time, host receive time) of the last samples: the board's clock on the host's
+        self._clock: collections.deque[tuple[float, float]] = collections.deque(
+            maxlen=int(OFFSET_WINDOW_S * rate) + 1
+        )
         self._lock = threading.Lock()
         self._controller: str | None = None
         self.watchers: set[str] = set()  # pages open (connected or not)
@@ -126,21 +129,30 @@ class DashboardHub:
     def _on_state(self, st: HandState) -> None:
         self.ring.add(st)
         self.latest = st
-        delay = st.host_time - st.board_time
         with self._lock:
-            q = self._offsets
-            while q and q[-1][1] >= delay:  # a monotonic deque: its head is the window's min
-                q.pop()
-            q.append((st.board_time, delay))
-            while q[0][0] < st.board_time - OFFSET_WINDOW_S:
-                q.popleft()
+            self._clock.append((st.board_time, st.host_time))
 
     def wall_time_of(self, board_time: float) -> float:
-        """When the board took a sample, on the host's wall clock: its board time plus the
-        smallest host-minus-board delay of the last ``OFFSET_WINDOW_S``."""
+        """When the board took a sample, on the host's wall clock, from its board time: the
+        lower envelope of (board time, host receive time) over the last ``OFFSET_WINDOW_S``,
+        through the least-delayed sample of each half of the window (so a board clock that
+        runs at another pace than the host's, as an emulated board under load does, is
+        followed; a sample's delay to the host is then what it took beyond the quickest)."""
         with self._lock:
-            offset = self._offsets[0][1] if self._offsets else math.nan
-        return board_time + offset
+            pts = np.array(self._clock) if len(self._clock) > 1 else None
+        if pts is None:
+            return math.nan
+        board, host = pts[:, 0], pts[:, 1]
+        keep = board >= board[-1] - OFFSET_WINDOW_S
+        board, host = board[keep], host[keep]
+        half = len(board) // 2
+        delay = host - board
+        if half < 1 or board[-1] - board[0] < OFFSET_WINDOW_S / 4:
+            return board_time + float(delay.min())
+        i = int(np.argmin(delay[:half]))
+        j = half + int(np.argmin(delay[half:]))
+        slope = (host[j] - host[i]) / (board[j] - board[i]) if board[j] > board[i] else 1.0
+        return float(host[i] + slope * (board_time - board[i]))
 
     # --- who controls ---------------------------------------------------------------------------
 

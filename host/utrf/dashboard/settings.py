@@ -12,7 +12,11 @@ from utrf.protocol import messages as m
 from utrf.protocol.codec import Field, Message
 
 #: group -> the set_ message whose fields (all but ``finger``) are the settings
-GROUPS: dict[str, type[Message]] = {"gains": m.SetGains, "limits": m.SetLimits, "motion": m.SetMotion}
+GROUPS: dict[str, type[Message]] = {
+    "gains": m.SetGains,
+    "limits": m.SetLimits,
+    "motion": m.SetMotion,
+}
 
 
 @dataclass(frozen=True)
