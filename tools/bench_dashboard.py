@@ -46,6 +46,7 @@ FLAGS = [
     "--enable-unsafe-swiftshader",
     "--window-size=1400,1000",
 ]
+STATUS = "return fetch('/api/status').then(r => r.text())"
 # The probe (measurement only, not part of the page): the time after each frame that drew a
 # new sample, minus that sample's time on the wall clock; and every frame's time.
 PROBE = """
@@ -136,6 +137,7 @@ def measure(elf: Path | None, seconds: float, rate: int, tmp: Path) -> dict:
         server = psutil.Process(dash.pid)
         browser = psutil.Process(driver.service.process.pid).children(recursive=True)
         b0 = sum(cpu_s(p) for p in browser)
+        pushed0 = json.loads(driver.execute_script(STATUS))["pushed"].get("live", 0)
         c0, w0 = cpu_s(server), time.monotonic()
         poses = ["fist", "open", "point", "open"]
         for k, pose in enumerate(poses):
@@ -175,6 +177,7 @@ def measure(elf: Path | None, seconds: float, rate: int, tmp: Path) -> dict:
         "browser_cpu_core": (b1 - b0) / (w1 - w0),
         "fps": (len(frames) - 1) / span,
         "updates_per_s": len(lat) / (w1 - w0),
+        "pushed_per_s": (status["pushed"].get("live", 0) - pushed0) / (w1 - w0),
         "load_average": os.getloadavg()[0],
         "sent": status["sent"],
     }
@@ -206,12 +209,16 @@ def section(r: dict) -> str:
             f"| server CPU <= 25 % of one core | {100 * r['server_cpu_core']:.1f} % | "
             f"{ok(r['server_cpu_core'] <= 0.25)} |",
             f"| page draws >= 30 frames/s | {r['fps']:.1f} frames/s; {r['updates_per_s']:.1f} "
-            f"new samples drawn/s | {ok(r['fps'] >= 30)} |",
+            f"new samples drawn/s, of the {r['pushed_per_s']:.1f}/s the server sent (it "
+            f"schedules 30/s) | {ok(r['fps'] >= 30)} |",
             "",
             f"The browser (all its processes) had {100 * r['browser_cpu_core']:.0f} % of one "
-            "core over the window: on a machine this loaded the page's frames and updates are "
-            "bounded by the CPU the browser gets, and the latency by the updates queued "
-            "meanwhile.",
+            "core over the window. With the machine's load average near "
+            f"{r['load_average']:.0f} on 2 cores, each busy thread gets about "
+            f"{200 / max(r['load_average'], 1):.0f} % of a core: the server sent "
+            f"{r['pushed_per_s']:.1f} live updates a second of the 30 it schedules, and the "
+            "figures above measure that starvation, not the dashboard; the server's CPU is "
+            "what it was given, not what it asks for. Re-measure on a quiet machine.",
             "",
             "Latency: the probe takes the time after the frame that drew each new sample "
             "(`requestAnimationFrame`, then a task) minus the sample's board time on the host's "

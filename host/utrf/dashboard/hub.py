@@ -116,6 +116,7 @@ class DashboardHub:
         self.watchers: set[str] = set()  # pages open (connected or not)
         self._connected: set[str] = set()
         self.sent: collections.Counter[str] = collections.Counter()  # commands sent, by name
+        self.pushed: collections.Counter[str] = collections.Counter()  # page updates, by kind
         self.record_dir = Path(record_dir)
         self.recording: Any = None  # utrf.recording.session.Recording while recording
         self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="utrf-dash")
@@ -302,6 +303,7 @@ class DashboardHub:
             "pages": len(self.watchers),
             "samples": self.ring.count,
             "sent": dict(self.sent),
+            "pushed": dict(self.pushed),
             "recording": None if self.recording is None else str(self.recording.path),
             "heartbeat_timeout_s": self.safety.heartbeat_timeout,
             "safe_action": m.SafeAction(self.safety.safe_action).name,

@@ -296,6 +296,7 @@ class DashboardPage:
         self.hand3d.show([f.theta2 for f in st.fingers], [bool(f.faults) for f in st.fingers])
         self.board_time.text = f"board time {st.board_time:.3f} s"
         self.sample_wall.text = f"{1000 * self.hub.wall_time_of(st.board_time):.1f}"
+        self.hub.pushed["live"] += 1
 
     def _update_plots(self) -> None:
         s = self.hub.ring.series(self.window_s, self.points_per_s)
@@ -314,3 +315,4 @@ class DashboardPage:
             ):
                 series[k]["data"] = np.column_stack((x, y)).round(3).tolist()
             chart.update()
+        self.hub.pushed["plots"] += 1
