@@ -4,10 +4,11 @@
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from nicegui import Client, app, ui
+from nicegui import Client, app, background_tasks, ui
 
 from utrf.dashboard.access import TokenGuard, needs_token
 from utrf.dashboard.hub import DashboardHub
@@ -59,7 +60,19 @@ def serve(hub: DashboardHub, options: ServerOptions, on_ready: Callable[[str], N
     def status() -> dict:
         return hub.status()
 
-    app.on_startup(lambda: on_ready(options.url()))
+    async def announce() -> None:
+        # uvicorn listens only after the app's startup: say "open" once it answers
+        for _ in range(400):
+            try:
+                _, writer = await asyncio.open_connection(options.host, options.port)
+            except OSError:
+                await asyncio.sleep(0.05)
+                continue
+            writer.close()
+            break
+        on_ready(options.url())
+
+    app.on_startup(lambda: background_tasks.create(announce(), name="utrf-announce"))
     ui.run(
         host=options.host,
         port=options.port,
