@@ -103,6 +103,10 @@ uint16_t fw_rx(const uint8_t* data, uint16_t n) {
 }
 
 void fw_add_rx_lost(uint16_t n) { state().rx_lost = (uint16_t)(state().rx_lost + n); }
+void fw_add_uart_errors(uint8_t overruns, uint8_t frame_errors) {
+    state().uart_overruns = (uint8_t)(state().uart_overruns + overruns);
+    state().uart_frame_errors = (uint8_t)(state().uart_frame_errors + frame_errors);
+}
 
 uint16_t fw_tx(uint8_t* out, uint16_t max) {
     if (g_line_len != 0) {  // the line first: it holds the older bytes

@@ -155,6 +155,12 @@ uint16_t serial_take_overruns() {
     return n;
 }
 
+UartErrors serial_take_uart_errors() {
+    const UartErrors e = {g_state.uart_overruns, g_state.uart_frame_errors};
+    g_state.uart_overruns = g_state.uart_frame_errors = 0;
+    return e;
+}
+
 uint8_t eeprom_read(uint16_t addr) { return g_state.eeprom[addr % host::kEepromBytes]; }
 
 bool eeprom_ready() {

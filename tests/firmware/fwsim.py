@@ -99,6 +99,7 @@ def load_library(path: Path = LIB_PATH) -> ctypes.CDLL:
         "fw_set_period_elapsed": (None, [c.c_int]),
         "fw_rx": (c.c_uint16, [c.c_char_p, c.c_uint16]),
         "fw_add_rx_lost": (None, [c.c_uint16]),
+        "fw_add_uart_errors": (None, [c.c_uint8, c.c_uint8]),
         "fw_tx": (c.c_uint16, [c.c_char_p, c.c_uint16]),
         "fw_set_tx_room": (None, [c.c_uint16]),
         "fw_eeprom": (c.POINTER(c.c_uint8), []),

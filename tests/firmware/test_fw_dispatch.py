@@ -422,17 +422,20 @@ def test_stats_count_and_reset(sim: Sim) -> None:
         sim.ok(m.Heartbeat())
     sim.nack(0x77, b"")
     sim.lib.fw_add_rx_lost(5)
+    sim.lib.fw_add_uart_errors(2, 3)
     sim.run(1100)
     stats = sim.ok(m.GetStats())
     assert stats.rx_frames == 5  # 3 heartbeats, the bad id, this request
     assert stats.nacks == 1
     assert stats.rx_overruns == 5
+    assert (stats.uart_overruns, stats.uart_frame_errors) == (2, 3)
     assert stats.ticks >= 1100
     assert stats.tick_worst == pytest.approx(300e-6)
     assert stats.tick_mean == pytest.approx(300e-6)
     sim.ok(m.ResetStats())
     stats = sim.ok(m.GetStats())
     assert (stats.rx_frames, stats.nacks, stats.rx_overruns) == (1, 0, 0)
+    assert (stats.uart_overruns, stats.uart_frame_errors) == (0, 0)
 
 
 def test_repeated_set_mode_is_harmless(sim: Sim) -> None:

@@ -111,6 +111,9 @@ void receive_byte(Board& b, uint8_t byte) {
 void receive(Board& b) {
     const uint16_t lost = hal::serial_take_overruns();
     b.link.rx_overruns += lost;
+    const hal::UartErrors e = hal::serial_take_uart_errors();
+    b.link.uart_overruns += e.overruns;
+    b.link.uart_frame_errors += e.frame_errors;
     uint8_t budget = kRxBurst;
     while (budget != 0 && b.reply_len == 0) {
         const uint8_t* data;

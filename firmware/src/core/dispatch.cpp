@@ -530,6 +530,8 @@ void get_stats(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     r.tick_mean = us_from_cycles(t.mean_cycles);
     r.rx_ignored = b.link.rx_ignored;
     r.rx_repeats = b.link.rx_repeats;
+    r.uart_overruns = b.link.uart_overruns;
+    r.uart_frame_errors = b.link.uart_frame_errors;
     reply(b, seq, r);
 }
 

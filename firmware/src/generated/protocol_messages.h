@@ -21,9 +21,9 @@
 namespace utrf {
 namespace proto {
 
-static const uint16_t kProtocolVersion = 1;
+static const uint16_t kProtocolVersion = 2;
 // CRC-32 of the canonical spec (doc texts excluded); compared at the handshake.
-static const uint32_t kSchemaHash = 0x002A60D8UL;
+static const uint32_t kSchemaHash = 0xC951C151UL;
 static const uint8_t kMaxPayload = 64;  // body bytes
 static const uint8_t kFingerCount = 5;
 static const uint32_t kDefaultBaud = 1000000UL;
@@ -652,13 +652,13 @@ struct Motion {
 // Link and timing counters since boot or reset_stats.
 struct Stats {
   static const uint8_t kId = 0xB5;
-  static const uint8_t kSize = 44;
+  static const uint8_t kSize = 52;
   static constexpr float kTickWorstScale = 1e-06f;
   static constexpr float kTickMeanScale = 1e-06f;
   uint32_t rx_frames;  // valid frames received
   uint32_t rx_crc_errors;  // frames whose CRC failed
   uint32_t rx_framing_errors;  // bad COBS, frames too short, or too long for the buffer
-  uint32_t rx_overruns;  // bytes lost because the receive buffer was full
+  uint32_t rx_overruns;  // bytes lost because the firmware's receive ring was full
   uint32_t nacks;  // nacks sent
   uint32_t tx_dropped;  // stream frames skipped because the transmit buffer was full
   uint32_t ticks;  // control ticks run
@@ -667,6 +667,8 @@ struct Stats {
   uint16_t tick_mean;  // x 1e-06; s; mean control tick, over the last 1024 ticks
   uint32_t rx_ignored;  // valid frames ignored: a request seq with the board's flag (bit 7) set
   uint32_t rx_repeats;  // resent requests answered from the reply cache, not done again
+  uint32_t uart_overruns;  // data overruns the UART reported (DOR0): its two-byte receive buffer was full when a third byte came, and one or more bytes were lost before the byte read
+  uint32_t uart_frame_errors;  // bytes the UART received with a bad stop bit (FE0): line noise, or the host at another baud
 };
 
 // ack (0xF0, board to host)
@@ -1702,6 +1704,8 @@ inline DecodeStatus decode(const uint8_t* body, uint8_t len, Stats& out,
   out.tick_mean = detail::rd_u16(body + 34);
   out.rx_ignored = detail::rd_u32(body + 36);
   out.rx_repeats = detail::rd_u32(body + 40);
+  out.uart_overruns = detail::rd_u32(body + 44);
+  out.uart_frame_errors = detail::rd_u32(body + 48);
   return DecodeStatus::OK;
 }
 inline uint8_t encode(const Stats& msg, uint8_t* body) {
@@ -1717,6 +1721,8 @@ inline uint8_t encode(const Stats& msg, uint8_t* body) {
   detail::wr_u16(body + 34, msg.tick_mean);
   detail::wr_u32(body + 36, msg.rx_ignored);
   detail::wr_u32(body + 40, msg.rx_repeats);
+  detail::wr_u32(body + 44, msg.uart_overruns);
+  detail::wr_u32(body + 48, msg.uart_frame_errors);
   return Stats::kSize;
 }
 
@@ -1891,6 +1897,8 @@ inline void write(W& w, const Stats& msg) {
   put_u16(w, msg.tick_mean);
   put_u32(w, msg.rx_ignored);
   put_u32(w, msg.rx_repeats);
+  put_u32(w, msg.uart_overruns);
+  put_u32(w, msg.uart_frame_errors);
 }
 template <typename W>
 inline void write(W& w, const Ack& msg) {
@@ -2615,7 +2623,9 @@ inline uint8_t flatten(const Stats& m, double* out) {
   out[9] = static_cast<double>(m.tick_mean);
   out[10] = static_cast<double>(m.rx_ignored);
   out[11] = static_cast<double>(m.rx_repeats);
-  return 12;
+  out[12] = static_cast<double>(m.uart_overruns);
+  out[13] = static_cast<double>(m.uart_frame_errors);
+  return 14;
 }
 inline void unflatten(const double* in, Stats& m) {
   m.rx_frames = static_cast<uint32_t>(in[0]);
@@ -2630,6 +2640,8 @@ inline void unflatten(const double* in, Stats& m) {
   m.tick_mean = static_cast<uint16_t>(in[9]);
   m.rx_ignored = static_cast<uint32_t>(in[10]);
   m.rx_repeats = static_cast<uint32_t>(in[11]);
+  m.uart_overruns = static_cast<uint32_t>(in[12]);
+  m.uart_frame_errors = static_cast<uint32_t>(in[13]);
 }
 inline uint8_t flatten(const Ack& m, double* out) {
   out[0] = static_cast<double>(m.msg_id);

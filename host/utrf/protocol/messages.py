@@ -14,9 +14,9 @@ from typing import ClassVar
 
 from utrf.protocol.codec import Direction, Field, Message, Request
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 #: CRC-32 of the canonical spec (doc texts excluded), compared at the handshake.
-SCHEMA_HASH = 0x002A60D8
+SCHEMA_HASH = 0xC951C151
 MAX_PAYLOAD = 64
 FINGER_COUNT = 5
 DEFAULT_BAUD = 1000000
@@ -1020,7 +1020,7 @@ class Stats(Message):
 
     NAME: ClassVar[str] = "stats"
     ID: ClassVar[int] = 0xB5
-    SIZE: ClassVar[int] = 44
+    SIZE: ClassVar[int] = 52
     DIRECTION: ClassVar[Direction] = Direction.BOARD_TO_HOST
     FIELDS: ClassVar[tuple[Field, ...]] = (
         Field("rx_frames", "u32", 0),
@@ -1035,6 +1035,8 @@ class Stats(Message):
         Field("tick_mean", "u16", 9, scale=1e-06, unit="s"),
         Field("rx_ignored", "u32", 10),
         Field("rx_repeats", "u32", 11),
+        Field("uart_overruns", "u32", 12),
+        Field("uart_frame_errors", "u32", 13),
     )
 
     #: valid frames received
@@ -1043,7 +1045,7 @@ class Stats(Message):
     rx_crc_errors: int
     #: bad COBS, frames too short, or too long for the buffer
     rx_framing_errors: int
-    #: bytes lost because the receive buffer was full
+    #: bytes lost because the firmware's receive ring was full
     rx_overruns: int
     #: nacks sent
     nacks: int
@@ -1061,6 +1063,11 @@ class Stats(Message):
     rx_ignored: int
     #: resent requests answered from the reply cache, not done again
     rx_repeats: int
+    #: data overruns the UART reported (DOR0): its two-byte receive buffer was full when a third
+    #: byte came, and one or more bytes were lost before the byte read
+    uart_overruns: int
+    #: bytes the UART received with a bad stop bit (FE0): line noise, or the host at another baud
+    uart_frame_errors: int
 
 
 @dataclass(frozen=True, slots=True)
