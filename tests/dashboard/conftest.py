@@ -54,7 +54,8 @@ class Dashboard:
         self.token = token
         cmd = [sys.executable, "-m", "utrf", "dashboard", "--elf", str(elf), "--host", host,
                "--http-port", str(self.port), "--rate", "200", "--record-dir", str(tmp),
-               "--ui-hz", "5", "--plot-hz", "2"]  # fmt: skip  # light: the machine is shared
+               "--ui-hz", "5", "--plot-hz", "2",  # light: the machine is shared
+               "--hold-after", "8"]  # fmt: skip  # a page starved for seconds is not closed
         if token:
             cmd += ["--token", token]
         self.log_path = tmp / f"dashboard-{self.port}.log"

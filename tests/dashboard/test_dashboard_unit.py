@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import time
 from types import SimpleNamespace
 from typing import Any
 
@@ -98,6 +99,12 @@ class FakeHand:
     def pose(self, name: str, duration: Any, wait: bool) -> None:
         self.pose_calls.append(name)
 
+    def state(self) -> list[SimpleNamespace]:
+        return [SimpleNamespace(index=0, closed_loop=True)]
+
+    def hold(self, fingers: list[int]) -> None:
+        self.pose_calls.append(f"hold {fingers}")
+
 
 def test_the_boards_clock_is_followed_when_it_runs_at_another_pace() -> None:
     hand = FakeHand()
@@ -135,3 +142,19 @@ def test_one_page_controls_the_others_watch() -> None:
     hub.leave("a")
     assert hub.take_control("b") and hub.controller == "b"
     hub.close()
+
+
+def test_a_page_in_control_that_goes_holds_the_fingers_unless_it_comes_back() -> None:
+    hand = FakeHand()
+    hub = DashboardHub(hand, hold_after_s=0.05)  # type: ignore[arg-type]
+    assert hub.join("a") and not hub.join("b")
+    hub.lost("b")  # a watcher going holds nothing
+    hub.lost("a")
+    hub.join("a")  # back within the grace: nothing held
+    time.sleep(0.3)
+    assert hand.pose_calls == []
+    hub.lost("a")  # gone: held once, however long it stays away
+    time.sleep(0.3)
+    hub.leave("a")
+    hub.close()
+    assert hand.pose_calls == ["hold [0]"] and hub.controller is None

@@ -48,6 +48,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--record-dir", type=Path, default=Path("."), help="where recordings go (default .)"
     )
+    p.add_argument(
+        "--hold-after",
+        type=float,
+        default=1.0,
+        metavar="S",
+        help="the page in control lost its connection for S seconds: every finger in closed "
+        "loop holds where it is (default 1)",
+    )
     p.add_argument("--ui-hz", type=float, default=30.0, help="live view updates a second")
     p.add_argument("--plot-hz", type=float, default=10.0, help="plot updates a second")
     p.set_defaults(handler=run)
@@ -62,6 +70,9 @@ def run(args: argparse.Namespace) -> int:
     if not 1 <= args.rate <= m.MAX_TELEMETRY_HZ:
         error("dashboard", f"--rate must lie in 1..{m.MAX_TELEMETRY_HZ} Hz, got {args.rate}")
         return EXIT_BAD_INPUT
+    if not 0 <= args.hold_after <= 60:
+        error("dashboard", f"--hold-after must lie in [0, 60] s, got {args.hold_after}")
+        return EXIT_BAD_INPUT
     if not (0 < args.ui_hz <= 60 and 0 < args.plot_hz <= 60):
         error("dashboard", "--ui-hz and --plot-hz must lie in (0, 60]")
         return EXIT_BAD_INPUT
@@ -73,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     )
     # the hand keeps what it holds when the dashboard stops: the board's host-silence rule
     with open_hand(args, telemetry_hz=args.rate, on_close="hold" if args.port else "brake") as hand:
-        hub = DashboardHub(hand, record_dir=args.record_dir)
+        hub = DashboardHub(hand, record_dir=args.record_dir, hold_after_s=args.hold_after)
         try:
             serve(hub, options, lambda url: print(f"utrf dashboard: open {url}", flush=True))
         finally:

@@ -101,7 +101,9 @@ class SampleRing:
 class DashboardHub:
     """One Hand for all the pages of a dashboard."""
 
-    def __init__(self, hand: Hand, *, record_dir: str | Path = ".") -> None:
+    def __init__(
+        self, hand: Hand, *, record_dir: str | Path = ".", hold_after_s: float = LOST_GRACE_S
+    ) -> None:
         self.hand = hand
         self.fingers = hand.fingers
         rate = max(hand.telemetry_hz, 1)
@@ -115,6 +117,8 @@ class DashboardHub:
         self._controller: str | None = None
         self.watchers: set[str] = set()  # pages open (connected or not)
         self._connected: set[str] = set()
+        self._losses: dict[str, int] = {}  # each page's lost connections, counted
+        self.hold_after_s = hold_after_s
         self.sent: collections.Counter[str] = collections.Counter()  # commands sent, by name
         self.pushed: collections.Counter[str] = collections.Counter()  # page updates, by kind
         self.record_dir = Path(record_dir)
@@ -166,25 +170,33 @@ class DashboardHub:
         with self._lock:
             self.watchers.add(page)
             self._connected.add(page)
+            self._losses[page] = self._losses.get(page, 0) + 1  # a pending hold is void
             if self._controller is None:
                 self._controller = page
             return self._controller == page
 
     def lost(self, page: str) -> None:
         """A page's connection dropped (closed, or a blip): if it controls and is not back
-        within ``LOST_GRACE_S``, the fingers in closed loop hold where they are then. It keeps
+        within ``hold_after_s``, the fingers in closed loop hold where they are then. It keeps
         control should it come back."""
         with self._lock:
             self._connected.discard(page)
             if self._controller != page:
                 return
-        timer = threading.Timer(LOST_GRACE_S, self._hold_if_gone, (page,))
+            self._losses[page] = loss = self._losses.get(page, 0) + 1
+        timer = threading.Timer(self.hold_after_s, self._hold_if_gone, (page, loss))
         timer.daemon = True
         timer.start()
 
-    def _hold_if_gone(self, page: str) -> None:
+    def _hold_if_gone(self, page: str, loss: int) -> None:
+        """The fingers held, once per loss, if the page is still away (and nobody else took
+        control meanwhile)."""
         with self._lock:
-            gone = page not in self._connected and self._controller in (page, None)
+            gone = (
+                page not in self._connected
+                and self._controller in (page, None)
+                and self._losses.get(page) == loss
+            )
         if gone:
             self._pool.submit(self._hold_all)
 
