@@ -83,6 +83,7 @@ const EncoderReading* encoders_read() {
     const bool stale = host::g_staleness.stale(g_state.adc_seq);
     for (uint8_t f = 0; f < 5; ++f) {
         out[f] = stale ? encoder::no_data() : encoder::judge(g_state.adc[f], g_setup[f]);
+        if (g_state.adc_rejudge) out[f].flags |= kReadingRejudge;
     }
     return out;
 }

@@ -25,6 +25,8 @@ struct State {
     uint16_t adc[5];
     uint8_t adc_seq;
     bool adc_frozen;
+    // every reading flagged as judged with an earlier setup: the tick's general encoder path
+    bool adc_rejudge;
     uint32_t sample_rounds;
     // tick
     bool tick_started;

@@ -94,7 +94,7 @@ enum class ConfigSource : uint8_t {
 
 // Why a request was refused (nack). A refused request changes nothing.
 enum class ErrorCode : uint8_t {
-  BAD_CRC = 1,  // the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only; detail = 0
+  BAD_CRC = 1,  // the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only (never 128 or more: such a frame is only counted); detail = 0
   UNKNOWN_ID = 2,  // no request has this message id; detail = 0
   BAD_LENGTH = 3,  // the body length does not match the message; detail = the length it should have
   OUT_OF_RANGE = 4,  // a field is outside its range; detail = field index, or 0x80 | finger for a per-finger limit
@@ -277,7 +277,8 @@ struct SetTelemetry {
 // keeps both, and the reply says so. The fingers must be in POSITION or GRASP (BUSY, detail =
 // finger, otherwise; FAULTED for a latched fault); targets beyond the limits are refused as
 // set_targets' are. A resent frame (the same move_id as the last move) changes nothing and gets
-// the same reply. set_targets, set_mode and any fault end a path.
+// the same reply. set_targets, set_mode, any fault and new limits the rest of the path would
+// leave end a path.
 struct Move {
   static const uint8_t kId = 0x13;
   static const uint8_t kSize = 34;
@@ -329,7 +330,8 @@ struct GetLimits {
 
 // set_limits (0x23, host to board, reply ack, idempotent)
 // Set one finger's supervision limits. theta2_min/max must lie within the finger geometry's range
-// (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned.
+// (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned. New limits apply to every setpoint
+// at once: the target is clamped in, and a move whose rest of path would leave them ends there.
 struct SetLimits {
   static const uint8_t kId = 0x23;
   static const uint8_t kSize = 27;
@@ -596,7 +598,8 @@ struct Gains {
 
 // limits (0xA2, board to host)
 // Set one finger's supervision limits. theta2_min/max must lie within the finger geometry's range
-// (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned.
+// (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned. New limits apply to every setpoint
+// at once: the target is clamped in, and a move whose rest of path would leave them ends there.
 struct Limits {
   static const uint8_t kId = 0xA2;
   static const uint8_t kSize = 27;

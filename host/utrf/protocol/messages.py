@@ -118,8 +118,8 @@ class ConfigSource(IntEnum):
 class ErrorCode(IntEnum):
     """Why a request was refused (nack). A refused request changes nothing."""
 
-    #: the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only; detail =
-    #: 0
+    #: the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only (never 128
+    #: or more: such a frame is only counted); detail = 0
     BAD_CRC = 1
     #: no request has this message id; detail = 0
     UNKNOWN_ID = 2
@@ -285,7 +285,8 @@ class Move(Request["Moving"]):
     that keeps both, and the reply says so. The fingers must be in POSITION or GRASP (BUSY,
     detail = finger, otherwise; FAULTED for a latched fault); targets beyond the limits are
     refused as set_targets' are. A resent frame (the same move_id as the last move) changes
-    nothing and gets the same reply. set_targets, set_mode and any fault end a path.
+    nothing and gets the same reply. set_targets, set_mode, any fault and new limits the rest of
+    the path would leave end a path.
     """
 
     NAME: ClassVar[str] = "move"
@@ -383,7 +384,9 @@ class GetLimits(Request["Limits"]):
 @dataclass(frozen=True, slots=True)
 class SetLimits(Request["Ack"]):
     """Set one finger's supervision limits. theta2_min/max must lie within the finger geometry's
-    range (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned.
+    range (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned. New limits apply to every
+    setpoint at once: the target is clamped in, and a move whose rest of path would leave them
+    ends there.
     """
 
     NAME: ClassVar[str] = "set_limits"
@@ -889,7 +892,9 @@ class Gains(Message):
 @dataclass(frozen=True, slots=True)
 class Limits(Message):
     """Set one finger's supervision limits. theta2_min/max must lie within the finger geometry's
-    range (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned.
+    range (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned. New limits apply to every
+    setpoint at once: the target is clamped in, and a move whose rest of path would leave them
+    ends there.
     """
 
     NAME: ClassVar[str] = "limits"
