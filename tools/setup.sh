@@ -7,7 +7,8 @@ cd "$(dirname "$0")/.."
 APT_PACKAGES=(gcc-avr avr-libc binutils-avr simavr libsimavr-dev libelf-dev arduino-core-avr
               avrdude
               libosmesa6  # MuJoCo's off-screen rendering (MUJOCO_GL=osmesa)
-              clang libclang-rt-14-dev)  # libFuzzer and the sanitizer runtimes (tests/fuzz)
+              clang libclang-rt-14-dev  # libFuzzer and the sanitizer runtimes (tests/fuzz)
+              chromium chromium-driver)  # the dashboard's browser tests (tests/dashboard)
 VENV=.venv
 PYTHON=${PYTHON:-python3.11}
 

@@ -65,3 +65,15 @@ bench-campaign: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
 BUILDS ?= 50
 bringup-campaign: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
 	$(PY) -m tools.bringup_campaign --builds $(BUILDS) --update docs/bringup.md --json $(BUILD)/bench/bringup-campaign.json
+
+# The dashboard's goals (docs/dashboard.md): sample-to-pixels latency, the server's CPU, the
+# page's frame rate, in headless chromium against `utrf emulate`: the "## Dashboard" section.
+BENCH_TARGETS += bench-dashboard
+.PHONY: bench-dashboard bench-recording
+bench-dashboard: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
+	$(PY) -m tools.bench_dashboard --update docs/benchmarks.md $(BENCH_DASHBOARD_ARGS)
+
+# A 10-minute recording at 1 kHz loses no sample: the "## Recording" section. Not part of
+# `make bench` (it takes 10 minutes); BENCH_RECORDING_ARGS="--seconds 60" for a shorter one.
+bench-recording: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
+	$(PY) -m tools.bench_recording --update docs/benchmarks.md $(BENCH_RECORDING_ARGS)

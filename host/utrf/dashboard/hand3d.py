@@ -1,0 +1,89 @@
+"""The hand in 3D on the page (NiceGUI's ``ui.scene``, three.js): the palm and each finger's
+three links placed as the MJCF places them (``utrf/data/mjcf.toml``), each joint a group
+turned by its angle on the rigid coupling (θ_i = q / R_i from the measured Joint-2 angle).
+Only joints that moved are sent: a hand at rest costs nothing."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from nicegui import ui
+from nicegui.elements.scene.objects import Cylinder, Group
+
+from utrf.models import kinematics
+from utrf.models.geometry import HandGeometry
+from utrf.models.mjcf_layout import load_layout
+
+#: three.js redraws the scene this often (software WebGL on a headless machine is costly)
+SCENE_FPS = 15
+#: metres to the scene's units
+SCALE = 10.0
+#: a joint is turned on the page when it moved more than this (rad)
+RESOLUTION = 0.004
+COLOR = "#5b8fd9"
+FAULT_COLOR = "#d9534f"
+
+
+class Hand3D:
+    """The scene and its joints; :meth:`show` moves them to the measured angles."""
+
+    def __init__(self, hand: HandGeometry, *, width: int = 420, height: int = 340) -> None:
+        self.hand = hand
+        layout = load_layout()
+        px, py, pz = layout.palm_size_m
+        with (
+            ui.scene(width=width, height=height, grid=False, fps=SCENE_FPS) as self.scene,
+            self.scene.group() as top,
+        ):
+            top.scale(SCALE)  # decimetres on the page: the default camera's near plane
+            self.scene.box(px, py, pz).move(0.0, 0.0, -pz / 2).material("#c8c8c8")
+            self._joints: list[list[Group]] = []
+            self._links: list[list[Cylinder]] = []
+            for f in hand.fingers:
+                place = layout.fingers[f.name]
+                g = f.geometry
+                radius = layout.link_radius_fraction * float(g.guide_radii_m[0])
+                joints: list[Group] = []
+                links: list[Cylinder] = []
+                with self.scene.group() as base:
+                    base.move(*place.position_m)
+                    base.rotate_R(place.rotation().tolist())
+                    self._chain([float(x) for x in g.L], radius, joints, links)
+                self._joints.append(joints)
+                self._links.append(links)
+        self.scene.move_camera(
+            x=2.2, y=-2.6, z=2.4, look_at_x=0.3, look_at_y=0.0, look_at_z=0.3, duration=0.0
+        )
+        self._shown = [[math.nan] * 3 for _ in hand.fingers]
+        self._faulted = [False] * len(hand.fingers)
+
+    def _chain(
+        self, lengths: list[float], radius: float, joints: list[Group], links: list[Cylinder]
+    ) -> None:
+        """Joint k's group holds link k and, at the link's end, joint k+1's group."""
+        k = len(joints)
+        with self.scene.group() as joint:
+            joint.move(lengths[k - 1] if k else 0.0, 0.0, 0.0)
+            # a three.js cylinder stands on y: turned onto the finger's x axis
+            link = self.scene.cylinder(radius, radius, lengths[k], 12)
+            link.rotate(0.0, 0.0, -math.pi / 2).move(lengths[k] / 2, 0.0, 0.0).material(COLOR)
+            joints.append(joint)
+            links.append(link)
+            if k + 1 < len(lengths):
+                self._chain(lengths, radius, joints, links)
+
+    def show(self, theta2: Sequence[float], faulted: Sequence[bool]) -> None:
+        for i, f in enumerate(self.hand.fingers):
+            g = f.geometry
+            lo, hi = g.q_range_m
+            q = min(max(float(theta2[i]) * g.guide_radii_m[1], lo), hi)
+            angles = kinematics.joint_angles(g, q)
+            for k in range(3):
+                if not abs(angles[k] - self._shown[i][k]) < RESOLUTION:
+                    self._shown[i][k] = float(angles[k])
+                    self._joints[i][k].rotate(0.0, 0.0, float(angles[k]))
+            if faulted[i] != self._faulted[i]:
+                self._faulted[i] = bool(faulted[i])
+                for link in self._links[i]:
+                    link.material(FAULT_COLOR if faulted[i] else COLOR)

@@ -1,0 +1,318 @@
+"""One page of the dashboard (NiceGUI): the hand in 3D, each finger's plot, slider, mode and
+faults, the pose library as buttons, the settings, recording. Angles are shown in degrees and
+duties in percent (the page says so); everything sent is SI through :class:`DashboardHub`.
+
+Two timers per page: the live view (3D hand, numbers, modes, faults, the newest sample's board
+time) at ``ui_hz``, the plots (the last ``window_s`` decimated to ``points_per_s``) at
+``plot_hz``. Each pushes only what changed. Elements carry ``utrf-*`` classes for the tests.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from nicegui import Client, ui
+from nicegui.elements.mixins.disableable_element import DisableableElement
+
+from utrf.dashboard import settings as settings_
+from utrf.dashboard.hand3d import Hand3D
+from utrf.dashboard.hub import DashboardHub, NotInControl
+from utrf.hand.state import fault_names
+from utrf.models.geometry import HandGeometry
+
+CHART_STYLE = "height: 150px; width: 560px"
+
+
+def _chart(name: str, lo_deg: float, hi_deg: float) -> dict[str, Any]:
+    line = {"type": "line", "showSymbol": False, "animation": False, "data": []}
+    return {
+        "animation": False,
+        "title": {"text": name, "textStyle": {"fontSize": 12}, "left": 4, "top": 0},
+        "grid": {"left": 40, "right": 40, "top": 24, "bottom": 20},
+        "legend": {"top": 0, "right": 4, "textStyle": {"fontSize": 10}},
+        "xAxis": {"type": "value", "min": -5, "max": 0},
+        "yAxis": [
+            {"type": "value", "min": lo_deg, "max": hi_deg},
+            {"type": "value", "min": -100, "max": 100, "splitLine": {"show": False}},
+        ],
+        "series": [
+            {**line, "name": "angle (deg)"},
+            {**line, "name": "setpoint (deg)", "lineStyle": {"type": "dashed"}},
+            {**line, "name": "duty A−B (%)", "yAxisIndex": 1, "lineStyle": {"width": 1}},
+        ],
+    }
+
+
+class DashboardPage:
+    """The elements of one page and their updates (one per browser tab)."""
+
+    def __init__(
+        self,
+        hub: DashboardHub,
+        client: Client,
+        *,
+        ui_hz: float,
+        plot_hz: float,
+        window_s: float,
+        points_per_s: float,
+    ) -> None:
+        self.hub = hub
+        self.id = client.id
+        self.window_s = window_s
+        self.points_per_s = points_per_s
+        self._shown: dict[str, Any] = {}
+        self._controls: list[DisableableElement] = []
+        self.in_control = hub.join(self.id)
+        # A page whose connection drops holds the fingers unless it is back within the hub's
+        # grace; it gives up control only when NiceGUI drops it (its reconnect timeout).
+        client.on_disconnect(lambda: hub.lost(self.id))
+        client.on_connect(lambda: hub.join(self.id))
+        client.on_delete(lambda: hub.leave(self.id))
+        self._build(hub.hand.geometry)
+        ui.timer(1.0 / ui_hz, self._update_live)
+        ui.timer(1.0 / plot_hz, self._update_plots)
+        self._show_control()
+
+    # --- layout ---------------------------------------------------------------------------------
+
+    def _build(self, hand: HandGeometry) -> None:
+        hub = self.hub
+        with ui.row().classes("items-center w-full"):
+            ui.label("UTRF-RoboHand").classes("text-h6")
+            self.control_label = ui.label().classes("utrf-control text-bold")
+            self.take_button = ui.button("Take control", on_click=self._take).classes("utrf-take")
+            ui.space()
+            self.board_time = ui.label("board time –").classes("utrf-board-time")
+            # the newest sample's board time on the host's wall clock (ms): the latency probe
+            self.sample_wall = ui.label("").classes("utrf-sample-wall hidden")
+        ui.label(
+            f"If this server stops, the board latches HOST_TIMEOUT after "
+            f"{hub.safety.heartbeat_timeout:g} s without the host and applies its safe action "
+            f"({self._safe_action()}); closing the page in control holds every finger where it "
+            "is. Angles in degrees, duties in percent."
+        ).classes("text-caption")
+        self.message = ui.label("").classes("utrf-message text-negative")
+        with ui.row().classes("w-full no-wrap"):
+            with ui.column():
+                self.hand3d = Hand3D(hand)
+                self._pose_buttons()
+                self._recording()
+            with ui.column().classes("grow"):
+                self._fingers()
+        self._settings()
+
+    def _safe_action(self) -> str:
+        return str(self.hub.status()["safe_action"])
+
+    def _pose_buttons(self) -> None:
+        ui.label("Poses (one move on the board each)").classes("text-subtitle2")
+        with ui.row().classes("utrf-poses"):
+            for name in self.hub.pose_names:
+                b = ui.button(name, on_click=lambda _e, n=name: self._do(self.hub.pose, n))
+                self._controls.append(b.classes(f"utrf-pose-{name}").props("dense no-caps"))
+
+    def _recording(self) -> None:
+        with ui.row().classes("items-center"):
+            self._controls.append(
+                ui.button("Record", on_click=self._record).classes("utrf-record").props("dense")
+            )
+            self._controls.append(
+                ui.button("Stop", on_click=self._stop_record).classes("utrf-stop").props("dense")
+            )
+            self.record_label = ui.label("").classes("utrf-record-label text-caption")
+
+    def _fingers(self) -> None:
+        self.charts: list[ui.echart] = []
+        self.values: list[ui.label] = []
+        self.modes: list[ui.label] = []
+        self.faults: list[ui.label] = []
+        for i, name in enumerate(self.hub.fingers):
+            lim = self.hub.limits[i]
+            with ui.row().classes(f"utrf-finger-{name} items-center no-wrap w-full"):
+                with ui.column().classes("w-48"):
+                    with ui.row().classes("items-center"):
+                        ui.label(name).classes("text-bold")
+                        self.modes.append(ui.label("").classes(f"utrf-mode-{name} text-caption"))
+                    self.values.append(ui.label("").classes(f"utrf-value-{name} text-caption"))
+                    with ui.row().classes("items-center"):
+                        self.faults.append(ui.label("").classes(f"utrf-faults-{name}"))
+                        b = ui.button(
+                            "Clear", on_click=lambda _e, i=i: self._do(self.hub.clear_faults, i)
+                        )
+                        self._controls.append(b.classes(f"utrf-clear-{name}").props("dense flat"))
+                    slider = ui.slider(
+                        min=round(math.degrees(lim.theta2_min), 1),
+                        max=round(math.degrees(lim.theta2_max), 1),
+                        step=0.5,
+                        value=0.0,
+                    ).classes(f"utrf-slider-{name}")
+                    slider.props("label")
+                    # every change while sliding, at most 4 a second, the last one always
+                    slider.on(
+                        "update:model-value",
+                        lambda e, i=i: self._do(
+                            self.hub.move_finger, i, math.radians(float(e.args))
+                        ),
+                        throttle=0.25,
+                    )
+                    self._controls.append(slider)
+                lo, hi = math.degrees(lim.theta2_min), math.degrees(lim.theta2_max)
+                chart = ui.echart(_chart(name, 10 * math.floor(lo / 10), 10 * math.ceil(hi / 10)))
+                self.charts.append(chart.classes(f"utrf-chart-{name}").style(CHART_STYLE))
+
+    def _settings(self) -> None:
+        with ui.expansion("Settings (the protocol's ranges are checked before sending)").classes(
+            "w-full utrf-settings"
+        ):
+            with ui.row().classes("items-center"):
+                self.set_finger = ui.select(
+                    {i: n for i, n in enumerate(self.hub.fingers)}, value=1, label="finger"
+                ).classes("utrf-set-finger w-32")
+                self.set_group = ui.toggle(list(settings_.GROUPS), value="gains").classes(
+                    "utrf-set-group"
+                )
+                ui.button("Read", on_click=self._read_settings).classes("utrf-read").props("dense")
+            self.inputs_row = ui.row()
+            with ui.row():
+                b = ui.button("Apply", on_click=self._apply_settings).classes("utrf-apply")
+                self._controls.append(b)
+                b = ui.button("Save to EEPROM", on_click=self._save).classes("utrf-save")
+                self._controls.append(b)
+            self.set_group.on_value_change(self._read_settings)
+            self.set_finger.on_value_change(self._read_settings)
+        self.inputs: dict[str, ui.number] = {}
+        self._read_settings()
+
+    def _read_settings(self) -> None:
+        group, finger = str(self.set_group.value), int(self.set_finger.value)
+        current = self.hub.read_settings(group, finger)
+        self.inputs_row.clear()
+        self.inputs = {}
+        with self.inputs_row:
+            for s in settings_.settings(group):
+                unit = "" if s.unit in ("", "1") else f" [{s.unit}]"
+                self.inputs[s.name] = ui.number(
+                    f"{s.name}{unit} {s.lo:g}..{s.hi:g}", value=current[s.name], format="%.4g"
+                ).classes(f"utrf-input-{s.name} w-40")
+
+    # --- commands -------------------------------------------------------------------------------
+
+    def _say(self, text: str, *, error: bool = True) -> None:
+        self.message.text = text
+        self.message.classes(replace="utrf-message " + ("text-negative" if error else ""))
+        ui.notify(text, type="negative" if error else "positive", multi_line=True)
+
+    async def _do(self, command: Callable[..., concurrent.futures.Future], *args: Any) -> Any:
+        try:
+            result = await asyncio.wrap_future(command(self.id, *args))
+        except (NotInControl, settings_.SettingsError) as exc:
+            self._say(str(exc))
+            return None
+        except Exception as exc:  # the Hand's errors name what went wrong: show them
+            self._say(f"{type(exc).__name__}: {exc}")
+            return None
+        self.message.text = ""
+        return result
+
+    async def _apply_settings(self) -> None:
+        group, finger = str(self.set_group.value), int(self.set_finger.value)
+        values = {n: inp.value for n, inp in self.inputs.items()}
+        try:
+            future = self.hub.apply_settings(self.id, group, finger, values)
+        except (NotInControl, settings_.SettingsError) as exc:
+            self._say(str(exc))
+            return
+        if await self._do(lambda _page: future) is not None:
+            self._say(f"{group} of {self.hub.fingers[finger]} set", error=False)
+
+    async def _save(self) -> None:
+        await self._do(self.hub.save_eeprom)
+        if not self.message.text:
+            self._say("configuration saved to the board's EEPROM", error=False)
+
+    def _record(self) -> None:
+        try:
+            path = self.hub.start_recording(self.id)
+        except (NotInControl, OSError, ValueError) as exc:
+            self._say(str(exc))
+            return
+        self.record_label.text = f"recording to {path}"
+
+    def _stop_record(self) -> None:
+        try:
+            s = self.hub.stop_recording(self.id)
+        except NotInControl as exc:
+            self._say(str(exc))
+            return
+        if s is not None:
+            self.record_label.text = f"{s.samples} samples in {s.path}, lost {s.lost}"
+
+    def _take(self) -> None:
+        self.in_control = self.hub.take_control(self.id)
+        self._show_control()
+
+    def _show_control(self) -> None:
+        self.in_control = self.hub.controller == self.id
+        text = (
+            "you control the hand"
+            if self.in_control
+            else "watching: another page controls the hand"
+        )
+        self.control_label.text = text
+        self.take_button.set_visibility(not self.in_control and self.hub.controller is None)
+        for c in self._controls:
+            c.set_enabled(self.in_control)
+
+    # --- live updates ---------------------------------------------------------------------------
+
+    def _set(self, key: str, element: ui.label, text: str) -> None:
+        if self._shown.get(key) != text:
+            self._shown[key] = text
+            element.text = text
+
+    def _update_live(self) -> None:
+        if (self.hub.controller == self.id) != self.in_control or (
+            not self.in_control and self.hub.controller is None
+        ):
+            self._show_control()
+        st = self.hub.latest
+        if st is None or self._shown.get("t") == st.board_time:
+            return
+        self._shown["t"] = st.board_time
+        for i, f in enumerate(st.fingers):
+            self._set(f"m{i}", self.modes[i], f.mode.name)
+            self._set(
+                f"v{i}",
+                self.values[i],
+                f"{math.degrees(f.theta2):6.1f}° → {math.degrees(f.target):6.1f}°, "
+                f"duty {100 * f.duty_a:+4.0f}/{100 * f.duty_b:+4.0f} %",
+            )
+            self._set(f"f{i}", self.faults[i], f"faults: {fault_names(int(f.faults))}")
+        self.hand3d.show([f.theta2 for f in st.fingers], [bool(f.faults) for f in st.fingers])
+        self.board_time.text = f"board time {st.board_time:.3f} s"
+        self.sample_wall.text = f"{1000 * self.hub.wall_time_of(st.board_time):.1f}"
+        self.hub.pushed["live"] += 1
+
+    def _update_plots(self) -> None:
+        s = self.hub.ring.series(self.window_s, self.points_per_s)
+        if len(s.board_time) < 2 or self._shown.get("plot") == s.board_time[-1]:
+            return
+        self._shown["plot"] = s.board_time[-1]
+        x = s.board_time - s.board_time[-1]
+        for i, chart in enumerate(self.charts):
+            series = chart.options["series"]
+            for k, y in enumerate(
+                (
+                    np.degrees(s.theta2[:, i]),
+                    np.degrees(s.target[:, i]),
+                    100 * (s.duty_a[:, i] - s.duty_b[:, i]),
+                )
+            ):
+                series[k]["data"] = np.column_stack((x, y)).round(3).tolist()
+            chart.update()
+        self.hub.pushed["plots"] += 1

@@ -1,0 +1,160 @@
+"""The dashboard's parts without a browser: the settings' ranges, the token rule, the board's
+clock on the host's, the decimation for the eye, who controls."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import pytest
+
+from utrf.dashboard import settings
+from utrf.dashboard.access import COOKIE, TokenGuard, needs_token
+from utrf.dashboard.hub import DashboardHub, NotInControl, SampleRing
+from utrf.hand.state import FingerState, HandState
+from utrf.protocol import messages as m
+
+
+def test_settings_take_the_protocols_ranges_and_name_every_problem() -> None:
+    kp = next(s for s in settings.settings("gains") if s.name == "kp")
+    assert (kp.lo, kp.hi, kp.unit) == (0.0, 1000.0, "1/rad")  # spec.toml's set_gains.kp
+    assert settings.check("gains", {"kp": "12.5", "ki": 0}) == {"kp": 12.5, "ki": 0.0}
+    with pytest.raises(settings.SettingsError) as exc:
+        settings.check("gains", {"kp": 5000, "kd": "x", "spin": 1, "ki": math.nan})
+    text = str(exc.value)
+    assert "kp = 5000 is outside its range [0, 1000]" in text
+    assert "kd = 'x' is not a number" in text and "spin is not a gains field" in text
+    assert "ki = nan is outside" in text and text.endswith("(nothing was sent)")
+    with pytest.raises(settings.SettingsError, match=r"theta2_min 1 must be below theta2_max 0\.5"):
+        settings.check("limits", {"theta2_min": 1.0, "theta2_max": 0.5})
+
+
+def test_the_token_is_needed_beyond_loopback_and_kept_in_a_cookie() -> None:
+    assert not needs_token("127.0.0.1") and not needs_token("localhost")
+    assert needs_token("0.0.0.0") and needs_token("127.0.0.2") and needs_token("192.168.1.5")
+    seen: list[str] = []
+
+    async def app(scope: Any, receive: Any, send: Any) -> None:
+        seen.append(scope["path"])
+        await send({"type": "http.response.start", "status": 200, "headers": []})
+        await send({"type": "http.response.body", "body": b"page"})
+
+    guard = TokenGuard(app, "tok")
+
+    def call(query: bytes, cookie: bytes | None = None) -> list[dict]:
+        sent: list[dict] = []
+        headers = [(b"cookie", cookie)] if cookie else []
+        scope = {"type": "http", "path": "/", "query_string": query, "headers": headers}
+
+        async def send(msg: dict) -> None:
+            sent.append(msg)
+
+        asyncio.run(guard(scope, None, send))
+        return sent
+
+    refused = call(b"")
+    assert refused[0]["status"] == 401 and b"no token" in refused[1]["body"]
+    assert call(b"token=nope")[0]["status"] == 401 and not seen
+    ok = call(b"token=tok")
+    assert ok[0]["status"] == 200 and seen == ["/"]
+    assert (b"set-cookie", f"{COOKIE}=tok; HttpOnly; SameSite=Strict; Path=/".encode()) in ok[0][
+        "headers"
+    ]
+    assert call(b"", cookie=f"{COOKIE}=tok".encode())[0]["status"] == 200
+    assert call(b"", cookie=f"{COOKIE}=bad".encode())[0]["status"] == 401
+
+
+def state(board: float, host: float, theta: float = 0.0) -> HandState:
+    f = FingerState(
+        "index", 0, theta, theta, 0.1, 0.0, m.ControlMode.POSITION, m.FaultBits(0), 0, 0
+    )
+    return HandState(board_time=board, host_time=host, seq=0, fingers=(f,))
+
+
+class FakeHand:
+    """What the hub asks of a Hand before any command."""
+
+    fingers = ("index",)
+    telemetry_hz = 1000
+
+    def __init__(self) -> None:
+        self.poses: dict[str, object] = {"fist": object()}
+        self.callbacks: list = []
+        self.pose_calls: list[str] = []
+
+    def limits(self, i: int) -> SimpleNamespace:
+        return SimpleNamespace(theta2_min=-0.2, theta2_max=1.5)
+
+    def safety(self) -> m.Safety:
+        return m.Safety(heartbeat_timeout=0.5, safe_action=m.SafeAction.HOLD)
+
+    def on_state(self, cb: Any) -> Any:
+        self.callbacks.append(cb)
+        return lambda: self.callbacks.remove(cb)
+
+    def pose(self, name: str, duration: Any, wait: bool) -> None:
+        self.pose_calls.append(name)
+
+    def state(self) -> list[SimpleNamespace]:
+        return [SimpleNamespace(index=0, closed_loop=True)]
+
+    def hold(self, fingers: list[int]) -> None:
+        self.pose_calls.append(f"hold {fingers}")
+
+
+def test_the_boards_clock_is_followed_when_it_runs_at_another_pace() -> None:
+    hand = FakeHand()
+    hub = DashboardHub(hand)  # type: ignore[arg-type]
+    rng = np.random.default_rng(1)
+    # an emulated board at half speed: 1 s of board time takes 2 s; delays of 1-20 ms
+    for k in range(3000):
+        board = k * 1e-3
+        hub._on_state(state(board, 100.0 + 2 * board + 0.001 + rng.exponential(0.004)))
+    wall = hub.wall_time_of(2.999)
+    assert abs(wall - (100.0 + 2 * 2.999 + 0.001)) < 0.003
+    hub.close()
+
+
+def test_the_ring_decimates_for_the_eye_and_keeps_the_newest() -> None:
+    ring = SampleRing(1, 5000)
+    for k in range(3000):
+        ring.add(state(k * 1e-3, 0.0, theta=k * 1e-3))
+    s = ring.series(2.0, points_per_s=25)
+    assert s.board_time[-1] == pytest.approx(2.999)
+    assert 49 <= len(s.board_time) <= 51  # 2 s at 25 a second
+    np.testing.assert_allclose(np.diff(s.board_time), 0.04)
+    np.testing.assert_array_equal(s.theta2[:, 0], s.board_time)
+
+
+def test_one_page_controls_the_others_watch() -> None:
+    hand = FakeHand()
+    hub = DashboardHub(hand)  # type: ignore[arg-type]
+    assert hub.join("a") and not hub.join("b")
+    with pytest.raises(NotInControl):
+        hub.pose("b", "fist")
+    assert not hub.take_control("b")  # a still controls
+    hub.pose("a", "fist").result()
+    assert hand.pose_calls == ["fist"] and hub.sent["pose"] == 1
+    hub.leave("a")
+    assert hub.take_control("b") and hub.controller == "b"
+    hub.close()
+
+
+def test_a_page_in_control_that_goes_holds_the_fingers_unless_it_comes_back() -> None:
+    hand = FakeHand()
+    hub = DashboardHub(hand, hold_after_s=0.05)  # type: ignore[arg-type]
+    assert hub.join("a") and not hub.join("b")
+    hub.lost("b")  # a watcher going holds nothing
+    hub.lost("a")
+    hub.join("a")  # back within the grace: nothing held
+    time.sleep(0.3)
+    assert hand.pose_calls == []
+    hub.lost("a")  # gone: held once, however long it stays away
+    time.sleep(0.3)
+    hub.leave("a")
+    hub.close()
+    assert hand.pose_calls == ["hold [0]"] and hub.controller is None
