@@ -29,6 +29,9 @@ HOW = {
     "utrf pose shaka --port /dev/pts/N": "run",
     "utrf monitor --port /dev/pts/N": "watch",
     "utrf hil grasp-hold --emulated --object egg": "run",
+    "utrf dashboard": "not run: a web server until Ctrl-C (tests/dashboard drive it in chromium)",
+    "utrf record run.mcap --duration 10": "run",
+    "utrf export run.mcap run.parquet": "run",
     "make flash PORT=/dev/ttyACM0": "not run: needs the MEGA on /dev/ttyACM0",
 }
 
