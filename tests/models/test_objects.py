@@ -90,6 +90,16 @@ def test_each_object_says_how_the_hand_takes_it() -> None:
         assert lowest == pytest.approx(0.0, abs=5e-4), obj.name
 
 
+def test_each_object_closes_with_its_own_pose() -> None:
+    """Issue 22: no object borrows another's grasp (the box once closed with grasp-bottle),
+    and each description names the pose it closes with."""
+    lib = objects.load_objects()
+    named = {name: obj.grasp_pose for name, obj in lib.items()}
+    assert len(set(named.values())) == len(named), named
+    for name, obj in lib.items():
+        assert f"pose {obj.grasp_pose})" in obj.description, name
+
+
 def _half_height(model: mujoco.MjModel, data: mujoco.MjData, name: str) -> float:
     """The geom's half extent along world z (its axis-aligned box)."""
     geom = model.geom(name)
