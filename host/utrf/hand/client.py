@@ -29,9 +29,11 @@ is generated from). ``set_targets`` stays for streaming targets (teleoperation):
 Closing (``with`` or :meth:`Hand.close`) stops the stream and leaves the hand in the safe mode
 ``on_close``: ``"brake"`` (the default: motor terminals shorted, no power; the fingers relax
 slowly instead of springing open and nothing runs without the host), ``"coast"`` (outputs off,
-fingers free) or ``"hold"`` (the board keeps the last targets in closed loop; after its
-heartbeat timeout it latches HOST_TIMEOUT and applies its configured safe action, HOLD by
-default: what ``utrf pose`` uses to leave a pose standing).
+fingers free) or ``"hold"`` (the board keeps the last targets in closed loop: what ``utrf
+pose`` uses to leave a pose standing). Every close ends with ``goodbye``: the board's
+host-silence rule stands down, so a held pose latches no HOST_TIMEOUT and the next connection
+takes over cleanly; a host that falls silent without it (killed, unplugged) still latches
+HOST_TIMEOUT and the board applies its safe action.
 """
 
 from __future__ import annotations

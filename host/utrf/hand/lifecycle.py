@@ -187,8 +187,10 @@ class HandLifecycle(HandTelemetry):
         return self._closed
 
     def close(self) -> None:
-        """Stop telemetry, leave the fingers in the ``on_close`` mode, close the link. A
-        board that reset or went away is only closed (nothing can be sent to it)."""
+        """Stop telemetry, leave the fingers in the ``on_close`` mode, say ``goodbye`` (the
+        board's host-silence rule stands down: a pose left in ``hold`` stays held and latches
+        no HOST_TIMEOUT) and close the link. A board that reset or went away is only closed
+        (nothing can be sent to it)."""
         if self._closed:
             return
         try:
@@ -196,7 +198,9 @@ class HandLifecycle(HandTelemetry):
                 if self.on_close != "hold":
                     mode = m.ControlMode.BRAKE if self.on_close == "brake" else m.ControlMode.COAST
                     self._set_mode_raw(ALL_FINGERS, [mode] * len(self.fingers))
+                self.link.heartbeat_period_s = None  # goodbye must be the last frame it hears
                 self._request(m.SetTelemetry(rate_hz=0))
+                self._request(m.Goodbye())
         except (ProtocolError, OSError) as exc:
             log.warning("utrf hand: could not leave the hand in %s mode: %s", self.on_close, exc)
         finally:
