@@ -4,9 +4,10 @@ Connects (riding out the board's auto-reset), moves every finger along a minimum
 the board runs over ``--duration`` seconds (default: the pose's own), waits until each is
 within ``--tolerance`` degrees of its target and prints the result. On a terminal a live
 table follows the fingers meanwhile. Afterwards the hand is left as ``--then`` says:
-``hold`` (the default: the board keeps the pose in closed loop; when the host has been
-silent for its heartbeat timeout it latches HOST_TIMEOUT and applies its safe action, HOLD
-by default, so the pose stands), ``brake`` or ``coast``.
+``hold`` (the default: the board keeps the pose in closed loop), ``brake`` or ``coast``; the
+command then says goodbye to the board, whose host-silence rule stands down, so a held pose
+latches no HOST_TIMEOUT and the next command (``--no-reset``) takes over cleanly. A command
+killed without its goodbye leaves HOST_TIMEOUT latched (the board's safe action applied).
 
 Exit codes: 0 settled; 1 not settled (the reason names each finger and how far off it is)
 or a latched fault; 2 bad input (unknown pose, bad pose file); 3 the board could not be
