@@ -111,6 +111,19 @@ class DisconnectedError(ProtocolError, ConnectionError):
     """The link is closed, or the line went away (cable, port, socket)."""
 
 
+class PortBusyError(DisconnectedError):
+    """The line is in use by another host: the emulated board already has one attached (it
+    said so in a ``utrf busy:`` line), or the OS says another program holds the port."""
+
+
+class NotABoardError(ProtocolError):
+    """Something answered on the line, but not as a UTRF board: no identity came back."""
+
+
+class NoAnswerError(ProtocolError, TimeoutError):
+    """Nothing at all came back on the line during the handshake."""
+
+
 class BoardResetError(ProtocolError):
     """The board restarted (it sent ``boot``): its state is gone.
 
