@@ -27,7 +27,7 @@ from utrf.hand.view import state_line
 from utrf.models.geometry import GeometryError, HandGeometry
 from utrf.poses import PoseError, PoseLibrary, user_pose_file
 from utrf.protocol import messages as m
-from utrf.protocol.errors import PortBusyError, ProtocolError
+from utrf.protocol.errors import NoAnswerError, NotABoardError, PortBusyError, ProtocolError
 
 EXIT_OK = 0
 EXIT_NOT_DONE = 1
@@ -180,6 +180,9 @@ def guarded(command: str) -> Callable[[Callable[[argparse.Namespace], int]], Cal
             except PortBusyError as exc:
                 error(command, exc)
                 return EXIT_BUSY
+            except (NotABoardError, NoAnswerError) as exc:  # they say what happened
+                error(command, exc)
+                return EXIT_LINK
             except ProtocolError as exc:
                 error(command, f"{type(exc).__name__}: {exc}")
                 return EXIT_LINK

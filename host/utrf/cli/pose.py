@@ -11,7 +11,8 @@ killed without its goodbye leaves HOST_TIMEOUT latched (the board's safe action 
 
 Exit codes: 0 settled; 1 not settled (the reason names each finger and how far off it is)
 or a latched fault; 2 bad input (unknown pose, bad pose file); 3 the board could not be
-reached or spoke another protocol.
+reached or spoke another protocol; 4 the board is in use; 130 interrupted (Ctrl-C: the
+fingers are held where they are, in closed loop, and the command prints their state).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from utrf.cli._hand_common import (
     connect,
     error,
     guarded,
+    interrupted,
     load_poses,
 )
 from utrf.hand import HandState
@@ -78,11 +80,16 @@ def run(args: argparse.Namespace) -> int:
             if not args.json:
                 took = args.duration if args.duration is not None else pose.duration_s or 1.0
                 print(f"moving to {pose.name} over {took:g} s ...", flush=True)
+        stopped = False
         with display:
             try:
                 hand.pose(pose, args.duration, tolerance=tolerance, timeout=args.timeout)
             except (NotSettledError, FingerFaultError, NotControlledError) as exc:
                 outcome = exc
+            except KeyboardInterrupt:
+                stopped = True
+        if stopped:  # after the live table is gone
+            return interrupted(hand, "pose")
         final = hand.state()
         if args.json:
             print(
