@@ -81,6 +81,7 @@ def test_settings_get_and_set_in_degrees(
     assert "coast" in out and "heartbeat_timeout [s]" in out
 
 
+@pytest.mark.slow
 def test_jog_mode_zero_clear_faults_and_eeprom(
     board: EmulatedBoard, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -103,8 +104,10 @@ def test_jog_mode_zero_clear_faults_and_eeprom(
     assert code == 0 and "cleared:" in out
     code, out, _ = utrf(capsys, *on(board, "eeprom", "save"))
     assert code == 0 and "saved" in out
-    code, _, err = utrf(capsys, *on(board, "eeprom", "load"))  # the jogged finger is held
-    assert code == 1 and "loading needs every finger idle" in err
+    code, out, _ = utrf(capsys, *on(board, "mode", "position", "index"))
+    assert code == 0 and "index: position" in out and "index" in out
+    code, _, err = utrf(capsys, *on(board, "eeprom", "load"))
+    assert code == 1 and "index is in POSITION: loading needs every finger idle" in err
     assert utrf(capsys, *on(board, "mode", "brake"))[0] == 0
     code, out, _ = utrf(capsys, *on(board, "eeprom", "load", "--defaults"))
     assert code == 0 and "the firmware's defaults" in out
@@ -112,6 +115,7 @@ def test_jog_mode_zero_clear_faults_and_eeprom(
     assert '"encoder_offset": 3.14159' in out  # the zero is gone with the defaults
 
 
+@pytest.mark.slow
 def test_config_backup_restore_round_trips(
     board: EmulatedBoard, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
