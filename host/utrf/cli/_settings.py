@@ -159,4 +159,8 @@ def write(hand: Hand, group: Group, finger: int | None, changes: Mapping[str, Va
     elif group.name == "hardware":
         hand.set_finger_config(f, **dict(changes))
     else:
-        hand.set_safety(**dict(changes))  # type: ignore[arg-type]
+        timeout, action = changes.get("heartbeat_timeout"), changes.get("safe_action")
+        hand.set_safety(
+            heartbeat_timeout=None if timeout is None else float(timeout),
+            safe_action=None if action is None else m.SafeAction(int(action)),
+        )

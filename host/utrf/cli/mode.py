@@ -33,6 +33,7 @@ MODES = ("coast", "brake", "position", "grasp", "duty")
 @guarded("mode")
 def run(args: argparse.Namespace) -> int:
     fingers = sorted(set(args.fingers)) if args.fingers else list(range(5))
+    duty: float = 0.0 if args.duty is None else args.duty
     if args.mode == "duty":
         if args.duty is None or not -1.0 <= args.duty <= 1.0:
             raise ValueError(f"duty needs --duty in -1..1 (a fraction), got {args.duty}")
@@ -47,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
             if args.mode == "position":
                 hand.hold(fingers)
             elif args.mode == "duty":
-                hand.set_mode("duty", fingers, duty=args.duty)
+                hand.set_mode("duty", fingers, duty=duty)
                 hand.clock.sleep(args.seconds)
                 hand.brake(fingers)
             else:

@@ -94,16 +94,23 @@ def run_eeprom(args: argparse.Namespace) -> int:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    kw = {"description": __doc__, "formatter_class": argparse.RawDescriptionHelpFormatter}
-    p = subparsers.add_parser("zero", help="take the present angles as 0 (idle, straight)", **kw)
+    def parser(name: str, help_: str) -> argparse.ArgumentParser:
+        return subparsers.add_parser(
+            name,
+            help=help_,
+            description=__doc__,
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
+
+    p = parser("zero", "take the present angles as 0 (idle, straight)")
     p.add_argument("fingers", nargs="+", type=finger_arg, metavar="FINGER")
     add_port(p, reset=False)
     p.set_defaults(handler=run_zero)
-    p = subparsers.add_parser("clear-faults", help="clear latched faults", **kw)
+    p = parser("clear-faults", "clear latched faults")
     p.add_argument("fingers", nargs="*", type=finger_arg, metavar="FINGER", help="default: all")
     add_port(p, reset=False)
     p.set_defaults(handler=run_clear)
-    p = subparsers.add_parser("eeprom", help="save or load the configuration in EEPROM", **kw)
+    p = parser("eeprom", "save or load the configuration in EEPROM")
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
     save = sub.add_parser("save", help="write the running configuration to the EEPROM")
     add_port(save, reset=False)
