@@ -202,5 +202,5 @@ def test_a_silent_device_gets_no_answer(capsys: pytest.CaptureFixture[str]) -> N
     url = _server(None)
     code, _, err = utrf(capsys, "safety", "get", "--port", url, "--boot-wait", "0")
     assert code == 3
-    assert f"no answer on {url} in " in err
+    assert f"no answer on {url} to identify in " in err
     assert "is the board powered, is it the right port, is another program using it?" in err

@@ -120,8 +120,16 @@ class NotABoardError(ProtocolError):
     """Something answered on the line, but not as a UTRF board: no identity came back."""
 
 
-class NoAnswerError(ProtocolError, TimeoutError):
-    """Nothing at all came back on the line during the handshake."""
+class NoAnswerError(ReplyTimeout):
+    """Nothing at all came back on the line during the handshake (a :class:`ReplyTimeout`
+    of ``identify`` that says so)."""
+
+    def __init__(self, text: str, timeout: ReplyTimeout) -> None:
+        self.request = timeout.request
+        self.timeout_s = timeout.timeout_s
+        self.attempts = timeout.attempts
+        self.outcome = timeout.outcome
+        Exception.__init__(self, text)
 
 
 class BoardResetError(ProtocolError):

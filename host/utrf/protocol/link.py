@@ -192,14 +192,15 @@ class Link(EngineDriver):
                 + (" and closed the line" if gone else "")
                 + ": is it the right port, is --baud the board's?"
             )
-        if gone:
+        if isinstance(exc, DisconnectedError):
             return NotABoardError(
                 f"not a UTRF board (no identity answer on {where}): the line closed without a "
                 f"word ({exc})"
             )
         return NoAnswerError(
-            f"no answer on {where} in {waited:.1f} s: is the board powered, is it the right "
-            "port, is another program using it?"
+            f"no answer on {where} to identify in {waited:.1f} s ({exc.attempts} attempts): is "
+            "the board powered, is it the right port, is another program using it?",
+            exc,
         )
 
     # --- driving the engine ----------------------------------------------------------------
