@@ -177,8 +177,8 @@ def run(
     for model in statics.MODELS:
         one = _median_time(lambda m=model: statics.solve(geom, 0.0, load, model=m), repeats_one)
         one_cpu = _cpu_time(lambda m=model: statics.solve(geom, 0.0, load, model=m), repeats_one)
-        # The same case through the batch code, the path ``solve`` took before its scalar
-        # path: measured in the same run, so the ratio holds whatever the machine's load.
+        # The same case through the general path: measured in the same run, so the ratio
+        # (why the fast path stays separate) holds whatever the machine's load.
         one_via_batch = _median_time(
             lambda m=model: statics.solve_batch(geom, [0.0], payload_kg=3.0, model=m),
             max(repeats_one // 10, 1),
@@ -243,7 +243,7 @@ def run(
 
 def _via_batch(r: dict[str, Any]) -> str:
     t = r["one_solve_via_batch_s"]
-    return f"{t * 1e6:.0f} µs ({t / r['one_solve_s']:.0f} times the scalar path)"
+    return f"{t * 1e6:.0f} µs ({t / r['one_solve_s']:.0f} times the fast path)"
 
 
 def markdown(result: dict[str, Any]) -> str:
@@ -262,10 +262,12 @@ def markdown(result: dict[str, Any]) -> str:
             else "."
         ),
         "",
-        "`statics.solve` is the scalar path (one case on plain floats, the batch's passes bit "
-        "for bit); targets (issue 11 goal 6): one solve at most 20 µs, the batch at least "
-        "200,000 solves/s. On the shared 2-core machine the wall-clock figures move with the "
-        "other jobs' load: a 16 µs call is rarely interrupted, a 50 ms batch often is, so the "
+        "`statics.solve` runs the passes' fast path (`statics_passes.passes_one`: one case on "
+        "plain floats, the general path's passes bit for bit); `statics.solve_batch` the general "
+        "path (`statics_passes.passes`, numpy over the cases); targets (issue 11 goal 6): one "
+        "solve at most 20 µs, the batch at least 200,000 solves/s. On the shared 2-core "
+        "machine the wall-clock figures move with the other jobs' load: a call of some µs is "
+        "rarely interrupted, a batch of tens of ms often is, so the "
         "CPU time (`time.process_time`: time spent waiting for a core left out) is given too.",
         "",
         "| figure | serial (default) | printed |",
@@ -275,7 +277,7 @@ def markdown(result: dict[str, Any]) -> str:
         f"({p['one_solve_iterations']} iterations) |",
         f"| the same, CPU time per solve | {s['one_solve_cpu_s'] * 1e6:.1f} µs | "
         f"{p['one_solve_cpu_s'] * 1e6:.1f} µs |",
-        f"| the same case through `solve_batch` (the path `solve` took before), same run | "
+        f"| the same case through the general path (`solve_batch`), same run | "
         f"{_via_batch(s)} | {_via_batch(p)} |",
         f"| batch of {n:,} random load cases, `statics.solve_batch` | "
         f"{s['batch_s'] * 1e3:.1f} ms | {p['batch_s'] * 1e3:.1f} ms |",

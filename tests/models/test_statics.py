@@ -19,7 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import root
 
-from utrf.models import energy, kinematics, statics, tendons
+from utrf.models import energy, kinematics, statics, statics_passes, tendons
 from utrf.models.geometry import FingerGeometry
 from utrf.models.statics import Load, StaticsError
 
@@ -433,40 +433,40 @@ def test_energy_check_refuses_follower_loads(g: FingerGeometry) -> None:
     model=st.sampled_from(statics.MODELS),
     relaxation=st.sampled_from(statics.RELAXATIONS),
 )
-def test_scalar_solve_is_the_batch_pass_for_pass(
+def test_the_fast_path_is_the_general_one_pass_for_pass(
     g: FingerGeometry, data: st.DataObject, model: str, relaxation: str
 ) -> None:
-    """``solve`` (plain floats, one case) and ``solve_batch`` (numpy) take the same passes to
-    the same numbers, whatever the finger, load, model and relaxation."""
+    """The passes' fast path (``statics_passes.passes_one``: plain floats, one case, what
+    ``solve`` runs) and the general path (``passes``: numpy, what ``solve_batch`` runs) take the
+    same passes to the same numbers, whatever the finger, load, model and relaxation."""
     lo, hi = g.q_range_m
     q = data.draw(st.floats(lo, hi))
-    load = Load(
-        payload_kg=data.draw(st.floats(0.0, 1.0)),
-        tip_force_n=(data.draw(st.floats(-10, 10)), data.draw(st.floats(-10, 10))),
-        tip_moment_nm=data.draw(st.floats(-0.2, 0.2)),
-        grasp_force_n=data.draw(st.floats(0.0, 10.0)),
-        gravity=data.draw(st.booleans()),
+    fx, fy = data.draw(st.floats(-10, 10)), data.draw(st.floats(-10, 10))
+    fy -= data.draw(st.floats(0.0, 1.0)) * G  # a payload
+    moment = data.draw(st.floats(-0.2, 0.2))
+    grasp = data.draw(st.floats(0.0, 10.0))
+    gravity = data.draw(st.booleans())
+    solver = (1e-12, statics.DEFAULT_MAX_ITERATIONS, relaxation)
+    theta, tips, net, stretch, iterations, converged = statics_passes.passes_one(
+        g, q, fx, fy, moment, grasp, gravity, model == "serial", *solver
     )
-    one = statics.solve(g, q, load, model=model, relaxation=relaxation, threshold_m=1e-12)
-    batch = statics.solve_batch(
+    general = statics_passes.passes(
         g,
-        [q],
-        payload_kg=load.payload_kg,
-        tip_force_n=load.tip_force_n,
-        tip_moment_nm=load.tip_moment_nm,
-        grasp_force_n=load.grasp_force_n,
-        gravity=load.gravity,
-        model=model,
-        relaxation=relaxation,
-        threshold_m=1e-12,
+        np.array([q]),
+        np.array([[fx, fy]]),
+        np.array([moment]),
+        np.array([grasp]),
+        gravity,
+        model,
+        *solver,
     )
-    assert one.iterations == batch.iterations[0] and one.converged == batch.converged[0]
+    assert iterations == general.iterations[0] and converged == general.converged[0]
     for mine, theirs in (
-        (one.theta_rad, batch.theta[0]),
-        (one.tip_m, batch.tip[0]),
-        (one.tip_unloaded_m, batch.tip_unloaded[0]),
-        (one.net_tensions_n, batch.net_tensions_n[0]),
-        (one.elongations_m, batch.elongations_m[0]),
+        (theta, general.theta[0]),
+        (tips[:2], general.tip[0]),
+        (tips[2:], general.tip_unloaded[0]),
+        (net, general.net[0]),
+        (stretch, general.stretch[0]),
     ):
         # Bit for bit where the trigonometric functions agree (they do on the machines
         # measured); the tolerance only allows a last-bit difference of sin/cos.

@@ -5,17 +5,23 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
+from typing import Literal
 
 import numpy as np
 
 from utrf.hand.errors import TargetError
-from utrf.hand.session import FingerKey, Kind, finger_mask
+from utrf.hand.fingers import FingerKey, Fingers, finger_mask
+from utrf.hand.goals import Goals
+from utrf.hand.limits import JointLimits
+from utrf.hand.session import HandSession
 from utrf.hand.state import CLOSED_LOOP
 from utrf.hand.telemetry import HandTelemetry
 from utrf.models import kinematics
+from utrf.models.geometry import HandGeometry
 from utrf.protocol import messages as m
 from utrf.protocol.errors import NackError
 
+Kind = Literal["theta2", "q", "flexion"]
 TargetsArg = Mapping[FingerKey, float] | Sequence[float]
 
 KINDS: dict[str, m.TargetKind] = {
@@ -36,34 +42,50 @@ def control_mode(value: m.ControlMode | str) -> m.ControlMode:
         raise ValueError(f"unknown control mode {value!r}; modes are {names}") from None
 
 
-class HandControl(HandTelemetry):
+class HandControl:
     """Targets and modes (a part of :class:`~utrf.hand.Hand`)."""
+
+    def __init__(
+        self,
+        session: HandSession,
+        fingers: Fingers,
+        geometry: HandGeometry,
+        telemetry: HandTelemetry,
+        limits: JointLimits,
+        goals: Goals,
+    ) -> None:
+        self._session = session
+        self._fingers = fingers
+        self._geometry = geometry
+        self._telemetry = telemetry
+        self._limits = limits
+        self._goals = goals
 
     # --- targets --------------------------------------------------------------------------------
 
-    def _targets(self, targets: TargetsArg, kind: str, during: str) -> dict[int, float]:
+    def targets(self, targets: TargetsArg, kind: str, during: str) -> dict[int, float]:
+        """Targets as given to a call, checked: finger index -> value in ``kind``'s unit."""
+        names = self._fingers.names
         if kind not in KINDS:
             raise TargetError(f"{during}: kind must be one of {list(KINDS)}, got {kind!r}")
         if isinstance(targets, Mapping):
-            items = [(self.finger_index(k), v) for k, v in targets.items()]
+            items = [(self._fingers.index(k), v) for k, v in targets.items()]
         elif isinstance(targets, str) or not isinstance(targets, Sequence | np.ndarray):
             raise TargetError(
                 f"{during}: targets must be a mapping finger -> value or a sequence of "
-                f"{len(self.fingers)} values, got {targets!r}"
+                f"{len(names)} values, got {targets!r}"
             )
         else:
             values = list(targets)
-            if len(values) != len(self.fingers):
-                raise TargetError(
-                    f"{during}: {len(values)} targets for {len(self.fingers)} fingers"
-                )
+            if len(values) != len(names):
+                raise TargetError(f"{during}: {len(values)} targets for {len(names)} fingers")
             items = list(enumerate(values))
         out: dict[int, float] = {}
         for i, v in items:
             if isinstance(v, bool) or not isinstance(v, int | float | np.floating | np.integer):
-                raise TargetError(f"{during}: target of {self.fingers[i]} is not a number: {v!r}")
+                raise TargetError(f"{during}: target of {names[i]} is not a number: {v!r}")
             if not math.isfinite(float(v)):
-                raise TargetError(f"{during}: target of {self.fingers[i]} is {v}")
+                raise TargetError(f"{during}: target of {names[i]} is {v}")
             out[i] = float(v)
         if not out:
             raise TargetError(f"{during}: no targets given")
@@ -71,7 +93,7 @@ class HandControl(HandTelemetry):
 
     def to_theta2(self, finger: FingerKey, value: float, kind: Kind = "theta2") -> float:
         """A target of any kind as the Joint-2 angle (rad), with the host's finger model."""
-        g = self.geometry.fingers[self.finger_index(finger)].geometry
+        g = self._geometry.fingers[self._fingers.index(finger)].geometry
         if kind == "theta2":
             return float(value)
         if kind == "q":
@@ -80,20 +102,6 @@ class HandControl(HandTelemetry):
             return float(kinematics.theta2_from_q(g, kinematics.q_from_flexion(g, value)))
         raise TargetError(f"kind must be one of {list(KINDS)}, got {kind!r}")
 
-    def _describe_limits(self, i: int) -> str:
-        lo, hi = self._limits[i]
-        return f"[{lo:.3f}, {hi:.3f}] rad ([{math.degrees(lo):.1f}, {math.degrees(hi):.1f}] deg)"
-
-    def _check_limits(self, theta2: Mapping[int, float], during: str) -> None:
-        for i, t in theta2.items():
-            lo, hi = self._limits[i]
-            if not lo - 1e-4 <= t <= hi + 1e-4:
-                raise TargetError(
-                    f"{during}: finger {self.fingers[i]!r} target {t:.3f} rad "
-                    f"({math.degrees(t):.1f} deg) is outside its Joint-2 limits "
-                    f"{self._describe_limits(i)}"
-                )
-
     def set_targets(
         self, targets: TargetsArg, *, kind: Kind = "theta2", enable: bool = True
     ) -> None:
@@ -101,32 +109,33 @@ class HandControl(HandTelemetry):
         converts q and flexion with its kinematics table and refuses what lies beyond a
         finger's limits: TargetError naming it). ``enable``: fingers not under closed-loop
         control are switched to POSITION."""
-        values = self._targets(targets, kind, "set_targets")
+        values = self.targets(targets, kind, "set_targets")
         mask = finger_mask(values)
-        wire = [values.get(i, 0.0) for i in range(len(self.fingers))]
+        wire = [values.get(i, 0.0) for i in range(len(self._fingers))]
         try:
-            self._request(m.SetTargets(kind=KINDS[kind], mask=mask, value=tuple(wire)))
+            self._session.request(m.SetTargets(kind=KINDS[kind], mask=mask, value=tuple(wire)))
         except NackError as exc:
             if exc.code == m.ErrorCode.OUT_OF_RANGE and exc.detail & 0x80:
                 i = exc.detail & 0x7F
                 unit = KIND_UNITS[kind]
                 raise TargetError(
-                    f"set_targets: the board refused finger {self.fingers[i]!r}'s target "
-                    f"{kind} = {values.get(i, math.nan):g}{(' ' + unit) if unit else ''}: "
-                    f"beyond its Joint-2 limits {self._describe_limits(i)}"
+                    f"set_targets: the board refused finger {self._fingers.names[i]!r}'s "
+                    f"target {kind} = {values.get(i, math.nan):g}{(' ' + unit) if unit else ''}"
+                    f": beyond its Joint-2 limits {self._limits.describe(i)}"
                     + (" (flexion targets lie in 0..1)" if kind == "flexion" else "")
                 ) from exc
             raise
-        for i, v in values.items():
-            self._goal[i] = self.to_theta2(i, v, kind)
+        idx = sorted(values)
+        self._goals.set(idx, [self.to_theta2(i, values[i], kind) for i in idx])
         if enable:
-            self._ensure_position(sorted(values), keep_closed=True)
+            self.ensure_position(idx, keep_closed=True)
 
-    def _send_joint2(self, idx: Sequence[int], values: np.ndarray) -> None:
-        wire = [0.0] * len(self.fingers)
+    def send_joint2(self, idx: Sequence[int], values: Iterable[float]) -> None:
+        """Joint-2 targets (rad) for some fingers, as they are (no mode change)."""
+        wire = [0.0] * len(self._fingers)
         for i, v in zip(idx, values, strict=True):
             wire[i] = float(v)
-        self._request(
+        self._session.request(
             m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=finger_mask(idx), value=tuple(wire))
         )
 
@@ -145,21 +154,21 @@ class HandControl(HandTelemetry):
         the largest closing duty) are fractions, one for all or per finger. A finger with a
         latched fault cannot be driven: FingerFaultError."""
         mode_ = control_mode(mode)
-        idx = self._finger_set(fingers)
-        n = len(self.fingers)
+        idx = self._fingers.select(fingers)
+        n = len(self._fingers)
 
         def per_finger(value: float | Mapping[FingerKey, float], name: str) -> list[float]:
             if isinstance(value, Mapping):
                 out = [0.0] * n
                 for k, v in value.items():
-                    out[self.finger_index(k)] = float(v)
+                    out[self._fingers.index(k)] = float(v)
             else:
                 out = [float(value)] * n
             lo = -1.0 if name == "duty" else 0.0
             for i in idx:
                 if not lo <= out[i] <= 1.0:
                     raise ValueError(
-                        f"{name} of {self.fingers[i]} must lie in [{lo:g}, 1], got {out[i]}"
+                        f"{name} of {self._fingers.names[i]} must lie in [{lo:g}, 1], got {out[i]}"
                     )
             return out
 
@@ -169,13 +178,31 @@ class HandControl(HandTelemetry):
         for i in idx:
             modes[i] = mode_
         try:
-            self._set_mode_raw(finger_mask(idx), modes, duties, efforts)
+            self.send_modes(finger_mask(idx), modes, duties, efforts)
         except NackError as exc:
             if exc.code == m.ErrorCode.FAULTED:
-                raise self._fault_error(exc, f"set_mode {mode_.name}") from exc
+                raise self._telemetry.fault_error(exc, f"set_mode {mode_.name}") from exc
             raise
         if mode_ not in CLOSED_LOOP:
-            self._goal[idx] = np.nan
+            self._goals.forget(idx)
+
+    def send_modes(
+        self,
+        mask: int,
+        modes: Sequence[m.ControlMode],
+        duty: Sequence[float] | None = None,
+        effort: Sequence[float] | None = None,
+    ) -> None:
+        """One ``set_mode`` as given, unchecked (closing uses it as it is)."""
+        n = len(self._fingers)
+        self._session.request(
+            m.SetMode(
+                mask=mask,
+                mode=tuple(modes),
+                duty=tuple(duty) if duty is not None else (0.0,) * n,
+                effort=tuple(effort) if effort is not None else (0.0,) * n,
+            )
+        )
 
     def coast(self, fingers: Iterable[FingerKey] | FingerKey | None = None) -> None:
         """Motor outputs off: the fingers are free."""
@@ -187,14 +214,14 @@ class HandControl(HandTelemetry):
 
     def hold(self, fingers: Iterable[FingerKey] | FingerKey | None = None) -> None:
         """Hold where the fingers are now, in closed loop."""
-        idx = self._finger_set(fingers)
-        st = self.state()
+        idx = self._fingers.select(fingers)
+        st = self._telemetry.state()
         self.set_targets({i: st.fingers[i].theta2 for i in idx}, enable=False)
-        self._ensure_position(idx, keep_closed=False)
+        self.ensure_position(idx, keep_closed=False)
 
-    def _ensure_position(self, idx: Sequence[int], keep_closed: bool) -> None:
+    def ensure_position(self, idx: Sequence[int], keep_closed: bool) -> None:
         """Put fingers in POSITION; with ``keep_closed``, those in GRASP stay in GRASP."""
-        st = self.state()
+        st = self._telemetry.state()
         todo = [
             i
             for i in idx

@@ -3,15 +3,21 @@
 from __future__ import annotations
 
 import math
+import random
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from utrf.hand.control import HandControl, TargetsArg, control_mode
+from utrf.hand.control import HandControl, Kind, TargetsArg, control_mode
 from utrf.hand.errors import FingerFaultError, NotControlledError, NotSettledError
-from utrf.hand.session import FingerKey, Kind, finger_mask, log
+from utrf.hand.fingers import FingerKey, Fingers, finger_mask
+from utrf.hand.goals import Goals
+from utrf.hand.limits import JointLimits
+from utrf.hand.session import HandSession, log
 from utrf.hand.state import CLOSED_LOOP, HandState
+from utrf.hand.telemetry import HandTelemetry
+from utrf.models.geometry import HandGeometry
 from utrf.poses import Pose, PoseLibrary
 from utrf.protocol import messages as m
 from utrf.protocol.errors import NackError
@@ -48,8 +54,32 @@ def _faulted(st: HandState, idx: Iterable[int]) -> dict[str, int]:
     return {st.fingers[i].name: int(st.fingers[i].faults) for i in idx if st.fingers[i].faults}
 
 
-class HandMotion(HandControl):
+class HandMotion:
     """Moves, poses and settling (a part of :class:`~utrf.hand.Hand`)."""
+
+    def __init__(
+        self,
+        session: HandSession,
+        fingers: Fingers,
+        geometry: HandGeometry,
+        telemetry: HandTelemetry,
+        control: HandControl,
+        limits: JointLimits,
+        goals: Goals,
+        poses: PoseLibrary | None = None,
+    ) -> None:
+        self._session = session
+        self._fingers = fingers
+        self._geometry = geometry
+        self._telemetry = telemetry
+        self._control = control
+        self._limits = limits
+        self._goals = goals
+        self._poses = poses
+        # A fresh move id per Hand: a board that kept the last session's move cannot take
+        # this session's first for a resend of it.
+        self._move_id = random.randrange(0x10000)
+        self._last_move: MoveResult | None = None
 
     # --- moves ----------------------------------------------------------------------------------
 
@@ -84,11 +114,11 @@ class HandMotion(HandControl):
         mode_ = control_mode(mode)
         if mode_ not in CLOSED_LOOP:
             raise ValueError(f"move needs POSITION or GRASP, got {mode_.name}")
-        values = self._targets(targets, kind, "move")
-        end = {i: self.to_theta2(i, v, kind) for i, v in values.items()}
-        self._check_limits(end, "move")
+        values = self._control.targets(targets, kind, "move")
+        end = {i: self._control.to_theta2(i, v, kind) for i, v in values.items()}
+        self._limits.check(end, "move")
         idx = sorted(end)
-        st = self.state()
+        st = self._telemetry.state()
         faulted = _faulted(st, idx)
         if faulted:
             raise FingerFaultError(faulted, "move")
@@ -99,8 +129,8 @@ class HandMotion(HandControl):
         # Fingers not under control yet hold where they are first: their paths start there.
         idle = [i for i in idx if not st.fingers[i].closed_loop]
         if idle:
-            self._send_joint2(idle, np.array([start[i] for i in idle]))
-        seen = len(self.faults_seen)
+            self._control.send_joint2(idle, np.array([start[i] for i in idle]))
+        seen = self._telemetry.fault_count()
         if mode_ == m.ControlMode.GRASP:
             # GRASP bounds the controller's output both ways: a finger that opens or stays
             # goes in POSITION, so a gentle effort does not leave it lagging on the way out.
@@ -108,14 +138,14 @@ class HandMotion(HandControl):
             opening = [i for i in idx if i not in closing]
             closing = [i for i in closing if st.fingers[i].mode != m.ControlMode.GRASP]
             if closing:
-                self.set_mode(m.ControlMode.GRASP, closing, effort=effort)
+                self._control.set_mode(m.ControlMode.GRASP, closing, effort=effort)
         else:
             opening = idx
         todo = [i for i in opening if st.fingers[i].mode != m.ControlMode.POSITION]
         if todo:
-            self.set_mode(m.ControlMode.POSITION, todo)
+            self._control.set_mode(m.ControlMode.POSITION, todo)
         result = self._send_move(idx, end, duration)
-        self._goal[idx] = [end[i] for i in idx]
+        self._goals.set(idx, [end[i] for i in idx])
         if result.stretched:
             log.info("utrf hand: %s", result.describe())
         if wait:
@@ -127,16 +157,16 @@ class HandMotion(HandControl):
                 fingers=idx,
             )
         else:
-            self._check_new_faults(seen, idx, "move")
+            self._telemetry.check_new_faults(seen, idx, "move")
         return result
 
     def _send_move(
         self, idx: Sequence[int], end: Mapping[int, float], duration: float
     ) -> MoveResult:
-        n = len(self.fingers)
+        n = len(self._fingers)
         self._move_id = (self._move_id + 1) & 0xFFFF
         try:
-            reply = self._request(
+            reply = self._session.request(
                 m.Move(
                     move_id=self._move_id,
                     kind=m.TargetKind.JOINT2_ANGLE,
@@ -147,12 +177,12 @@ class HandMotion(HandControl):
             )
         except NackError as exc:
             if exc.code == m.ErrorCode.FAULTED:
-                raise self._fault_error(exc, "move") from exc
+                raise self._telemetry.fault_error(exc, "move") from exc
             raise
         self._last_move = MoveResult(
             requested=duration,
-            duration={self.fingers[i]: float(reply.duration[i]) for i in idx},
-            stretched=tuple(self.fingers[i] for i in idx if reply.stretched & (1 << i)),
+            duration={self._fingers.names[i]: float(reply.duration[i]) for i in idx},
+            stretched=tuple(self._fingers.names[i] for i in idx if reply.stretched & (1 << i)),
         )
         return self._last_move
 
@@ -163,19 +193,20 @@ class HandMotion(HandControl):
         faults. Board time comes from telemetry (or get_state without a stream); the wait
         follows the board's clock, however fast it runs against the host's (an emulated
         board may run slower), and ends early only if that clock stops for a second."""
-        period = self._poll_period()
+        clock = self._session.clock
+        period = self._telemetry.poll_period()
         st: HandState | None = None
-        last_time, last_progress = -math.inf, self.clock.now()
+        last_time, last_progress = -math.inf, clock.now()
         while True:
-            self._check_new_faults(seen, idx, "move")
-            st = self._fresh_state(st)
-            now = self.clock.now()
+            self._telemetry.check_new_faults(seen, idx, "move")
+            st = self._telemetry.fresh_state(st)
+            now = clock.now()
             if st.board_time > last_time:
                 last_time, last_progress = st.board_time, now
             left = since + duration - st.board_time
             if left <= 0 or now - last_progress > 1.0:
                 return
-            self.clock.sleep(min(left, period))  # a fault or reset is seen within a period
+            clock.sleep(min(left, period))  # a fault or reset is seen within a period
 
     @property
     def last_move(self) -> MoveResult | None:
@@ -189,7 +220,7 @@ class HandMotion(HandControl):
     def poses(self) -> PoseLibrary:
         """The pose library (built-in, then ~/.config/utrf/poses.toml), loaded on first use."""
         if self._poses is None:
-            self._poses = PoseLibrary.load(hand=self.geometry)
+            self._poses = PoseLibrary.load(hand=self._geometry)
         return self._poses
 
     def pose(
@@ -208,7 +239,7 @@ class HandMotion(HandControl):
         p = self.poses[pose] if isinstance(pose, str) else pose
         if duration is None:
             duration = p.duration_s if p.duration_s is not None else DEFAULT_MOVE_S
-        theta2 = p.theta2(self.geometry)
+        theta2 = p.theta2(self._geometry)
         if p.grasp is not None:
             self.move(
                 list(theta2),
@@ -240,22 +271,22 @@ class HandMotion(HandControl):
         finger latches a fault, NotControlledError when one leaves closed loop."""
         if not tolerance > 0 or not timeout >= 0:
             raise ValueError(f"tolerance must be > 0 and timeout >= 0, got {tolerance}, {timeout}")
-        st = self._fresh_state(None)
+        st = self._telemetry.fresh_state(None)
+        n = len(self._fingers)
         if fingers is not None:
-            idx = self._finger_set(fingers)
+            idx = self._fingers.select(fingers)
         else:
-            idx = [i for i in range(len(self.fingers)) if np.isfinite(self._goal[i])]
-            if not idx:
-                idx = [i for i in range(len(self.fingers)) if st.fingers[i].closed_loop]
+            idx = self._goals.named() or [i for i in range(n) if st.fingers[i].closed_loop]
         if not idx:
             return st
-        period = self._poll_period()
-        start = self.clock.now()
+        clock = self._session.clock
+        period = self._telemetry.poll_period()
+        start = clock.now()
         ok_since: float | None = None
         history: list[tuple[float, np.ndarray]] = []
         while True:
-            now = self.clock.now()
-            st = self._fresh_state(st)
+            now = clock.now()
+            st = self._telemetry.fresh_state(st)
             faulted = _faulted(st, idx)
             if faulted:
                 raise FingerFaultError(faulted, "wait_settled")
@@ -270,12 +301,12 @@ class HandMotion(HandControl):
             history.append((now, theta))
             while history and history[0][0] < now - settle_time - 1e-9:
                 history.pop(0)
-            goal = np.where(np.isfinite(self._goal), self._goal, st.target)
+            goal = np.where(np.isfinite(self._goals.theta2), self._goals.theta2, st.target)
             err = goal - theta
             if now - start >= settle_time and len(history) > 1:
                 stopped = np.abs(theta - history[0][1]) < tolerance / 4
             else:
-                stopped = np.zeros(len(self.fingers), dtype=bool)
+                stopped = np.zeros(n, dtype=bool)
             good = all(
                 abs(err[i]) <= tolerance
                 or (st.fingers[i].mode == m.ControlMode.GRASP and stopped[i])
@@ -289,8 +320,10 @@ class HandMotion(HandControl):
             else:
                 ok_since = None
             if now - start >= timeout:
-                off = {self.fingers[i]: float(err[i]) for i in idx if abs(err[i]) > tolerance}
+                off = {
+                    self._fingers.names[i]: float(err[i]) for i in idx if abs(err[i]) > tolerance
+                }
                 if not off:  # settled only just now: not for settle_time yet
-                    off = {self.fingers[i]: float(err[i]) for i in idx}
+                    off = {self._fingers.names[i]: float(err[i]) for i in idx}
                 raise NotSettledError(off, tolerance, timeout)
-            self.clock.sleep(period)
+            clock.sleep(period)

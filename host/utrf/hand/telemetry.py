@@ -3,21 +3,55 @@ and the freshest state a wait can use."""
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from utrf.hand.errors import FingerFaultError
 from utrf.hand.session import HandSession, log
-from utrf.hand.state import FaultEvent, HandState
+from utrf.hand.state import STATE_CLOCK_WRAP_S, BoardClock, FaultEvent, HandState, TipModel
 from utrf.hand.telemetry_log import TelemetryLog
+from utrf.models.geometry import HandGeometry
 from utrf.protocol import messages as m
-from utrf.protocol.errors import BoardResetError, NackError, ProtocolError
+from utrf.protocol.errors import NackError, ProtocolError
 from utrf.protocol.link import Telemetry
 
+#: default telemetry rate: a sample every 10 ms, 7 % of the line
+DEFAULT_TELEMETRY_HZ = 100
 
-class HandTelemetry(HandSession):
-    """The Hand's view of what its board reports (a part of :class:`~utrf.hand.Hand`)."""
+
+class HandTelemetry:
+    """The Hand's view of what its board reports (a part of :class:`~utrf.hand.Hand`).
+    :meth:`on_frame` takes every stream frame, from the link's reader thread."""
+
+    def __init__(
+        self,
+        session: HandSession,
+        geometry: HandGeometry,
+        fingers: tuple[str, ...],
+        telemetry_hz: int = DEFAULT_TELEMETRY_HZ,
+    ) -> None:
+        if not 0 <= telemetry_hz <= m.MAX_TELEMETRY_HZ:
+            raise ValueError(
+                f"telemetry_hz must lie in 0..{m.MAX_TELEMETRY_HZ} Hz, got {telemetry_hz}"
+            )
+        self._session = session
+        self._fingers = fingers
+        self._telemetry_hz = int(telemetry_hz)
+        self._lock = threading.Lock()  # telemetry arrives on the reader thread
+        # Held while callbacks run, so an unsubscribe returns only once no call is under way
+        # (re-entrant: a callback may unsubscribe itself).
+        self._dispatch_lock = threading.RLock()
+        self._board_clock = BoardClock(STATE_CLOCK_WRAP_S)  # the state's ms clock
+        self._fault_clock = BoardClock()  # the fault message's µs clock
+        self._tips = TipModel(geometry)
+        self._status: m.Status | None = None  # the latest status (modes, faults)
+        self._latest: HandState | None = None
+        self._state_callbacks: list[Callable[[HandState], None]] = []
+        self._fault_callbacks: list[Callable[[FaultEvent], None]] = []
+        self._faults_seen: list[FaultEvent] = []
+        self._log: TelemetryLog | None = None
 
     # --- state ----------------------------------------------------------------------------------
 
@@ -44,33 +78,33 @@ class HandTelemetry(HandSession):
     def state(self) -> HandState:
         """Ask the board for its state now (``get_state``; and ``get_status`` when the
         sample names a status not received yet)."""
-        msg = self._request(m.GetState())
+        msg = self._session.request(m.GetState())
         with self._lock:
             status = self._status
         if status is None or status.change != msg.status_seq:
-            self._take_status(self._request(m.GetStatus()))
-        host_time = self.clock.timestamp()
+            self._take_status(self._session.request(m.GetStatus()))
+        host_time = self._session.clock.timestamp()
         with self._lock:
             st = self._state_of(msg, host_time)
             if self._latest is None or st.board_time >= self._latest.board_time:
                 self._latest = st
         return st
 
-    def _poll_period(self) -> float:
+    def poll_period(self) -> float:
         """How often a wait looks at the state: each sample at the stream's rate, between
         2 ms and 20 ms (20 ms without a stream: each look is then a get_state)."""
         period = 1.0 / self._telemetry_hz if self._telemetry_hz else 0.02
         return min(max(period, 0.002), 0.02)
 
-    def _fresh_state(self, previous: HandState | None) -> HandState:
+    def fresh_state(self, previous: HandState | None) -> HandState:
         """The latest telemetry sample if it is newer than ``previous`` and recent; else ask."""
-        self._check_alive()
+        self._session.check_alive()
         st = self.latest
         if (
             st is not None
             and self._telemetry_hz
             and (previous is None or st.board_time > previous.board_time)
-            and self.clock.timestamp() - st.host_time < max(5.0 / self._telemetry_hz, 0.1)
+            and self._session.clock.timestamp() - st.host_time < max(5.0 / self._telemetry_hz, 0.1)
         ):
             return st
         return self.state()
@@ -81,14 +115,28 @@ class HandTelemetry(HandSession):
         """Stream the hand's state at ``rate_hz`` (0 stops; at most 500 Hz)."""
         if not 0 <= rate_hz <= m.MAX_TELEMETRY_HZ:
             raise ValueError(f"rate_hz must lie in 0..{m.MAX_TELEMETRY_HZ}, got {rate_hz}")
-        self._request(m.SetTelemetry(rate_hz=int(rate_hz)))
+        self._session.request(m.SetTelemetry(rate_hz=int(rate_hz)))
         self._telemetry_hz = int(rate_hz)
+
+    def resume(self) -> None:
+        """After a handshake: the stream at the Hand's rate, and the board's status now."""
+        self._session.request(m.SetTelemetry(rate_hz=self._telemetry_hz))
+        self._take_status(self._session.request(m.GetStatus()))
+
+    def silence(self) -> None:
+        """Stop the stream on closing (the rate asked for is kept)."""
+        self._session.request(m.SetTelemetry(rate_hz=0))
 
     def on_state(self, callback: Callable[[HandState], None]) -> Callable[[], None]:
         """Call ``callback(HandState)`` for every telemetry sample (from the link's reader
         thread on a real link: keep it short). Returns a function that unsubscribes; once it
         returns, the callback is not called again."""
         return self._subscribe(self._state_callbacks, callback)
+
+    def on_fault(self, callback: Callable[[FaultEvent], None]) -> Callable[[], None]:
+        """Call ``callback(FaultEvent)`` whenever a finger latches a fault. Returns a function
+        that unsubscribes."""
+        return self._subscribe(self._fault_callbacks, callback)
 
     def _subscribe(
         self, callbacks: list[Callable[[Any], None]], callback: Callable[[Any], None]
@@ -111,14 +159,9 @@ class HandTelemetry(HandSession):
                 if cb in callbacks:  # not unsubscribed by an earlier callback
                     cb(item)
 
-    def on_fault(self, callback: Callable[[FaultEvent], None]) -> Callable[[], None]:
-        """Call ``callback(FaultEvent)`` whenever a finger latches a fault. Returns a function
-        that unsubscribes."""
-        return self._subscribe(self._fault_callbacks, callback)
-
     def start_log(self, path: str | Path) -> TelemetryLog:
         """Log every telemetry sample to a CSV file (appended when its columns match)."""
-        log_ = TelemetryLog(path, self.fingers)
+        log_ = TelemetryLog(path, self._fingers)
         with self._lock:
             old, self._log = self._log, log_
         if old is not None:
@@ -136,7 +179,7 @@ class HandTelemetry(HandSession):
         time unwrapped (the caller holds the lock)."""
         return HandState.from_message(
             msg,
-            self.fingers,
+            self._fingers,
             self._status,
             self._tips,
             board_time=self._board_clock.unwrap(msg.board_time, host_time),
@@ -151,9 +194,10 @@ class HandTelemetry(HandSession):
             if old is None or (msg.change - old.change) % 256 < 128:
                 self._status = msg
 
-    def _on_telemetry(self, item: Telemetry) -> None:
+    def on_frame(self, item: Telemetry) -> None:
+        """One frame the board sent on its own: status, state, fault or boot."""
         msg = item.message
-        host_time = self.clock.timestamp()
+        host_time = self._session.clock.timestamp()
         if isinstance(msg, m.Status):
             self._take_status(msg)
         elif isinstance(msg, m.State):
@@ -170,10 +214,10 @@ class HandTelemetry(HandSession):
         elif isinstance(msg, m.Fault):
             with self._lock:
                 event = FaultEvent(
-                    finger=self.fingers[msg.finger],
+                    finger=self._fingers[msg.finger],
                     index=msg.finger,
                     new_faults=msg.new_faults,
-                    faults={n: msg.faults[i] for i, n in enumerate(self.fingers)},
+                    faults={n: msg.faults[i] for i, n in enumerate(self._fingers)},
                     board_time=self._fault_clock.unwrap(msg.board_time, host_time),
                     host_time=host_time,
                 )
@@ -181,29 +225,36 @@ class HandTelemetry(HandSession):
             self._dispatch(self._fault_callbacks, event)
         elif isinstance(msg, m.Boot):
             with self._lock:
-                self._last_boot = msg
                 self._board_clock.restart()
                 self._fault_clock.restart()
                 self._status = None
-                self._reset = BoardResetError(msg)
                 self._latest = None
+            self._session.board_booted(msg)
 
     # --- faults ---------------------------------------------------------------------------------
 
-    def _check_new_faults(self, seen: int, idx: Sequence[int], during: str) -> None:
-        self._check_alive()
+    def fault_count(self) -> int:
+        """How many faults were seen: where :meth:`check_new_faults` starts."""
+        with self._lock:
+            return len(self._faults_seen)
+
+    def check_new_faults(self, seen: int, idx: Sequence[int], during: str) -> None:
+        """FingerFaultError if one of these fingers latched a fault since ``seen``, the
+        board's reset if it reset."""
+        self._session.check_alive()
         with self._lock:
             new = [e for e in self._faults_seen[seen:] if e.index in idx]
         if new:
             raise FingerFaultError({e.finger: int(e.faults[e.finger]) for e in new}, during)
 
-    def _fault_error(self, exc: NackError, during: str) -> FingerFaultError:
-        f = exc.detail if exc.detail < len(self.fingers) else None
+    def fault_error(self, exc: NackError, during: str) -> FingerFaultError:
+        """The board's FAULTED nack as a FingerFaultError naming every faulted finger."""
+        f = exc.detail if exc.detail < len(self._fingers) else None
         try:
             st = self.state()
             faults = {x.name: int(x.faults) for x in st if x.faults}
         except ProtocolError:
             faults = {}
-        if f is not None and self.fingers[f] not in faults:
-            faults[self.fingers[f]] = 0
+        if f is not None and self._fingers[f] not in faults:
+            faults[self._fingers[f]] = 0
         return FingerFaultError(faults, during)

@@ -1,6 +1,6 @@
-"""Algorithm 1 for many load cases at once, vectorised over the cases (numpy), with Aitken
-relaxation where the plain iteration converges slowly; its options, checked in one place.
-The model: :mod:`utrf.models.statics`."""
+"""Algorithm 1 for many load cases at once: the cases checked and broadcast, the passes
+(:func:`~utrf.models.statics_passes.passes`) run on them all, and Algorithm 1's options,
+checked in one place. The model: :mod:`utrf.models.statics`."""
 
 from __future__ import annotations
 
@@ -10,25 +10,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from utrf.models import kinematics, tendons
-from utrf.models.equilibrium import (
-    DEFAULT_MODEL,
-    GRAVITY_MPS2,
-    StaticsError,
-    chain_points,
-    chain_torques,
-    configuration,
-    net_tensions,
-    require_model,
-)
+from utrf.models.equilibrium import DEFAULT_MODEL, GRAVITY_MPS2, StaticsError, require_model
 from utrf.models.geometry import FingerGeometry
+from utrf.models.statics_passes import passes
 
 DEFAULT_THRESHOLD_M = 1e-9
 DEFAULT_MAX_ITERATIONS = 100
 RELAXATIONS = ("auto", "none", "aitken")
 DEFAULT_RELAXATION = "auto"
-SLOW_CONTRACTION = 0.5  # "auto" relaxes a case whose tip movement shrinks less than this
-OMEGA_BOUNDS = (0.02, 5.0)  # keep the Aitken factor sane on nonlinear steps
 
 
 def check_solver(model: str, relaxation: str, threshold_m: float, max_iterations: int) -> None:
@@ -125,69 +114,17 @@ def solve_batch(
     moment = np.broadcast_to(moment, n).astype(float)
     grasp = np.broadcast_to(grasp, n).astype(float)
 
-    compliance = 1.0 / tendons.stiffnesses(geom)
-    theta = kinematics.joint_angles(geom, qa)
-    pts = chain_points(geom, theta)
-    tip_unloaded = pts[:, 3, :].copy()
-    net = np.zeros((*n, 3))
-    stretch = np.zeros((*n, 3))
-    iterations = np.zeros(n, dtype=int)
-    converged = np.zeros(n, dtype=bool)
-    # Relaxation state per case: the last plain step, its factor, the last tip movement.
-    step_prev = np.zeros((*n, 3))
-    omega = np.ones(n)
-    change_prev = np.full(n, np.inf)
-    relaxed = np.full(n, relaxation == "aitken")
-    everyone = True  # while no case has converged, skip the fancy indexing
-    active = np.arange(n[0])
-    for k in range(1, max_iterations + 1):
-        sel = slice(None) if everyone else active
-        th, pts_a = theta[sel], pts[sel]
-        net_a = net_tensions(
-            geom, chain_torques(geom, th, pts_a, force[sel], moment[sel], grasp[sel], gravity)
-        )
-        stretch_a = net_a * compliance
-        plain = configuration(geom, qa[sel], stretch_a, model)  # one pass of Algorithm 1
-        pts_plain = chain_points(geom, plain)
-        change = np.hypot(*(pts_plain[:, 3, :] - pts_a[:, 3, :]).T)
-        done = change <= threshold_m
-        step = plain - th
-        rel = relaxed[sel]
-        if relaxation == "auto" and k >= 2:
-            rel = rel | (change > SLOW_CONTRACTION * change_prev[sel])
-        om = omega[sel]
-        if k >= 2 and rel.any():
-            # Aitken (Irons-Tuck) factor from the last two plain steps.
-            diff = step - step_prev[sel]
-            denom = (diff * diff).sum(-1)
-            safe = np.where(denom > 0, denom, 1.0)
-            aitken = -om * (step_prev[sel] * diff).sum(-1) / safe
-            om = np.where(rel & (denom > 0), np.clip(aitken, *OMEGA_BOUNDS), om)
-        move = rel & ~done
-        nxt, pts_nxt = plain, pts_plain
-        if move.any():
-            nxt = np.where(move[:, None], th + om[:, None] * step, plain)
-            pts_nxt = pts_plain.copy()
-            pts_nxt[move] = chain_points(geom, nxt[move])
-        net[sel], stretch[sel], theta[sel], pts[sel] = net_a, stretch_a, nxt, pts_nxt
-        step_prev[sel], omega[sel], change_prev[sel], relaxed[sel] = step, om, change, rel
-        iterations[sel] = k
-        converged[active[done]] = True
-        active = active[~done]
-        everyone = everyone and not done.any()
-        if active.size == 0:
-            break
-    tip = pts[:, 3, :]
-    # Each case's tensions are those of the configuration its last pass started from: the
-    # same, within the threshold, as those of the returned one once converged.
+    found = passes(
+        geom, qa, force, moment, grasp, gravity, model, threshold_m, max_iterations, relaxation
+    )
     return StaticsBatch(
         model=model,
         q=qa,
-        theta=theta,
-        tip=tip,
-        tip_unloaded=tip_unloaded,
-        net_tensions_n=net,
-        elongations_m=stretch,
-        iterations=iterations,
-        converged=converged,
+        theta=found.theta,
+        tip=found.tip,
+        tip_unloaded=found.tip_unloaded,
+        net_tensions_n=found.net,
+        elongations_m=found.stretch,
+        iterations=found.iterations,
+        converged=found.converged,
     )
