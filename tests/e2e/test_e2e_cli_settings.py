@@ -182,6 +182,14 @@ def _server(reply: bytes | None) -> str:
             time.sleep(15)  # a silent device
         else:
             conn.sendall(reply)
+            conn.settimeout(0.2)
+            end = time.monotonic() + 1.0
+            while time.monotonic() < end:  # read what the host sends (unread: a reset)
+                try:
+                    if not conn.recv(4096):
+                        break
+                except TimeoutError:
+                    pass
         conn.close()
         srv.close()
 

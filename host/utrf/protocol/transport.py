@@ -47,7 +47,7 @@ class SerialTransport:
             # One program at a time on a serial port (an advisory lock, as other tools take).
             serial_kwargs.setdefault("exclusive", True)
         try:
-            self._serial = serial.serial_for_url(url, baudrate=baudrate, timeout=0, **serial_kwargs)
+            self._serial = self._open(url, baudrate, serial_kwargs)
         except (serial.SerialException, ValueError) as exc:
             if getattr(exc, "errno", None) in (errno.EBUSY, errno.EAGAIN) or "lock" in str(exc):
                 raise PortBusyError(
@@ -62,6 +62,16 @@ class SerialTransport:
             self._fd: int | None = self._serial.fileno()
         except (AttributeError, NotImplementedError, OSError, serial.SerialException):
             self._fd = None  # loop:// and friends: poll instead of select
+
+    @staticmethod
+    def _open(url: str, baudrate: int, kwargs: dict[str, object]) -> serial.SerialBase:
+        port = serial.serial_for_url(url, baudrate=baudrate, timeout=0, do_not_open=True, **kwargs)
+        if url.startswith("socket://"):
+            # A new connection holds no stale bytes, but pyserial's open() reads and drops
+            # whatever came at once: a server's first words (why it refuses us) with it.
+            port.reset_input_buffer = lambda: None  # type: ignore[method-assign]  # see above
+        port.open()
+        return port
 
     def start(self, on_data: DataCallback, on_close: CloseCallback) -> None:
         if self._thread is not None:
