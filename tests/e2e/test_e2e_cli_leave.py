@@ -66,7 +66,7 @@ def test_a_command_killed_without_goodbye_latches_host_timeout(
     try:
         assert proc.stdout is not None
         assert proc.stdout.readline().startswith("moving to fist")
-        time.sleep(0.5)
+        assert board.wait_until(lambda b: b.theta2[1] > 0.3, timeout=30.0)  # under way
         proc.kill()  # no goodbye
         proc.wait(timeout=10)
     finally:

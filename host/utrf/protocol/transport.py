@@ -69,7 +69,7 @@ class SerialTransport:
         if url.startswith("socket://"):
             # A new connection holds no stale bytes, but pyserial's open() reads and drops
             # whatever came at once: a server's first words (why it refuses us) with it.
-            port.reset_input_buffer = lambda: None  # type: ignore[method-assign]  # see above
+            port.reset_input_buffer = lambda: None
         port.open()
         return port
 
