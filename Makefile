@@ -4,8 +4,15 @@
 # before any recipe runs, so on a fresh machine this invocation has parsed before the set-up
 # installed the Arduino core and simavr. No rule may depend on what set-up installs at parse
 # time (firmware/arduino_core.mk lists the core's sources in a sub-make for the same reason).
+# Every build step that uses what set-up installs has `| $(NEEDS_SETUP)` (order-only), so
+# `make firmware` or `make setup firmware emulator` on a fresh clone sets up first (also with
+# -j); the sub-makes after a set-up skip it (SETUP_DONE=1). What a build used that make cannot
+# see as a file (MuJoCo's headers, flags) is recorded in a stamp it depends on (harness.mk,
+# firmware.mk), so a harness built without MuJoCo is rebuilt once MuJoCo is there.
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
+
+NEEDS_SETUP := $(if $(SETUP_DONE),,setup)
 
 VENV  := .venv
 PY    := $(VENV)/bin/python
@@ -24,7 +31,7 @@ BENCH_TARGETS :=
 
 .PHONY: help setup test demo bench lint clean test-after-setup demo-after-setup \
         bench-after-setup
-SUBMAKE = $(MAKE) --no-print-directory
+SUBMAKE = $(MAKE) --no-print-directory SETUP_DONE=1
 
 help:
 	@echo "make demo    set up, build the firmware, run the pose demo on the emulated board"

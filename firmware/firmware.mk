@@ -1,7 +1,8 @@
 # Firmware for the Arduino MEGA 2560 (Debian's avr-gcc + arduino-core-avr), the host build of
 # its core for the tests, flashing and the firmware benchmark. Included by the top Makefile.
 #
-#   make firmware              build/firmware/utrf.elf and .hex; prints flash and RAM use
+#   make firmware              build/firmware/utrf.elf and .hex; prints flash and RAM use against
+#                              the chip (as the Arduino IDE does) and the project's budgets
 #   make flash PORT=/dev/ttyACM0   avrdude over the MEGA's stk500v2 bootloader, 115200 baud
 #   make firmware-host         build/firmware/host/libutrf_fw.so: core + host HAL, for pytest
 #   make bench-firmware        tick load and memory, appended to docs/benchmarks.md
@@ -70,7 +71,7 @@ FW_GIT_ID   := $(shell git rev-parse --short=8 HEAD 2>/dev/null)
 .PHONY: firmware flash firmware-host bench-firmware firmware-size
 
 firmware: $(FW_ELF) $(FW_HEX)
-	@$(MAKE) --no-print-directory firmware-size
+	@$(MAKE) --no-print-directory SETUP_DONE=1 firmware-size
 
 $(FW_BUILD_ID): FORCE_FW_ID
 	@mkdir -p $(@D)
@@ -83,14 +84,23 @@ FORCE_FW_ID:
 $(FW_BUILD)/obj/core/dispatch.o: $(FW_BUILD_ID)
 $(FW_BUILD)/obj/core/dispatch.o: FW_EXTRA := -include $(FW_BUILD_ID)
 
-$(FW_BUILD)/obj/%.o: $(FW_SRC)/%.cpp
+# What the objects were compiled with (the compiler's version, the flags): a change rebuilds
+# them, as a changed source does (UTRF_BAUD=... on the command line, another avr-gcc).
+FW_BUILT_WITH := $(FW_BUILD)/built-with.txt
+$(FW_BUILT_WITH): FORCE_FW_ID | $(NEEDS_SETUP)
+	@mkdir -p $(@D)
+	@new="$$($(AVR_CXX) -dumpversion 2>/dev/null || echo none) $(FW_MCU) $(FW_OPT) $(FW_CXXSTD) \
+	 $(FW_WARN) $(FW_DEFS) $(FW_INC) $(ARDUINO_OPT)"; \
+	 if [ ! -f $@ ] || [ "$$(cat $@)" != "$$new" ]; then echo "$$new" > $@; fi
+
+$(FW_BUILD)/obj/%.o: $(FW_SRC)/%.cpp $(FW_BUILT_WITH) | $(NEEDS_SETUP)
 	@mkdir -p $(@D)
 	$(AVR_CXX) -c $(FW_MCU) $(FW_OPT) $(FW_CXXSTD) $(FW_WARN) $(FW_DEFS) $(FW_INC) \
 	  $(FW_EXTRA) -MMD -MP -o $@ $<
 
 # Always asked (the sub-make knows the core's files); the archive is rewritten only when an
 # object changed, so the ELF is relinked only then.
-$(ARDUINO_LIB): FORCE_ARDUINO_CORE
+$(ARDUINO_LIB): FORCE_ARDUINO_CORE | $(NEEDS_SETUP)
 	@$(ARDUINO_CORE_MAKE) $@
 .PHONY: FORCE_ARDUINO_CORE
 FORCE_ARDUINO_CORE:
@@ -102,16 +112,29 @@ $(FW_HEX): $(FW_ELF)
 	$(AVR_OBJCOPY) -O ihex -R .eeprom $< $@
 
 # Flash = .text + .data (the initial values of .data live in flash); RAM = .data + .bss +
-# .noinit, static use (the stack comes on top). Targets: 64 KB flash (of the MEGA's 256 KB;
-# raised from 48 KB for the written-out finger ticks: firmware/README.md, Timing), 3 KB RAM.
+# .noinit, static use (the stack comes on top). Reported as the Arduino IDE does, against the
+# chip: the MEGA's program space is its 256 KB less the 8 KB bootloader, its RAM 8 KB. Then
+# against the project's budgets: 64 KB flash (raised from 48 KB for the written-out finger
+# ticks: firmware/README.md, Timing), 3 KB RAM (the rest is the stack's).
+MEGA_FLASH := 253952
+MEGA_RAM   := 8192
 firmware-size: $(FW_ELF)
 	@$(AVR_SIZE) -A $(FW_ELF) | awk -v tf=$(FW_TARGET_FLASH) -v tr=$(FW_TARGET_RAM) \
+	  -v cf=$(MEGA_FLASH) -v cr=$(MEGA_RAM) \
 	  '$$1==".text"{t=$$2} $$1==".data"{d=$$2} $$1==".bss"{b=$$2} $$1==".noinit"{n=$$2} \
 	   END { f=t+d; r=d+b+n; \
-	     printf "firmware: flash %d bytes (%.1f%% of the %d-byte target), ", f, 100*f/tf, tf; \
+	     printf "firmware: Sketch uses %d bytes (%d%%) of program storage space. ", \
+	       f, int(100*f/cf); \
+	     printf "Maximum is %d bytes.\n", cf; \
+	     printf "firmware: Global variables use %d bytes (%d%%) of dynamic memory, ", \
+	       r, int(100*r/cr); \
+	     printf "leaving %d bytes for local variables. Maximum is %d bytes.\n", cr-r, cr; \
+	     printf "firmware: the project'"'"'s budgets: flash %d bytes (%.1f%% of %d), ", \
+	       f, 100*f/tf, tf; \
 	     printf "static RAM %d bytes (data %d + bss %d + noinit %d; %.1f%% of %d)\n", \
 	       r, d, b, n, 100*r/tr, tr; \
-	     if (f > tf || r > tr) print "firmware: OVER TARGET" }'
+	     if (f > tf || r > tr) print "firmware: OVER THE PROJECT'"'"'S BUDGET"; \
+	     if (f > cf || r > cr) print "firmware: DOES NOT FIT THE ATmega2560" }'
 	@grep -h "^// Geometry\|rows, .* bytes; worst" $(FW_SRC)/generated/kinematics_table.h \
 	  | sed 's|^// |kinematics table: |'
 
@@ -119,7 +142,7 @@ firmware-size: $(FW_ELF)
 # fails in seconds with one line where avrdude alone would hang or retry for 30 s.
 flash:
 	@if [ -z "$(PORT)" ]; then echo "usage: make flash PORT=/dev/ttyACM0" >&2; exit 2; fi
-	@$(MAKE) --no-print-directory setup && $(MAKE) -s --no-print-directory $(FW_HEX)
+	@$(MAKE) --no-print-directory setup && $(MAKE) -s --no-print-directory SETUP_DONE=1 $(FW_HEX)
 	$(PY) -m utrf flash --port '$(PORT)' --hex $(FW_HEX) --avrdude $(AVRDUDE) \
 	  --programmer $(AVRDUDE_PROGRAMMER) --baud $(FLASH_BAUD)
 
@@ -151,7 +174,7 @@ firmware-check: $(FW_CHECK_ELF)
 # One compile of several sources: -MMD keeps only the last one's dependencies, so the headers
 # (the check's sequence among them) are listed here.
 $(FW_CHECK_ELF): $(FW_CHECK_SRCS) firmware/test/core_check_seq.h $(wildcard $(FW_SRC)/core/*.h) \
-                 $(FW_SRC)/hal/hal.h
+                 $(FW_SRC)/hal/hal.h | $(NEEDS_SETUP)
 	@mkdir -p $(@D)
 	$(AVR_CXX) $(FW_MCU) $(FW_OPT) $(FW_CXXSTD) $(FW_WARN) -I$(FW_SRC) -Ifirmware/test -MMD -MP \
 	  -Wl,--gc-sections -o $@ $(FW_CHECK_SRCS) -lm
@@ -195,7 +218,7 @@ PIO_SRC_FLAGS = $(shell sed -n '/^build_src_flags *=/,/^[a-z_]* *=/{/^ /p}' plat
 firmware-pio: $(FW_PIO_ELF)
 
 $(FW_PIO_ELF): $(FW_OWN_SRCS) $(wildcard $(FW_SRC)/*.h $(FW_SRC)/*/*.h $(FW_SRC)/*/*/*.h) \
-               platformio.ini
+               platformio.ini | $(NEEDS_SETUP)
 	@rm -rf $(FW_PIO_BUILD) && mkdir -p $(FW_PIO_BUILD)/core $(FW_PIO_BUILD)/src
 	@set -e; for f in $(ARDUINO_CORE)/*.c $(ARDUINO_CORE)/*.cpp $(ARDUINO_CORE)/*.S; do \
 	  [ -e "$$f" ] || continue; o=$(FW_PIO_BUILD)/core/$$(basename $$f).o; \

@@ -7,12 +7,13 @@ safety tests run against it; a test must fail for every mutant.
 
 Each mutant is a copy of the checkout (its sources, tests and build products, timestamps
 kept, so make rebuilds only what the mutation touched) under build/mutants/<name>/, with one
-exact edit to firmware/src: a rule's condition made false, its action removed (a condition the
-code states in two places is edited in both, or has a mutant for each). The tests run
-there, on the mutated firmware, both as the host build (tests/firmware/test_fw_safety.py and
-test_fw_moves.py) and as the ELF on the emulated board (tests/reliability/test_safety_matrix.py),
-and stop at the first failure: the mutant is caught. An edit whose text is no longer in the
-source is an error (the list must follow the code). The score goes to
+exact edit to firmware/src: a rule's condition made false, its action removed (each rule has
+one home; a rule with a fast path beside its general one has a mutant for each). The tests
+run there, on the mutated firmware, both as the host build (tests/firmware/test_fw_safety.py,
+test_fw_moves.py and test_fw_limits_rule.py) and as the ELF on the emulated board
+(tests/reliability/test_safety_matrix.py), and stop at the first failure: the mutant is
+caught. An edit whose text is no longer in the source is an error (the list must follow the
+code). The score goes to
 build/reliability/mutants.json for docs/reliability.md.
 """
 
@@ -32,6 +33,7 @@ WORK = REPO / "build" / "mutants"
 TESTS = [
     "tests/firmware/test_fw_safety.py",
     "tests/firmware/test_fw_moves.py",
+    "tests/firmware/test_fw_limits_rule.py",
     "tests/reliability/test_safety_matrix.py",
 ]
 COPY = ["Makefile", "pyproject.toml", "firmware", "protocol", "tests", "tools", "host"]
@@ -61,18 +63,6 @@ class Mutant:
         return (Edit(self.path, self.old, self.new), *self.more)
 
 
-# set_targets and move check their targets with the same lines: each mutant names its own by
-# the line after them
-_LIMIT_CHECK = (
-    "        if (a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1) {\n"
-    "            nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));\n"
-    "            return;\n"
-    "        }\n"
-)
-_NO_LIMIT_CHECK = _LIMIT_CHECK.replace(
-    "a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1", "false"
-)
-
 MUTANTS = [
     Mutant(
         "host-silence-off",
@@ -88,23 +78,21 @@ MUTANTS = [
         "if (safe_action_ == 0) {",
         "if (true) {",
     ),
-    # The encoder's rules live in two places since the sampler judges each sample (the AVR's
-    # ADC interrupt, core/encoder.h judge()): it flags a reading out of band or beyond the
-    # fault limits, and the tick takes an unflagged reading as it is; a flagged one goes to
-    # Finger::judge_reading(), the only place ENCODER_RANGE and JOINT_LIMIT are latched. So
-    # each rule has two mutants: its latch removed (the rule off wherever a reading is judged)
-    # and the sampler's judgment off (a bad reading reaches the tick unflagged, and only a
-    # reading flagged for another reason is judged again).
+    # The encoder's rules each have one home: the band (the driver's valid band, as5600_reading)
+    # and the limits in encoder::judge(), which the sampler runs on each sample and the tick
+    # again on a reading judged with an earlier setup (Finger::judge_reading(), the only place
+    # ENCODER_RANGE and JOINT_LIMIT are latched); the jump in Finger::take_angle(), which both
+    # of the tick's paths call. So a rule has two mutants: its judgment off, and its latch off.
     Mutant(
         "encoder-band-off",
-        "encoder band (and a stale ADC round)",
+        "encoder band (and a stale ADC round): the latch",
         "firmware/src/core/finger.cpp",
         "        encoder_ok_ = false;\n        return ENCODER_RANGE;",
         "        encoder_ok_ = false;\n        return 0;",
     ),
     Mutant(
         "encoder-band-sampler-off",
-        "encoder band (the sampler's judgment)",
+        "encoder band (the driver's judgment)",
         "firmware/src/core/encoder.h",
         "    r.status = (sample < kAdcBandLow || sample > kAdcBandHigh) ? "
         "hal::EncoderStatus::OUT_OF_BAND\n"
@@ -114,23 +102,21 @@ MUTANTS = [
     ),
     Mutant(
         "encoder-jump-off",
-        "encoder jump",
+        "encoder jump (Finger::take_angle, both tick paths)",
         "firmware/src/core/finger.h",
-        "            found = ENCODER_JUMP;",
-        "            ;",
-        # the same rule on a flagged reading
-        (Edit("firmware/src/core/finger.cpp", "found = ENCODER_JUMP;", "found = 0;"),),
+        "        found = ENCODER_JUMP;",
+        "        ;",
     ),
     Mutant(
         "joint-limit-off",
-        "joint limit",
+        "joint limit: the latch",
         "firmware/src/core/finger.cpp",
-        "found |= JOINT_LIMIT;",
-        ";",
+        "return (r.flags & hal::kReadingLimit) ? (uint8_t)(found | JOINT_LIMIT) : found;",
+        "return found;",
     ),
     Mutant(
         "joint-limit-sampler-off",
-        "joint limit (the sampler's judgment)",
+        "joint limit (encoder::judge)",
         "firmware/src/core/encoder.h",
         "r.flags = (r.angle < s.low || r.angle > s.high) ? hal::kReadingLimit : 0;",
         "r.flags = 0;",
@@ -192,28 +178,28 @@ MUTANTS = [
         "mode == BRAKE && (faults_ & (kStopFaults & ~JOINT_LIMIT)) == 0);",
         "mode == BRAKE);",
     ),
+    # The target range rule's one home (finger::Params::accepts(): move, and set_targets'
+    # kinds other than JOINT2_ANGLE) and its fast path (set_targets' micro-radian window)
     Mutant(
-        "targets-beyond-limits",
-        "joint limit (targets outside the limits refused)",
-        "firmware/src/core/dispatch.cpp",
-        # JOINT2_ANGLE values against each finger's window (micro-radians), the other kinds
-        # in counts after their conversion: both off
-        "if ((m.mask & bit) && (m.value[f] < b.urad_lo[f] || m.value[f] > b.urad_hi[f])) {",
-        "if ((m.mask & bit) && false) {",
-        more=(
-            Edit(
-                "firmware/src/core/dispatch.cpp",
-                "    " + _LIMIT_CHECK.replace("\n    ", "\n        ") + "            bu[f] =",
-                "    " + _NO_LIMIT_CHECK.replace("\n    ", "\n        ") + "            bu[f] =",
-            ),
-        ),
+        "target-range-off",
+        "joint limit (targets and a move's end outside the limits refused)",
+        "firmware/src/core/finger.h",
+        "return bu >= (int32_t)theta_min - 1 && bu <= (int32_t)theta_max + 1;",
+        "return true;",
     ),
     Mutant(
-        "move-beyond-limits",
-        "joint limit (a move's end outside the limits refused)",
+        "target-window-off",
+        "joint limit (set_targets' JOINT2_ANGLE window, the fast path)",
         "firmware/src/core/dispatch.cpp",
-        _LIMIT_CHECK + "        end[f] =",
-        _NO_LIMIT_CHECK + "        end[f] =",
+        "if ((m.mask & bit) && (m.value[f] < b.urad_lo[f] || m.value[f] > b.urad_hi[f])) {",
+        "if ((m.mask & bit) && false) {",
+    ),
+    Mutant(
+        "limits-keep-path",
+        "joint limit (new limits end a path that would leave them)",
+        "firmware/src/core/finger.cpp",
+        "    if (end_path) path_.stop();\n",
+        "",
     ),
     Mutant(
         "duty-past-limit",

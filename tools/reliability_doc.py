@@ -266,8 +266,8 @@ def mutants_section(res: dict) -> str:
             "## Mutation check",
             "",
             f"`make mutants` (tools/mutants.py, {res.get('date', '')}): each safety rule "
-            "disabled in turn by one edit of firmware/src (or one per place the rule is "
-            "stated) in a copy of the checkout, then "
+            "disabled in turn by one edit of firmware/src at its one home (a fast path beside "
+            "its general one has a mutant of its own) in a copy of the checkout, then "
             f"{', '.join(res['tests'])} on it (host build and ELF on the emulated board). "
             f"**Score: {res['caught']} of {res['total']} rule mutants caught.**",
             "",

@@ -20,6 +20,13 @@ Scenarios (all five fingers in POSITION, encoders sweeping, 500 Hz telemetry):
   latency   1 kHz stream, ping and set_targets one at a time, each 0.5-3 ms after the last
             reply: round trips from the request's first byte on the line to the reply's last byte
             off it (its stop bit), and where the time goes
+  heavy     the heaviest traffic the protocol allows: 1 kHz stream, requests back to back (the
+            receive line saturated): five-finger moves, pings, get_state, get_stats and
+            heartbeats in turn, and a save_config (EEPROM writes) every 0.5 s
+Every row also reports the receive path as the harness models the chip's receiver (a two-byte
+FIFO behind the shift register): bytes read, the worst and mean wait from a byte's stop bit to
+the firmware's read of UDR0, bytes that waited over a frame, bytes lost (DOR0), and the
+firmware's own count of the overruns it saw (get_stats: uart_overruns).
 The host's frames drift against the tick (its clock is not the board's): each period is a
 little longer than nominal, so that over a run of a second or more the frames start at every
 phase of the tick, the worst (a frame arriving while the tick runs) included.
@@ -54,7 +61,17 @@ from utrf.protocol.framing import Frame, decode_stream, encode_frame
 CPU_HZ = 16_000_000
 TICK_VECTOR = 13  # TIMER2_COMPA
 TICK, LOOP, DISPATCH = 0, 1, 2  # the harness's function profile slots
-SCENARIOS = ("idle", "typical", "stress", "silent", "moves", "latency", "pins", "tickdead")
+SCENARIOS = (
+    "idle",
+    "typical",
+    "stress",
+    "silent",
+    "moves",
+    "latency",
+    "heavy",
+    "pins",
+    "tickdead",
+)
 CHUNK = CPU_HZ // 2000  # the encoders' inputs are set every 0.5 ms at most
 ALL = 0x1F
 
@@ -196,10 +213,11 @@ class Bench:
         b.profile_function_slot(DISPATCH, self.addr["dispatch"])
         b.profile_vector(TICK_VECTOR)
         b.profile_vector_requires(TICK)  # the timer interrupts that ran a tick
-        self.start(1000 if scenario in ("moves", "latency") else 500)
+        self.start(1000 if scenario in ("moves", "latency", "heavy") else 500)
         self.send(m.ResetStats())
         self.run_until(0.31)
         b.profile_clear()
+        b.rx_timing(clear=True)
         histogram = os.environ.get("UTRF_PC_PROFILE")
         hist_of = os.environ.get("UTRF_PC_PROFILE_OF", "tick")
         if histogram:
@@ -255,6 +273,13 @@ class Bench:
                     self.take_output()
                 gap_phase = math.fmod(gap_phase + 0.6180339887, 1.0)
                 self.run_until(b.cycle / CPU_HZ + 0.0005 + 0.0025 * gap_phase)
+            elif scenario == "heavy":
+                if b.uart_pending() < 64:
+                    move_id += 1
+                    self.send(self.heavy_request(t, t >= next_send, move_id))
+                    if t >= next_send:
+                        next_send += 0.5
+                self.run_until(t + 0.0005)
             elif scenario == "silent":
                 self.run_until(t + 0.0005)
             else:
@@ -271,7 +296,16 @@ class Bench:
             write_histogram(Path(histogram), b.pc_histogram_get(), f"{hist_of}, {scenario} row")
             b.pc_histogram(None)
         slept = b.stats()["sleep_cycles"] - sleep0
+        rx = b.rx_timing()
         result = self.figures(scenario, seconds, b.cycle - cycles0, slept)
+        result.update(
+            rx_reads=rx["reads"],
+            rx_wait_worst_cycles=rx["worst"],
+            rx_wait_worst_at_s=round(rx["worst_at"] / CPU_HZ, 6),
+            rx_wait_mean_cycles=round(rx["total"] / rx["reads"], 1) if rx["reads"] else 0.0,
+            rx_waits_over_a_frame=rx["late"],
+            rx_bytes_lost=rx["overruns"],
+        )
         result["state_frames"] = self.state_frames - frames0
         result["state_seq_gaps"] = self.state_gaps - gaps0
         # Let the board work off what it has received, then ask for its counters. A lone 0x00
@@ -293,11 +327,36 @@ class Bench:
             rx_crc_errors=s.rx_crc_errors,
             rx_framing_errors=s.rx_framing_errors,
             rx_overruns=s.rx_overruns,
+            uart_overruns=s.uart_overruns,
+            uart_frame_errors=s.uart_frame_errors,
             nacks=s.nacks,
             tx_dropped=s.tx_dropped,
             fault_frames=self.faults,
         )
         return result
+
+    def heavy_request(self, t: float, save: bool, k: int) -> m.Message:
+        """The heavy row's next request: a save_config when due, else a five-finger move,
+        ping, get_state, get_stats and heartbeat in turn."""
+        if save:
+            return m.SaveConfig()
+        kind = k % 5
+        if kind == 0:
+            v = 0.5 if (k // 5) & 1 else -0.3
+            return m.Move(
+                move_id=(k // 5) & 0xFF,
+                kind=m.TargetKind.JOINT2_ANGLE,
+                mask=ALL,
+                value=(v,) * 5,
+                duration=(0.2,) * 5,
+            )
+        if kind == 1:
+            return m.Ping(token=k & 0xFFFF)
+        if kind == 2:
+            return m.GetState()
+        if kind == 3:
+            return m.GetStats()
+        return m.Heartbeat()
 
     def last_rt(self) -> int:
         return self.rt["ping" if self.rt_ping else "targets"][-1]

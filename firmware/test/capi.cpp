@@ -6,6 +6,7 @@
 #include <new>
 
 #include "core/app.h"
+#include "generated/config_layout.h"
 #include "core/config.h"
 #include "core/dispatch.h"
 #include "core/encoder.h"
@@ -87,6 +88,9 @@ void fw_advance_ms(uint32_t ms) { state().ms += ms; }
 void fw_set_adc(uint8_t f, uint16_t sample) { state().adc[f] = sample; }
 // The sampler stops (no new ADC rounds): every encoder goes stale.
 void fw_freeze_adc(int frozen) { state().adc_frozen = frozen != 0; }
+// Every reading through the tick's general encoder path (Finger::judge_reading()), not its
+// fast one: the two must judge alike.
+void fw_encoder_general_path(int on) { state().adc_rejudge = on != 0; }
 void fw_set_tick_cycles(uint32_t c) { state().tick_cycles = c; }
 void fw_set_period_elapsed(int on) { state().period_elapsed = on != 0; }
 
@@ -103,6 +107,10 @@ uint16_t fw_rx(const uint8_t* data, uint16_t n) {
 }
 
 void fw_add_rx_lost(uint16_t n) { state().rx_lost = (uint16_t)(state().rx_lost + n); }
+void fw_add_uart_errors(uint8_t overruns, uint8_t frame_errors) {
+    state().uart_overruns = (uint8_t)(state().uart_overruns + overruns);
+    state().uart_frame_errors = (uint8_t)(state().uart_frame_errors + frame_errors);
+}
 
 uint16_t fw_tx(uint8_t* out, uint16_t max) {
     if (g_line_len != 0) {  // the line first: it holds the older bytes
@@ -215,31 +223,32 @@ pid::Coeffs g_pc;
 pid::Pid g_pid;
 int16_t g_plimit;
 
-pid::Gains gains(double kp, double ki, double kd, double fc, double db, double slew) {
-    pid::Gains g;
-    g.kp = (float)kp;
-    g.ki = (float)ki;
-    g.kd = (float)kd;
-    g.d_cutoff_hz = (float)fc;
-    g.deadband = (float)db;
-    g.slew_per_s = (float)slew;
-    return g;
+// A set_gains body (the host's encoding, every gain the spec has) to the coefficients, as the
+// board compiles them: -1 when the body does not decode.
+int gains_from_body(const uint8_t* body, uint8_t len, pid::Coeffs& out) {
+    proto::SetGains m;
+    uint8_t bad = 0xFF;
+    if (proto::decode(body, len, m, bad) != proto::DecodeStatus::OK) return -1;
+    config::Gains g;
+    config::take(m, g);
+    out = pid::compile(g, 1e-3f);
+    return 0;
 }
 }  // namespace
 
-void fw_pid_config(double kp, double ki, double kd, double fc, double db, double slew,
-                   int16_t limit) {
-    g_pc = pid::compile(gains(kp, ki, kd, fc, db, slew), 1e-3f);
+int fw_pid_config(const uint8_t* set_gains_body, uint8_t len, int16_t limit) {
+    if (gains_from_body(set_gains_body, len, g_pc) != 0) return -1;
     g_plimit = limit;
     g_pid.load(g_pc);
+    return 0;
 }
 
 // New gains while running: rebased, so the output does not jump.
-void fw_pid_regain(double kp, double ki, double kd, double fc, double db, double slew,
-                   int16_t limit) {
-    g_pc = pid::compile(gains(kp, ki, kd, fc, db, slew), 1e-3f);
+int fw_pid_regain(const uint8_t* set_gains_body, uint8_t len, int16_t limit) {
+    if (gains_from_body(set_gains_body, len, g_pc) != 0) return -1;
     g_plimit = limit;
     g_pid.set_coeffs(g_pc, g_plimit);
+    return 0;
 }
 
 void fw_pid_reset(int16_t u, int16_t measured) { g_pid.reset(g_plimit, u, measured); }
@@ -254,11 +263,9 @@ void fw_pid_state(int32_t* i31, int32_t* v8, int32_t* saturated) {
     *v8 = g_pid.velocity8();
     *saturated = g_pid.saturated() ? 1 : 0;
 }
-int16_t fw_pid_add_deadband(int16_t v, int16_t db) { return db ? pid::add_deadband(v, db) : v; }
+int32_t fw_pid_add_deadband(int32_t v, int16_t db) { return db ? pid::add_deadband(v, db) : v; }
 int16_t fw_pid_remove_deadband(int16_t u, int16_t db) {
-    pid::Gains g = gains(0, 0, 0, 10, db / 32768.0, 1);
-    const pid::Coeffs c = pid::compile(g, 1e-3f);
-    return pid::remove_deadband(u, c.deadband, c.db_inverse);
+    return pid::remove_deadband(u, db, pid::deadband_inverse(db));
 }
 // The gain representation: value -> (mantissa, shift) -> the value it stands for.
 double fw_gain_roundtrip(double value) {
@@ -310,6 +317,15 @@ uint16_t fw_encoder_turn_from_rad(double rad) { return encoder::turn_from_rad((f
 
 void fw_target_window(int16_t theta_min, int16_t theta_max, int32_t* lo, int32_t* hi) {
     dispatch::target_window(theta_min, theta_max, *lo, *hi);
+}
+// The general target range rule (finger::Params::accepts()) on a JOINT2_ANGLE value, as move
+// applies it: the set_targets window (the fast path) must accept exactly these.
+int fw_target_accepts(int16_t theta_min, int16_t theta_max, int32_t urad) {
+    finger::Params p = finger::Params();
+    p.theta_min = theta_min;
+    p.theta_max = theta_max;
+    if (urad < -dispatch::kMaxUrad || urad > dispatch::kMaxUrad) return 0;
+    return p.accepts(dispatch::bu_from_urad(urad)) ? 1 : 0;
 }
 
 uint16_t fw_config_image_bytes(void) { return config::kImageBytes; }

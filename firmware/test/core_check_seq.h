@@ -121,7 +121,7 @@ inline uint32_t core_check_run() {
         for (uint8_t i = 0; i < 50; ++i) f.add((uint32_t)fx::apply16(g, (int16_t)r.next(), pid::kTermMax14));
     }
     // The PID on a random walk of target and measurement, coefficients given as integers.
-    pid::Coeffs c;
+    pid::Coeffs c = pid::Coeffs();
     c.kp = fx::make_gain(1677.7f, pid::kTermMax14);
     c.ki = fx::make_gain(429.5f, pid::kIStepMax31);
     c.kd = fx::make_gain(6283.2f, pid::kTermMax14);
@@ -159,7 +159,7 @@ inline uint32_t core_check_run() {
     const int16_t deadbands[] = {1311, 0, 16384, 0, 200, 100};
     const int16_t limits[] = {22937, 32767, 0, 3000};
     for (uint8_t k = 0; k < 6; ++k) {
-        pid::Coeffs ck;
+        pid::Coeffs ck = pid::Coeffs();
         ck.kp = fx::make_gain(sets[k][0], pid::kTermMax14);
         ck.ki = fx::make_gain(sets[k][1], pid::kIStepMax31);
         ck.kd = fx::make_gain(sets[k][2], pid::kTermMax14);
@@ -204,7 +204,7 @@ inline uint32_t core_check_run() {
     for (uint8_t k = 0; k < 6; ++k) {
         const int16_t db = edge_db[k % 3];
         const int16_t limit = k < 3 ? 200 : 32767;
-        pid::Coeffs ce;
+        pid::Coeffs ce = pid::Coeffs();
         ce.kp = fx::make_gain(256.0f, pid::kTermMax14);
         ce.ki = fx::make_gain(0.0f, pid::kIStepMax31);
         ce.kd = fx::make_gain(6283.2f, pid::kTermMax14);
@@ -245,7 +245,7 @@ inline uint32_t core_check_run() {
     // filtered speed v8, so the P term cancels an unsaturated D term exactly and a saturated
     // one leaves its remainder in the output. (alpha < 1: v8 has low bits.)
     {
-        pid::Coeffs cd;
+        pid::Coeffs cd = pid::Coeffs();
         cd.kp = fx::make_gain(3001.0f, pid::kTermMax14);
         cd.ki = fx::make_gain(0.0f, pid::kIStepMax31);
         cd.kd = fx::make_gain(3001.0f, pid::kTermMax14);  // xlim 11181

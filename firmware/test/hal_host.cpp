@@ -83,6 +83,7 @@ const EncoderReading* encoders_read() {
     const bool stale = host::g_staleness.stale(g_state.adc_seq);
     for (uint8_t f = 0; f < 5; ++f) {
         out[f] = stale ? encoder::no_data() : encoder::judge(g_state.adc[f], g_setup[f]);
+        if (g_state.adc_rejudge) out[f].flags |= kReadingRejudge;
     }
     return out;
 }
@@ -153,6 +154,12 @@ uint16_t serial_take_overruns() {
     const uint16_t n = g_state.rx_lost;
     g_state.rx_lost = 0;
     return n;
+}
+
+UartErrors serial_take_uart_errors() {
+    const UartErrors e = {g_state.uart_overruns, g_state.uart_frame_errors};
+    g_state.uart_overruns = g_state.uart_frame_errors = 0;
+    return e;
 }
 
 uint8_t eeprom_read(uint16_t addr) { return g_state.eeprom[addr % host::kEepromBytes]; }

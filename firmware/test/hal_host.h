@@ -25,6 +25,8 @@ struct State {
     uint16_t adc[5];
     uint8_t adc_seq;
     bool adc_frozen;
+    // every reading flagged as judged with an earlier setup: the tick's general encoder path
+    bool adc_rejudge;
     uint32_t sample_rounds;
     // tick
     bool tick_started;
@@ -37,6 +39,7 @@ struct State {
     uint8_t rx[kRxBytes];
     uint16_t rx_head, rx_tail;
     uint16_t rx_lost;
+    uint8_t uart_overruns, uart_frame_errors;  // what serial_take_uart_errors() reports next
     uint8_t tx[kTxBytes];
     uint16_t tx_len;
     uint16_t tx_room_limit;  // serial_tx_room() reports at most this

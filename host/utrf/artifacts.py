@@ -13,6 +13,10 @@ In order:
    default), once per version of the sources. A missing tool is one line naming the Debian
    package that has it.
 
+A board started without an explicit firmware says which it runs (:func:`describe_firmware`:
+its build id and which of these it came from). A cached build's id is its sources' hash, so
+two installs of the same sources report the same build.
+
 No path here climbs from ``__file__`` into a repository: the packaged sources are package
 data (``importlib.resources``), and a checkout is found from the working directory.
 """
@@ -67,12 +71,24 @@ def cache_root() -> Path:
 
 
 def _source_hash(fw_dir: Path, harness_dir: Path) -> str:
+    """The sources' hash, and the MuJoCo the harness is built against (its headers come from
+    the mujoco package: installed or upgraded later, the harness is built anew)."""
     h = hashlib.sha256()
+    h.update(f"mujoco {_mujoco_version()}\0".encode())
     for root in (fw_dir, harness_dir):
         files = [*root.glob("*.mk"), *root.glob("src/**/*.[ch]*"), *root.glob("*.[ch]")]
         for p in sorted(set(files)):
             h.update(str(p.relative_to(root)).encode() + b"\0" + p.read_bytes() + b"\0")
     return h.hexdigest()[:16]
+
+
+def _mujoco_version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("mujoco")
+    except metadata.PackageNotFoundError:
+        return "none"
 
 
 def _check_tools(tools: dict[str, str], files: dict[Path, str], what: str) -> None:
@@ -111,7 +127,8 @@ def _cached(relative: Path, what: str, tools: dict[str, str], files: dict[Path, 
         print(f"utrf: building {what} into {out} (once)", flush=True)
         cmd = ["make", "-s", "--no-print-directory",
                "-f", str(fw_dir / "firmware.mk"), "-f", str(harness_dir / "harness.mk"),
-               f"FW_DIR={fw_dir}", f"EMU_DIR={harness_dir}", f"BUILD={out}", "FW_GIT_ID=",
+               f"FW_DIR={fw_dir}", f"EMU_DIR={harness_dir}", f"BUILD={out}",
+               f"FW_GIT_ID={out.name[:8]}",  # the build id: the cache's hash of the sources
                f"PY={sys.executable}",  # harness.mk asks it for MuJoCo's headers
                str(target)]  # fmt: skip
         proc = subprocess.run(cmd, cwd=out, capture_output=True, text=True, check=False)
@@ -148,3 +165,49 @@ def firmware_hex() -> Path:
 def harness_library() -> Path:
     """The emulator's simavr harness (a shared library loaded with ctypes)."""
     return _resolve("UTRF_SIM_LIB", CHECKOUT_LIB, "emulator", "the emulator's harness library")
+
+
+def firmware_build_id(elf: Path) -> int | None:
+    """The build id compiled into ``elf`` (identify's ``build_id``), from the ``build_id.h``
+    its build wrote beside it; None when there is none (an ELF from elsewhere)."""
+    try:
+        text = (elf.parent / "build_id.h").read_text()
+    except OSError:
+        return None
+    for word in text.split():
+        if word.startswith("0x") and word.endswith("UL"):
+            return int(word[2:-2], 16)
+    return None
+
+
+def describe_firmware(elf: Path, given: bool = False) -> str:
+    """Which firmware ``elf`` is, in words: its build id and where it came from (given
+    explicitly, ``UTRF_FIRMWARE_ELF``, this checkout's build, or the user's cache built from
+    the packaged sources)."""
+    build = firmware_build_id(elf)
+    ident = f"build {build:08x}" if build is not None else "build id unknown"
+    env = os.environ.get("UTRF_FIRMWARE_ELF")
+    root = checkout_root()
+    if given:
+        origin = "given explicitly"
+    elif env and Path(env).resolve() == elf.resolve():
+        origin = "from UTRF_FIRMWARE_ELF"
+    elif root is not None and (root / CHECKOUT_ELF).resolve() == elf.resolve():
+        origin = f"this checkout's `make firmware` ({root})"
+    elif cache_root().resolve() in elf.resolve().parents:
+        origin = (
+            f"built from the sources packaged with utrf {_version()} and cached in "
+            f"{elf.parent.parent} (pass --elf or set UTRF_FIRMWARE_ELF for another)"
+        )
+    else:
+        origin = "the default"
+    return f"{elf} ({ident}, {origin})"
+
+
+def _version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("utrf")
+    except metadata.PackageNotFoundError:
+        return "(not installed)"

@@ -154,3 +154,17 @@ def read_log(path: str | Path, columns: Sequence[str] | None = None) -> LogData:
             continue
         rows.append({c: _value(v) for c, v in zip(header, line, strict=True)})
     return LogData(columns=header, rows=rows, skipped=skipped)
+
+
+def read_rows(path: str | Path, columns: Sequence[str]) -> list[dict[str, float | str]]:
+    """The complete rows of a log that a killed writer may have left: none when the file is
+    missing or its header was cut short (a kill before the first row); else :func:`read_log`'s
+    rows. A whole header of other columns is still an error."""
+    path = Path(path)
+    if not path.exists():
+        return []
+    with path.open("rb") as f:
+        first = f.readline()
+    if not first.endswith(b"\n"):
+        return []  # the header itself was cut: not one row was written
+    return read_log(path, columns).rows

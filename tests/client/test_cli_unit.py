@@ -48,7 +48,7 @@ def test_poses_json_is_si_and_reads_user_files(
     assert data["vulcan"]["theta2_rad"]["ring"] == pytest.approx(expected)
     assert data["shaka"]["source"] == str(extra)
     assert data["shaka"]["theta2_rad"]["index"] == 0.0
-    assert data["grasp-egg"]["grasp"]["effort"] == pytest.approx(0.2)
+    assert data["grasp-egg"]["grasp"]["effort"] == pytest.approx(0.4)
 
 
 def test_a_bad_pose_file_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -255,13 +255,13 @@ def test_pose_uses_the_library_and_grasp_mode(board: HandBoard, hand: Hand) -> N
     assert set(st[i].mode for i in range(5)) == {M.ControlMode.POSITION}
     hand.pose("open", duration=0.1)
     n = len(board.requests(M.SetMode))
-    grasp = hand.pose("grasp-egg", duration=0.1)  # closes thumb, index, middle
-    (modes,) = board.requests(M.SetMode)[n:]  # ring and little already hold position
-    assert modes.mask == 0b00111
-    assert modes.mode[:3] == (M.ControlMode.GRASP,) * 3
-    assert modes.effort[:3] == (pytest.approx(grasp.grasp.effort),) * 3
+    grasp = hand.pose("grasp-egg", duration=0.1)  # closes thumb, index, middle, ring
+    (modes,) = board.requests(M.SetMode)[n:]  # the little finger already holds position
+    assert modes.mask == 0b01111
+    assert modes.mode[:4] == (M.ControlMode.GRASP,) * 4
+    assert modes.effort[:4] == (pytest.approx(grasp.grasp.effort),) * 4
     st = hand.state()
-    assert [f.mode for f in st][3:] == [M.ControlMode.POSITION] * 2
+    assert [f.mode for f in st][4:] == [M.ControlMode.POSITION]
 
 
 # --- telemetry, log, closing -------------------------------------------------------------

@@ -80,17 +80,38 @@ class TestUart:
             expected = (len(payload) + 6 + 1) * frame
             assert expected <= elapsed < expected + frame
 
-    def test_a_busy_firmware_loses_no_bytes(self, board: EmulatedBoard, console: Console) -> None:
-        """The receive interrupt is off for 5 ms while 126 bytes arrive: simavr's FIFO holds
-        63, the rest wait upstream; all come through in order."""
-        payload = random.Random(2).randbytes(120)
+    def test_a_busy_firmware_overruns_the_two_byte_receiver(
+        self, board: EmulatedBoard, console: Console
+    ) -> None:
+        """The receive interrupt is off for 5 ms while 100 bytes arrive: the chip keeps two in
+        its FIFO and one in the shift register (nothing starts after the last); the other 97
+        are lost (DOR), as on an ATmega2560, where simavr alone would have queued 64."""
         console.port.write(b"x 5\n")
-        console.port.write(b"e 120\n" + payload)
+        board.run_for(0.5e-3)  # the command is read: the interrupt is off now
+        board.rx_timing(clear=True)
+        payload = bytes(range(1, 101))
+        console.port.write(payload)
         assert console.line(timeout=0.1) == "x"
-        assert console.port.read(120) == payload
-        stats = board.stats
-        assert stats["rx_held"] > 0
-        assert stats["rx_uart_bytes"] == stats["rx_host_bytes"]
+        stats, rx = board.stats, board.rx_timing()
+        assert stats["rx_uart_bytes"] == stats["rx_host_bytes"] == 104
+        assert stats["rx_overruns"] == rx["overruns"] == 97
+        # the three kept bytes are read when the interrupt comes back, 5 ms after the first
+        assert rx["reads"] == 3
+        assert rx["worst"] > 4e-3 * 16e6 and rx["late"] == 3
+
+    def test_bytes_read_in_time_wait_under_a_frame(self, board: EmulatedBoard) -> None:
+        """Back-to-back bytes to a firmware that reads them (its echo and timer interrupts in
+        between): each is read within two frames of its stop bit, none lost; the wait is timed
+        from the end of the stop bit (a read 24 cycles after it), not from the start bit."""
+        console = Console(board)
+        assert console.line() == "boot 1"
+        board.rx_timing(clear=True)
+        payload = random.Random(2).randbytes(120)
+        assert echo_duration(board, console, payload) > 0
+        rx = board.rx_timing()
+        assert rx["overruns"] == 0 and rx["reads"] == 120 + len("e 120\n")
+        assert 0 < rx["worst"] < 2 * 160
+        assert 20 <= rx["total"] / rx["reads"] < 80
 
     def test_bytes_sent_while_the_receiver_is_off_are_lost(self, board: EmulatedBoard) -> None:
         board.write(b"a\n")  # the fixture has not enabled its receiver yet at t = 0

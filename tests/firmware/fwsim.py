@@ -12,6 +12,7 @@ import ctypes
 import math
 import struct
 import subprocess
+import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -95,10 +96,12 @@ def load_library(path: Path = LIB_PATH) -> ctypes.CDLL:
         "fw_advance_ms": (None, [c.c_uint32]),
         "fw_set_adc": (None, [c.c_uint8, c.c_uint16]),
         "fw_freeze_adc": (None, [c.c_int]),
+        "fw_encoder_general_path": (None, [c.c_int]),
         "fw_set_tick_cycles": (None, [c.c_uint32]),
         "fw_set_period_elapsed": (None, [c.c_int]),
         "fw_rx": (c.c_uint16, [c.c_char_p, c.c_uint16]),
         "fw_add_rx_lost": (None, [c.c_uint16]),
+        "fw_add_uart_errors": (None, [c.c_uint8, c.c_uint8]),
         "fw_tx": (c.c_uint16, [c.c_char_p, c.c_uint16]),
         "fw_set_tx_room": (None, [c.c_uint16]),
         "fw_eeprom": (c.POINTER(c.c_uint8), []),
@@ -112,14 +115,8 @@ def load_library(path: Path = LIB_PATH) -> ctypes.CDLL:
         "fw_path_left": (c.c_uint16, [c.c_uint8]),
         "fw_stream_slots": (c.c_uint8, []),
         "fw_status": (None, [c.POINTER(FwStatus)]),
-        "fw_pid_config": (
-            None,
-            [c.c_double, c.c_double, c.c_double, c.c_double, c.c_double, c.c_double, c.c_int16],
-        ),
-        "fw_pid_regain": (
-            None,
-            [c.c_double, c.c_double, c.c_double, c.c_double, c.c_double, c.c_double, c.c_int16],
-        ),
+        "fw_pid_config": (c.c_int, [c.c_char_p, c.c_uint8, c.c_int16]),
+        "fw_pid_regain": (c.c_int, [c.c_char_p, c.c_uint8, c.c_int16]),
         "fw_pid_reset": (None, [c.c_int16, c.c_int16]),
         "fw_pid_step": (c.c_int16, [c.c_int16, c.c_int16]),
         "fw_pid_step_open": (c.c_int16, [c.c_int16, c.c_int16]),
@@ -127,7 +124,7 @@ def load_library(path: Path = LIB_PATH) -> ctypes.CDLL:
             None,
             [c.POINTER(c.c_int32), c.POINTER(c.c_int32), c.POINTER(c.c_int32)],
         ),
-        "fw_pid_add_deadband": (c.c_int16, [c.c_int16, c.c_int16]),
+        "fw_pid_add_deadband": (c.c_int32, [c.c_int32, c.c_int16]),
         "fw_pid_remove_deadband": (c.c_int16, [c.c_int16, c.c_int16]),
         "fw_gain_roundtrip": (c.c_double, [c.c_double]),
         "fw_gain_apply": (c.c_int32, [c.c_double, c.c_int16, c.c_int32]),
@@ -152,6 +149,7 @@ def load_library(path: Path = LIB_PATH) -> ctypes.CDLL:
             None,
             [c.c_int16, c.c_int16, c.POINTER(c.c_int32), c.POINTER(c.c_int32)],
         ),
+        "fw_target_accepts": (c.c_int, [c.c_int16, c.c_int16, c.c_int32]),
         "fw_config_image_bytes": (c.c_uint16, []),
         "fw_config_body_bytes": (c.c_uint16, []),
     }
@@ -160,6 +158,22 @@ def load_library(path: Path = LIB_PATH) -> ctypes.CDLL:
         fn.restype = res
         fn.argtypes = args
     return lib
+
+
+def spec_defaults(message: str) -> dict[str, float]:
+    """A message's field defaults, as protocol/spec.toml gives them."""
+    spec = tomllib.loads((REPO / "protocol" / "spec.toml").read_text(encoding="utf-8"))
+    (msg,) = [x for x in spec["message"] if x["name"] == message]
+    return {f["name"]: f["default"] for f in msg["fields"] if "default" in f}
+
+
+def pid_config(lib: ctypes.CDLL, limit: int, *, regain: bool = False, **gains: float) -> None:
+    """The PID alone with these gains (the rest the spec's defaults), as the board compiles a
+    set_gains: the C API takes the message's body, so a gain added to the spec needs no change
+    here. `regain`: new gains while running (rebased, bumpless)."""
+    body = m.SetGains(**{"finger": 0, **spec_defaults("set_gains"), **gains}).encode()
+    fn = lib.fw_pid_regain if regain else lib.fw_pid_config
+    assert fn(body, len(body), limit) == 0
 
 
 # ---- encoder voltages ---------------------------------------------------------------------

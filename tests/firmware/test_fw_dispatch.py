@@ -10,6 +10,7 @@ import itertools
 import math
 import struct
 
+import numpy as np
 import pytest
 from fwsim import Sim, m, raw_body
 
@@ -212,6 +213,31 @@ def test_bad_crc_is_refused_with_the_frames_seq(sim: Sim) -> None:
     assert (nack.msg_id, nack.code, nack.detail) == (m.SetMode.ID, m.ErrorCode.BAD_CRC, 0)
     assert snapshot(sim) == before
     assert sim.ok(m.GetStats()).rx_crc_errors == 1
+
+
+@pytest.mark.parametrize("seq", [0x42, 0x00, 0x7F])
+def test_a_damaged_frame_whose_seq_reads_as_a_board_seq_is_counted_not_answered(
+    sim: Sim, seq: int
+) -> None:
+    """A BAD_CRC nack echoes the damaged frame's seq; one with bit 7 set would read as a board
+    frame (protocol/README.md, Sequence numbers): the board counts the frame and says nothing."""
+    frame = bytearray(encode_frame(seq, m.SetMode.ID, VALID[m.SetMode].encode()))
+    damaged = bytearray(frame)
+    if seq == 0:  # seq 0 is a COBS code's zero: damage the msg_id's place instead, then flip
+        damaged = bytearray(encode_frame(0x80, m.SetMode.ID, VALID[m.SetMode].encode()))
+        damaged[-2] ^= 0x01  # a CRC byte: the frame is damaged, its seq reads 0x80
+    else:
+        assert damaged[1] == seq
+        damaged[1] ^= 0x80  # the seq byte, bit 7 flipped on the line
+    sim.take()
+    sim.send_raw(bytes(damaged))
+    sim.run(3)
+    assert [r for r in sim.frames if r.msg_id == m.Nack.ID] == []
+    assert sim.ok(m.GetStats()).rx_crc_errors == 1
+    # the link goes on: the undamaged frame is answered
+    sim.send_raw(bytes(frame))
+    sim.run(2)
+    assert any(r.seq == seq and r.msg_id == m.Ack.ID for r in sim.frames)
 
 
 def test_framing_errors_are_counted_not_answered(sim: Sim) -> None:
@@ -423,17 +449,20 @@ def test_stats_count_and_reset(sim: Sim) -> None:
         sim.ok(m.Heartbeat())
     sim.nack(0x77, b"")
     sim.lib.fw_add_rx_lost(5)
+    sim.lib.fw_add_uart_errors(2, 3)
     sim.run(1100)
     stats = sim.ok(m.GetStats())
     assert stats.rx_frames == 5  # 3 heartbeats, the bad id, this request
     assert stats.nacks == 1
     assert stats.rx_overruns == 5
+    assert (stats.uart_overruns, stats.uart_frame_errors) == (2, 3)
     assert stats.ticks >= 1100
     assert stats.tick_worst == pytest.approx(300e-6)
     assert stats.tick_mean == pytest.approx(300e-6)
     sim.ok(m.ResetStats())
     stats = sim.ok(m.GetStats())
     assert (stats.rx_frames, stats.nacks, stats.rx_overruns) == (1, 0, 0)
+    assert (stats.uart_overruns, stats.uart_frame_errors) == (0, 0)
 
 
 def test_repeated_set_mode_is_harmless(sim: Sim) -> None:
@@ -693,6 +722,27 @@ def test_the_set_targets_window_is_exactly_the_values_the_count_check_accepts(si
         assert (lo.value, hi.value) == (want_lo, want_hi), (t_min, t_max)
         assert bu(want_lo) >= t_min - 1 and (want_lo == -k or bu(want_lo - 1) < t_min - 1)
         assert bu(want_hi) <= t_max + 1 and (want_hi == k or bu(want_hi + 1) > t_max + 1)
+
+
+def test_the_set_targets_window_and_the_general_range_rule_accept_alike(sim: Sim) -> None:
+    """The target range rule has one home (finger::Params::accepts(), which move and the
+    other kinds take); set_targets' micro-radian window is its fast path for JOINT2_ANGLE.
+    Fed the same values (each window's edges and either side of them, random ones, the ends
+    of the range), the two agree."""
+    import ctypes
+
+    rng = np.random.default_rng(23)
+    lo, hi = ctypes.c_int32(), ctypes.c_int32()
+    limits = [(-16384, 16384), (-100, 100), (0, 0), (12000, 12345), (-32768, 32767)]
+    limits += [tuple(sorted(rng.integers(-20000, 20000, size=2))) for _ in range(20)]
+    for t_min, t_max in limits:
+        sim.lib.fw_target_window(int(t_min), int(t_max), ctypes.byref(lo), ctypes.byref(hi))
+        values = [lo.value + d for d in (-2, -1, 0, 1)] + [hi.value + d for d in (-1, 0, 1, 2)]
+        values += [int(v) for v in rng.integers(-4_100_000, 4_100_000, size=200)]
+        values += [-4_000_001, -4_000_000, 4_000_000, 4_000_001, 0]
+        for v in values:
+            fast = lo.value <= v <= hi.value
+            assert bool(sim.lib.fw_target_accepts(int(t_min), int(t_max), v)) == fast, (t_min, v)
 
 
 def test_joint2_angle_targets_are_the_exact_nearest_count(sim: Sim) -> None:

@@ -11,7 +11,17 @@ import itertools
 import math
 
 import pytest
-from fwsim import BU, Q15, ClosedLoop, FingerPlant, Sim, m, step_figures, step_response
+from fwsim import (
+    BU,
+    Q15,
+    ClosedLoop,
+    FingerPlant,
+    Sim,
+    m,
+    pid_config,
+    step_figures,
+    step_response,
+)
 
 LIMIT = round(0.7 * Q15)  # default max_duty 0.8 less the pretension 0.1
 
@@ -43,7 +53,9 @@ def test_step_response_figures(sim: Sim, step: float) -> None:
 
 def test_derivative_on_measurement_gives_no_kick(fwlib: ctypes.CDLL) -> None:
     """A target step moves only P (and later I); D sees the measurement, which did not move."""
-    fwlib.fw_pid_config(0.0, 0.0, 0.5, 30.0, 0.0, 1000.0, LIMIT)
+    pid_config(
+        fwlib, LIMIT, kp=0.0, ki=0.0, kd=0.5, d_cutoff_hz=30.0, deadband_duty=0.0, slew_per_s=1000.0
+    )
     fwlib.fw_pid_reset(0, 0)
     assert fwlib.fw_pid_step(bu(1.0), 0) == 0
     # A measurement step does move D, against the motion, then the filter lets it decay.
@@ -57,7 +69,16 @@ def test_derivative_on_measurement_gives_no_kick(fwlib: ctypes.CDLL) -> None:
 def test_derivative_filter_follows_its_cutoff(fwlib: ctypes.CDLL, cutoff_hz: float) -> None:
     """A ramp in the measurement: D rises toward kd * speed with the filter's time constant."""
     kd, speed = 0.01, 2.0  # s/rad, rad/s
-    fwlib.fw_pid_config(0.0, 0.0, kd, cutoff_hz, 0.0, 1000.0, LIMIT)
+    pid_config(
+        fwlib,
+        LIMIT,
+        kp=0.0,
+        ki=0.0,
+        kd=kd,
+        d_cutoff_hz=cutoff_hz,
+        deadband_duty=0.0,
+        slew_per_s=1000.0,
+    )
     fwlib.fw_pid_reset(0, 0)
     tau_ticks = 1000.0 / (2 * math.pi * cutoff_hz)
     outs = [
@@ -71,7 +92,16 @@ def test_derivative_filter_follows_its_cutoff(fwlib: ctypes.CDLL, cutoff_hz: flo
 
 def test_conditional_integration_holds_when_saturated(fwlib: ctypes.CDLL) -> None:
     """Pushing into the limit does not wind the integrator; the opposite error unwinds it."""
-    fwlib.fw_pid_config(2.0, 20.0, 0.0, 30.0, 0.0, 1000.0, LIMIT)
+    pid_config(
+        fwlib,
+        LIMIT,
+        kp=2.0,
+        ki=20.0,
+        kd=0.0,
+        d_cutoff_hz=30.0,
+        deadband_duty=0.0,
+        slew_per_s=1000.0,
+    )
     fwlib.fw_pid_reset(0, 0)
     for _ in range(50):  # e = 1 rad: P alone is 2 duty, far beyond the limit
         assert fwlib.fw_pid_step(bu(1.0), 0) == LIMIT
@@ -128,7 +158,16 @@ def test_anti_windup_recovery_beats_a_wound_integrator(sim: Sim) -> None:
 
 def test_integrator_removes_a_load_offset(fwlib: ctypes.CDLL) -> None:
     """P alone leaves an error under a constant load; I drives it out."""
-    fwlib.fw_pid_config(1.0, 10.0, 0.0, 30.0, 0.0, 1000.0, LIMIT)
+    pid_config(
+        fwlib,
+        LIMIT,
+        kp=1.0,
+        ki=10.0,
+        kd=0.0,
+        d_cutoff_hz=30.0,
+        deadband_duty=0.0,
+        slew_per_s=1000.0,
+    )
     fwlib.fw_pid_reset(0, 0)
     theta, load = 0.0, -0.2  # the load needs 0.2 duty to hold
     for _ in range(5000):
@@ -138,7 +177,9 @@ def test_integrator_removes_a_load_offset(fwlib: ctypes.CDLL) -> None:
 
 
 def test_bumpless_start_from_the_present_output(fwlib: ctypes.CDLL) -> None:
-    fwlib.fw_pid_config(3.0, 2.0, 0.05, 30.0, 0.04, 20.0, LIMIT)
+    pid_config(
+        fwlib, LIMIT, kp=3.0, ki=2.0, kd=0.05, d_cutoff_hz=30.0, deadband_duty=0.04, slew_per_s=20.0
+    )
     present = round(0.35 * Q15)
     fwlib.fw_pid_reset(present, bu(0.2))
     # Target = measured: the output stays where it was.
@@ -154,17 +195,38 @@ def test_bumpless_start_from_the_present_output(fwlib: ctypes.CDLL) -> None:
 
 
 def test_gain_change_is_bumpless(fwlib: ctypes.CDLL) -> None:
-    fwlib.fw_pid_config(3.0, 2.0, 0.05, 30.0, 0.0, 1000.0, LIMIT)
+    pid_config(
+        fwlib,
+        LIMIT,
+        kp=3.0,
+        ki=2.0,
+        kd=0.05,
+        d_cutoff_hz=30.0,
+        deadband_duty=0.0,
+        slew_per_s=1000.0,
+    )
     fwlib.fw_pid_reset(0, 0)
     for _ in range(30):
         u = fwlib.fw_pid_step(bu(0.1), bu(0.05))
-    fwlib.fw_pid_regain(6.0, 2.0, 0.05, 30.0, 0.0, 1000.0, LIMIT)
+    pid_config(
+        fwlib,
+        LIMIT,
+        regain=True,
+        kp=6.0,
+        ki=2.0,
+        kd=0.05,
+        d_cutoff_hz=30.0,
+        deadband_duty=0.0,
+        slew_per_s=1000.0,
+    )
     after = fwlib.fw_pid_step(bu(0.1), bu(0.05))
     assert abs(after - u) <= 0.01 * Q15  # P doubled, yet the output did not jump
 
 
 def test_slew_limit(fwlib: ctypes.CDLL) -> None:
-    fwlib.fw_pid_config(100.0, 0.0, 0.0, 30.0, 0.0, 5.0, LIMIT)  # 5 duty/s
+    pid_config(
+        fwlib, LIMIT, kp=100.0, ki=0.0, kd=0.0, d_cutoff_hz=30.0, deadband_duty=0.0, slew_per_s=5.0
+    )  # 5 duty/s
     fwlib.fw_pid_reset(0, 0)
     outs = [fwlib.fw_pid_step(bu(1.0), 0) for _ in range(200)]
     steps = [b - a for a, b in zip([0, *outs], outs, strict=False)]
@@ -181,6 +243,8 @@ def test_deadband_compensation(fwlib: ctypes.CDLL) -> None:
     # Outside the ramp the deadband is added in the output's direction ...
     assert fwlib.fw_pid_add_deadband(5000, db) == 5000 + db
     assert fwlib.fw_pid_add_deadband(-5000, db) == -5000 - db
+    # on the PID's unlimited sum: beyond a duty, unsaturated (the limit comes after)
+    assert fwlib.fw_pid_add_deadband(40000, db) == 40000 + db
     # ... continuous through zero (no chatter between +db and -db) ...
     values = [fwlib.fw_pid_add_deadband(v, db) for v in range(-2 * ramp, 2 * ramp + 1)]
     assert values[2 * ramp] == 0

@@ -40,7 +40,7 @@ def test_the_pid_on_a_falling_angle_is_defined_behaviour() -> None:
         """
         import fwsim
         lib = fwsim.load_library()
-        lib.fw_pid_config(3.0, 2.0, 0.05, 30.0, 0.04, 20.0, 22937)
+        fwsim.pid_config(lib, 22937, kp=3.0, ki=2.0, kd=0.05, deadband_duty=0.04)
         lib.fw_pid_reset(0, 0)
         for k in range(400):  # down and up through +-63 BU a tick and beyond
             lib.fw_pid_step(0, 3000 - 70 * k if k < 200 else -11000 + 70 * (k - 200))

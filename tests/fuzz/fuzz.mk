@@ -28,7 +28,7 @@ SOAK_SECONDS ?= 1800
 
 fuzz-build: $(FUZZ_BINS)
 
-$(FUZZ_BUILD)/obj/%.o: %.cpp
+$(FUZZ_BUILD)/obj/%.o: %.cpp | $(NEEDS_SETUP)
 	@mkdir -p $(@D)
 	$(FUZZ_CXX) -c $(FUZZ_FLAGS) -fsanitize=fuzzer-no-link -MMD -MP -o $@ $<
 

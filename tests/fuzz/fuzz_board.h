@@ -156,6 +156,13 @@ class Board {
                 FUZZ_CHECK(size >= 0, "the board sent message id 0x%02X", host_.msg_id());
                 FUZZ_CHECK(size == host_.body_len(), "message 0x%02X with %u bytes, not %d",
                            host_.msg_id(), host_.body_len(), size);
+                // A board seq (bit 7) only on the board's own frames: never on a reply, so a
+                // reply and a board frame cannot be confused (a BAD_CRC nack included).
+                const uint8_t id = host_.msg_id();
+                FUZZ_CHECK(!(host_.seq() & proto::kBoardSeqFlag) || id == proto::Boot::kId ||
+                               id == proto::State::kId || id == proto::Status::kId ||
+                               id == proto::Fault::kId,
+                           "message 0x%02X with the board's seq %u", id, host_.seq());
                 if (host_.seq() & proto::kBoardSeqFlag) continue;
                 if (nreplies_ < kMaxReplies) {
                     Reply& r = replies_[nreplies_++];

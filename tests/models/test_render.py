@@ -82,3 +82,23 @@ def test_cli_force_drive_and_bad_layout(tmp_path: Path, capsys: pytest.CaptureFi
     assert "[palm]: size_m must be a list of 3 finite numbers" in capsys.readouterr().err
     assert main(["mjcf", "--layout", str(tmp_path / "missing.toml")]) == 2
     assert "no such MJCF layout file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("pose", ["open", "shaka"])
+def test_every_fingertip_is_in_the_frame_where_it_is_drawn(pose: str) -> None:
+    """``hand_at_labelled`` frames the whole hand (a straight finger reaches furthest) and says
+    where each fingertip is: there the picture shows the tip's red site."""
+    from utrf.poses import PoseLibrary
+
+    theta2 = PoseLibrary.load()[pose].theta2(HAND)
+    image, tips = render.hand_at_labelled(list(theta2), HAND, height=240, width=320)
+    assert list(tips) == [f.name for f in HAND.fingers]
+    red = (image[:, :, 0] > 170) & (image[:, :, 1] < 90) & (image[:, :, 2] < 90)
+    rows, cols = np.nonzero(red)
+    seen = 0
+    for name, (col, row) in tips.items():
+        assert 0.04 * 320 <= col <= 0.96 * 320 and 0.04 * 240 <= row <= 0.96 * 240, name
+        near = np.hypot(cols - col, rows - row).min() if len(cols) else np.inf
+        seen += near < 6  # a flexed tip may hide behind its finger; a straight one shows
+    straight = sum(abs(t) < 0.1 for t in theta2)
+    assert seen >= straight >= 2

@@ -98,6 +98,8 @@ def test_installed_package_emulates_poses_and_flashes_from_anywhere(
     (built,) = cache.iterdir()
     assert f"building firmware ELF into {built} (once)" in out
     assert f"serving: firmware {built / 'firmware' / 'utrf.elf'}" in out
+    # it says which firmware: the build id (the sources' hash) and that it is the cached build
+    assert f"(build {built.name[:8]}, built from the sources packaged with utrf" in out
     assert (built / "emulator" / "libutrf_sim.so").is_file()
 
     flash = subprocess.run(

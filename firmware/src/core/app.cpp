@@ -93,8 +93,12 @@ void receive_byte(Board& b, uint8_t byte) {
             break;
         case framing::RxEvent::CRC_ERROR:
             ++b.link.rx_crc_errors;
-            dispatch::nack(b, b.decoder.seq(), b.decoder.msg_id(),
-                           (uint8_t)proto::ErrorCode::BAD_CRC, 0);
+            // The hint echoes the damaged seq; one with the board's flag would read as a board
+            // frame, and names no request: counted only.
+            if (!(b.decoder.seq() & proto::kBoardSeqFlag)) {
+                dispatch::nack(b, b.decoder.seq(), b.decoder.msg_id(),
+                               (uint8_t)proto::ErrorCode::BAD_CRC, 0);
+            }
             break;
         case framing::RxEvent::FRAMING_ERROR:
         case framing::RxEvent::OVERSIZE:
@@ -111,6 +115,9 @@ void receive_byte(Board& b, uint8_t byte) {
 void receive(Board& b) {
     const uint16_t lost = hal::serial_take_overruns();
     b.link.rx_overruns += lost;
+    const hal::UartErrors e = hal::serial_take_uart_errors();
+    b.link.uart_overruns += e.overruns;
+    b.link.uart_frame_errors += e.frame_errors;
     uint8_t budget = kRxBurst;
     while (budget != 0 && b.reply_len == 0) {
         const uint8_t* data;
@@ -325,13 +332,8 @@ void apply_finger_config(uint8_t f) {
     const finger::Params p = finger::compile(b.cfg.finger[f], hand::kDt, c);
     dispatch::target_window(p.theta_min, p.theta_max, b.urad_lo[f], b.urad_hi[f]);
     Lock lock;
-    b.hand.configure_finger(f, p, c);
-    // A target outside new limits is never kept: clamp it in.
-    finger::Finger& fg = b.hand.finger(f);
-    const int16_t t = fg.target();
-    if (t < p.theta_min || t > p.theta_max) {
-        fg.set_target(t < p.theta_min ? p.theta_min : p.theta_max);
-    }
+    // The move's memo goes with a path the new limits ended: its resend is a new move.
+    if (b.hand.configure_finger(f, p, c)) b.move_memo = false;
 }
 
 void apply_motion(uint8_t f) {

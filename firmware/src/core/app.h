@@ -37,6 +37,8 @@ struct LinkStats {
     uint32_t tx_dropped;
     uint32_t rx_ignored;  // requests with the board's seq flag: never answered
     uint32_t rx_repeats;  // resent requests answered from the reply cache
+    uint32_t uart_overruns;      // DOR0 reports: bytes the UART lost
+    uint32_t uart_frame_errors;  // FE0 reports: bytes with a bad stop bit
 };
 
 // The last request answered and its reply frame. A request with the same seq, id and CRC is

@@ -121,27 +121,6 @@ bool target_angle(uint8_t kind, uint8_t f, int32_t raw, float& theta2) {
     return false;
 }
 
-// Micro-radians (set_targets' JOINT2_ANGLE) to BU, to the nearest count, in integers:
-// x 32768 / (2 pi 1e6) as x * M / 2^32. M is within 2e-9 of exact: below 1e-4 count off for
-// any angle the board can hold.
-// The 64-bit product is formed from 32-bit ones (avr-gcc's 64-bit multiply and shift took
-// ~600 cycles a finger, a fifth of set_targets' dispatch): with M = 2^16 Mh + Ml and
-// x = 2^16 xh + xl (xl the low 16 bits, unsigned; xh = x >> 16, floor),
-// x M + 2^31 = 2^16 (x Mh + xh Ml + 2^15) + xl Ml, and since xl Ml < 2^32,
-// floor((x M + 2^31) / 2^32) = (x Mh + xh Ml + (xl Ml >> 16) + 2^15) >> 16 exactly.
-// |x| <= kMaxUrad keeps every term in 32 bits. (The host tests compare it with the 64-bit
-// form over the whole range.)
-const int32_t kMaxUrad = 4000000L;  // beyond +-pi: refused before the multiply
-int32_t bu_from_urad(int32_t urad) {
-    static const uint16_t kMh = 341;    // round(2^32 * 32768 / (2 pi 1e6)) = 22399067
-    static const uint16_t kMl = 51291;  //   = 341 * 65536 + 51291
-    const int16_t xh = (int16_t)(urad >> 16);
-    const uint16_t xl = (uint16_t)urad;
-    const int32_t s = urad * (int32_t)kMh + (int32_t)xh * (int32_t)kMl +
-                      (int32_t)(((uint32_t)xl * kMl) >> 16) + 0x8000L;
-    return s >> 16;
-}
-
 // A target in the unit of `kind` to BU (not yet clamped to the finger's limits); kNoTarget
 // when it has none. JOINT2_ANGLE in integers, the others through the kinematics (floats).
 // The float path out of line: its frame (registers saved for the float calls) is not paid by
@@ -158,13 +137,31 @@ inline int32_t target_bu(uint8_t kind, uint8_t f, int32_t raw) {
     return kin_target_bu(kind, f, raw);
 }
 
+// The targets of the fingers in `mask` (in `kind`'s unit) as setpoints, BU, by the target range
+// rule (finger::Params::accepts()): set_targets' and move's. False, with a nack naming the
+// first finger beyond its limits, when one is: nothing is set.
+bool setpoints(app::Board& b, uint8_t seq, uint8_t msg_id, uint8_t kind, uint8_t mask,
+               const int32_t* value, int16_t* out) {
+    uint8_t bit = 1;  // the finger's bit of the mask (a shift by f is a loop on the AVR)
+    for (uint8_t f = 0; f < kFingerCount; ++f, bit = (uint8_t)(bit << 1)) {
+        if (!(mask & bit)) continue;
+        const finger::Params& p = b.hand.finger(f).params();
+        const int32_t a = target_bu(kind, f, value[f]);
+        if (!p.accepts(a)) {
+            nack(b, seq, msg_id, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
+            return false;
+        }
+        out[f] = p.clamp(a);
+    }
+    return true;
+}
+
 // The frequent requests (set_targets, ping) are functions of their own, not inlined into
-// handle(): handle()'s frame, sized for every handler, made each of them save and spill far
-// more than it needs (set_targets took about 2,900 cycles inlined).
-// JOINT2_ANGLE targets (the usual kind) are checked against each finger's window of values
-// (target_window(), in micro-radians, the same values the check in counts accepts), so the
-// ack goes out before they are converted and set: the conversion (some 2,000 cycles for five
-// fingers) runs while the ack is on the line. Nothing else runs in between: a request after
+// handle(), whose frame is sized for every handler.
+// JOINT2_ANGLE targets (the usual kind) take the fast path: checked against each finger's
+// window of values (target_window(), in micro-radians, exactly the values the general rule,
+// setpoints(), accepts), so the ack goes out before they are converted and set, and the
+// conversion runs while the ack is on the line. Nothing else runs in between: a request after
 // this one finds the targets set.
 __attribute__((noinline)) void set_targets(app::Board& b, uint8_t seq, const uint8_t* body,
                                            uint8_t len) {
@@ -187,20 +184,10 @@ __attribute__((noinline)) void set_targets(app::Board& b, uint8_t seq, const uin
         for (uint8_t f = 0; f < kFingerCount; ++f, bit = (uint8_t)(bit << 1)) {
             if (!(m.mask & bit)) continue;
             const finger::Params& p = b.hand.finger(f).params();
-            bu[f] = (int16_t)fx::clamp32(bu_from_urad(m.value[f]), p.theta_min, p.theta_max);
+            bu[f] = p.clamp(bu_from_urad(m.value[f]));
         }
-    } else {
-        for (uint8_t f = 0; f < kFingerCount; ++f, bit = (uint8_t)(bit << 1)) {
-            if (!(m.mask & bit)) continue;
-            const finger::Params& p = b.hand.finger(f).params();
-            const int32_t a = kin_target_bu(m.kind, f, m.value[f]);
-            // The exact limit is allowed: the float round trip may land a count beyond it.
-            if (a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1) {
-                nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
-                return;
-            }
-            bu[f] = (int16_t)fx::clamp32(a, p.theta_min, p.theta_max);
-        }
+    } else if (!setpoints(b, seq, m.kId, m.kind, m.mask, m.value, bu)) {
+        return;
     }
     {
         Lock lock;
@@ -230,16 +217,7 @@ void move(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
         return;
     }
     int16_t end[kFingerCount];
-    for (uint8_t f = 0; f < kFingerCount; ++f) {
-        if (!(m.mask & (1u << f))) continue;
-        const finger::Params& p = b.hand.finger(f).params();
-        const int32_t a = target_bu(m.kind, f, m.value[f]);
-        if (a < (int32_t)p.theta_min - 1 || a > (int32_t)p.theta_max + 1) {
-            nack(b, seq, m.kId, (uint8_t)ErrorCode::OUT_OF_RANGE, (uint8_t)(0x80 | f));
-            return;
-        }
-        end[f] = (int16_t)fx::clamp32(a, p.theta_min, p.theta_max);
-    }
+    if (!setpoints(b, seq, m.kId, m.kind, m.mask, m.value, end)) return;
     // The paths start from the setpoints in use: read them (a moving finger's changes a few
     // counts before its new path starts, which moves its start by as much), plan outside the
     // lock, then check the modes again and start them under one lock.
@@ -530,6 +508,8 @@ void get_stats(app::Board& b, uint8_t seq, const uint8_t* body, uint8_t len) {
     r.tick_mean = us_from_cycles(t.mean_cycles);
     r.rx_ignored = b.link.rx_ignored;
     r.rx_repeats = b.link.rx_repeats;
+    r.uart_overruns = b.link.uart_overruns;
+    r.uart_frame_errors = b.link.uart_frame_errors;
     reply(b, seq, r);
 }
 

@@ -49,13 +49,14 @@ __attribute__((always_inline)) inline int16_t angle_bu(uint16_t turn, uint16_t z
     return (int16_t)((int16_t)d >> 1);  // -16384..16383
 }
 
-// A sample judged for the tick: the band, the angle with the finger's setup and the fault
-// limits (the rules that need no memory of earlier samples; the jump rule needs the finger's
-// last angle and stays in the tick). The sampler runs it for each sample (the AVR's ADC
-// interrupt, between ticks), so the tick takes a ready angle.
-__attribute__((always_inline)) inline hal::EncoderReading judge(uint16_t sample,
+// The encoder's rules that need no memory of earlier readings, on a reading's turn and status:
+// out of band (or no data) is kReadingOut; otherwise the angle with the finger's setup, and
+// kReadingLimit beyond its fault limits. The one home of these rules: the sampler runs it on
+// each sample (the AVR's ADC interrupt, between ticks, so the tick takes a ready angle) and
+// the tick on a reading judged with an earlier setup (Finger::judge_reading()). The jump rule
+// needs the finger's last angle: Finger::take_angle().
+__attribute__((always_inline)) inline hal::EncoderReading judge(hal::EncoderReading r,
                                                                 const hal::EncoderSetup& s) {
-    hal::EncoderReading r = as5600_reading(sample);
     if (r.status != hal::EncoderStatus::OK) {
         r.angle = 0;
         r.flags = hal::kReadingOut;
@@ -64,6 +65,11 @@ __attribute__((always_inline)) inline hal::EncoderReading judge(uint16_t sample,
     r.angle = angle_bu(r.turn, s.zero_turn, s.invert);
     r.flags = (r.angle < s.low || r.angle > s.high) ? hal::kReadingLimit : 0;
     return r;
+}
+// A sample judged for the tick.
+__attribute__((always_inline)) inline hal::EncoderReading judge(uint16_t sample,
+                                                                const hal::EncoderSetup& s) {
+    return judge(as5600_reading(sample), s);
 }
 
 // A reading with no data (the sampler stopped).

@@ -16,14 +16,7 @@ int16_t q15_milli(uint16_t milli) {
 
 Params compile(const config::Finger& cfg, float dt_s, pid::Coeffs& coeffs) {
     Params p;
-    pid::Gains g;
-    g.kp = cfg.gains.kp;
-    g.ki = cfg.gains.ki;
-    g.kd = cfg.gains.kd;
-    g.d_cutoff_hz = cfg.gains.d_cutoff_hz;
-    g.deadband = cfg.gains.deadband_duty * 1e-3f;
-    g.slew_per_s = cfg.gains.slew_per_s;
-    coeffs = pid::compile(g, dt_s);
+    coeffs = pid::compile(cfg.gains, dt_s);
     p.max_duty = q15_milli(cfg.gains.max_duty);
     p.pretension = q15_milli(cfg.gains.pretension_duty);
     p.theta_min = fx::bu(cfg.limits.theta2_min);
@@ -77,26 +70,37 @@ int16_t Finger::limit_for(uint8_t mode) const {
     return lim < 0 ? (int16_t)0 : lim;
 }
 
-void Finger::configure(const Params& p, const pid::Coeffs& c) {
+bool Finger::configure(const Params& p, const pid::Coeffs& c) {
     const bool encoder_changed =
         p.zero_turn != params_.zero_turn || p.encoder_invert != params_.encoder_invert;
     params_ = p;
     if (encoder_changed) have_theta_ = false;  // the next reading is not a jump
     limit_ = limit_for(mode_);
     pid_.set_coeffs(c, limit_);
+    // Ended, not clamped: the rest of a path lies between its setpoint now and its end (the
+    // profile is monotonic), so it stays within the limits only if both do; a path bent to
+    // new limits would be a move nobody asked for.
+    const bool end_path =
+        path_.active() && (target_ != p.clamp(target_) || path_.end() != p.clamp(path_.end()));
+    if (end_path) path_.stop();
+    target_ = p.clamp(target_);
+    return end_path;
+}
+
+// Inline: the host-silence HOLD runs it from the tick for every finger (hold_here()).
+__attribute__((always_inline)) inline void Finger::restart(uint8_t mode, int16_t u) {
+    limit_ = limit_for(mode);
+    pid_.reset(limit_, u, theta_);
+    stall_count_ = 0;
+    stall_ref_ = theta_;
 }
 
 void Finger::enter_closed_loop(uint8_t mode) {
     if (!target_valid_) {
-        target_ = fx::clamp16(theta_, params_.theta_min, params_.theta_max);
+        target_ = params_.clamp(theta_);
         target_valid_ = true;
     }
-    // Bumpless: the PID starts from the output the motors have now.
-    const int16_t present = idle() ? (int16_t)0 : pid_.output();
-    limit_ = limit_for(mode);
-    pid_.reset(limit_, present, theta_);
-    stall_count_ = 0;
-    stall_ref_ = theta_;
+    restart(mode, present_output());
     contact_ = false;
 }
 
@@ -111,15 +115,10 @@ void Finger::set_mode(uint8_t mode, int16_t duty, int16_t effort) {
     if (mode == POSITION || mode == GRASP) {
         enter_closed_loop(mode);
     } else if (mode == DUTY) {
-        const int16_t present = idle() ? (int16_t)0 : pid_.output();
-        limit_ = limit_for(DUTY);
-        pid_.reset(limit_, present, theta_);
-        stall_count_ = 0;
-        stall_ref_ = theta_;
+        restart(DUTY, present_output());
     } else {
         target_valid_ = false;
-        limit_ = limit_for(mode);
-        pid_.reset(limit_, 0, theta_);
+        restart(mode, 0);
     }
     contact_ = false;
     mode_ = mode;
@@ -139,19 +138,15 @@ void Finger::clear_faults() {
 }
 
 uint8_t Finger::judge_reading(const hal::EncoderReading& enc) {
-    if (enc.status != hal::EncoderStatus::OK) {
+    const hal::EncoderReading r = encoder::judge(enc, encoder_setup());
+    if (r.flags & hal::kReadingOut) {
         encoder_ok_ = false;
         return ENCODER_RANGE;
     }
     encoder_ok_ = true;
-    last_turn_ = enc.turn;
-    const int16_t th = encoder::angle_bu(enc.turn, params_.zero_turn, params_.encoder_invert);
-    uint8_t found = 0;
-    if (have_theta_ && fx::abs16((int16_t)(th - theta_)) > params_.jump) found = ENCODER_JUMP;
-    theta_ = th;
-    have_theta_ = true;
-    if (th < params_.fault_low || th > params_.fault_high) found |= JOINT_LIMIT;
-    return found;
+    last_turn_ = r.turn;
+    const uint8_t found = take_angle(r.angle);
+    return (r.flags & hal::kReadingLimit) ? (uint8_t)(found | JOINT_LIMIT) : found;
 }
 
 void Finger::latch(uint8_t bits) {
@@ -159,27 +154,21 @@ void Finger::latch(uint8_t bits) {
     faults_ |= bits;
     if ((bits & kStopFaults) && mode_ != COAST) {
         path_.stop();
-        // Beyond a joint limit (and nothing else wrong) the motors short-brake: passive, no
-        // energy in, and it resists an outside force carrying the finger further (measured on
-        // the emulated board, test_fw_limit_brake.py). Any other stop fault coasts.
+        // JOINT_LIMIT alone short-brakes (firmware/README.md, Safety, says why); any other stop
+        // fault coasts.
         mode_ = (faults_ & kStopFaults) == JOINT_LIMIT ? BRAKE : COAST;
         target_valid_ = false;
         contact_ = false;
-        limit_ = limit_for(COAST);
-        pid_.reset(limit_, 0, theta_);
+        restart(COAST, 0);
     }
 }
 
 void Finger::hold_here() {
     const uint8_t mode = mode_ == GRASP ? GRASP : POSITION;
     path_.stop();
-    target_ = fx::clamp16(theta_, params_.theta_min, params_.theta_max);
+    target_ = params_.clamp(theta_);
     target_valid_ = true;
-    const int16_t present = pid_.output();
-    limit_ = limit_for(mode);
-    pid_.reset(limit_, present, theta_);
-    stall_count_ = 0;
-    stall_ref_ = theta_;
+    restart(mode, pid_.output());  // a driving finger's (the tick holds only those)
     mode_ = mode;
 }
 

@@ -35,9 +35,7 @@ enum Fault : uint8_t {
 };
 // The stall rule runs for each finger about every kStallEvery ticks, in loop() (Hand::
 // stall_rules(): its window, the stall time, is some hundreds of ticks; loop() runs within
-// kLoopHangTicks or the tick halts the hand). (Running the integrator every 5 ticks was
-// tried: Ki's step five times larger every 5 ms doubled the settling time against friction,
-// tests/firmware/test_fw_pid.py.)
+// kLoopHangTicks or the tick halts the hand).
 static const uint8_t kStallEvery = 5;
 
 // Faults that stop the finger: COAST, motors off; JOINT_LIMIT alone short-brakes them instead
@@ -67,6 +65,14 @@ struct Params {
     int16_t stall_error;
     int16_t stall_motion;
     uint16_t stall_ticks;  // stall time in ticks
+    // The limits rule for setpoints (set_targets, move, new limits): a target asked for, in BU
+    // as converted, is accepted within a count of a limit (a float round trip may land the
+    // exact limit a count beyond), and every setpoint in use lies within the limits.
+    bool accepts(int32_t bu) const {
+        return bu >= (int32_t)theta_min - 1 && bu <= (int32_t)theta_max + 1;
+    }
+    int16_t clamp(int32_t bu) const { return (int16_t)fx::clamp32(bu, theta_min, theta_max); }
+    int16_t clamp(int16_t bu) const { return fx::clamp16(bu, theta_min, theta_max); }
     // The controller's output limit: max_duty, less the pretension when antagonistic.
     int16_t limit() const {
         const int16_t l = rotary ? max_duty : (int16_t)(max_duty - pretension);
@@ -81,7 +87,9 @@ class Finger {
     Finger();
 
     // ---- from loop(), under the tick lock, after validation ----
-    void configure(const Params& p, const pid::Coeffs& c);  // bumpless when gains or limits change
+    // Bumpless when gains or limits change. New limits hold every setpoint at once: the target
+    // is clamped in, and a path that would leave them is ended (true: one was).
+    bool configure(const Params& p, const pid::Coeffs& c);
     // Enter `mode`. duty (DUTY) and effort (GRASP) are Q15 fractions.
     void set_mode(uint8_t mode, int16_t duty, int16_t effort);
     void set_target(int16_t theta_bu);  // a step: ends a move's path
@@ -153,10 +161,18 @@ class Finger {
 
    private:
     int16_t limit_for(uint8_t mode) const;
-    // A reading the sampler flagged (out of band, beyond a joint limit, or judged with an
-    // earlier setup): every encoder rule from its turn and status, with this finger's
-    // configuration. Updates the angle; returns the faults found.
+    // The encoder's rule that needs the last angle (the jump), on a reading's angle: takes it
+    // as theta_; returns ENCODER_JUMP or 0. The tick's both paths call it.
+    inline uint8_t take_angle(int16_t th);
+    // The tick's general path, for a reading the sampler flagged (out of band, beyond a joint
+    // limit, or judged with an earlier setup): judged again with this finger's setup
+    // (encoder::judge()), then its faults. The tick's fast path takes an unflagged reading.
     uint8_t judge_reading(const hal::EncoderReading& enc);
+    // Bumpless re-entry into `mode`: its output limit, the PID restarted from the output `u`
+    // at the measured angle, the stall watch from here. Every mode change goes through it.
+    void restart(uint8_t mode, int16_t u);
+    // The output the motors have now (0 when idle): where a bumpless start begins.
+    int16_t present_output() const { return idle() ? (int16_t)0 : pid_.output(); }
     void enter_closed_loop(uint8_t mode);
     // DUTY: the commanded duty, never further past a joint limit, through the PID's limit and
     // slew limiter.
@@ -164,10 +180,8 @@ class Finger {
     hal::MotorCommand idle_outputs(uint8_t mode);  // by value: the tick's command stays in registers
 
     // The tick's working state first, then the PID (its state and coefficients), then the
-    // configuration (Params: the fields the tick reads first). The hand's tick reaches each
-    // finger at a fixed address (hand.h: lds/sts), so the layout no longer has to keep what
-    // it touches within ldd/std reach (64 bytes) of one pointer; it stays close to that for
-    // the code that reaches a finger through a pointer.
+    // configuration (Params: the fields the tick reads first): close together for the code
+    // that reaches a finger through a pointer (ldd/std reach 64 bytes).
     int16_t theta_;
     int16_t target_;
     int16_t limit_;  // limit_for(mode_), kept current
@@ -205,6 +219,17 @@ UTRF_HOT uint16_t pwm_counts(uint16_t mag) {
     return (uint16_t)((uint16_t)(hi + (uint16_t)((uint16_t)(lo + 512u) >> 8)) >> 2);
 }
 
+UTRF_HOT uint8_t Finger::take_angle(int16_t th) {
+    uint8_t found = 0;
+    if (UTRF_LIKELY(have_theta_) &&
+        UTRF_UNLIKELY(fx::abs16((int16_t)(th - theta_)) > params_.jump)) {
+        found = ENCODER_JUMP;
+    }
+    theta_ = th;
+    have_theta_ = true;
+    return found;
+}
+
 UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& out) {
     // ---- encoder: band and plausibility; joint limits ----
     // Angles are BU within +-pi, so every difference below fits int16. The faults found are
@@ -213,21 +238,16 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
     // (The band and the limits were judged by the sampler: hal.h, EncoderReading.)
     // The usual paths are told to the compiler (UTRF_LIKELY), so they run straight through.
     int16_t th;
-    uint8_t found = 0;
+    uint8_t found;
     if (UTRF_LIKELY(enc.flags == 0)) {
-        // In band and within the joint limits, its angle worked out by the sampler with this
-        // finger's setup (core/encoder.h, judge()): only the jump rule is left.
+        // Fast path: in band and within the joint limits, its angle worked out by the sampler
+        // with this finger's setup (core/encoder.h, judge()): only the jump rule is left.
         encoder_ok_ = true;
         last_turn_ = enc.turn;
         th = enc.angle;
-        if (UTRF_LIKELY(have_theta_) &&
-            UTRF_UNLIKELY(fx::abs16((int16_t)(th - theta_)) > params_.jump)) {
-            found = ENCODER_JUMP;
-        }
-        theta_ = th;
-        have_theta_ = true;
+        found = take_angle(th);
     } else {
-        found = judge_reading(enc);  // every rule, from the reading's turn and status
+        found = judge_reading(enc);  // general path: every rule, from turn and status
         th = theta_;
     }
     if (UTRF_UNLIKELY(found)) latch(found);

@@ -1,6 +1,6 @@
 // Fixed-point arithmetic for the control tick.
 //
-// The ATmega2560 has no FPU (a float multiply-add is some 200 cycles) and every 32-bit
+// The ATmega2560 has no FPU (floats are slow: firmware/README.md, Timing) and every 32-bit
 // operation costs four 8-bit ones, so the tick works in 16-bit integers wherever the range
 // allows, and multiplies 16 x 16 -> 32 bits. Floats appear only where loop() turns
 // configuration (SI units) into the coefficients below.

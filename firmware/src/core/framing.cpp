@@ -33,13 +33,13 @@ FrameDecoder::FrameDecoder() : body_len_(0), discarding_(false) { start(); }
 void FrameDecoder::start() {
   len_ = 0;
   out_ = 0;
-  left_ = 0;
-  hi_ = 0xFF;
-  lo_ = 0xFF;
-  d1_ = 0;
-  d2_ = 0;
-  lag_ = kCrcBytes;
-  zero_ = false;
+  st_.left = 0;
+  st_.hi = 0xFF;
+  st_.lo = 0xFF;
+  st_.d1 = 0;
+  st_.d2 = 0;
+  st_.lag = kCrcBytes;
+  st_.zero = false;
 }
 
 void FrameDecoder::reset() {
@@ -74,13 +74,13 @@ RxEvent FrameDecoder::feed_rest(uint8_t byte) {
 // whose code claims more bytes than came before the 0x00 is a framing error. A frame holds
 // fewer than 254 bytes, so a code 0xFF (254 bytes, no zero after them) can never be complete.
 RxEvent FrameDecoder::finish() {
-  if (left_ != 0) return RxEvent::FRAMING_ERROR;
+  if (st_.left != 0) return RxEvent::FRAMING_ERROR;
   const uint8_t n = out_;
   if (n < kMinRawBytes) return RxEvent::FRAMING_ERROR;
   const uint8_t payload = static_cast<uint8_t>(n - kCrcBytes);
   const uint16_t got = static_cast<uint16_t>(buf_[payload] | (buf_[payload + 1] << 8));
   body_len_ = static_cast<uint8_t>(payload - kHeaderBytes);
-  if (static_cast<uint16_t>((static_cast<uint16_t>(hi_) << 8) | lo_) != got) {
+  if (static_cast<uint16_t>((static_cast<uint16_t>(st_.hi) << 8) | st_.lo) != got) {
     return RxEvent::CRC_ERROR;
   }
   return RxEvent::FRAME;

@@ -118,11 +118,11 @@ class FrameDecoder {
     }
     return feed_rest(byte);
   }
-  // Several bytes of a frame at once, as feed() would take them: data[0..n) up to the first
-  // 0x00 (not taken: feed() it), and no further than the buffer holds (the byte that does not
-  // fit goes to feed() too, which reports OVERSIZE). Returns how many it took. Inline, with
-  // the state in locals (through the members, every store to buf_ made the compiler load them
-  // all again): the receive path's per-byte cost.
+  // Fast path: several bytes of a frame at once, as feed() would take them: data[0..n) up to
+  // the first 0x00 (not taken: feed() it), and no further than the buffer holds (the byte
+  // that does not fit goes to feed() too, which reports OVERSIZE). Returns how many it took.
+  // The same rule as take() (decode()), its state in a local for the run: a store to buf_
+  // may alias the members, so the compiler would reload them after each.
   uint8_t feed_run(const uint8_t* data, uint8_t n) {
     if (discarding_) return 0;
     const uint8_t room = static_cast<uint8_t>(kMaxEncodedBytes - len_);
@@ -130,46 +130,17 @@ class FrameDecoder {
     const uint8_t* p = data;
     const uint8_t* const end = data + n;
     uint8_t* out = buf_ + out_;
-    uint8_t left = left_;
-    uint8_t hi = hi_;
-    uint8_t lo = lo_;
-    uint8_t d1 = d1_;
-    uint8_t d2 = d2_;
-    uint8_t lag = lag_;
-    bool zero = zero_;
+    Cobs s = st_;
     while (p != end) {
       uint8_t byte = *p;
       if (byte == 0) break;
       ++p;
-      if (left == 0) {  // a code: the block before it stood for a zero
-        left = static_cast<uint8_t>(byte - 1u);
-        if (!zero) {
-          zero = true;
-          continue;
-        }
-        byte = 0x00;
-      } else {
-        --left;
-      }
-      if (lag != 0) {
-        --lag;
-      } else {
-        crc_step(hi, lo, d2);
-      }
-      d2 = d1;
-      d1 = byte;
-      *out++ = byte;
+      if (decode(s, byte)) *out++ = byte;
     }
+    st_ = s;
     const uint8_t k = static_cast<uint8_t>(p - data);
     len_ = static_cast<uint8_t>(len_ + k);
     out_ = static_cast<uint8_t>(out - buf_);
-    left_ = left;
-    hi_ = hi;
-    lo_ = lo;
-    d1_ = d1;
-    d2_ = d2;
-    lag_ = lag;
-    zero_ = zero;
     return k;
   }
   // Forget any partial frame (e.g. after the UART reported an overrun).
@@ -190,27 +161,42 @@ class FrameDecoder {
   }
 
  private:
-  // One COBS byte of a frame (len_ already counts it): a code starts a block (and writes the
-  // zero the block before it stands for), any other is a decoded byte.
-  void take(uint8_t byte) {
-    if (left_ == 0) {
-      left_ = static_cast<uint8_t>(byte - 1u);
-      if (!zero_) {
-        zero_ = true;
-        return;
+  // Where the frame's decoding is between two bytes.
+  struct Cobs {
+    uint8_t left;  // bytes of the current COBS block still to come (0: the next is a code)
+    uint8_t hi;    // the CRC so far, over the decoded bytes but the last two
+    uint8_t lo;
+    uint8_t d1;    // the last decoded byte and the one before it (not yet in the CRC)
+    uint8_t d2;
+    uint8_t lag;   // decoded bytes still to come before the CRC takes one (2 at the start)
+    bool zero;     // a block was begun: the next code writes its zero
+  };
+  // One COBS byte of a frame, the rule both feeds run: a code starts a block (and yields the
+  // zero the block before it stands for), any other is a decoded byte; the CRC runs two
+  // decoded bytes behind. True with the decoded byte in `byte`.
+  __attribute__((always_inline)) static bool decode(Cobs& s, uint8_t& byte) {
+    if (s.left == 0) {
+      s.left = static_cast<uint8_t>(byte - 1u);
+      if (!s.zero) {
+        s.zero = true;
+        return false;
       }
       byte = 0x00;
     } else {
-      --left_;
+      --s.left;
     }
-    if (lag_ != 0) {
-      --lag_;
+    if (s.lag != 0) {
+      --s.lag;
     } else {
-      crc_step(hi_, lo_, d2_);
+      crc_step(s.hi, s.lo, s.d2);
     }
-    d2_ = d1_;
-    d1_ = byte;
-    buf_[out_++] = byte;
+    s.d2 = s.d1;
+    s.d1 = byte;
+    return true;
+  }
+  // The general path: one COBS byte of a frame (len_ already counts it).
+  void take(uint8_t byte) {
+    if (decode(st_, byte)) buf_[out_++] = byte;
   }
   void start();  // a new frame: nothing taken
   RxEvent feed_rest(uint8_t byte);
@@ -219,13 +205,7 @@ class FrameDecoder {
   uint8_t buf_[kMaxEncodedBytes];  // the decoded bytes (never more than the encoded)
   uint8_t len_;   // encoded bytes taken
   uint8_t out_;   // decoded bytes
-  uint8_t left_;  // bytes of the current COBS block still to come (0: the next is a code)
-  uint8_t hi_;    // the CRC so far, over buf_[0 .. out_ - 2)
-  uint8_t lo_;
-  uint8_t d1_;    // the last decoded byte and the one before it (not yet in the CRC)
-  uint8_t d2_;
-  uint8_t lag_;   // decoded bytes still to come before the CRC takes one (2 at the start)
-  bool zero_;     // a block was begun: the next code writes its zero
+  Cobs st_;
   uint8_t body_len_;
   bool discarding_;
 };

@@ -42,8 +42,7 @@ struct StateSample {
     int16_t duty_b[kFingers];  // state message's 1/128 counts (fx::duty_counts) as it writes
 };
 // Samples waiting for loop(): loop() may fall this many periods behind (a long request, a
-// busy line) before one is dropped. Measured: a move's request holds loop() up to 5 ms at
-// 1 kHz with five paths running (docs/benchmarks.md); 8 slots of 43 bytes.
+// busy line: a move's, firmware/README.md, Protocol notes) before one is dropped.
 static const uint8_t kStreamSlots = 8;
 
 class Hand {
@@ -51,9 +50,11 @@ class Hand {
     Hand();
 
     // loop() context, under the tick lock.
-    void configure_finger(uint8_t f, const finger::Params& p, const pid::Coeffs& c) {
-        fingers_[f].configure(p, c);
+    // True when the new limits ended the finger's path (Finger::configure()).
+    bool configure_finger(uint8_t f, const finger::Params& p, const pid::Coeffs& c) {
+        const bool ended = fingers_[f].configure(p, c);
         hal::encoder_setup(f, fingers_[f].encoder_setup());  // the sampler judges with it
+        return ended;
     }
     void set_safety(uint16_t timeout_ms, uint8_t safe_action);
     finger::Finger& finger(uint8_t f) { return fingers_[f]; }
@@ -192,10 +193,8 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
     }
 
     // Five written-out ticks, not a loop: each Finger's fields at a fixed address (lds/sts),
-    // no pointer kept and spilled. Measured: about 600 cycles a tick less (mean and worst),
-    // for some 7.5 KB of flash (firmware/README.md, Timing). Each finger's driver command goes
-    // to its driver as soon as it is worked out: from registers, never stored (on the AVR the
-    // write is inline: hal/avr/motors_inline.h).
+    // no pointer kept and spilled (firmware/README.md, Timing). Each finger's driver command
+    // goes to its driver as soon as it is worked out, from registers (hal/avr/motors_inline.h).
     static_assert(kFingers == 5, "five finger ticks written out");
     hal::MotorCommand out;
     fingers_[0].tick(enc[0], out);

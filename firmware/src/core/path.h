@@ -13,7 +13,7 @@
 // then rounded up to whole ticks.
 //
 // Cost in the tick. The path is cut into segments of kEvery = 5 ticks. loop() works out each
-// segment's end point (the polynomial: nine 16 x 16 multiplies, some 900 cycles on the AVR)
+// segment's end point (the polynomial: nine 16 x 16 multiplies, too many for the tick)
 // one segment ahead and hands it over under the tick lock, with the step a tick toward it
 // (worked out there from where the setpoint will be when the segment starts: the present
 // segment's remaining steps are fixed); every tick a moving finger only steps its setpoint
@@ -74,6 +74,7 @@ class Path {
     Path() : left_(0), seg_left_(0), next_ready_(0), plan_left_(0) {}
     bool active() const { return left_ != 0; }
     uint16_t left() const { return left_; }  // ticks to go
+    int16_t end() const { return end_; }      // BU: where it ends (valid while active())
     int16_t feedforward() const { return ff_; }
     // loop() context, under the tick lock: start from the setpoint `from_bu` (the finger's
     // present one), at rest. Cheap: plan_next() works out the first segment.
@@ -83,8 +84,7 @@ class Path {
     void stop() { left_ = 0; }
     // loop() context, without the lock (it takes it to hand the segment over): work out the
     // next segment when the tick has taken the last one. Cheap when there is nothing to do:
-    // that test inline (loop() runs it for every finger every pass; a call with the frame
-    // plan_next_work() needs took ~80 cycles just to return).
+    // that test inline (loop() runs it for every finger every pass; the work's frame is not).
     void plan_next() {
         if (plan_left_ != 0 && !next_ready_) plan_next_work();
     }

@@ -11,8 +11,8 @@ const float kRadPerBu = 1.0f / fx::kBuPerRad;
 int16_t q15(float duty) { return fx::sat16(fx::round_sat(duty * 32768.0f)); }
 }  // namespace
 
-Coeffs compile(const Gains& g, float dt_s) {
-    Coeffs c;
+Coeffs compile(const config::Gains& g, float dt_s) {
+    Coeffs c = Coeffs();
     c.kp = fx::make_gain(g.kp * kRadPerBu * 16384.0f, kTermMax14);
     c.ki = fx::make_gain(g.ki * dt_s * kRadPerBu * 2147483648.0f, kIStepMax31);
     // v is Q8 BU per tick: rad/s = v / 256 * kRadPerBu / dt.
@@ -21,11 +21,16 @@ Coeffs compile(const Gains& g, float dt_s) {
     const float a = 1.0f - expf(-2.0f * 3.14159265f * g.d_cutoff_hz * dt_s);
     c.alpha = (uint16_t)fx::clamp32(fx::round_sat(a * 65536.0f), 1, 65535);
     c.slew = (int16_t)fx::clamp32(fx::round_sat(g.slew_per_s * dt_s * 32768.0f), 1, 32767);
-    c.deadband = (int16_t)fx::clamp32(q15(g.deadband), 0, 16384);
-    c.db_inverse = (uint16_t)fx::clamp32(
-        fx::round_sat(65536.0f * kDeadbandRamp15 / (float)(kDeadbandRamp15 + c.deadband)), 0,
-        65535);
+    c.deadband = (int16_t)fx::clamp32(
+        q15(g.deadband_duty * proto::SetGains::kDeadbandDutyScale), 0, 16384);
+    c.db_inverse = deadband_inverse(c.deadband);
     return c;
+}
+
+uint16_t deadband_inverse(int16_t deadband) {
+    return (uint16_t)fx::clamp32(
+        fx::round_sat(65536.0f * kDeadbandRamp15 / (float)(kDeadbandRamp15 + deadband)), 0,
+        65535);
 }
 
 int16_t remove_deadband(int16_t u, int16_t db, uint16_t db_inverse) {
@@ -49,16 +54,12 @@ void Pid::reset(int16_t limit, int16_t u, int16_t measured) {
     saturated_ = false;
 }
 
-// The Q15 output the P and D terms give (the step's sum, before the deadband and the limit).
-static int32_t pd_sum15(const Coeffs& c, int16_t e, int16_t v8) {
-    return 2 * ((int32_t)fx::apply16(c.kp, e, kTermMax14) - fx::apply16(c.kd, v8, kTermMax14));
-}
-
 void Pid::set_coeffs(const Coeffs& c, int16_t new_limit) {
     // The output before the change, less the new P and D terms, is the new integrator.
-    const int32_t before = pd_sum15(c_, e_last_, v8_) + (int16_t)(i31_ >> 16);
+    const int32_t before = (int32_t)p_minus_d(c_, e_last_, v8_) * 2 + (int16_t)(i31_ >> 16);
     c_ = c;
-    const int32_t i15 = fx::clamp32(before - pd_sum15(c, e_last_, v8_), -new_limit, new_limit);
+    const int32_t i15 =
+        fx::clamp32(before - (int32_t)p_minus_d(c, e_last_, v8_) * 2, -new_limit, new_limit);
     i31_ = (int32_t)((uint32_t)i15 << 16);
     u_ = fx::clamp16(u_, (int16_t)-new_limit, new_limit);
 }

@@ -27,22 +27,15 @@
 
 #include <stdint.h>
 
+#include "../generated/config_layout.h"
 #include "fixed.h"
 
 namespace utrf {
 namespace pid {
 
-// SI gains, as configured (set_gains).
-struct Gains {
-    float kp;           // duty per rad
-    float ki;           // duty per rad s
-    float kd;           // duty s per rad
-    float d_cutoff_hz;  // derivative filter cut-off
-    float deadband;     // duty added in the output's direction
-    float slew_per_s;   // largest output change per second (duty/s)
-};
-
-// The same, ready for the tick. Built by compile() in loop() context (floats live here only).
+// The gains as configured (config::Gains, generated from spec.toml's set_gains), ready for
+// the tick. Built by compile() in loop() context (floats live there only). A gain of the law
+// is a line in the spec, a field here with its line in compile(), and its use in step().
 struct Coeffs {
     fx::Gain kp;          // e [BU] -> Q14 duty
     fx::Gain ki;          // e [BU] -> Q31 duty per tick
@@ -59,7 +52,9 @@ static const int32_t kIStepMax31 = 1L << 29;  // integrator step: +-0.25 duty pe
 static const int16_t kMaxDm = 63;                // d(measured) clamp, BU per tick
 static const int16_t kDeadbandRamp15 = 256;      // 1/128 duty: the compensation ramps in
 
-Coeffs compile(const Gains& g, float dt_s);
+Coeffs compile(const config::Gains& g, float dt_s);
+// ramp / (ramp + deadband), Q16: undoes the deadband's compensation (remove_deadband()).
+uint16_t deadband_inverse(int16_t deadband);
 
 class Pid {
    public:
@@ -105,21 +100,21 @@ int16_t remove_deadband(int16_t u, int16_t deadband, uint16_t db_inverse);
 // millisecond, and a call with its register saves costs as much as the arithmetic.
 #define UTRF_HOT __attribute__((always_inline)) inline
 
-UTRF_HOT int16_t add_deadband(int16_t v, int16_t db) {
-    if (v >= kDeadbandRamp15) return fx::sat_add16(v, db);
-    if (v <= -kDeadbandRamp15) return fx::sat_add16(v, (int16_t)-db);
-    // |v| < 2^8 and db <= 2^14: the product fits; the ramp is 2^8, so the shift is a byte move.
-    return (int16_t)(v + fx::prod_mid16(fx::prod_su(v, (uint16_t)db)));
-}
-
 // The PID's sum before the limit: |P - D| 2 + |I| + |ff| < 2^18 fits 24 bits (fx::int24).
 typedef fx::int24 sum_t;
 
-// The same on the unlimited sum (before the limit).
-UTRF_HOT sum_t add_deadband32(sum_t v, int16_t db) {
+// The deadband compensation on the unlimited sum (before the limit): db added in the sum's
+// direction, ramped in over |v| < kDeadbandRamp15 so it is continuous at 0.
+UTRF_HOT sum_t add_deadband(sum_t v, int16_t db) {
     if (v >= kDeadbandRamp15) return v + db;
     if (v <= -kDeadbandRamp15) return v - db;
     return v + fx::prod_mid16(fx::prod_su((int16_t)v, (uint16_t)db));
+}
+
+// The proportional term less the derivative one, Q14 (+-2 duty each): the law's P - D, for the
+// step and for the rebase of a gain change (Pid::set_coeffs()).
+UTRF_HOT sum_t p_minus_d(const Coeffs& c, int16_t e, int16_t v8) {
+    return (sum_t)fx::apply16(c.kp, e, kTermMax14) - fx::apply16(c.kd, v8, kTermMax14);
 }
 
 UTRF_HOT int16_t slew_limit(int16_t want, int16_t last, int16_t slew) {
@@ -145,12 +140,9 @@ UTRF_HOT int16_t Pid::step(int16_t limit, int16_t target, int16_t measured, int1
     const int16_t dv = (int16_t)(dm * 256 - v8_);
     v8_ = (int16_t)(v8_ + fx::prod_hi16(fx::prod_su(dv, c.alpha), true));
 
-    // P and D in Q14 (+-2 duty each), the integrator's high word and the feedforward in Q15:
-    // the sum fits int32 with room to spare.
-    const sum_t p_d =
-        (sum_t)fx::apply16(c.kp, e, kTermMax14) - fx::apply16(c.kd, v8_, kTermMax14);
-    sum_t v = p_d * 2 + (int16_t)(i31_ >> 16) + ff;
-    if (c.deadband) v = add_deadband32(v, c.deadband);
+    // P - D in Q14, the integrator's high word and the feedforward in Q15: fits sum_t.
+    sum_t v = p_minus_d(c, e, v8_) * 2 + (int16_t)(i31_ >> 16) + ff;
+    if (c.deadband) v = add_deadband(v, c.deadband);
     // `free`: the output is the sum itself (neither the limit nor the slew limiter cut it), so
     // nothing holds it back and the test below needs no compare of the 24-bit sum.
     int16_t u;

@@ -21,9 +21,9 @@
 namespace utrf {
 namespace proto {
 
-static const uint16_t kProtocolVersion = 1;
+static const uint16_t kProtocolVersion = 2;
 // CRC-32 of the canonical spec (doc texts excluded); compared at the handshake.
-static const uint32_t kSchemaHash = 0xF6F7A5BDUL;
+static const uint32_t kSchemaHash = 0x8E3DAEF7UL;
 static const uint8_t kMaxPayload = 64;  // body bytes
 static const uint8_t kFingerCount = 5;
 static const uint32_t kDefaultBaud = 1000000UL;
@@ -94,7 +94,7 @@ enum class ConfigSource : uint8_t {
 
 // Why a request was refused (nack). A refused request changes nothing.
 enum class ErrorCode : uint8_t {
-  BAD_CRC = 1,  // the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only; detail = 0
+  BAD_CRC = 1,  // the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only (never 128 or more: such a frame is only counted); detail = 0
   UNKNOWN_ID = 2,  // no request has this message id; detail = 0
   BAD_LENGTH = 3,  // the body length does not match the message; detail = the length it should have
   OUT_OF_RANGE = 4,  // a field is outside its range; detail = field index, or 0x80 | finger for a per-finger limit
@@ -290,7 +290,8 @@ struct SetTelemetry {
 // keeps both, and the reply says so. The fingers must be in POSITION or GRASP (BUSY, detail =
 // finger, otherwise; FAULTED for a latched fault); targets beyond the limits are refused as
 // set_targets' are. A resent frame (the same move_id as the last move) changes nothing and gets
-// the same reply. set_targets, set_mode and any fault end a path.
+// the same reply. set_targets, set_mode, any fault and new limits the rest of the path would
+// leave end a path.
 struct Move {
   static const uint8_t kId = 0x13;
   static const uint8_t kSize = 34;
@@ -342,7 +343,8 @@ struct GetLimits {
 
 // set_limits (0x23, host to board, reply ack, idempotent)
 // Set one finger's supervision limits. theta2_min/max must lie within the finger geometry's range
-// (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned.
+// (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned. New limits apply to every setpoint
+// at once: the target is clamped in, and a move whose rest of path would leave them ends there.
 struct SetLimits {
   static const uint8_t kId = 0x23;
   static const uint8_t kSize = 27;
@@ -609,7 +611,8 @@ struct Gains {
 
 // limits (0xA2, board to host)
 // Set one finger's supervision limits. theta2_min/max must lie within the finger geometry's range
-// (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned.
+// (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned. New limits apply to every setpoint
+// at once: the target is clamped in, and a move whose rest of path would leave them ends there.
 struct Limits {
   static const uint8_t kId = 0xA2;
   static const uint8_t kSize = 27;
@@ -665,13 +668,13 @@ struct Motion {
 // Link and timing counters since boot or reset_stats.
 struct Stats {
   static const uint8_t kId = 0xB5;
-  static const uint8_t kSize = 44;
+  static const uint8_t kSize = 52;
   static constexpr float kTickWorstScale = 1e-06f;
   static constexpr float kTickMeanScale = 1e-06f;
   uint32_t rx_frames;  // valid frames received
   uint32_t rx_crc_errors;  // frames whose CRC failed
   uint32_t rx_framing_errors;  // bad COBS, frames too short, or too long for the buffer
-  uint32_t rx_overruns;  // bytes lost because the receive buffer was full
+  uint32_t rx_overruns;  // bytes lost because the firmware's receive ring was full
   uint32_t nacks;  // nacks sent
   uint32_t tx_dropped;  // stream frames skipped because the transmit buffer was full
   uint32_t ticks;  // control ticks run
@@ -680,6 +683,8 @@ struct Stats {
   uint16_t tick_mean;  // x 1e-06; s; mean control tick, over the last 1024 ticks
   uint32_t rx_ignored;  // valid frames ignored: a request seq with the board's flag (bit 7) set
   uint32_t rx_repeats;  // resent requests answered from the reply cache, not done again
+  uint32_t uart_overruns;  // data overruns the UART reported (DOR0): its two-byte receive buffer was full when a third byte came, and one or more bytes were lost before the byte read
+  uint32_t uart_frame_errors;  // bytes the UART received with a bad stop bit (FE0): line noise, or the host at another baud
 };
 
 // ack (0xF0, board to host)
@@ -1728,6 +1733,8 @@ inline DecodeStatus decode(const uint8_t* body, uint8_t len, Stats& out,
   out.tick_mean = detail::rd_u16(body + 34);
   out.rx_ignored = detail::rd_u32(body + 36);
   out.rx_repeats = detail::rd_u32(body + 40);
+  out.uart_overruns = detail::rd_u32(body + 44);
+  out.uart_frame_errors = detail::rd_u32(body + 48);
   return DecodeStatus::OK;
 }
 inline uint8_t encode(const Stats& msg, uint8_t* body) {
@@ -1743,6 +1750,8 @@ inline uint8_t encode(const Stats& msg, uint8_t* body) {
   detail::wr_u16(body + 34, msg.tick_mean);
   detail::wr_u32(body + 36, msg.rx_ignored);
   detail::wr_u32(body + 40, msg.rx_repeats);
+  detail::wr_u32(body + 44, msg.uart_overruns);
+  detail::wr_u32(body + 48, msg.uart_frame_errors);
   return Stats::kSize;
 }
 
@@ -1917,6 +1926,8 @@ inline void write(W& w, const Stats& msg) {
   put_u16(w, msg.tick_mean);
   put_u32(w, msg.rx_ignored);
   put_u32(w, msg.rx_repeats);
+  put_u32(w, msg.uart_overruns);
+  put_u32(w, msg.uart_frame_errors);
 }
 template <typename W>
 inline void write(W& w, const Ack& msg) {
@@ -2653,7 +2664,9 @@ inline uint8_t flatten(const Stats& m, double* out) {
   out[9] = static_cast<double>(m.tick_mean);
   out[10] = static_cast<double>(m.rx_ignored);
   out[11] = static_cast<double>(m.rx_repeats);
-  return 12;
+  out[12] = static_cast<double>(m.uart_overruns);
+  out[13] = static_cast<double>(m.uart_frame_errors);
+  return 14;
 }
 inline void unflatten(const double* in, Stats& m) {
   m.rx_frames = static_cast<uint32_t>(in[0]);
@@ -2668,6 +2681,8 @@ inline void unflatten(const double* in, Stats& m) {
   m.tick_mean = static_cast<uint16_t>(in[9]);
   m.rx_ignored = static_cast<uint32_t>(in[10]);
   m.rx_repeats = static_cast<uint32_t>(in[11]);
+  m.uart_overruns = static_cast<uint32_t>(in[12]);
+  m.uart_frame_errors = static_cast<uint32_t>(in[13]);
 }
 inline uint8_t flatten(const Ack& m, double* out) {
   out[0] = static_cast<double>(m.msg_id);

@@ -144,8 +144,16 @@ void serial_write(const uint8_t* data, uint16_t len);
 uint8_t* serial_tx_ring();
 uint8_t serial_tx_head();
 void serial_tx_commit(uint8_t end);
-// Bytes lost since the last call because the receive buffer or the UART itself overflowed.
+// Bytes lost since the last call because the receive ring was full.
 uint16_t serial_take_overruns();
+// What the UART's receiver reported since the last call: data overruns (DOR0: its two-byte
+// buffer was full when a third byte came; one or more bytes lost) and frame errors (FE0: a
+// byte with a bad stop bit).
+struct UartErrors {
+    uint8_t overruns;
+    uint8_t frame_errors;
+};
+UartErrors serial_take_uart_errors();
 
 // ---- EEPROM ------------------------------------------------------------------------------------
 uint8_t eeprom_read(uint16_t addr);

@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
+from utrf import artifacts
 from utrf.cli import error
 from utrf.emulator import EmulatedBoard, EmulatorError, HarnessError, PlantError
 from utrf.models.geometry import GeometryError, HandGeometry
@@ -416,8 +417,9 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
         pace = "as fast as it goes" if board.speed is None else f"{board.speed:g}x real time"
+        firmware = artifacts.describe_firmware(board.elf, given=args.elf is not None)
         say.say(
-            f"serving: firmware {board.elf} on an emulated ATmega2560 (simavr, 16 MHz), "
+            f"serving: firmware {firmware} on an emulated ATmega2560 (simavr, 16 MHz), "
             f"seed {board.seed}, {pace}\n"
             f"  connect: {board.url}"
             + (f"\n           {board.pty_path}" if board.pty_path else "")
@@ -426,6 +428,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
             url=board.url,
             pty=board.pty_path,
             elf=str(board.elf),
+            firmware=firmware,
+            build_id=artifacts.firmware_build_id(board.elf),
         )
         if args.url_file is not None:
             tmp = args.url_file.with_name(f".{args.url_file.name}.{os.getpid()}")

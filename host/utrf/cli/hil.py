@@ -2,7 +2,7 @@
 
     utrf hil static-loading --emulated --out out/static [--seed N] [--force]
     utrf hil static-loading --port /dev/ttyACM0 --tracker-port /dev/ttyUSB0 --out out/static
-    utrf hil grasp-hold --emulated --out out/grasp --duration-s 600
+    utrf hil grasp-hold --emulated [--object egg] [--duration-s 600] [--out out/grasp]
     utrf hil analyse out/grasp          # results from the logs alone, a killed run's too
 
 Options are SI except where named (``--loads-kg``); the progress lines and tables show mm and
@@ -19,6 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from utrf.cli._hand_common import EXIT_BAD_INPUT, EXIT_LINK, EXIT_NOT_DONE, EXIT_OK, error
+
+EMULATED_HOLD_S = 20.0  # the emulated hold's default: a minute's wait, not ten
+PAPER_HOLD_S = 600.0  # the paper's hold (Sec. IV-C), the rig's default
 
 
 def register(subparsers: Any) -> None:
@@ -82,9 +85,20 @@ def register(subparsers: Any) -> None:
     g.add_argument(
         "--effort", type=float, default=None, help="with --object: GRASP effort (the pose's)"
     )
-    g.add_argument("--duration-s", type=float, default=600.0, help="hold time (paper: 600 s)")
     g.add_argument(
-        "--hits", type=int, default=None, help="emulated hammer hits (default one per 30 s)"
+        "--duration-s",
+        type=float,
+        default=None,
+        help=f"hold time (default: {EMULATED_HOLD_S:g} s emulated, the paper's "
+        f"{PAPER_HOLD_S:g} s on the rig; --duration-s {PAPER_HOLD_S:g} for the full hold "
+        "emulated)",
+    )
+    g.add_argument(
+        "--hits",
+        type=int,
+        default=None,
+        help="emulated hammer hits (default one per 30 s, at least one; with --object one "
+        "per 10 s)",
     )
     g.add_argument(
         "--hit-impulse",
@@ -107,10 +121,21 @@ def register(subparsers: Any) -> None:
     p.set_defaults(handler=lambda _a: (p.print_help(), EXIT_BAD_INPUT)[1])
 
 
+def _out(args: argparse.Namespace, kind: str, name: str, progress: Any) -> None:
+    """``--out``, or a new directory named after the run (said where)."""
+    from utrf.hil.runs import default_out
+
+    if args.out is None:
+        args.out = default_out(kind, name)
+        progress(f"writing to {args.out}")
+
+
 def _analyse(args: argparse.Namespace) -> int:
     import json
 
+    from utrf.hil import object_hold, object_hold_report
     from utrf.hil.grasp_hold import report as grasp_report
+    from utrf.hil.runs import RunError, run_kind
     from utrf.hil.static_loading import report as static_report
     from utrf.models.geometry import HandGeometry
 
@@ -118,13 +143,26 @@ def _analyse(args: argparse.Namespace) -> int:
     if not meta_path.exists():
         error("hil analyse", f"{args.out} holds no run (no meta.json)")
         return EXIT_BAD_INPUT
-    config = json.loads(meta_path.read_text())["config"]
-    if "loads_kg" in config:
-        geometry = HandGeometry.default().fingers[int(config["finger"])].geometry
-        print(static_report.describe(static_report.write(args.out, geometry)))
+    try:
+        meta = json.loads(meta_path.read_text())
+        kind = run_kind(meta)
+    except (ValueError, RunError) as exc:
+        error("hil analyse", f"{meta_path}: {exc}")
+        return EXIT_BAD_INPUT
+    if kind == "static-loading":
+        geometry = HandGeometry.default().fingers[int(meta["config"]["finger"])].geometry
+        result = static_report.write(args.out, geometry)
+        print(static_report.describe(result))
+        figure: Any = args.out / static_report.FIGURE if result["per_payload"] else None
+    elif kind == "object-hold":
+        result = object_hold_report.write(args.out)
+        print(object_hold.describe(result))
+        figure = result["figure"]
     else:
-        print(grasp_report.describe(grasp_report.write(args.out)))
-    print(f"results: {args.out / 'results.json'}")
+        result = grasp_report.write(args.out)
+        print(grasp_report.describe(result))
+        figure = args.out / grasp_report.FIGURE if result["samples"] else None
+    print(f"results: {args.out / 'results.json'}" + (f", figure: {figure}" if figure else ""))
     return EXIT_OK
 
 
@@ -144,7 +182,13 @@ def _common(p: argparse.ArgumentParser) -> None:
         help="--emulated: the firmware ELF (default: build/firmware/utrf.elf in a checkout, "
         "else built from the package's sources)",
     )
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="output directory (default: a new out/RUN/NAME-DATE-TIME, printed)",
+    )
     p.add_argument(
         "--tracker-port",
         default=None,
@@ -231,7 +275,11 @@ def _static_loading(args: argparse.Namespace) -> int:
     progress = (lambda _s: None) if args.quiet else (lambda s: print(s, flush=True))
 
     def body() -> int:
+        if args.out is None and args.resume:
+            error(command, "--resume needs the run's --out DIR")
+            return EXIT_BAD_INPUT
         finger = _finger(args.finger)
+        _out(args, "static-loading", f"finger-{finger}", progress)
         rating = args.actuator_rating_n
         if rating is None and args.emulated:
             rating = RIG_ACTUATOR.stall_force_n
@@ -310,6 +358,7 @@ def _object_hold(args: argparse.Namespace, progress: Any) -> int:
         error("hil grasp-hold", "--object needs --emulated (the MuJoCo hand holds the object)")
         return EXIT_BAD_INPUT
     hits = args.hits if args.hits is not None else max(1, int(args.duration_s // 10))
+    _out(args, "grasp-hold", args.object, progress)
     config = oh.ObjectHoldConfig(
         object=args.object,
         pose=args.pose,
@@ -321,8 +370,8 @@ def _object_hold(args: argparse.Namespace, progress: Any) -> int:
     )
     result = oh.run(config, args.out, elf=getattr(args, "elf", None), progress=progress)
     print(oh.describe(result))
-    picture = f", picture: {result['picture']}" if result["picture"] else ""
-    print(f"results: {args.out / 'results.json'}{picture}")
+    figure = f", figure: {result['figure']}" if result["figure"] else ""
+    print(f"results: {args.out / 'results.json'}{figure}")
     return EXIT_OK if not result["dropped"] and not result["broke"] else EXIT_NOT_DONE
 
 
@@ -336,10 +385,13 @@ def _grasp_hold(args: argparse.Namespace) -> int:
     progress = (lambda _s: None) if args.quiet else (lambda s: print(s, flush=True))
 
     def body() -> int:
+        if args.duration_s is None:
+            args.duration_s = EMULATED_HOLD_S if args.emulated else PAPER_HOLD_S
         if args.object is not None:
             return _object_hold(args, progress)
         tracked = _finger(args.tracked_finger)
-        hits = args.hits if args.hits is not None else int(args.duration_s // 30)
+        hits = args.hits if args.hits is not None else max(1, int(args.duration_s // 30))
+        _out(args, "grasp-hold", args.pose or "grasp-bottle", progress)
         config = gh.GraspHoldConfig(
             pose=args.pose or "grasp-bottle",
             duration_s=args.duration_s,

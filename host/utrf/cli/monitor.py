@@ -5,7 +5,9 @@ target Joint-2 angles in degrees, the motor duties in percent, the fingertip in 
 latched faults, with the stream's measured rate and the frames lost. Elsewhere (a pipe, CI),
 one line every ``--every`` seconds, or with ``--json`` one JSON object (SI) per sample.
 Faults and board resets are printed as they happen; after a reset the monitor says so and
-handshakes again (the board forgot the telemetry rate).
+handshakes again (the board forgot the telemetry rate). Every 2 s it reads the board's
+counters (``get_stats``) and says when the board's UART lost bytes (overruns of its two-byte
+receive buffer, frame errors); the footer shows them with the ring's overflows and bad CRCs.
 
 The monitor connects without resetting the board (no DTR pulse; ``--reset`` to reset it),
 changes no mode and leaves the hand as it finds it: a pose held stays held. The first
@@ -34,6 +36,8 @@ from utrf.hand import FaultEvent, Hand, HandState
 from utrf.hand.view import state_line, state_table
 from utrf.protocol import messages as m
 
+STATS_EVERY_S = 2.0  # the board's counters (get_stats) are read this often
+
 
 class _Watch:
     """Samples and events from the reader thread, for the display loop."""
@@ -44,6 +48,7 @@ class _Watch:
         self.events: list[str] = []
         self.samples: list[HandState] = []  # for --json, printed by the display loop
         self.as_json = False
+        self.board: m.Stats | None = None  # the board's counters, read every few seconds
 
     def on_state(self, st: HandState) -> None:
         with self.lock:
@@ -83,9 +88,31 @@ def _json_line(st: HandState) -> str:
 
 def _footer(hand: Hand, watch: _Watch) -> str:
     ls = hand.link_stats()
-    return (
+    text = (
         f"{hand.url} | stream {watch.rate():.0f}/{hand.telemetry_hz} Hz, frames lost "
         f"{ls.stream_lost}, damaged {ls.crc_errors + ls.framing_errors}"
+    )
+    b = watch.board
+    if b is not None:  # what the board lost on its side of the line
+        text += (
+            f" | board received: UART overruns {b.uart_overruns}, frame errors "
+            f"{b.uart_frame_errors}, ring full {b.rx_overruns}, bad CRC {b.rx_crc_errors}"
+        )
+    return text
+
+
+def _board_losses(hand: Hand, watch: _Watch) -> str | None:
+    """Read the board's counters; a line when its UART lost bytes since the last read."""
+    old, new = watch.board, hand.stats()
+    watch.board = new
+    if old is None or (new.uart_overruns, new.uart_frame_errors) == (
+        old.uart_overruns,
+        old.uart_frame_errors,
+    ):
+        return None
+    return (
+        f"the board's UART lost bytes: {new.uart_overruns - old.uart_overruns} overruns, "
+        f"{new.uart_frame_errors - old.uart_frame_errors} frame errors since the last check"
     )
 
 
@@ -112,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
         boot = hand.last_boot
         end = None if args.duration is None else time.monotonic() + args.duration
         next_line = time.monotonic() + args.every
+        next_stats = time.monotonic()
         ident = hand.identity
         header = (
             f"firmware {ident.fw_major}.{ident.fw_minor}.{ident.fw_patch} "
@@ -143,6 +171,11 @@ def run(args: argparse.Namespace) -> int:
                     msg = f"the board reset ({cause}): handshaking again"
                     (live.console.print if live_view else print)(msg)
                     hand.reconnect()
+                if not args.json and time.monotonic() >= next_stats:
+                    next_stats += STATS_EVERY_S
+                    lost = _board_losses(hand, watch)
+                    if lost:
+                        (live.console.print if live_view else print)(lost)
                 if not live_view and not args.json and time.monotonic() >= next_line:
                     next_line += args.every
                     now = hand.latest

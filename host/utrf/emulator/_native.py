@@ -26,6 +26,7 @@ from utrf.emulator.harness_abi import (
     PROFILE_FIELDS,
     RESET_PIN,
     RESET_POWER_ON,
+    RX_TIMING_FIELDS,
     STAT_FIELDS,
     STATUS_NAMES,
     TO_BOARD,
@@ -36,6 +37,7 @@ from utrf.emulator.harness_abi import (
     MjPlantParamsC,
     MjPlantStateC,
     ProfileC,
+    RxTimingC,
     StatsC,
     library_path,
     load_library,
@@ -293,6 +295,15 @@ class NativeBoard:
         s = StatsC()
         self._lib.utrf_sim_stats(self.handle, ctypes.byref(s))
         return {name: int(getattr(s, name)) for name in STAT_FIELDS}
+
+    def rx_timing(self, clear: bool = False) -> dict[str, int]:
+        """The receive path since the last clear: bytes read from UDR0 (``reads``), their
+        waits from the end of the stop bit to the read (``total``, ``worst`` and its cycle
+        ``worst_at``, in cycles; ``late``: over one frame), bytes lost to the two-byte FIFO
+        (``overruns``, DOR0) and frame errors (FE0). ``clear`` starts it again."""
+        t = RxTimingC()
+        self._lib.utrf_sim_rx_timing(self.handle, ctypes.byref(t), int(clear))
+        return {name: int(getattr(t, name)) for name in RX_TIMING_FIELDS}
 
     def profile_vector(self, vector: int) -> None:
         if self._lib.utrf_sim_profile_vector(self.handle, vector):

@@ -44,6 +44,13 @@ class BoardProbes:
         with self._lock:
             return self._board().stats()
 
+    def rx_timing(self, clear: bool = False) -> dict[str, int]:
+        """The receive path as the chip's receiver sees it, since the last clear: bytes read,
+        their worst wait from the end of the stop bit to the read of UDR0 (cycles), bytes
+        lost to the two-byte FIFO (``overruns``) and frame errors."""
+        with self._lock:
+            return self._board().rx_timing(clear)
+
     @property
     def reset_flags(self) -> set[str]:
         """MCUSR's reset flags as the firmware finds them after the last reset."""

@@ -15,7 +15,7 @@ from typing import Any
 
 from utrf import artifacts
 
-ABI = 13
+ABI = 14
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -33,7 +33,7 @@ STAT_FIELDS = (
     "rx_dropped",
     "rx_corrupted",
     "rx_inserted",
-    "rx_held",
+    "rx_overruns",
     "tx_uart_bytes",
     "tx_dropped",
     "tx_corrupted",
@@ -55,7 +55,9 @@ STAT_FIELDS = (
     "stalls",
     "sleep_cycles",
     "quieted_timer_events",
+    "rx_frame_errors",
 )
+RX_TIMING_FIELDS = ("reads", "total", "worst", "worst_at", "late", "overruns", "frame_errors")
 PROFILE_FIELDS = (
     "count",
     "total",
@@ -86,6 +88,12 @@ class StatsC(ctypes.Structure):
     """``utrf_sim_stats_t``: the harness counters, one per ``STAT_FIELDS``."""
 
     _fields_ = [(name, ctypes.c_uint64) for name in STAT_FIELDS]
+
+
+class RxTimingC(ctypes.Structure):
+    """``utrf_sim_rx_timing_t``: the receive path's waits, one per ``RX_TIMING_FIELDS``."""
+
+    _fields_ = [(name, ctypes.c_uint64) for name in RX_TIMING_FIELDS]
 
 
 class LineFaultsC(ctypes.Structure):
@@ -282,6 +290,7 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_eeprom_get": (ctypes.c_int, [p, u8p, ctypes.c_size_t]),
         "utrf_sim_eeprom_set": (ctypes.c_int, [p, ctypes.c_char_p, ctypes.c_size_t]),
         "utrf_sim_stats": (None, [p, ctypes.POINTER(StatsC)]),
+        "utrf_sim_rx_timing": (None, [p, ctypes.POINTER(RxTimingC), ctypes.c_int]),
         "utrf_sim_profile_vector": (ctypes.c_int, [p, ctypes.c_int]),
         "utrf_sim_profile_function": (ctypes.c_int, [p, ctypes.c_int64]),
         "utrf_sim_profile_function_slot": (ctypes.c_int, [p, ctypes.c_int, ctypes.c_int64]),

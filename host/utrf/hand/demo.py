@@ -83,19 +83,22 @@ class _Recorder:
             return [s for s in self.samples if s.board_time >= board_time]
 
 
-def _rendered(geometry: HandGeometry, theta2: np.ndarray) -> np.ndarray | None:
-    """The MuJoCo hand at these angles, rendered off-screen; None where this machine cannot
-    render (the picture then draws the hand) or an angle was never measured."""
+def _rendered(
+    geometry: HandGeometry, theta2: np.ndarray
+) -> tuple[np.ndarray, dict[str, tuple[float, float]]] | tuple[None, None]:
+    """The MuJoCo hand at these angles, rendered off-screen, and where each fingertip is in
+    the image; None where this machine cannot render (the picture then draws the hand) or an
+    angle was never measured."""
     if not np.all(np.isfinite(theta2)):
-        return None
+        return None, None
     try:
-        from utrf.models.render import RenderError, hand_at
+        from utrf.models.render import RenderError, hand_at_labelled
     except ImportError:  # no mujoco
-        return None
+        return None, None
     try:
-        return hand_at(list(theta2), geometry)
+        return hand_at_labelled(list(theta2), geometry)
     except RenderError:
-        return None
+        return None, None
 
 
 def run_demo(
@@ -172,6 +175,7 @@ def run_demo(
     result = DemoResult(out, steps, csv, url=url, realtime_factor=factor, stretched=stretched)
     geometry = hand.geometry
     for step in steps:
+        image, tips = _rendered(geometry, step.measured)
         step.picture = draw_pose(
             geometry,
             step.measured,
@@ -180,7 +184,8 @@ def run_demo(
             title=f"pose {step.index} of {len(steps)}: {step.name}"
             + ("" if step.settled else "  (NOT SETTLED)"),
             note=library[step.name].description,
-            rendered=_rendered(geometry, step.measured),
+            rendered=image,
+            labels=tips,
         )
     data = read_log(csv, log_columns(hand.fingers))
     result.tracking = tracking_from_log(data, hand.fingers)

@@ -68,11 +68,12 @@ def draw_pose(
     title: str,
     note: str = "",
     rendered: np.ndarray | None = None,
+    labels: Mapping[str, tuple[float, float]] | None = None,
 ) -> Path:
     """The hand (the gesture) and a side view of each finger's chain at the measured Joint-2
     angles (solid) and the targets (dashed). Writes a PNG. ``rendered``: an image of the
-    MuJoCo hand at the measured angles (``utrf.models.render.hand_at``), shown in place of the
-    drawn front view."""
+    MuJoCo hand at the measured angles (``utrf.models.render.hand_at_labelled``), shown in
+    place of the drawn front view, its fingers named at ``labels`` (pixels, per finger)."""
     n = len(hand.fingers)
     fig = plt.figure(figsize=(13, 9.0))
     grid = fig.add_gridspec(2, n, height_ratios=(1.7, 1.0), hspace=0.3, wspace=0.35)
@@ -80,6 +81,7 @@ def draw_pose(
     if rendered is not None:
         front.imshow(rendered)
         front.axis("off")
+        _label_fingers(front, rendered.shape, labels or {})
         front.set_title("the MuJoCo hand at the measured angles (rendered)", fontsize=10)
     else:
         _draw_front(front, hand, measured, target)
@@ -89,7 +91,7 @@ def draw_pose(
         0.5,
         0.015,
         "Side views: each finger's Joints 1-3 and tip from the kinematics model "
-        "(θ_i = q / R_i) at the measured Joint-2 angle (solid) and the target (dashed); mm."
+        "(θ_i = q / R_i) at the measured Joint-2 angle (wide band) and the target (dashed); mm."
         + (f"\n{note}" if note else ""),
         ha="center",
         fontsize=8,
@@ -100,6 +102,21 @@ def draw_pose(
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def _label_fingers(
+    ax: Any, shape: tuple[int, ...], tips: Mapping[str, tuple[float, float]]
+) -> None:
+    """Each finger's name in a row under the rendered image, in the order of the fingertips
+    across it, with a line to its tip: the names never overlap, however close the tips."""
+    height, width = shape[0], shape[1]
+    order = sorted(tips, key=lambda n: tips[n][0])
+    slots = np.linspace(0.1 * width, 0.9 * width, len(order))
+    for name, x in zip(order, slots, strict=True):
+        ax.annotate(name, tips[name], xytext=(x, height * 1.08), textcoords="data",
+                    ha="center", va="top", fontsize=9, annotation_clip=False,
+                    arrowprops={"arrowstyle": "-", "lw": 0.7, "color": "#333333",
+                                "shrinkA": 1, "shrinkB": 2})  # fmt: skip
 
 
 def _draw_front(front: Any, hand: HandGeometry, measured: Angles, target: Angles) -> None:
@@ -143,29 +160,60 @@ def _pose_panels(fig: Any, grid: Any, hand: HandGeometry, measured: Angles, targ
     info.text(0.0, 0.95, "\n".join(lines), family="monospace", fontsize=9, va="top")
     key = fig.add_subplot(grid[0, n - 1])
     key.axis("off")
-    key.plot([], [], "-", color=MEASURED, lw=4, label="measured")
-    key.plot([], [], "--", color=TARGET, lw=1.6, label="target")
+    key.plot([], [], "-", color=MEASURED, lw=7, alpha=0.45, label="measured")
+    key.plot([], [], "--", color=TARGET, lw=1.8, label="target")
     key.legend(loc="upper left", fontsize=9, frameon=False)
+    limits = _side_limits(hand, measured, target)
     for i, f in enumerate(hand.fingers):
         ax = fig.add_subplot(grid[1, i])
-        g = f.geometry
-        reach = 1e3 * g.total_length_m
-        for value, color, style, width, label in (
-            (target[i], TARGET, "--", 1.5, "target"),
-            (measured[i], MEASURED, "-", 4.0, "measured"),
-        ):
-            pts = finger_chain(g, value) * 1e3
-            # drawn pointing up: finger x (along the straight finger) is up, flexion to the left
-            ax.plot(-pts[:, 1], pts[:, 0], style, color=color, lw=width, label=label)
-            ax.plot(-pts[:-1, 1], pts[:-1, 0], "o", color=color, ms=4 if style == "-" else 2)
-        ax.plot([6, 6], [-reach * 0.6, 0], color="#b09070", lw=10, solid_capstyle="butt")  # palm
-        ax.set_aspect("equal")
-        ax.set_xlim(-reach * 1.05, reach * 0.45)
-        ax.set_ylim(-reach * 0.7, reach * 1.15)  # room for the line caps of a straight finger
+        _side_view(ax, f.geometry, measured[i], target[i], limits)
         m_deg, t_deg = math.degrees(measured[i]), math.degrees(target[i])
         ax.set_title(f"{f.name}\nθ2 {m_deg:.1f}° (target {t_deg:.1f}°)", fontsize=9)
         ax.tick_params(labelsize=7)
         ax.set_xlabel("mm", fontsize=8)
+
+
+def _side_xy(g: FingerGeometry, theta2: float) -> np.ndarray:
+    """A finger's joints and tip as drawn from the side (mm): pointing up (along the straight
+    finger), flexing to the left."""
+    pts = finger_chain(g, theta2) * 1e3
+    return np.column_stack((-pts[:, 1], pts[:, 0]))
+
+
+def _side_limits(hand: HandGeometry, measured: Angles, target: Angles) -> tuple[float, ...]:
+    """One frame for every side view (the same scale side by side) that holds each finger
+    whole at both angles, its palm too, with a margin."""
+    xy = [np.array([[12.0, 0.0], [0.0, -0.6e3 * f.geometry.total_length_m]])
+          for f in hand.fingers]  # fmt: skip
+    for i, f in enumerate(hand.fingers):
+        for value in (measured[i], target[i]):
+            if math.isfinite(value):
+                xy.append(_side_xy(f.geometry, value))
+    allxy = np.vstack(xy)
+    pad = 15.0
+    lo, hi = allxy.min(axis=0) - pad, allxy.max(axis=0) + pad
+    return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
+
+
+def _side_view(
+    ax: Any, g: FingerGeometry, measured: float, target: float, limits: tuple[float, ...]
+) -> None:
+    """One finger from the side at the measured angle (a wide pale band, under) and the
+    target (a dark dashed line with open joints, over it: seen where the two coincide)."""
+    reach = 1e3 * g.total_length_m
+    for value, color, style, width, alpha, z, label in (
+        (measured, MEASURED, "-", 7.0, 0.45, 2, "measured"),
+        (target, TARGET, "--", 1.8, 1.0, 3, "target"),
+    ):
+        xy = _side_xy(g, value)
+        ax.plot(xy[:, 0], xy[:, 1], style, color=color, lw=width, alpha=alpha, zorder=z,
+                label=label, solid_capstyle="round")  # fmt: skip
+        ax.plot(xy[:-1, 0], xy[:-1, 1], "o", color=color, zorder=z,
+                ms=6 if style == "-" else 4, mfc=color if style == "-" else "white")  # fmt: skip
+    ax.plot([6, 6], [-reach * 0.6, 0], color="#b09070", lw=10, solid_capstyle="butt")  # palm
+    ax.set_aspect("equal")
+    ax.set_xlim(limits[0], limits[1])
+    ax.set_ylim(limits[2], limits[3])
 
 
 @dataclass(frozen=True)

@@ -14,21 +14,23 @@ the end, as a tracker's sensor on it would see), each hit's peak displacement an
 time (back to rest within ``rest_mm`` for ``rest_s``), the largest contact force per finger,
 for a fragile object whether (and when) a contact force passed its breaking force, and a
 grasp that lets the object fall is reported as dropped (it moved more than ``drop_mm``), not
-as settled. A picture of the hand holding the object (MuJoCo, rendered off-screen) goes with
-them, when the machine can render.
+as settled. The figure (``utrf.hil.object_hold_report``) puts the object's displacement, slip
+and contact forces over the hold beside a render of the hand holding it (MuJoCo, off-screen,
+when the machine can render). A killed run's logs analyse as they are (``utrf hil analyse``).
 """
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from utrf.datalog import CsvLog
+from utrf.datalog import CsvLog, read_rows
 from utrf.hil.runs import RunError, write_json
 from utrf.models import objects
 
@@ -112,6 +114,8 @@ class ObjectHoldConfig:
         return out
 
 
+RENDER = "object_render.png"  # the hand holding the object, once closed (MuJoCo)
+HIT_COLUMNS = ("time_s", "jx_ns", "jy_ns", "jz_ns", "duration_s")
 SAMPLE_COLUMNS = (
     ["time_s", "phase", "x_m", "y_m", "z_m", "qw", "qx", "qy", "qz"]
     + [f"force_{n}_n" for n in ("thumb", "index", "middle", "ring", "little")]
@@ -140,14 +144,14 @@ def run(
     plant = MujocoPlant(obj=obj, seed=config.seed, timestep=1e-3)
     # palm up (the model's gravity, −z) while the hand closes: the object rests on the palm
     out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "meta.json", {"config": asdict(config), "object": asdict(obj)})
+    meta: dict[str, Any] = {"config": asdict(config), "object": asdict(obj)}
+    write_json(out / "meta.json", meta)
     board = EmulatedBoard(elf, realtime=False, seed=config.seed, plant=plant, exchange_period=1e-3)
-    hit_columns = ["time_s", "jx_ns", "jy_ns", "jz_ns", "duration_s"]
     with (
         board,
         Hand.emulated(board) as hand,
         CsvLog(out / "object_samples.csv", SAMPLE_COLUMNS) as log,
-        CsvLog(out / "object_hits.csv", hit_columns) as hit_log,
+        CsvLog(out / "object_hits.csv", HIT_COLUMNS) as hit_log,
     ):
         # the board's output is read once a sample, not every millisecond (the samples' rate
         # is all this run needs; the telemetry still arrives whole)
@@ -155,7 +159,11 @@ def run(
             hand.link.pump_interval_s = 1.0 / config.sample_hz
         s = _Sampler(hand, board, plant, config, log)
         closed_forces, effort = _close(hand, s, config, progress)
-        picture = _picture(plant, out / "object_hold.png") if config.picture else None
+        # what the close found, for the analysis of a run killed later
+        meta["close"] = {"effort": effort, "contact_forces_n": [float(x) for x in closed_forces]}
+        write_json(out / "meta.json", meta)
+        if config.picture:
+            _picture(plant, out / RENDER)
         plant.hold_object(False)
         s.run_until(s.t0 + config.release_s, "release")
         progress("turning the hand over: palm down, the grasp alone holds the object")
@@ -163,12 +171,9 @@ def run(
         s.run_until(s.t0 + config.release_s + config.settle_s - 1e-9, "turn")
         if not s.fell:
             _hold(s, config, hit_log, progress)
-    result = analyse(out)
-    result["effort"] = effort
-    result["closed_contact_forces_n"] = [float(x) for x in closed_forces]
-    result["picture"] = str(picture) if picture else None
-    write_json(out / "results.json", result)
-    return result
+    from utrf.hil import object_hold_report
+
+    return object_hold_report.write(out, figure=config.picture)
 
 
 class _Sampler:
@@ -298,21 +303,38 @@ def _hold(s: _Sampler, config: ObjectHoldConfig, hit_log: Any, progress: Any) ->
 def _picture(plant: Any, path: Path) -> Path | None:
     """The hand holding the object, rendered off-screen; None when this machine cannot."""
     try:
-        from utrf.models.render import RenderError, render_png
+        from utrf.models.render import RenderError, framed_camera, hand_camera, render_png
     except ImportError:
         return None
-    try:
-        return render_png(plant.model, plant.data, path)
+    try:  # framed: the hand and the object fill the picture
+        camera = framed_camera(plant.model, plant.data, hand_camera())
+        return render_png(plant.model, plant.data, path, camera=camera)
     except RenderError:
         return None
 
 
 def analyse(out: Path) -> dict[str, Any]:
-    """The object hold's figures, from its logs alone."""
+    """The object hold's figures, from its logs alone: a killed run's too (its cut last row
+    is skipped; killed during the close, whose rows wait in memory, it has no samples)."""
     meta = json.loads((out / "meta.json").read_text())
     config = ObjectHoldConfig(**meta["config"])
     obj = config.grasp_object
-    rows = _read(out / "object_samples.csv")
+    close = meta.get("close", {})
+    rows = _read(out / "object_samples.csv", SAMPLE_COLUMNS)
+    result: dict[str, Any] = {
+        "object": obj.name,
+        "pose": config.pose_name,
+        "effort": close.get("effort", config.effort),
+        "closed_contact_forces_n": close.get("contact_forces_n"),
+        "planned_duration_s": config.duration_s,
+        "samples": len(rows.get("time_s", ())),
+        "breaking_force_n": obj.breaking_force_n,
+    }
+    if not result["samples"]:
+        return {**result, "complete": False, "duration_s": 0.0, "dropped": False,
+                "dropped_at_s": None, "slip_mm": None, "largest_displacement_mm": None,
+                "hits": [], "largest_contact_force_n": dict.fromkeys(FINGERS, 0.0),
+                "broke": None, "broke_at_s": None}  # fmt: skip
     t = rows["time_s"]
     pos = np.column_stack((rows["x_m"], rows["y_m"], rows["z_m"]))
     forces = np.column_stack([rows[f"force_{n}_n"] for n in FINGERS])
@@ -322,11 +344,10 @@ def analyse(out: Path) -> dict[str, Any]:
     ref = pos[free][0] if free.any() else pos[0]
     fall = np.linalg.norm(pos - ref, axis=1) * 1e3
     dropped_at = next((float(t[i]) for i in np.nonzero(free)[0] if fall[i] > config.drop_mm), None)
-    in_base = (t >= 0) & (t < config.baseline_s)
-    base = pos[in_base].mean(axis=0) if in_base.any() else ref
+    base = baseline_position(t, pos, config.baseline_s, ref)
     held = t >= 0
     disp = np.linalg.norm(pos[held] - base, axis=1) * 1e3  # mm
-    hits_t = _read(out / "object_hits.csv").get("time_s", np.zeros(0))
+    hits_t = _read(out / "object_hits.csv", HIT_COLUMNS).get("time_s", np.zeros(0))
     hit_rows = []
     for j, th in enumerate(hits_t):
         end = hits_t[j + 1] if j + 1 < len(hits_t) else t[-1] + 1e-9
@@ -345,16 +366,17 @@ def analyse(out: Path) -> dict[str, Any]:
                 "offset_after_mm": float(d[-1]),
             }
         )
-    fmax = forces.max(axis=0) if len(forces) else np.zeros(5)
+    fmax = forces.max(axis=0)
     broke_at = None
     if obj.breaking_force_n is not None:
         over = np.nonzero(forces.max(axis=1) > obj.breaking_force_n)[0]
         broke_at = float(t[over[0]]) if len(over) else None
+    duration = max(float(t[-1]), 0.0)
+    ended = dropped_at is not None or duration >= config.duration_s - 1.5 / config.sample_hz
     return {
-        "object": obj.name,
-        "pose": config.pose_name,
-        "effort": config.effort,
-        "duration_s": max(float(t[-1]), 0.0) if len(t) else 0.0,
+        **result,
+        "duration_s": duration,
+        "complete": ended,
         "dropped": dropped_at is not None,
         "dropped_at_s": dropped_at,
         # never held: how far it fell
@@ -362,10 +384,16 @@ def analyse(out: Path) -> dict[str, Any]:
         "largest_displacement_mm": float(max(disp.max(initial=0.0), fall[free].max(initial=0.0))),
         "hits": hit_rows,
         "largest_contact_force_n": {n: float(f) for n, f in zip(FINGERS, fmax, strict=True)},
-        "breaking_force_n": obj.breaking_force_n,
         "broke": broke_at is not None if obj.fragile else None,
         "broke_at_s": broke_at,
     }
+
+
+def baseline_position(t: np.ndarray, pos: np.ndarray, baseline_s: float, ref: np.ndarray) -> Any:
+    """Where the object sat over the hold's baseline (its first ``baseline_s``): what slip and
+    displacement are measured from; ``ref`` (where it was let go) when the run has none."""
+    in_base = (t >= 0) & (t < baseline_s)
+    return pos[in_base].mean(axis=0) if in_base.any() else ref
 
 
 FINGERS = ("thumb", "index", "middle", "ring", "little")
@@ -385,26 +413,25 @@ def _rest_time(t: np.ndarray, pos: np.ndarray, rest_mm: float, rest_s: float) ->
     return None
 
 
-def _read(path: Path) -> dict[str, np.ndarray]:
-    import csv
-
-    with path.open() as f:
-        rows = list(csv.DictReader(f))
+def _read(path: Path, columns: Sequence[str]) -> dict[str, np.ndarray]:
+    """A log's complete rows as columns (numbers as float); {} when it has none."""
+    rows = read_rows(path, columns)
     if not rows:
         return {}
-    out: dict[str, np.ndarray] = {}
-    for key in rows[0]:
-        try:
-            out[key] = np.array([float(r[key]) for r in rows])
-        except ValueError:
-            out[key] = np.array([r[key] for r in rows])
-    return out
+    return {c: np.array([r[c] for r in rows]) for c in columns}
 
 
 def describe(result: dict[str, Any]) -> str:
+    if not result["samples"]:
+        return (
+            f"object hold: the {result['object']} ({result['pose']}): no samples (the run "
+            "ended during the close, whose samples are written once it is over)"
+        )
     early = result["dropped"] and result["dropped_at_s"] < 0
+    short = "" if result["complete"] else f" of {result['planned_duration_s']:g} s (cut short)"
     lines = [
-        f"object hold: the {result['object']} ({result['pose']}), {result['duration_s']:.1f} s, "
+        f"object hold: the {result['object']} ({result['pose']}), {result['duration_s']:.1f} s"
+        + f"{short}, "
         + (f"DROPPED at {result['dropped_at_s']:.2f} s" if result["dropped"] else "held")
         + (" (before the hold: times are from its start)" if early else ""),
         f"object slip {result['slip_mm']:.2f} mm (largest displacement "

@@ -48,3 +48,25 @@ def finite_mean(values: list[float] | np.ndarray) -> float:
     a = np.asarray(values, dtype=float)
     a = a[np.isfinite(a)]
     return float(a.mean()) if a.size else math.nan
+
+
+RUN_KINDS = ("static-loading", "grasp-hold", "object-hold")
+
+
+def run_kind(meta: dict[str, Any]) -> str:
+    """Which run wrote a ``meta.json`` (one of RUN_KINDS), from its configuration's fields."""
+    config = meta.get("config")
+    if not isinstance(config, dict):
+        raise RunError("meta.json has no run configuration ('config')")
+    if "loads_kg" in config:
+        return "static-loading"
+    if "object" in config:
+        return "object-hold"
+    if "pose" in config and "tracked_finger" in config:
+        return "grasp-hold"
+    raise RunError(f"meta.json's configuration is of no known run (fields {sorted(config)})")
+
+
+def default_out(kind: str, name: str) -> Path:
+    """A new output directory for a run not given ``--out``: out/KIND/NAME-YYYYmmdd-HHMMSS."""
+    return Path("out") / kind / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}"

@@ -130,7 +130,21 @@ def hand_at(
     camera: mujoco.MjvCamera | None = None,
 ) -> np.ndarray:
     """The MuJoCo hand (``mjcf.hand_xml``) with each finger at a Joint-2 angle (rad, on the
-    rigid coupling), rendered: an RGB image as ``render`` gives."""
+    rigid coupling), rendered: an RGB image as ``render`` gives. The default camera is
+    ``pose_camera`` moved back until every finger is in the frame (``framed_camera``)."""
+    return hand_at_labelled(theta2, hand, height=height, width=width, camera=camera)[0]
+
+
+def hand_at_labelled(
+    theta2: Sequence[float],
+    hand: HandGeometry | None = None,
+    *,
+    height: int = DEFAULT_SIZE[0],
+    width: int = DEFAULT_SIZE[1],
+    camera: mujoco.MjvCamera | None = None,
+) -> tuple[np.ndarray, dict[str, tuple[float, float]]]:
+    """``hand_at``'s image and where each fingertip is in it (pixels: column, row), for the
+    fingers' labels."""
     from utrf.models import mjcf
 
     hand = hand if hand is not None else HandGeometry.default()
@@ -143,13 +157,74 @@ def hand_at(
         lo, hi = f.geometry.q_range_m
         q[f.name] = min(max(float(angle) * f.geometry.guide_radii_m[1], lo), hi)
     mjcf.set_coupled_pose(model, data, q, hand)
-    return render(model, data, height=height, width=width, camera=camera or pose_camera())
+    if camera is None:
+        camera = framed_camera(model, data, pose_camera(), height=height, width=width)
+    tips = np.array([data.site(f"{f.name}_tip").xpos for f in hand.fingers])
+    px = project(model, data, tips, camera, height=height, width=width)
+    image = render(model, data, height=height, width=width, camera=camera)
+    return image, {f.name: (float(c), float(r)) for f, (c, r) in zip(hand.fingers, px, strict=True)}
 
 
 def pose_camera() -> mujoco.MjvCamera:
     """A camera for a gesture: over the palm, on the thumb's side, the fingertips in front."""
     return hand_camera(lookat=(0.02, 0.0, 0.05), distance_m=0.32, azimuth_deg=150.0,
                        elevation_deg=-35.0)  # fmt: skip
+
+
+def project(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    points: np.ndarray,
+    camera: mujoco.MjvCamera,
+    *,
+    height: int = DEFAULT_SIZE[0],
+    width: int = DEFAULT_SIZE[1],
+) -> np.ndarray:
+    """World points (n, 3) as pixels (column, row) of ``render``'s image with this camera
+    (MuJoCo's perspective: its frustum, the width following the image's aspect); a point
+    behind the camera gets NaN."""
+    scene = mujoco.MjvScene(model, maxgeom=1)
+    mujoco.mjv_updateCamera(model, data, camera, scene)
+    # the scene holds two eyes an inter-pupillary distance apart; mjr_render views from
+    # their average
+    cam = mujoco.mjv_averageCamera(scene.camera[0], scene.camera[1])
+    forward, up = np.array(cam.forward), np.array(cam.up)
+    right = np.cross(forward, up)
+    v = np.atleast_2d(points) - np.array(cam.pos)
+    depth = v @ forward
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xs = np.where(depth > 0, (v @ right) / depth * cam.frustum_near, np.nan)
+        ys = np.where(depth > 0, (v @ up) / depth * cam.frustum_near, np.nan)
+    span = cam.frustum_top - cam.frustum_bottom
+    half_w = cam.frustum_width or 0.5 * width / height * span
+    col = (xs - (cam.frustum_center - half_w)) / (2 * half_w) * width
+    row = (cam.frustum_top - ys) / span * height
+    return np.column_stack((col, row))
+
+
+def framed_camera(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    camera: mujoco.MjvCamera,
+    *,
+    height: int = DEFAULT_SIZE[0],
+    width: int = DEFAULT_SIZE[1],
+    margin: float = 0.06,
+) -> mujoco.MjvCamera:
+    """``camera`` aimed at the middle of the model's bodies and moved along its line of sight
+    until all of them, and every site (the fingertips), lie ``margin`` (a fraction of the
+    image) inside the frame: a straight finger is not cropped."""
+    pts = np.vstack((data.xpos[1:], data.site_xpos))
+    camera.lookat[:] = (pts.min(axis=0) + pts.max(axis=0)) / 2
+    camera.distance *= 0.6  # from nearer than asked: the hand fills the frame
+    lo = np.array([margin * width, margin * height])
+    hi = np.array([(1 - margin) * width, (1 - margin) * height])
+    for _ in range(40):
+        px = project(model, data, pts, camera, height=height, width=width)
+        if np.isfinite(px).all() and (px >= lo).all() and (px <= hi).all():
+            break
+        camera.distance *= 1.08
+    return camera
 
 
 def render_png(

@@ -14,9 +14,9 @@ from typing import ClassVar
 
 from utrf.protocol.codec import Direction, Field, Message, Request
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 #: CRC-32 of the canonical spec (doc texts excluded), compared at the handshake.
-SCHEMA_HASH = 0xF6F7A5BD
+SCHEMA_HASH = 0x8E3DAEF7
 MAX_PAYLOAD = 64
 FINGER_COUNT = 5
 DEFAULT_BAUD = 1000000
@@ -118,8 +118,8 @@ class ConfigSource(IntEnum):
 class ErrorCode(IntEnum):
     """Why a request was refused (nack). A refused request changes nothing."""
 
-    #: the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only; detail =
-    #: 0
+    #: the frame's CRC did not match; seq and msg_id are the damaged frame's, a hint only (never 128
+    #: or more: such a frame is only counted); detail = 0
     BAD_CRC = 1
     #: no request has this message id; detail = 0
     UNKNOWN_ID = 2
@@ -302,7 +302,8 @@ class Move(Request["Moving"]):
     that keeps both, and the reply says so. The fingers must be in POSITION or GRASP (BUSY,
     detail = finger, otherwise; FAULTED for a latched fault); targets beyond the limits are
     refused as set_targets' are. A resent frame (the same move_id as the last move) changes
-    nothing and gets the same reply. set_targets, set_mode and any fault end a path.
+    nothing and gets the same reply. set_targets, set_mode, any fault and new limits the rest of
+    the path would leave end a path.
     """
 
     NAME: ClassVar[str] = "move"
@@ -400,7 +401,9 @@ class GetLimits(Request["Limits"]):
 @dataclass(frozen=True, slots=True)
 class SetLimits(Request["Ack"]):
     """Set one finger's supervision limits. theta2_min/max must lie within the finger geometry's
-    range (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned.
+    range (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned. New limits apply to every
+    setpoint at once: the target is clamped in, and a move whose rest of path would leave them
+    ends there.
     """
 
     NAME: ClassVar[str] = "set_limits"
@@ -906,7 +909,9 @@ class Gains(Message):
 @dataclass(frozen=True, slots=True)
 class Limits(Message):
     """Set one finger's supervision limits. theta2_min/max must lie within the finger geometry's
-    range (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned.
+    range (from theta1 in [-90, 90] deg) or OUT_OF_RANGE is returned. New limits apply to every
+    setpoint at once: the target is clamped in, and a move whose rest of path would leave them
+    ends there.
     """
 
     NAME: ClassVar[str] = "limits"
@@ -1037,7 +1042,7 @@ class Stats(Message):
 
     NAME: ClassVar[str] = "stats"
     ID: ClassVar[int] = 0xB5
-    SIZE: ClassVar[int] = 44
+    SIZE: ClassVar[int] = 52
     DIRECTION: ClassVar[Direction] = Direction.BOARD_TO_HOST
     FIELDS: ClassVar[tuple[Field, ...]] = (
         Field("rx_frames", "u32", 0),
@@ -1052,6 +1057,8 @@ class Stats(Message):
         Field("tick_mean", "u16", 9, scale=1e-06, unit="s"),
         Field("rx_ignored", "u32", 10),
         Field("rx_repeats", "u32", 11),
+        Field("uart_overruns", "u32", 12),
+        Field("uart_frame_errors", "u32", 13),
     )
 
     #: valid frames received
@@ -1060,7 +1067,7 @@ class Stats(Message):
     rx_crc_errors: int
     #: bad COBS, frames too short, or too long for the buffer
     rx_framing_errors: int
-    #: bytes lost because the receive buffer was full
+    #: bytes lost because the firmware's receive ring was full
     rx_overruns: int
     #: nacks sent
     nacks: int
@@ -1078,6 +1085,11 @@ class Stats(Message):
     rx_ignored: int
     #: resent requests answered from the reply cache, not done again
     rx_repeats: int
+    #: data overruns the UART reported (DOR0): its two-byte receive buffer was full when a third
+    #: byte came, and one or more bytes were lost before the byte read
+    uart_overruns: int
+    #: bytes the UART received with a bad stop bit (FE0): line noise, or the host at another baud
+    uart_frame_errors: int
 
 
 @dataclass(frozen=True, slots=True)

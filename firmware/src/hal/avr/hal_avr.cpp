@@ -231,6 +231,7 @@ uint8_t g_rx_buf[128];
 uint8_t g_tx_buf[256];
 volatile uint8_t g_tx_head, g_tx_tail;
 volatile uint8_t g_rx_lost;  // bytes lost since serial_take_overruns() (8 bits: one register)
+volatile uint8_t g_rx_dor, g_rx_fe;  // DOR0 and FE0 seen since serial_take_uart_errors()
 }  // namespace
 static_assert(sizeof g_tx_buf == 256, "the transmit index wraps by itself at 256");
 static_assert(sizeof g_rx_buf == 128, "the receive ring is 128 slots");
@@ -333,12 +334,21 @@ ISR(TIMER2_COMPA_vect) {
     run_due_ticks();
 }
 
-ISR(ADC_vect) {
+// With the interrupts on from its first instruction (ISR_NOBLOCK, before the register saves):
+// the UART's two-byte receive FIFO gives a byte two byte times (20 us at 1 Mbaud) and this
+// handler takes about 14. The tick must not run inside the round's bookkeeping (it would
+// restart the round): from the lock on, a compare waits as under the tick lock, and its tick
+// runs at the end. (One that comes before the lock runs first, harmlessly: the round goes on
+// and the result register holds until the next conversion starts, below.)
+ISR(ADC_vect, ISR_NOBLOCK) {
+    const uint8_t was_locked = g_tick_locked;  // the tick leaves it as it found it
+    g_tick_locked = 1;
+    const uint16_t code = ADC;
     uint8_t i = g_adc_at;
     // Judged here, between ticks (the round runs after each tick), not in the tick: the band,
     // the angle and the joint limits (core/encoder.h, judge()).
     EncoderReading* const fill = g_adc_fill;
-    fill[i] = encoder::judge(ADC, g_setup[i]);
+    fill[i] = encoder::judge(code, g_setup[i]);
     if (++i < UTRF_FINGER_COUNT) {
         g_adc_at = i;
         adc_select(i);
@@ -349,16 +359,25 @@ ISR(ADC_vect) {
         g_adc_done = fill;
         g_adc_round = (uint8_t)(g_adc_round + 1);
     }
+    cli();  // only the tick touches the round's state, and it waits for the lock
+    g_tick_locked = was_locked;
+    if (!was_locked && g_tick_deferred && !g_tick_running) run_due_ticks();
+    sei();  // the register restores, too, with the interrupts on
 }
 
-// A received byte into the ring; a byte that finds the ring full, or that the UART itself
-// lost (DOR0), is counted in g_rx_lost.
+// A received byte into the ring; a byte that finds the ring full is counted in g_rx_lost.
+// UCSR0A, read before UDR0 as the datasheet asks, tells of bytes the UART itself lost before
+// this one (DOR0) and of this byte's bad stop bit (FE0): counted, the byte kept (the frame's
+// CRC drops it).
 ISR(USART0_RX_vect) {
     const uint8_t status = UCSR0A;
     const uint8_t byte = UDR0;
     const uint8_t head = GPIOR1;
     const uint8_t next = (uint8_t)((head + 1) & 0x7F);
-    if (__builtin_expect((status & _BV(DOR0)) != 0, 0)) g_rx_lost = (uint8_t)(g_rx_lost + 1);
+    if (__builtin_expect((status & (_BV(DOR0) | _BV(FE0))) != 0, 0)) {
+        if (status & _BV(DOR0)) g_rx_dor = (uint8_t)(g_rx_dor + 1);
+        if (status & _BV(FE0)) g_rx_fe = (uint8_t)(g_rx_fe + 1);
+    }
     if (__builtin_expect(next == GPIOR2, 0)) {
         g_rx_lost = (uint8_t)(g_rx_lost + 1);  // full: the byte is not kept
         return;
@@ -446,6 +465,7 @@ void avr_init() {
     GPIOR2 = 0;  // receive tail
     g_tx_head = g_tx_tail = 0;
     g_rx_lost = 0;
+    g_rx_dor = g_rx_fe = 0;
     UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
 }
 
@@ -572,12 +592,30 @@ uint16_t serial_take_overruns() {
     return n;
 }
 
+UartErrors serial_take_uart_errors() {
+    UartErrors e;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+        e.overruns = g_rx_dor;
+        e.frame_errors = g_rx_fe;
+        g_rx_dor = g_rx_fe = 0;
+    }
+    return e;
+}
+
 void sleep_until_interrupt(bool (*idle)(), void (*take_bytes)()) {
     set_sleep_mode(SLEEP_MODE_IDLE);
     cli();
     GPIOR0 &= (uint8_t)~_BV(kWake);  // before the check: what comes after it wakes us
     uint8_t ms = (uint8_t)timer0_overflow_count;
-    if (idle()) {
+    // The check runs with interrupts on: it takes some 300 cycles, and a byte the UART
+    // received may wait at most two byte times (320 cycles at 1 Mbaud). Whatever the check
+    // saw and an interrupt changed meanwhile raises kWake (a tick, a frame's end, the transmit
+    // buffer empty) or moves timer 0 on (millis): then no sleep. A byte of a frame sets kRxByte,
+    // which the loop below takes care of after the first wake-up.
+    sei();
+    const bool go = idle();
+    cli();
+    if (go && !(GPIOR0 & _BV(kWake)) && (uint8_t)timer0_overflow_count == ms) {
         for (;;) {
             sleep_enable();
             sei();  // SLEEP runs before any interrupt pending now, which then wakes it at once

@@ -14,6 +14,7 @@
 #define TX_QUEUE_SIZE 8192u    /* bytes on the wire toward the host (power of two) */
 #define CAPTURE_SIZE 1048576u  /* in-process output buffer (power of two) */
 #define LOG_SIZE 4096u
+#define UTRF_RX_ARRIVALS 4u    /* arrival times of the receive FIFO's bytes (power of two, > 2) */
 
 /* An AVR interrupt vector's simavr IRQ (faults.c's stalls, profile.c's timing): NULL for a
  * vector outside 1..255 or one the core does not have. */
@@ -83,6 +84,11 @@ typedef struct {
 } io_write_hook_t;
 
 typedef struct {
+    avr_io_read_t c;
+    void *param;
+} io_read_hook_t;
+
+typedef struct {
     struct avr_timer_t *timer;
     int quieted; /* its events were cancelled */
     avr_io_read_t orig_read;
@@ -134,6 +140,17 @@ struct utrf_sim {
     line_faults_t faults[2];
     uint64_t rng;
     uint64_t frame_cycles;
+    /* the chip's receiver: the byte on the wire, the shift register, the FIFO's arrivals */
+    int rx_on_wire;
+    uint16_t rx_wire_byte;      /* with UART_INPUT_FE when its stop bit was damaged */
+    int rx_shift_full;          /* a complete byte waits there: the FIFO was full */
+    uint16_t rx_shift_byte;
+    uint64_t rx_shift_arrival;
+    int rx_lost_pending;        /* a byte was lost: the next into the FIFO carries DOR0 */
+    uint64_t rx_arrival[UTRF_RX_ARRIVALS];
+    uint32_t rx_arr_head, rx_arr_tail;
+    utrf_sim_rx_timing_t rx_timing;
+    io_read_hook_t udr_read, ucsra_read; /* simavr's handlers of UDR0's and UCSR0A's reads */
 
     /* serving */
     int pty_fd;

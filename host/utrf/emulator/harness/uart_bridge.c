@@ -1,18 +1,25 @@
-/* UART0 <-> host bytes, with the wire's timing and the line faults.
+/* UART0 <-> host bytes, with the wire's timing, the line faults and the chip's receiver.
  *
  * To the board: host bytes wait in a queue; a cycle timer puts one on the wire per frame
- * time at the baud the firmware configured (start + data + parity + stop bits). simavr's
- * receiver makes a byte readable one frame after it starts, so a byte sent at cycle t is
- * readable at t + frame, as on the chip. A byte is only handed over while simavr's 64-byte
- * FIFO has room (it waits otherwise, as behind flow control: nothing is lost or reordered),
- * and is lost, as on the chip, while the receiver is off (during boot or after a reset).
+ * time at the baud the firmware configured (start + data + parity + stop bits). When its stop
+ * bit ends, the byte reaches the ATmega2560's receiver as modelled here (datasheet, "USART:
+ * Receive Buffer"): a two-byte receive FIFO (UDR0) behind the shift register. A byte that
+ * completes with the FIFO full waits in the shift register; when the next start bit comes and
+ * the FIFO is still full, that byte is lost and the next byte into the FIFO carries the
+ * data-overrun flag DOR0 (one or more bytes lost between the last one read and this one). A
+ * byte whose stop bit the line damaged (a noise byte: a burst, an inserted byte) carries the
+ * frame-error flag FE0. simavr's own receive FIFO holds 64 bytes: the bridge feeds it only the
+ * bytes the chip's FIFO would hold, with the flags in each entry (FE in simavr's bit, DOR in
+ * ours), and shows them in UCSR0A as the chip does, for the byte at the head. Bytes are lost
+ * too while the receiver is off (during boot or after a reset). Each byte's wait, from the
+ * end of its stop bit to the firmware's read of UDR0, is timed (utrf_sim_rx_timing).
  *
  * To the host: a byte the firmware writes to UDR0 reaches the host when its stop bit ends,
  * never sooner than one frame after the previous one.
  *
  * simavr 1.6 counts a parity bit in every frame whether parity is on or not (11 bits for
- * 8N1), which makes its own receive and transmit pacing 10 % slow; the bridge sets its
- * per-byte time to the frame the registers describe.
+ * 8N1), which makes its own transmit pacing 10 % slow; the bridge sets its per-byte time to
+ * the frame the registers describe.
  */
 #include <string.h>
 
@@ -37,9 +44,18 @@ static uint8_t flip_bit(utrf_sim_t *s, uint8_t b)
     return (uint8_t)(b ^ (1u << (utrf_xorshift64s(&s->rng) >> 61)));
 }
 
+/* A noise byte: random data, and a random stop bit from the same draw (low: a frame error). */
+static uint8_t noise_byte(utrf_sim_t *s, int *frame_error)
+{
+    uint64_t x = utrf_xorshift64s(&s->rng);
+    if (frame_error)
+        *frame_error = !((x >> 55) & 1);
+    return (uint8_t)(x >> 56);
+}
+
 /* A burst of noise: starts at a byte with probability f->burst and replaces it and the
  * bytes after it, burst_min..burst_max in all. True when b was replaced. */
-static int burst_byte(utrf_sim_t *s, line_faults_t *f, uint8_t *b)
+static int burst_byte(utrf_sim_t *s, line_faults_t *f, uint8_t *b, int *frame_error)
 {
     if (!f->burst_left && chance(s, f->burst)) {
         uint32_t span = f->burst_max - f->burst_min + 1;
@@ -48,7 +64,7 @@ static int burst_byte(utrf_sim_t *s, line_faults_t *f, uint8_t *b)
     if (!f->burst_left)
         return 0;
     f->burst_left--;
-    *b = (uint8_t)(utrf_xorshift64s(&s->rng) >> 56);
+    *b = noise_byte(s, frame_error);
     return 1;
 }
 
@@ -61,29 +77,174 @@ void bridge_sync_baud(utrf_sim_t *s)
         s->uart0->cycles_per_byte = frame;
 }
 
-static int uart_fifo_full(const avr_uart_t *u)
+/* ---- the chip's receiver ---------------------------------------------------------------- */
+#define CHIP_FIFO 2u             /* UDR0's receive buffer: two bytes */
+#define RX_DOR_FLAG 0x4000u      /* a FIFO entry's DOR0 (simavr keeps FE0 in UART_INPUT_FE) */
+#define ARR_MASK (UTRF_RX_ARRIVALS - 1)
+
+/* simavr's FIFO, read in place (its accessors are not exported by libsimavr). */
+static unsigned chip_fifo_count(const utrf_sim_t *s)
 {
-    return ((u->input.write + 1) & (uart_fifo_fifo_size - 1)) == u->input.read;
+    const uart_fifo_t *f = &s->uart0->input;
+    return (unsigned)(f->write - f->read) & (uart_fifo_fifo_size - 1);
 }
 
+static uint16_t chip_fifo_head(const utrf_sim_t *s)
+{
+    const uart_fifo_t *f = &s->uart0->input;
+    return f->buffer[f->read & (uart_fifo_fifo_size - 1)];
+}
+
+/* The arrival times follow simavr's FIFO, which it empties itself when the receiver is
+ * turned off or reset: drop the oldest until the two agree. */
+static void sync_arrivals(utrf_sim_t *s)
+{
+    unsigned n = chip_fifo_count(s);
+    while (s->rx_arr_head - s->rx_arr_tail > n)
+        s->rx_arr_tail++;
+}
+
+/* RXC0 is a level on the chip: its interrupt comes again while the FIFO holds a byte. simavr
+ * raises it once and re-raises it only a frame later (its pacing timer): request it now. */
+static void rxc_request(utrf_sim_t *s)
+{
+    if (chip_fifo_count(s) && !s->uart0->rxc.pending)
+        avr_raise_interrupt(s->avr, &s->uart0->rxc);
+}
+
+/* A complete byte into the FIFO, readable at once (simavr would wait another frame). */
+static void fifo_put(utrf_sim_t *s, uint16_t v, uint64_t arrival)
+{
+    avr_t *avr = s->avr;
+    avr_uart_t *u = s->uart0;
+    sync_arrivals(s);
+    if (s->rx_lost_pending) {
+        v |= RX_DOR_FLAG;
+        s->rx_lost_pending = 0;
+    }
+    avr_regbit_clear(avr, u->dor); /* simavr refuses input while DOR is set */
+    avr_raise_irq(s->uart_irq + UART_IRQ_INPUT, v);
+    s->rx_arrival[s->rx_arr_head++ & ARR_MASK] = arrival;
+    if (!avr_regbit_get(avr, u->rxc.raised)) {
+        u->rxc_raise_time = avr->cycle;
+        u->rx_cnt = 0;
+    }
+    rxc_request(s);
+}
+
+/* The next start bit with the FIFO still full: the byte in the shift register is lost. */
+static void overrun(utrf_sim_t *s)
+{
+    s->rx_shift_full = 0;
+    s->rx_lost_pending = 1;
+    s->stats.rx_overruns++;
+    s->rx_timing.overruns++;
+}
+
+/* A byte's stop bit ends: into the FIFO, or the shift register while the FIFO is full. */
+static void receiver_complete(utrf_sim_t *s, uint16_t v, int rx_enabled)
+{
+    if (!rx_enabled) {
+        s->stats.rx_lost_disabled++;
+        s->rx_shift_full = 0;
+        s->rx_lost_pending = 0;
+        return;
+    }
+    s->stats.rx_uart_bytes++;
+    if (v & UART_INPUT_FE) {
+        s->stats.rx_frame_errors++;
+        s->rx_timing.frame_errors++;
+    }
+    if (s->rx_shift_full)
+        overrun(s);
+    if (chip_fifo_count(s) < CHIP_FIFO) {
+        fifo_put(s, v, s->avr->cycle);
+    } else {
+        s->rx_shift_full = 1;
+        s->rx_shift_byte = v;
+        s->rx_shift_arrival = s->avr->cycle;
+    }
+}
+
+/* UDR0 read: simavr takes the FIFO's head; its wait is timed, and a byte waiting in the shift
+ * register moves into the room made. */
+static uint8_t udr_read(avr_t *avr, avr_io_addr_t addr, void *param)
+{
+    utrf_sim_t *s = param;
+    avr_uart_t *u = s->uart0;
+    sync_arrivals(s);
+    unsigned before = chip_fifo_count(s);
+    u->rx_cnt = 0; /* simavr's guard against reads faster than its own pacing: ours is exact */
+    uint8_t v = s->udr_read.c ? s->udr_read.c(avr, addr, s->udr_read.param) : avr->data[addr];
+    if (chip_fifo_count(s) < before && s->rx_arr_tail != s->rx_arr_head) {
+        uint64_t waited = avr->cycle - s->rx_arrival[s->rx_arr_tail++ & ARR_MASK];
+        utrf_sim_rx_timing_t *t = &s->rx_timing;
+        t->reads++;
+        t->total += waited;
+        if (waited > t->worst) {
+            t->worst = waited;
+            t->worst_at = avr->cycle;
+        }
+        if (waited > s->frame_cycles)
+            t->late++;
+    }
+    if (s->rx_shift_full && chip_fifo_count(s) < CHIP_FIFO) {
+        s->rx_shift_full = 0;
+        fifo_put(s, s->rx_shift_byte, s->rx_shift_arrival);
+    }
+    rxc_request(s);
+    return v;
+}
+
+/* UCSR0A read: DOR0 as the FIFO's head carries it (simavr sets FE0 the same way). */
+static uint8_t ucsra_read(avr_t *avr, avr_io_addr_t addr, void *param)
+{
+    utrf_sim_t *s = param;
+    avr_uart_t *u = s->uart0;
+    int dor = chip_fifo_count(s) && (chip_fifo_head(s) & RX_DOR_FLAG);
+    avr_regbit_setto(avr, u->dor, (uint8_t)(dor != 0));
+    return s->ucsra_read.c ? s->ucsra_read.c(avr, addr, s->ucsra_read.param) : avr->data[addr];
+}
+
+static void hook_read(avr_t *avr, uint16_t reg, io_read_hook_t *orig, avr_io_read_t fn,
+                      utrf_sim_t *s)
+{
+    avr_io_addr_t io = AVR_DATA_TO_IO(reg);
+    *orig = (io_read_hook_t){avr->io[io].r.c, avr->io[io].r.param};
+    avr->io[io].r.c = fn;
+    avr->io[io].r.param = s;
+}
+
+void utrf_sim_rx_timing(utrf_sim_t *s, utrf_sim_rx_timing_t *out, int clear)
+{
+    if (out)
+        *out = s->rx_timing;
+    if (clear)
+        memset(&s->rx_timing, 0, sizeof s->rx_timing);
+}
+
+/* ---- the wire ------------------------------------------------------------------------------ */
+/* Every frame time while bytes come: the byte on the wire completes (its stop bit ends), then
+ * the next one, if any, starts (its start bit: the moment an overrun is judged). */
 static avr_cycle_count_t rx_wire(avr_t *avr, avr_cycle_count_t when, void *param)
 {
     utrf_sim_t *s = param;
+    int rx_enabled;
+    uint64_t frame = board_io_uart0_frame_cycles(avr, &rx_enabled);
+    bridge_sync_baud(s);
+    if (s->rx_on_wire) {
+        s->rx_on_wire = 0;
+        receiver_complete(s, s->rx_wire_byte, rx_enabled);
+    }
     if (s->rx_head == s->rx_tail) {
         s->rx_wire_active = 0;
         return 0;
     }
-    int rx_enabled;
-    uint64_t frame = board_io_uart0_frame_cycles(avr, &rx_enabled);
-    bridge_sync_baud(s);
-    if (rx_enabled && uart_fifo_full(s->uart0)) {
-        s->stats.rx_held++;
-        return when + frame;
-    }
     line_faults_t *f = &s->faults[UTRF_SIM_TO_BOARD];
     uint8_t b;
+    int fe = 0;
     if (!f->burst_left && chance(s, f->insert)) { /* a noise byte takes this frame; the host byte waits */
-        b = (uint8_t)(utrf_xorshift64s(&s->rng) >> 56);
+        b = noise_byte(s, &fe);
         s->stats.rx_inserted++;
     } else {
         b = s->rx[s->rx_tail & RX_MASK];
@@ -91,12 +252,12 @@ static avr_cycle_count_t rx_wire(avr_t *avr, avr_cycle_count_t when, void *param
             s->stats.rx_duplicated++; /* left at the tail: it goes on the wire again */
         else
             s->rx_tail++;
-        if (burst_byte(s, f, &b)) {
+        if (burst_byte(s, f, &b, &fe)) {
             s->stats.rx_burst_bytes++;
         } else {
             if (chance(s, f->drop)) {
                 s->stats.rx_dropped++;
-                return when + frame;
+                return when + frame; /* the line idles for its frame */
             }
             if (chance(s, f->corrupt)) {
                 b = flip_bit(s, b);
@@ -104,18 +265,16 @@ static avr_cycle_count_t rx_wire(avr_t *avr, avr_cycle_count_t when, void *param
             }
         }
     }
-    if (!rx_enabled) {
-        s->stats.rx_lost_disabled++;
-    } else {
-        avr_raise_irq(s->uart_irq + UART_IRQ_INPUT, b);
-        s->stats.rx_uart_bytes++;
-    }
+    if (s->rx_shift_full && rx_enabled && chip_fifo_count(s) >= CHIP_FIFO)
+        overrun(s);
+    s->rx_on_wire = 1;
+    s->rx_wire_byte = (uint16_t)(b | (fe ? UART_INPUT_FE : 0));
     return when + frame;
 }
 
 void bridge_rx_kick(utrf_sim_t *s)
 {
-    if (s->rx_wire_active || s->rx_head == s->rx_tail)
+    if (s->rx_wire_active || (s->rx_head == s->rx_tail && !s->rx_on_wire))
         return;
     s->rx_wire_active = 1;
     avr_cycle_timer_register(s->avr, 1, rx_wire, s);
@@ -219,13 +378,13 @@ void bridge_deliver(utrf_sim_t *s)
             bridge_to_host(s, out, n);
             n = 0;
         }
-        if (burst_byte(s, f, &b)) {
+        if (burst_byte(s, f, &b, NULL)) {
             out[n++] = b;
             s->stats.tx_burst_bytes++;
             continue;
         }
         if (chance(s, f->insert)) {
-            out[n++] = (uint8_t)(utrf_xorshift64s(&s->rng) >> 56);
+            out[n++] = noise_byte(s, NULL);
             s->stats.tx_inserted++;
         }
         if (chance(s, f->drop)) {
@@ -255,6 +414,13 @@ void bridge_after_reset(utrf_sim_t *s)
         s->tx_head--;
         s->stats.tx_cut++;
     }
+    /* The byte coming in is cut, the receiver starts empty (simavr emptied its FIFO). */
+    if (s->rx_on_wire)
+        s->stats.rx_lost_disabled++;
+    s->rx_on_wire = 0;
+    s->rx_shift_full = 0;
+    s->rx_lost_pending = 0;
+    s->rx_arr_tail = s->rx_arr_head;
     /* It also cleared simavr's cycle timers: restart the wire if bytes are waiting. */
     s->rx_wire_active = 0;
     bridge_rx_kick(s);
@@ -274,6 +440,8 @@ void bridge_init(utrf_sim_t *s)
         avr_ioctl(s->avr, AVR_IOCTL_UART_SET_FLAGS(name), &flags);
     }
     s->uart_irq = avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), 0);
+    hook_read(s->avr, s->uart0->r_udr, &s->udr_read, udr_read, s);
+    hook_read(s->avr, s->uart0->r_ucsra, &s->ucsra_read, ucsra_read, s);
     avr_irq_register_notify(s->uart_irq + UART_IRQ_OUTPUT, on_uart_output, s);
     bridge_sync_baud(s);
 }

@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 13
+#define UTRF_SIM_ABI 14
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -46,7 +46,7 @@ typedef struct {
     uint64_t rx_dropped;        /* line faults: bytes dropped on the way to the board */
     uint64_t rx_corrupted;      /* line faults: bytes with a flipped bit */
     uint64_t rx_inserted;       /* line faults: noise bytes added */
-    uint64_t rx_held;           /* byte times a byte waited because simavr's FIFO was full */
+    uint64_t rx_overruns;       /* bytes the chip's receiver lost: its 2-byte FIFO full (DOR0) */
     uint64_t tx_uart_bytes;     /* bytes the firmware sent */
     uint64_t tx_dropped;        /* line faults: bytes dropped on the way to the host */
     uint64_t tx_corrupted;      /* line faults */
@@ -68,7 +68,20 @@ typedef struct {
     uint64_t stalls;            /* stalled entries of the stalled vector (utrf_sim_stall_vector) */
     uint64_t sleep_cycles;      /* cycles the CPU slept (SLEEP; simavr skips them) */
     uint64_t quieted_timer_events; /* PWM timer events left out (timers.c) */
+    uint64_t rx_frame_errors;   /* bytes received with a damaged stop bit (FE0): line noise */
 } utrf_sim_stats_t;
+
+/* The receive path's timing since the last clear: each byte from the end of its stop bit to
+ * the firmware's read of UDR0 (uart_bridge.c). */
+typedef struct {
+    uint64_t reads;        /* bytes read from UDR0 */
+    uint64_t total;        /* their waits, summed (cycles) */
+    uint64_t worst;        /* the longest wait (cycles) */
+    uint64_t worst_at;     /* the cycle of that read */
+    uint64_t late;         /* reads more than one frame after their byte's arrival */
+    uint64_t overruns;     /* bytes lost (DOR0) */
+    uint64_t frame_errors; /* bytes received with FE0 */
+} utrf_sim_rx_timing_t;
 
 /* Cycle profile of one interrupt vector or one function. */
 typedef struct {
@@ -189,6 +202,8 @@ int utrf_sim_eeprom_get(utrf_sim_t *s, uint8_t *buf, size_t n);
 int utrf_sim_eeprom_set(utrf_sim_t *s, const uint8_t *buf, size_t n);
 
 void utrf_sim_stats(const utrf_sim_t *s, utrf_sim_stats_t *out);
+/* The receive path's timing into out (NULL: none); clear != 0 starts it again. */
+void utrf_sim_rx_timing(utrf_sim_t *s, utrf_sim_rx_timing_t *out, int clear);
 
 /* Cycle profiling: of an interrupt vector (its entry to its RETI), or of a function from its
  * first instruction to its return (address in bytes, e.g. from utrf_sim_symbol). One vector

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from utrf.datalog import read_log
+from utrf.datalog import read_rows
 from utrf.hand.state import fault_names
 from utrf.hil.grasp_hold.config import HIT_COLUMNS, GraspHoldConfig, sample_columns
 from utrf.hil.runs import write_json
@@ -20,7 +20,7 @@ from utrf.models.geometry import HandGeometry
 
 def read_samples(out: Path, names: list[str]) -> list[dict[str, Any]]:
     """The rows of a run's ``samples.csv``."""
-    return read_log(out / "samples.csv", sample_columns(names)).rows
+    return read_rows(out / "samples.csv", sample_columns(names))
 
 
 def tracker_samples(rows: list[dict[str, Any]]) -> tuple[np.ndarray, np.ndarray]:
@@ -85,13 +85,19 @@ def analyse(out: Path, hand_geometry: HandGeometry | None = None) -> dict[str, A
     names = [f.name for f in geometry.fingers]
     rows = read_samples(out, names)
     if not rows:
-        empty: dict[str, Any] = {"experiment": "grasp hold (paper Sec. IV-C)", "samples": 0}
+        empty: dict[str, Any] = {
+            "experiment": "grasp hold (paper Sec. IV-C)",
+            "pose": config.pose,
+            "planned_duration_s": config.duration_s,
+            "complete": False,
+            "samples": 0,
+        }
         write_json(out / "results.json", empty)
         return empty
     t = np.array([float(r["time_s"]) for r in rows])
     base = t < config.baseline_s
     end = t >= t[-1] - config.baseline_s
-    hits = read_log(out / "hits.csv", HIT_COLUMNS).rows if (out / "hits.csv").exists() else []
+    hits = read_rows(out / "hits.csv", HIT_COLUMNS)
     per = {}
     worst_dev, worst_rec = 0.0, 0.0
     unrecovered = 0

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from utrf.datalog import read_log
+from utrf.datalog import read_rows
 from utrf.hil import joint2
 from utrf.hil.runs import write_json
 from utrf.hil.static_loading.config import (
@@ -48,7 +48,7 @@ def load_steps(out: Path) -> list[StepData]:
     done = completed_steps(out)
     if not done:
         return []
-    rows = read_log(out / "samples.csv", SAMPLE_COLUMNS).rows
+    rows = read_rows(out / "samples.csv", SAMPLE_COLUMNS)
     by_key: dict[tuple[int, int], list[dict[str, Any]]] = {}
     for r in rows:
         by_key.setdefault((int(r["step"]), int(r["attempt"])), []).append(r)

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from utrf.datalog import read_log
+from utrf.datalog import read_rows
 from utrf.hil.runs import RunError, finite_mean
 
 PAPER_LOADS_KG = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
@@ -140,10 +140,7 @@ class StaticLoadingConfig:
 
 
 def completed_steps(out: Path) -> dict[int, dict[str, Any]]:
-    path = out / "steps.csv"
-    if not path.exists():
-        return {}
-    rows = read_log(path, STEP_COLUMNS).rows
+    rows = read_rows(out / "steps.csv", STEP_COLUMNS)
     return {int(r["step"]): r for r in rows}
 
 

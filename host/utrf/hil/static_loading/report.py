@@ -19,7 +19,8 @@ FIGURE = "static_loading.png"
 def write(out: Path, geometry: FingerGeometry) -> dict[str, Any]:
     """The run's results (``results.json``) and its figure, from its files alone."""
     result = analyse(out, geometry=geometry)
-    plot(result, out / FIGURE, geometry)
+    if result["per_payload"]:  # a run killed before its first loaded step has no figure
+        plot(result, out / FIGURE, geometry)
     return result
 
 

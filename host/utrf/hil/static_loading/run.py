@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from utrf.datalog import CsvLog, read_log
+from utrf.datalog import CsvLog, read_rows
 from utrf.hand.state import fault_names
 from utrf.hil.joint2 import Joint2Frames
 from utrf.hil.rig import RIG_GAINS, Rig
@@ -87,7 +87,7 @@ def _attempts(out: Path) -> dict[int, int]:
     if not path.exists():
         return {}
     seen: dict[int, int] = {}
-    for r in read_log(path, SAMPLE_COLUMNS).rows:
+    for r in read_rows(path, SAMPLE_COLUMNS):
         s, a = int(r["step"]), int(r["attempt"])
         seen[s] = max(seen.get(s, 0), a)
     return seen
