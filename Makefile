@@ -30,12 +30,13 @@ BENCH_TARGETS :=
 -include tools/tools.mk
 
 .PHONY: help setup test demo bench lint clean test-after-setup demo-after-setup \
-        bench-after-setup
+        bench-after-setup test-fresh-clone
 SUBMAKE = $(MAKE) --no-print-directory SETUP_DONE=1
 
 help:
 	@echo "make demo    set up, build the firmware, run the pose demo on the emulated board"
 	@echo "make test    set up, build, run the whole suite (pytest drives the C++ tests too)"
+	@echo "make test-fresh-clone  a clone of HEAD set up from nothing (new .venv), README's commands"
 	@echo "make bench   benchmarks; results in docs/benchmarks.md"
 	@echo "make generate  every generated file, rewritten (tests fail when one is stale)"
 	@echo "make firmware | flash PORT=/dev/ttyACM0 | lint | hil-readme | figures | clean"
@@ -47,6 +48,11 @@ test: setup
 	@$(SUBMAKE) test-after-setup
 test-after-setup: $(TEST_DEPS)
 	$(PY) -m pytest $(PYTEST_ARGS)
+
+# Minutes of pip and builds in a clone with a new .venv: its own target, run by .ci/run after
+# `make test`, so the suite stays quick.
+test-fresh-clone: setup
+	UTRF_FRESH_CLONE=1 $(PY) -m pytest tests/packaging/test_fresh_clone.py $(PYTEST_ARGS)
 
 demo: setup
 	@$(SUBMAKE) demo-after-setup

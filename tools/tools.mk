@@ -11,9 +11,10 @@
 #   make hil-readme        hil/README.md's seed-0 section, from the emulated run it reports
 #   make figures           the models page's figures in docs/figures/ (committed)
 #   make bench-models | bench-client | bench-moves   their sections of docs/benchmarks.md
+#   make bench-campaign    campaigns on Dask: 1e6 designs, 1 vs 2 workers, the engine's share
 
 .PHONY: generate kinematics-table hil-readme figures figures-models bench-models \
-        bench-client bench-moves
+        bench-client bench-moves bench-campaign
 
 # One after the other: the vectors need the regenerated bindings, the hil section the rebuilt
 # firmware.
@@ -39,7 +40,7 @@ figures: figures-models
 figures-models: setup
 	$(PY) -m tools.model_figures docs/figures
 
-BENCH_TARGETS += bench-models bench-client bench-moves
+BENCH_TARGETS += bench-models bench-client bench-moves bench-campaign
 
 # The statics solver and the MuJoCo hand: the "## Models" section.
 bench-models: setup
@@ -53,3 +54,9 @@ bench-client: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
 # Moves on the board's clock: tracking over the whole demo and the tick with paths running.
 bench-moves: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
 	$(PY) -m tools.bench_moves $(BENCH_MOVES_ARGS)
+
+# Campaigns on Dask (utrf campaign): 1e6 designs, runs an hour on 1 and 2 workers, the
+# engine's share of the wall time, twin grasp holds: the "## Campaigns" section.
+bench-campaign: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
+	$(PY) -m tools.bench_campaign --update docs/benchmarks.md --json $(BUILD)/bench/campaign.json \
+	  $(BENCH_CAMPAIGN_ARGS)

@@ -357,3 +357,25 @@ def test_board_clock_unwraps_and_restarts() -> None:
     assert clock.unwrap(1.0) == pytest.approx(1.0 + BOARD_CLOCK_WRAP_S)
     clock.restart()
     assert clock.unwrap(0.01) == 0.01
+
+
+def test_tip_model_interpolates_as_numpy_does_to_the_bit() -> None:
+    """The tips of every telemetry sample come from a plain-float interpolation (its fast
+    path); numpy's np.interp on the same table is the general twin it must equal."""
+    import numpy as np
+
+    from utrf.hand.state import TipModel
+    from utrf.models.geometry import HandGeometry
+
+    model = TipModel(HandGeometry.default())
+    grid, xs, ys = model._tables[1]
+    rng = np.random.default_rng(3)
+    values = [*rng.uniform(grid[0] - 0.5, grid[-1] + 0.5, 2000), *grid[:40], grid[-1]]
+    for v in values:
+        assert model.tip(1, v) == (float(np.interp(v, grid, xs)), float(np.interp(v, grid, ys)))
+    nan_x, _ = model.tip(0, math.nan)
+    assert math.isnan(nan_x)
+    assert model.tips([0.1, 0.2, 0.3, 0.4, 0.5]) == (
+        [model.tip(i, t)[0] for i, t in enumerate([0.1, 0.2, 0.3, 0.4, 0.5])],
+        [model.tip(i, t)[1] for i, t in enumerate([0.1, 0.2, 0.3, 0.4, 0.5])],
+    )

@@ -106,3 +106,26 @@ def test_a_killed_writer_keeps_every_row_it_wrote(tmp_path: Path) -> None:
     # Every row the writer reported written is on disk, in order, with nothing invented.
     assert got[: last + 1] == list(range(last + 1))
     assert got == list(range(len(got)))
+
+
+def test_a_slow_disk_does_not_hold_up_the_writer(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The periodic fsync runs beside the writer; close() waits for it and syncs the rest."""
+    synced: list[int] = []
+    real_fsync = os.fsync
+
+    def slow_fsync(fd: int) -> None:
+        time.sleep(0.3)
+        real_fsync(fd)
+        synced.append(fd)
+
+    monkeypatch.setattr(os, "fsync", slow_fsync)
+    log = CsvLog(tmp_path / "log.csv", ["a"], fsync_period_s=0.0)
+    t0 = time.monotonic()
+    for i in range(20):  # every row is due a sync; at most one runs at a time
+        log.write([i])
+    assert time.monotonic() - t0 < 0.25
+    log.close()
+    assert len(synced) >= 2  # the periodic one, then close()'s own
+    assert [r["a"] for r in read_log(tmp_path / "log.csv").rows] == list(range(20))

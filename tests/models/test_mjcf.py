@@ -236,3 +236,32 @@ def test_bad_layout_names_the_field(tmp_path: Path) -> None:
         mjcf.hand_xml(layout=mjcf.load_layout(bad))
     with pytest.raises(mjcf.MjcfError, match="drive must be one of"):
         mjcf.hand_xml(drive="torque")
+
+
+def test_fingers_in_parallel_planes_apart_are_left_out_of_each_others_contacts() -> None:
+    """Index..little flex in parallel planes 22 mm apart (capsules <= 9 mm): never touching;
+    the thumb's plane is not parallel to theirs, so its pairs stay."""
+    hand = HandGeometry.default()
+    layout = mjcf.load_layout()
+    apart = mjcf.never_touching(hand, layout)
+    bit = {f.name: mjcf.FINGER_CONTYPE << i for i, f in enumerate(hand.fingers)}
+    long_fingers = ("index", "middle", "ring", "little")
+    for i, f in enumerate(hand.fingers):
+        want = 0 if f.name == "thumb" else sum(bit[n] for n in long_fingers if n != f.name)
+        assert apart[i] == want, f.name
+    model = mujoco.MjModel.from_xml_string(mjcf.hand_xml(hand, layout))
+
+    def collide(a: str, b: str) -> bool:
+        ga, gb = (mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) for n in (a, b))
+        ta, ca = int(model.geom_contype[ga]), int(model.geom_conaffinity[ga])
+        tb, cb = int(model.geom_contype[gb]), int(model.geom_conaffinity[gb])
+        return bool(ta & cb or tb & ca)
+
+    assert not collide("index_link3", "middle_link3")
+    assert not collide("ring_link1", "little_link2")
+    assert collide("thumb_link3", "index_link3")
+    assert collide("little_link3", "palm")
+    # moved so their planes are close, two long fingers collide again
+    near = dataclasses.replace(layout.fingers["middle"], position_m=(0.0, -0.025, 0.0))
+    close = dataclasses.replace(layout, fingers={**layout.fingers, "middle": near})
+    assert not mjcf.never_touching(hand, close)[1] & bit["middle"]

@@ -73,6 +73,10 @@ def _sh(cmd: str, clone: Path, timeout: float) -> subprocess.CompletedProcess[st
 
 
 @pytest.mark.slow
+@pytest.mark.skipif(
+    os.environ.get("UTRF_FRESH_CLONE") != "1",
+    reason="a new .venv and the whole build take minutes: `make test-fresh-clone` (CI runs it)",
+)
 @pytest.mark.timeout(1800)  # a new .venv (pip) and the whole build: minutes on a loaded machine
 def test_a_fresh_clone_sets_up_builds_and_runs_the_readme(tmp_path: Path) -> None:
     clone = tmp_path / "clone"

@@ -238,6 +238,8 @@ class MujocoPlant(_FingerPlant):
         self._t1 = [m.tendon(f"{n}_t1").id for n in self.names]
         self._t4 = [m.tendon(f"{n}_t4").id for n in self.names]
         self.frames = [mjcf.finger_frame(m, self.data, n) for n in self.names]
+        self._origins = np.array([o for o, _ in self.frames])  # (5, 3): all tips in one go
+        self._rots = np.array([r for _, r in self.frames])  # (5, 3, 3)
         self._native = NativeMjPlant(
             libmujoco_path(), m._address, self.data._address, self._c_params(), seed
         )
@@ -320,9 +322,8 @@ class MujocoPlant(_FingerPlant):
     @property
     def tip(self) -> np.ndarray:
         """Fingertips in each finger's frame (m), (5, 2)."""
-        return np.array(
-            [self.to_finger(f, self.data.site_xpos[s])[:2] for f, s in enumerate(self._tip_site)]
-        )
+        rel = self.data.site_xpos[self._tip_site] - self._origins
+        return np.einsum("fji,fj->fi", self._rots[:, :, :2], rel)
 
     @property
     def tension(self) -> np.ndarray:

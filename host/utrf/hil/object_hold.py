@@ -129,10 +129,12 @@ def run(
     *,
     elf: Path | None = None,
     progress: Any = print,
+    on_hand: Any = None,
 ) -> dict[str, Any]:
     """Close on the object, let go, turn the hand over, hold under hits, record, analyse.
     Every phase is sampled (``object_samples.csv``, time from the hold's start: the close,
-    release and turn-over come before 0)."""
+    release and turn-over come before 0). ``on_hand(hand)``, when given, is called once the
+    hand is connected, before the close (a campaign sets gains and listens to telemetry)."""
     from utrf.emulator import EmulatedBoard
     from utrf.emulator.mujoco_plant import MujocoPlant
     from utrf.hand import Hand
@@ -157,6 +159,8 @@ def run(
         # is all this run needs; the telemetry still arrives whole)
         if isinstance(hand.link, SimLink):
             hand.link.pump_interval_s = 1.0 / config.sample_hz
+        if on_hand is not None:
+            on_hand(hand)
         s = _Sampler(hand, board, plant, config, log)
         closed_forces, effort = _close(hand, s, config, progress)
         # what the close found, for the analysis of a run killed later

@@ -45,7 +45,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from utrf.models import statics
 from utrf.models.geometry import FingerGeometry, GeometryError
@@ -434,6 +433,8 @@ def fit(
             return ((pred - data.tip_m) * 1e3).ravel()  # mm, for conditioning
         assert data.deflection_m is not None
         return (pred - data.deflection_m) * 1e3
+
+    from scipy.optimize import least_squares  # here: every CLI start imports this module
 
     x0a = np.clip(np.array(x0), np.array(lo) + 1e-12, np.array(hi) - 1e-12)
     try:

@@ -23,7 +23,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize
 
 from utrf.models import tendons
 from utrf.models.geometry import FingerGeometry
@@ -124,6 +123,8 @@ def solve_energy(geom: FingerGeometry, q: float, load: Load) -> EnergySolution:
 
     def jac(x: np.ndarray) -> np.ndarray:
         return _complex_step_gradient(lambda t: potential(geom, q, load, t), x)
+
+    from scipy.optimize import minimize  # here: the CLI imports this module at every start
 
     res = minimize(fun, theta0, jac=jac, method="BFGS", options={"gtol": 1e-10, "maxiter": 500})
     theta = np.asarray(res.x, dtype=float)

@@ -43,6 +43,10 @@ travel limits; at duty 0 it is a short brake. ``"force"``: ctrl is the motor for
 Collisions: a finger's links collide with the other fingers, the palm and objects, not with
 each other (the paper's model, like the real finger, ignores that). Bits: finger i has contype
 ``1 << i``; the palm ``PALM_CONTYPE``; objects ``OBJECT_CONTYPE`` with ``OBJECT_CONAFFINITY``.
+Two fingers that flex in parallel planes further apart than their links' radii can never
+touch (every joint is a hinge about its plane's normal): their pair is left out of the
+affinities (:func:`never_touching`), which spares MuJoCo's collision search its checks and
+changes no contact.
 
 World frame: z up, the hand palm-up, fingers along +x, Joint-1 axes on the palm's top face
 (z = 0). Gravity −z: for index..little it loads each finger along its −y, as on the paper's
@@ -52,6 +56,7 @@ an assumption in docs/mujoco.md.
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from typing import Any
@@ -123,6 +128,7 @@ def _add_finger(
     place: FingerPlacement,
     layout: Layout,
     drive: str,
+    apart: int = 0,
 ) -> None:
     L, R = geom.link_lengths_m, geom.guide_radii_m
     if min(geom.link_masses_kg) <= 0:
@@ -133,7 +139,7 @@ def _add_finger(
     quat = place.quat()
     ranges = joint_ranges_rad(geom)
     contype = FINGER_CONTYPE << index
-    conaffinity = (_FINGER_BITS & ~contype) | OBJECT_CONTYPE
+    conaffinity = (_FINGER_BITS & ~contype & ~apart) | OBJECT_CONTYPE
     dyn = layout.dynamics
     _sub(
         world_palm,
@@ -333,6 +339,26 @@ def _actuator(
         )
 
 
+def never_touching(hand: HandGeometry, layout: Layout) -> list[int]:
+    """Per finger, the bits (``FINGER_CONTYPE << j``) of the fingers it can never touch: both
+    flex in parallel planes (a finger's joints are hinges about its frame's z) whose distance
+    is more than the sum of their thickest links' radii."""
+    planes = []
+    for spec in hand.fingers:
+        place = layout.fingers[spec.name]
+        normal = place.rotation()[:, 2]
+        radius = layout.link_radius_fraction * max(spec.geometry.guide_radii_m)
+        planes.append((normal, float(normal @ np.asarray(place.position_m)), radius))
+    apart = [0] * len(planes)
+    for i, (ni, di, ri) in enumerate(planes):
+        for j, (nj, dj, rj) in enumerate(planes):
+            sign = float(ni @ nj)
+            parallel = i != j and abs(abs(sign) - 1.0) < 1e-9
+            if parallel and abs(di - math.copysign(1.0, sign) * dj) > ri + rj:
+                apart[i] |= FINGER_CONTYPE << j
+    return apart
+
+
 def hand_xml(
     hand: HandGeometry | None = None,
     layout: Layout | None = None,
@@ -397,6 +423,7 @@ def hand_xml(
         _sub(contact, "exclude", body1="palm", body2=f"{spec.name}_link1")
     tendon_root = ET.Element("tendon")
     actuator_root = ET.Element("actuator")
+    apart = never_touching(hand, layout)
     for i, spec in enumerate(hand.fingers):
         _add_finger(
             palm,
@@ -409,6 +436,7 @@ def hand_xml(
             layout.fingers[spec.name],
             layout,
             drive,
+            apart[i],
         )
     root.append(tendon_root)
     root.append(actuator_root)

@@ -32,7 +32,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import brentq, minimize_scalar
 
 from utrf.models import kinematics, statics
 from utrf.models.geometry import FingerGeometry
@@ -223,6 +222,8 @@ def plan(
             gravity=load.gravity,
             model=model,
         )
+
+    from scipy.optimize import brentq, minimize_scalar  # here: the CLI imports this module
 
     grid = np.linspace(*window, 257)
     scan = batch(grid)

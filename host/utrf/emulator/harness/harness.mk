@@ -29,9 +29,9 @@ FIXTURE_CFLAGS := -mmcu=atmega2560 -DF_CPU=16000000UL -Os -std=gnu99 -Wall -Wext
 
 TEST_DEPS     += $(EMU_LIB) $(EMU_FIXTURE)
 DEMO_DEPS     += $(EMU_LIB)
-BENCH_TARGETS += bench-emulator
+BENCH_TARGETS += bench-emulator bench-twin
 
-.PHONY: emulator bench-emulator
+.PHONY: emulator bench-emulator bench-twin
 
 emulator: $(EMU_LIB) $(EMU_FIXTURE)
 
@@ -63,3 +63,9 @@ $(EMU_FIXTURE): tests/emulator/fixtures/fixture.c firmware/src/board_pins.h $(EM
 # `firmware` target builds it); results into docs/benchmarks.md, between the emulator markers.
 bench-emulator: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
 	$(PY) -m tools.bench_emulator $(BENCH_EMULATOR_ARGS)
+
+# The twin's throughput against f500c49 (issue 20): a 120 s grasp hold in fresh processes, this
+# checkout and a throwaway worktree of the reference under build/ (built by its own make),
+# alternately; each engine alone too. Results into docs/benchmarks.md, between the twin markers.
+bench-twin: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
+	$(PY) -m tools.bench_twin $(BENCH_TWIN_ARGS)

@@ -78,12 +78,16 @@ def _events(
     return out
 
 
-def analyse(out: Path, hand_geometry: HandGeometry | None = None) -> dict[str, Any]:
+def analyse(
+    out: Path, hand_geometry: HandGeometry | None = None, rows: list[dict[str, Any]] | None = None
+) -> dict[str, Any]:
+    """A run's results from its files (``rows``: its samples when the caller has read them)."""
     meta = json.loads((out / "meta.json").read_text())
     config = GraspHoldConfig(**meta["config"])
     geometry = hand_geometry or HandGeometry.default()
     names = [f.name for f in geometry.fingers]
-    rows = read_samples(out, names)
+    if rows is None:
+        rows = read_samples(out, names)
     if not rows:
         empty: dict[str, Any] = {
             "experiment": "grasp hold (paper Sec. IV-C)",

@@ -18,10 +18,11 @@ FIGURE = "grasp_hold.png"
 
 def write(out: Path, hand_geometry: HandGeometry | None = None) -> dict[str, Any]:
     """The run's results (``results.json``) and its figure, from its files alone."""
-    result = analyse(out, hand_geometry)
+    names = [f.name for f in (hand_geometry or HandGeometry.default()).fingers]
+    rows = read_samples(out, names) if (out / "meta.json").exists() else None  # read once
+    result = analyse(out, hand_geometry, rows)
     if result["samples"]:
-        names = list(result["fingers"])
-        plot(result, read_samples(out, names), names, out / FIGURE)
+        plot(result, rows or [], list(result["fingers"]), out / FIGURE)
     return result
 
 

@@ -1,0 +1,262 @@
+"""``make bench-twin``: the twin's throughput against a reference commit, side by side.
+
+A 120 s plain grasp hold (``utrf hil grasp-hold --emulated --duration-s 120``, a fresh process
+each time) of this checkout and of a reference commit (f500c49 by default: the twin before
+issue 20), run alternately on the same machine, several repeats; the ratio of the medians is
+the figure (absolute times differ twofold between this project's machines, and the machine
+may be shared). Each engine alone too, in each tree: the ELF on simavr with no plant (the
+same host traffic, the encoders held still), and the MJCF stepped alone; the rest of the
+hold's time is Python and the crossings between them.
+
+The reference is a throwaway ``git worktree`` under ``build/`` (never committed), built with
+its own ``make firmware emulator`` and run with its own sources (``PYTHONPATH``, working
+directory), this checkout's Python environment. Prints a Markdown section and writes it into
+docs/benchmarks.md between the twin markers (``--no-update``: only prints).
+
+``python -m tools.bench_twin --engine elf|mjcf --seconds S`` runs one engine alone and prints
+JSON (what the benchmark runs in each tree: it uses only interfaces both trees have).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from datetime import date
+from pathlib import Path
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+BENCH_DOC = REPO_ROOT / "docs" / "benchmarks.md"
+BEGIN = "<!-- BEGIN twin (make bench-twin) -->"
+END = "<!-- END twin -->"
+REFERENCE = "f500c49"
+
+
+# --- one engine alone (runs inside either tree) ----------------------------------------------
+
+
+def engine_elf(seconds: float) -> dict:
+    """The firmware on simavr with no plant: telemetry at 100 Hz and heartbeats (the hold's
+    host traffic), five fingers in POSITION at the angles their encoders read, held still."""
+    from utrf.emulator import EmulatedBoard
+    from utrf.hand.simlink import SimLink
+    from utrf.hil.rig import EmulatedTruth
+    from utrf.protocol import messages as m
+
+    params = EmulatedTruth(actuator=None).plant_params()
+    with EmulatedBoard(realtime=False, seed=0, plant_params=params) as board:
+        board._native.attach_plant(None)  # no plant: the encoder voltages stay as they are
+        latest: list = [None]
+
+        def keep(t) -> None:
+            if isinstance(t.message, m.State):
+                latest[0] = t.message
+
+        link = SimLink(board, on_telemetry=keep)
+        link.handshake()
+        link.request(m.SetTelemetry(rate_hz=100))
+        link.sleep(0.1)
+        theta = tuple(latest[0].theta2)
+        link.request(m.ClearFaults(mask=0b11111))
+        link.request(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=0b11111, value=theta))
+        link.request(
+            m.SetMode(
+                mask=0b11111,
+                mode=(m.ControlMode.POSITION,) * 5,
+                duty=(0.0,) * 5,
+                effort=(0.0,) * 5,
+            )
+        )
+        cpu0, wall0, sim0 = time.process_time(), time.perf_counter(), board.sim_time
+        link.sleep(seconds)
+        cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
+        sim = board.sim_time - sim0
+        modes = link.request(m.GetStatus()).mode
+    return {"sim": sim, "cpu": cpu, "wall": wall,
+            "held": all(x == m.ControlMode.POSITION for x in modes)}  # fmt: skip
+
+
+def engine_mjcf(seconds: float) -> dict:
+    """The twin's MuJoCo hand stepped alone (no MCU, no motor model): ``seconds`` of its
+    0.5 ms steps in one call, the fingers at the grasp pose's contact angles, motors off."""
+    import mujoco
+
+    from utrf.emulator.mujoco_plant import MujocoPlant
+    from utrf.hil.rig import EmulatedTruth
+
+    plant = MujocoPlant(None, EmulatedTruth(actuator=None).plant_params(), 0, timestep=1e-3)
+    for f, theta2 in enumerate((0.3, 0.6, 0.6, 0.6, 0.6)):
+        plant.set_theta2(f, theta2)
+    steps = round(seconds / plant.model.opt.timestep)
+    cpu0, wall0 = time.process_time(), time.perf_counter()
+    mujoco.mj_step(plant.model, plant.data, nstep=steps)
+    cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
+    return {"sim": steps * plant.model.opt.timestep, "cpu": cpu, "wall": wall}
+
+
+# --- the benchmark (drives both trees) -------------------------------------------------------
+
+
+def reference_tree(commit: str) -> Path:
+    """A worktree of ``commit`` under build/, built with its own make (reused when there)."""
+    tree = REPO_ROOT / "build" / f"ref-{commit}"
+    if not (tree / ".git").exists():
+        # a build/ removed since (make clean) leaves its worktree registered: forget it first
+        subprocess.run(["git", "worktree", "prune"], cwd=REPO_ROOT, check=True)
+        subprocess.run(
+            ["git", "worktree", "add", "--detach", str(tree), commit], cwd=REPO_ROOT, check=True
+        )
+    venv = Path(sys.prefix)
+    subprocess.run(
+        ["make", "-s", "-C", str(tree), f"VENV={venv}", "firmware", "emulator"], check=True
+    )
+    return tree
+
+
+def _env(tree: Path) -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(tree / "host")
+    env.pop("UTRF_SIM_LIB", None)  # each tree's own harness, from its build/
+    return env
+
+
+def _child(cmd: list[str], tree: Path) -> tuple[float, float, subprocess.CompletedProcess]:
+    """Run ``cmd`` in ``tree``: wall seconds, CPU seconds (the child's user + system)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    done = subprocess.run(cmd, cwd=tree, env=_env(tree), capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+    if done.returncode not in (0, 1):  # 1: the hold ran and reported (not all held, a fault)
+        tail = "\n".join((done.stderr or done.stdout).strip().splitlines()[-5:])
+        raise RuntimeError(f"{' '.join(cmd)} in {tree} failed ({done.returncode}):\n{tail}")
+    return wall, cpu, done
+
+
+def hold(tree: Path, seconds: float) -> dict:
+    """The grasp hold, a fresh process: wall and CPU seconds."""
+    out = Path(tempfile.mkdtemp(prefix="bench-twin-"))
+    try:
+        cmd = [sys.executable, "-m", "utrf", "hil", "grasp-hold", "--emulated",
+               "--duration-s", f"{seconds:g}", "--out", str(out / "run"), "--quiet"]  # fmt: skip
+        wall, cpu, done = _child(cmd, tree)
+        results = json.loads((out / "run" / "results.json").read_text())
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+    return {"wall": wall, "cpu": cpu, "rc": done.returncode,
+            "complete": bool(results.get("complete")), "load": os.getloadavg()[0]}  # fmt: skip
+
+
+def engine(tree: Path, which: str, seconds: float) -> dict:
+    """One engine alone in ``tree`` (this file run there with that tree's sources)."""
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--engine", which,
+           "--seconds", f"{seconds:g}"]  # fmt: skip
+    _, _, done = _child(cmd, tree)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def median(rows: list[dict], key: str) -> float:
+    return statistics.median(r[key] for r in rows)
+
+
+def report(ref: str, runs: dict[str, list[dict]], alone: dict, seconds: float, repeats: int) -> str:
+    from tools.doc_sections import cpu_name
+
+    new, old = runs["new"], runs["ref"]
+    ratio_wall = median(new, "wall") / median(old, "wall")
+    ratio_cpu = median(new, "cpu") / median(old, "cpu")
+
+    def paired(key: str) -> str:  # each run against the other tree's run beside it
+        each = [a[key] / b[key] for a, b in zip(new, old, strict=True)]
+        return f"median {statistics.median(each):.2f} ({', '.join(f'{x:.2f}' for x in each)})"
+
+    loads = [r["load"] for r in new + old]
+
+    def cell(rows: list[dict], key: str) -> str:
+        each = ", ".join(f"{r[key]:.1f}" for r in rows)
+        return f"**{median(rows, key):.1f} s** ({each})"
+
+    def engines(tag: str) -> str:
+        e, j, h = alone[tag]["elf"], alone[tag]["mjcf"], median(runs[tag], "cpu")
+        rest = h - e["cpu"] - j["cpu"]
+        shares = " / ".join(f"{100 * x / h:.0f}" for x in (e["cpu"], j["cpu"], rest))
+        return f"{e['cpu']:.1f} s / {j['cpu']:.1f} s / {rest:.1f} s ({shares} %)"
+
+    lines = [
+        BEGIN,
+        "## Twin throughput (issue 20)",
+        "",
+        f"Measured with `make bench-twin` (`python -m tools.bench_twin`) on {cpu_name()}, "
+        f"{os.cpu_count()} cores, {date.today().isoformat()}: `utrf hil grasp-hold --emulated "
+        f"--duration-s {seconds:g}` (the plain hold: grasp-bottle, 100 Hz telemetry, hits), a "
+        f"fresh process each time, this checkout against `{ref}` (a `git worktree` of it under "
+        f"`build/`, built by its own make), alternately, {repeats} times each; medians. CPU "
+        "time is the process's user + system time; the machine was shared (load average "
+        f"{min(loads):.1f}–{max(loads):.1f} during the runs), which moves wall time more than "
+        "CPU time.",
+        "",
+        f"| | this checkout | `{ref}` | ratio of the medians; of each pair run side by side |",
+        "|---|---|---|---|",
+        f"| wall time | {cell(new, 'wall')} | {cell(old, 'wall')} | **{ratio_wall:.2f}**; "
+        f"pairs: {paired('wall')} |",
+        f"| CPU time | {cell(new, 'cpu')} | {cell(old, 'cpu')} | **{ratio_cpu:.2f}**; "
+        f"pairs: {paired('cpu')} |",
+        f"| each engine alone, CPU: the ELF on simavr with no plant / the MJCF stepped alone / "
+        f"the rest of the hold (Python, start-up, the figure, the crossings) | {engines('new')} "
+        f"| {engines('ref')} | |",
+        "",
+        f"The ELF alone: the firmware for {seconds:g} s simulated with no plant attached, the "
+        "hold's host traffic (telemetry at 100 Hz, heartbeats), five fingers in POSITION at the "
+        "angles their still encoders read. The MJCF alone: the twin's hand model (plain, no "
+        f"object) stepped {seconds:g} s in its 0.5 ms steps in one `mj_step(nstep=...)` call, "
+        "the motors off.",
+        END,
+    ]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--engine", choices=("elf", "mjcf"), help="run one engine alone; JSON out")
+    p.add_argument("--seconds", type=float, default=120.0, help="simulated seconds")
+    p.add_argument("--repeats", type=int, default=3, help="holds per tree, alternating")
+    p.add_argument("--reference", default=REFERENCE, help="the commit to compare with")
+    p.add_argument("--no-update", action="store_true", help="print only")
+    args = p.parse_args(argv)
+    if args.engine:
+        fn = engine_elf if args.engine == "elf" else engine_mjcf
+        print(json.dumps(fn(args.seconds)))
+        return 0
+    if args.repeats < 1 or not args.seconds > 0:
+        p.error("--repeats must be >= 1 and --seconds > 0")
+    trees = {"new": REPO_ROOT, "ref": reference_tree(args.reference)}
+    runs: dict[str, list[dict]] = {"new": [], "ref": []}
+    for i in range(args.repeats):
+        for tag in ("new", "ref") if i % 2 == 0 else ("ref", "new"):
+            runs[tag].append(hold(trees[tag], args.seconds))
+            print(f"{tag} {runs[tag][-1]}", file=sys.stderr, flush=True)
+    alone = {
+        tag: {which: engine(trees[tag], which, args.seconds) for which in ("elf", "mjcf")}
+        for tag in ("new", "ref")
+    }
+    print(json.dumps(alone), file=sys.stderr)
+    section = report(args.reference, runs, alone, args.seconds, args.repeats)
+    print(section)
+    if not args.no_update:
+        from tools.doc_sections import write_section
+
+        write_section(BENCH_DOC, section, BEGIN, END)
+        print(f"\nwritten to {BENCH_DOC}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
