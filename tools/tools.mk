@@ -4,8 +4,9 @@
 # the repository's root as `python -m tools.NAME`.
 #
 #   make generate          every generated file: the protocol bindings and README tables, the
-#                          golden vectors, the kinematics table, hil/README.md's seed-0 section
-#                          (tests fail when any of them is stale)
+#                          golden vectors, the kinematics table, hil/README.md's seed-0 section,
+#                          docs/hand.md's table of `utrf` commands (tests fail when any of them
+#                          is stale)
 #   make kinematics-table  firmware/src/generated/kinematics_table.h from the hand file
 #   make hil-readme        hil/README.md's seed-0 section, from the emulated run it reports
 #   make figures           the models page's figures in docs/figures/ (committed)
@@ -21,6 +22,7 @@ generate: setup
 	@$(SUBMAKE) protocol-generate
 	@$(SUBMAKE) kinematics-table
 	@$(SUBMAKE) hil-readme
+	$(PY) -m tools.cli_doc
 
 kinematics-table: setup
 	$(PY) -m tools.kinematics_table

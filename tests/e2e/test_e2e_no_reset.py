@@ -53,9 +53,9 @@ def test_reconnect_without_reset_leaves_the_fingers_where_they_are(
             assert f.mode == M.ControlMode.POSITION
         goal = LIBRARY["point"].theta2(hand.geometry)
         np.testing.assert_allclose(held, goal, atol=0.03)
-        # the pose's targets (or, once the host's silence latched HOST_TIMEOUT, the HOLD
-        # action's: where the fingers were)
+        # the pose's targets, no fault: the first connection said goodbye
         np.testing.assert_allclose(st.target, goal, atol=0.03)
+        assert all(f.faults == 0 for f in st.fingers)
         time.sleep(0.5)  # heartbeats flow; nothing moves
         # The hold dithers by a few encoder counts (0.0015 rad each) under the plant's noise;
         # a reset would put every finger in COAST, and the flexed ones would fall.

@@ -73,8 +73,8 @@ def test_utrf_pose_settles_and_leaves_the_pose_standing(
     got = [out["fingers"][n]["theta2_rad"] for n in ("thumb", "index", "middle", "ring", "little")]
     # read just after settling: within the tolerance, give or take an ADC count (7.7 mrad)
     np.testing.assert_allclose(got, goal, atol=DEFAULT_TOLERANCE + 0.008)
-    # --then hold (the default): after the command the board holds the pose by itself, past
-    # its host timeout (it latches HOST_TIMEOUT and applies its safe action, HOLD)
+    # --then hold (the default): after the command (and its goodbye) the board holds the pose
+    # by itself, past its host timeout
     served.run_for(1.0)
     np.testing.assert_allclose(served.theta2, goal, atol=DEFAULT_TOLERANCE + 0.02)
 

@@ -50,9 +50,13 @@ def test_tcp_client_with_auto_reset_and_echo(fixture_elf: Path) -> None:
             # (sim_time moves at the end of a batch of exchanges; the last byte left during one)
             assert sim >= 1032 * 40e-6 - SERVE_BATCH_S
             assert wall >= sim - 0.1
-            # a second client is turned away while the first is connected
+            # a second client is turned away, told why, while the first is connected
             with socket.create_connection(("127.0.0.1", board.tcp_port), timeout=2.0) as other:
                 other.settimeout(2.0)
+                assert recv_line(other) == (
+                    b"utrf busy: the emulator already has a host attached (a TCP client, on "
+                    b"its socket); one host at a time\n"
+                )
                 assert other.recv(16) == b""
         finally:
             port.close()

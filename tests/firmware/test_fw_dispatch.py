@@ -23,6 +23,7 @@ VALID: dict[type[m.Message], m.Message] = {
     m.Identify: m.Identify(),
     m.Ping: m.Ping(token=0xDEADBEEF),
     m.Heartbeat: m.Heartbeat(),
+    m.Goodbye: m.Goodbye(),
     m.SetTargets: m.SetTargets(
         kind=m.TargetKind.JOINT2_ANGLE, mask=0b11, value=(0.2, -0.1, 0, 0, 0)
     ),
@@ -191,7 +192,7 @@ def test_out_of_range_field_is_refused_and_changes_nothing(sim: Sim, cls, index,
     assert snapshot(sim) == before
 
 
-@pytest.mark.parametrize("msg_id", [0x00, 0x04, 0x14, 0x3F, 0x81, 0x90, 0xF0, 0xFF])
+@pytest.mark.parametrize("msg_id", [0x00, 0x05, 0x14, 0x3F, 0x81, 0x90, 0xF0, 0xFF])
 def test_unknown_ids_are_refused(sim: Sim, msg_id: int) -> None:
     before = snapshot(sim)
     nack = sim.nack(msg_id, b"\x01\x02")

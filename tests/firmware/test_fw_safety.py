@@ -93,6 +93,20 @@ def test_any_valid_frame_feeds_the_host_watchdog(sim: Sim) -> None:
     assert sim.finger(0).faults == F.HOST_TIMEOUT
 
 
+def test_goodbye_stands_the_silence_rule_down_until_the_next_frame(sim: Sim) -> None:
+    sim.ok(m.SetSafety(heartbeat_timeout=0.1, safe_action=m.SafeAction.COAST))
+    move_to(sim, 1, 0.2)
+    set_target(sim, 1, 0.2)
+    set_mode(sim, 1, POSITION)
+    sim.ok(m.Goodbye())
+    sim.ok(m.Goodbye())  # a second one is done again (its ack is not cached): nothing re-arms
+    sim.run(500)  # five timeouts of silence
+    assert sim.finger(1).faults == 0 and sim.finger(1).mode == POSITION  # still holding
+    sim.send(m.Ping(token=1))  # a new host's first frame arms the rule again
+    sim.run(150)
+    assert sim.finger(1).faults == F.HOST_TIMEOUT and motors_off(sim, 1)
+
+
 def test_a_silent_host_with_an_idle_hand_latches_nothing(sim: Sim) -> None:
     sim.run(2000)
     assert all(sim.finger(f).faults == 0 for f in range(5))

@@ -621,6 +621,17 @@ void handle(app::Board& b, uint8_t seq, uint8_t msg_id, const uint8_t* body, uin
             if (decode_or_nack(b, seq, body, len, m)) ack(b, seq, msg_id);
             return;
         }
+        case MsgId::GOODBYE: {
+            Goodbye m;
+            if (!decode_or_nack(b, seq, body, len, m)) return;
+            {
+                Lock lock;
+                b.hand.host_left();  // after take_request's note_frame(): this frame feeds nothing
+            }
+            b.request_seq = -1;  // not cached: a resend does this again (a lost ack re-arms nothing)
+            ack(b, seq, msg_id);
+            return;
+        }
         case MsgId::SET_TARGETS: set_targets(b, seq, body, len); return;
         case MsgId::SET_MODE: set_mode(b, seq, body, len); return;
         case MsgId::MOVE: move(b, seq, body, len); return;

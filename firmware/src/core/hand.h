@@ -77,6 +77,12 @@ class Hand {
 
     // loop() context, no lock needed.
     void note_frame() { frame_seen_ = 1; }
+    // loop() context, under the tick lock: the host said goodbye (proto::Goodbye): the
+    // host-silence rule stands down (0: fallen) until the next frame arms it again.
+    void host_left() {
+        frame_seen_ = 0;
+        silence_left_ = 0;
+    }
     void note_loop() { loop_count_ = (uint8_t)(loop_count_ + 1); }
     bool halted() const { return halted_ != 0; }
     // Stop driving for good (until the watchdog resets the board): every motor off, every

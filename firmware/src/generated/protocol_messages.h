@@ -23,7 +23,7 @@ namespace proto {
 
 static const uint16_t kProtocolVersion = 2;
 // CRC-32 of the canonical spec (doc texts excluded); compared at the handshake.
-static const uint32_t kSchemaHash = 0xC951C151UL;
+static const uint32_t kSchemaHash = 0x8E3DAEF7UL;
 static const uint8_t kMaxPayload = 64;  // body bytes
 static const uint8_t kFingerCount = 5;
 static const uint32_t kDefaultBaud = 1000000UL;
@@ -120,6 +120,7 @@ namespace MsgId {
 static const uint8_t IDENTIFY = 0x01;
 static const uint8_t PING = 0x02;
 static const uint8_t HEARTBEAT = 0x03;
+static const uint8_t GOODBYE = 0x04;
 static const uint8_t SET_TARGETS = 0x10;
 static const uint8_t SET_MODE = 0x11;
 static const uint8_t SET_TELEMETRY = 0x12;
@@ -224,6 +225,18 @@ struct Ping {
 // too.
 struct Heartbeat {
   static const uint8_t kId = 0x03;
+  static const uint8_t kSize = 0;
+  static const uint8_t kReplyId = 0xF0;  // ack
+};
+
+// goodbye (0x04, host to board, reply ack, idempotent)
+// The host is leaving on purpose: the host-silence rule stands down, so the fingers keep what
+// they do (a pose held in POSITION stays held) and no HOST_TIMEOUT latches. The host's last
+// frame: the next valid frame from any host arms the rule again (a new connection takes over).
+// The other rules (encoder, joint limit, stall, overrun, loop alive) keep running. A resend is
+// answered again (its ack is not cached), so a lost ack cannot re-arm the rule.
+struct Goodbye {
+  static const uint8_t kId = 0x04;
   static const uint8_t kSize = 0;
   static const uint8_t kReplyId = 0xF0;  // ack
 };
@@ -733,6 +746,19 @@ inline uint8_t encode(const Heartbeat& msg, uint8_t* body) {
   (void)msg;
   (void)body;
   return Heartbeat::kSize;
+}
+
+inline DecodeStatus decode(const uint8_t* body, uint8_t len, Goodbye& out,
+                           uint8_t& bad_field) {
+  (void)body;
+  (void)out;
+  bad_field = 0xFF;
+  return len == Goodbye::kSize ? DecodeStatus::OK : DecodeStatus::BAD_LENGTH;
+}
+inline uint8_t encode(const Goodbye& msg, uint8_t* body) {
+  (void)msg;
+  (void)body;
+  return Goodbye::kSize;
 }
 
 inline DecodeStatus decode(const uint8_t* body, uint8_t len, SetTargets& out,
@@ -1920,6 +1946,7 @@ inline int16_t message_size(uint8_t msg_id) {
     case MsgId::IDENTIFY: return Identify::kSize;
     case MsgId::PING: return Ping::kSize;
     case MsgId::HEARTBEAT: return Heartbeat::kSize;
+    case MsgId::GOODBYE: return Goodbye::kSize;
     case MsgId::SET_TARGETS: return SetTargets::kSize;
     case MsgId::SET_MODE: return SetMode::kSize;
     case MsgId::SET_TELEMETRY: return SetTelemetry::kSize;
@@ -1966,6 +1993,7 @@ inline int16_t message_size(uint8_t msg_id) {
   X(Identify, IDENTIFY) \
   X(Ping, PING) \
   X(Heartbeat, HEARTBEAT) \
+  X(Goodbye, GOODBYE) \
   X(SetTargets, SET_TARGETS) \
   X(SetMode, SET_MODE) \
   X(SetTelemetry, SET_TELEMETRY) \
@@ -2008,6 +2036,7 @@ inline int16_t message_size(uint8_t msg_id) {
   X(Identify, IDENTIFY) \
   X(Ping, PING) \
   X(Heartbeat, HEARTBEAT) \
+  X(Goodbye, GOODBYE) \
   X(SetTargets, SET_TARGETS) \
   X(SetMode, SET_MODE) \
   X(SetTelemetry, SET_TELEMETRY) \
@@ -2072,6 +2101,15 @@ inline uint8_t flatten(const Heartbeat& m, double* out) {
   return 0;
 }
 inline void unflatten(const double* in, Heartbeat& m) {
+  (void)in;
+  (void)m;
+}
+inline uint8_t flatten(const Goodbye& m, double* out) {
+  (void)m;
+  (void)out;
+  return 0;
+}
+inline void unflatten(const double* in, Goodbye& m) {
   (void)in;
   (void)m;
 }

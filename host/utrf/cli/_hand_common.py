@@ -1,9 +1,12 @@
 """What the hand commands (``pose``, ``monitor``, ``demo``) share: options, the pose library,
 connecting, and turning errors into one line on stderr and an exit code.
 
-Exit codes: 0 done; 1 the hand did not do it (not settled, a latched fault); 2 bad input
-(an unknown pose, a bad file or value); 3 the board could not be reached or spoke another
-protocol (no reply, a reset, a lost line, a schema mismatch).
+Exit codes: 0 done; 1 the hand did not do it (not settled, a latched fault, a finger not idle
+when it must be); 2 bad input (an unknown pose, a bad file or value, a setting outside the
+protocol's range: nothing was sent); 3 the board could not be reached or spoke another
+protocol (no answer, not a UTRF board, a reset, a lost line, a schema mismatch); 4 the board
+is in use (the emulated board already has a host attached, or the OS says another program
+holds the port); 130 interrupted (Ctrl-C: the command says what it left).
 """
 
 from __future__ import annotations
@@ -14,20 +17,24 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from utrf.cli import error
 from utrf.hand import DEFAULT_TELEMETRY_HZ, Hand, HandError, TargetError
 from utrf.hand.client import OnClose
 from utrf.hand.errors import FingerFaultError, NotControlledError, NotSettledError
-from utrf.models.geometry import GeometryError
+from utrf.hand.view import state_line
+from utrf.models.geometry import GeometryError, HandGeometry
 from utrf.poses import PoseError, PoseLibrary, user_pose_file
 from utrf.protocol import messages as m
-from utrf.protocol.errors import ProtocolError
+from utrf.protocol.errors import NoAnswerError, NotABoardError, PortBusyError, ProtocolError
 
 EXIT_OK = 0
 EXIT_NOT_DONE = 1
 EXIT_BAD_INPUT = 2
 EXIT_LINK = 3
+EXIT_BUSY = 4
+EXIT_INTERRUPTED = 130
 
 
 def add_port(p: argparse.ArgumentParser, *, reset: bool = True) -> None:
@@ -106,6 +113,56 @@ def connect(
     )
 
 
+def finger_arg(text: str) -> int:
+    """A finger by name (``thumb index middle ring little``) or number 0..4, checked before
+    connecting (argparse's ``type``)."""
+    names = [f.name for f in HandGeometry.default().fingers]
+    if text in names:
+        return names.index(text)
+    if text.isdigit() and int(text) < len(names):
+        return int(text)
+    raise argparse.ArgumentTypeError(f"no finger {text!r}; fingers are {names} or 0..4")
+
+
+def connect_running(args: argparse.Namespace, command: str, **kwargs: Any) -> Hand:
+    """:func:`connect` for a command that leaves the board running (no reset unless
+    ``--reset``); over socket://, which has no DTR line, every connection resets the emulated
+    board: said on stderr."""
+    if not args.reset and args.port.startswith("socket://"):
+        print(
+            f"utrf {command}: note: {args.port} has no DTR line: connecting resets the emulated "
+            "board (its pty, which `utrf emulate` prints, does not)",
+            file=sys.stderr,
+        )
+        args.reset = True
+    return connect(args, **kwargs)
+
+
+def interrupted(hand: Hand, command: str) -> int:
+    """Ctrl-C during a command: the fingers under closed-loop control are held where they are
+    now (POSITION at the measured angle), those driven open-loop (DUTY) are braked; says so
+    and what it left, and leaves them so (goodbye: no HOST_TIMEOUT). Exit code 130."""
+    hand.on_close = "hold"
+    try:
+        st = hand.state()
+        held = [f.name for f in st if f.closed_loop and not f.faults]
+        braked = [f.name for f in st if f.mode == m.ControlMode.DUTY and not f.faults]
+        if held:
+            hand.hold(held)
+        if braked:
+            hand.brake(braked)
+        print(state_line(hand.state()), flush=True)
+        what = []
+        if held:
+            what.append(f"held where they were (POSITION at the measured angle): {', '.join(held)}")
+        if braked:
+            what.append(f"braked (they ran open-loop): {', '.join(braked)}")
+        error(command, "interrupted; " + ("; ".join(what) or "no finger was moving"))
+    except (HandError, ProtocolError, OSError) as exc:
+        error(command, f"interrupted, and the fingers could not be held: {exc}")
+    return EXIT_INTERRUPTED
+
+
 def guarded(command: str) -> Callable[[Callable[[argparse.Namespace], int]], Callable[..., int]]:
     """Errors to one line on stderr and the module's exit codes."""
 
@@ -120,6 +177,12 @@ def guarded(command: str) -> Callable[[Callable[[argparse.Namespace], int]], Cal
             except (NotSettledError, FingerFaultError, NotControlledError) as exc:
                 error(command, exc)
                 return EXIT_NOT_DONE
+            except PortBusyError as exc:
+                error(command, exc)
+                return EXIT_BUSY
+            except (NotABoardError, NoAnswerError) as exc:  # they say what happened
+                error(command, exc)
+                return EXIT_LINK
             except ProtocolError as exc:
                 error(command, f"{type(exc).__name__}: {exc}")
                 return EXIT_LINK

@@ -4,13 +4,15 @@ Connects (riding out the board's auto-reset), moves every finger along a minimum
 the board runs over ``--duration`` seconds (default: the pose's own), waits until each is
 within ``--tolerance`` degrees of its target and prints the result. On a terminal a live
 table follows the fingers meanwhile. Afterwards the hand is left as ``--then`` says:
-``hold`` (the default: the board keeps the pose in closed loop; when the host has been
-silent for its heartbeat timeout it latches HOST_TIMEOUT and applies its safe action, HOLD
-by default, so the pose stands), ``brake`` or ``coast``.
+``hold`` (the default: the board keeps the pose in closed loop), ``brake`` or ``coast``; the
+command then says goodbye to the board, whose host-silence rule stands down, so a held pose
+latches no HOST_TIMEOUT and the next command (``--no-reset``) takes over cleanly. A command
+killed without its goodbye leaves HOST_TIMEOUT latched (the board's safe action applied).
 
 Exit codes: 0 settled; 1 not settled (the reason names each finger and how far off it is)
 or a latched fault; 2 bad input (unknown pose, bad pose file); 3 the board could not be
-reached or spoke another protocol.
+reached or spoke another protocol; 4 the board is in use; 130 interrupted (Ctrl-C: the
+fingers are held where they are, in closed loop, and the command prints their state).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from utrf.cli._hand_common import (
     connect,
     error,
     guarded,
+    interrupted,
     load_poses,
 )
 from utrf.hand import HandState
@@ -77,11 +80,16 @@ def run(args: argparse.Namespace) -> int:
             if not args.json:
                 took = args.duration if args.duration is not None else pose.duration_s or 1.0
                 print(f"moving to {pose.name} over {took:g} s ...", flush=True)
+        stopped = False
         with display:
             try:
                 hand.pose(pose, args.duration, tolerance=tolerance, timeout=args.timeout)
             except (NotSettledError, FingerFaultError, NotControlledError) as exc:
                 outcome = exc
+            except KeyboardInterrupt:
+                stopped = True
+        if stopped:  # after the live table is gone
+            return interrupted(hand, "pose")
         final = hand.state()
         if args.json:
             print(

@@ -29,9 +29,11 @@ is generated from). ``set_targets`` stays for streaming targets (teleoperation):
 Closing (``with`` or :meth:`Hand.close`) stops the stream and leaves the hand in the safe mode
 ``on_close``: ``"brake"`` (the default: motor terminals shorted, no power; the fingers relax
 slowly instead of springing open and nothing runs without the host), ``"coast"`` (outputs off,
-fingers free) or ``"hold"`` (the board keeps the last targets in closed loop; after its
-heartbeat timeout it latches HOST_TIMEOUT and applies its configured safe action, HOLD by
-default: what ``utrf pose`` uses to leave a pose standing).
+fingers free) or ``"hold"`` (the board keeps the last targets in closed loop: what ``utrf
+pose`` uses to leave a pose standing). Every close ends with ``goodbye``: the board's
+host-silence rule stands down, so a held pose latches no HOST_TIMEOUT and the next connection
+takes over cleanly; a host that falls silent without it (killed, unplugged) still latches
+HOST_TIMEOUT and the board applies its safe action.
 """
 
 from __future__ import annotations
@@ -291,6 +293,13 @@ class Hand:
     @property
     def on_close(self) -> OnClose:
         return self._lifecycle.on_close
+
+    @on_close.setter
+    def on_close(self, value: OnClose) -> None:
+        """Change what closing leaves (``utrf``'s Ctrl-C: ``"hold"`` where the fingers are)."""
+        if value not in ON_CLOSE:
+            raise ValueError(f"on_close must be one of {ON_CLOSE}, got {value!r}")
+        self._lifecycle.on_close = value
 
     @property
     def closed(self) -> bool:

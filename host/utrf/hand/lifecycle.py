@@ -101,8 +101,10 @@ class HandLifecycle:
         return self._session.closed
 
     def close(self) -> None:
-        """Stop telemetry, leave the fingers in the ``on_close`` mode, close the link. A
-        board that reset or went away is only closed (nothing can be sent to it)."""
+        """Stop telemetry, leave the fingers in the ``on_close`` mode, say ``goodbye`` (the
+        board's host-silence rule stands down: a pose left in ``hold`` stays held and latches
+        no HOST_TIMEOUT) and close the link. A board that reset or went away is only closed
+        (nothing can be sent to it)."""
         session = self._session
         if session.closed:
             return
@@ -111,7 +113,9 @@ class HandLifecycle:
                 if self.on_close != "hold":
                     mode = m.ControlMode.BRAKE if self.on_close == "brake" else m.ControlMode.COAST
                     self._control.send_modes(ALL_FINGERS, [mode] * len(self._fingers))
+                session.link.heartbeat_period_s = None  # goodbye: the last frame it hears
                 self._telemetry.silence()
+                session.request(m.Goodbye())
         except (ProtocolError, OSError) as exc:
             log.warning("utrf hand: could not leave the hand in %s mode: %s", self.on_close, exc)
         finally:

@@ -111,6 +111,27 @@ class DisconnectedError(ProtocolError, ConnectionError):
     """The link is closed, or the line went away (cable, port, socket)."""
 
 
+class PortBusyError(DisconnectedError):
+    """The line is in use by another host: the emulated board already has one attached (it
+    said so in a ``utrf busy:`` line), or the OS says another program holds the port."""
+
+
+class NotABoardError(ProtocolError):
+    """Something answered on the line, but not as a UTRF board: no identity came back."""
+
+
+class NoAnswerError(ReplyTimeout):
+    """Nothing at all came back on the line during the handshake (a :class:`ReplyTimeout`
+    of ``identify`` that says so)."""
+
+    def __init__(self, text: str, timeout: ReplyTimeout) -> None:
+        self.request = timeout.request
+        self.timeout_s = timeout.timeout_s
+        self.attempts = timeout.attempts
+        self.outcome = timeout.outcome
+        Exception.__init__(self, text)
+
+
 class BoardResetError(ProtocolError):
     """The board restarted (it sent ``boot``): its state is gone.
 

@@ -43,7 +43,13 @@ from utrf.protocol.engine import (
     Wait,
     call_each,
 )
-from utrf.protocol.errors import DisconnectedError
+from utrf.protocol.errors import (
+    DisconnectedError,
+    NoAnswerError,
+    NotABoardError,
+    PortBusyError,
+    ReplyTimeout,
+)
 from utrf.protocol.transport import SerialTransport, Transport
 
 __all__ = ["Link", "LinkStats", "StreamMessage", "Telemetry"]
@@ -83,6 +89,7 @@ class Link(EngineDriver):
         self._cond = threading.Condition(threading.Lock())  # guards the engine and callbacks
         self._request_lock = threading.Lock()  # one request in flight
         self._stop = threading.Event()
+        self._heard = bytearray()  # the first bytes received (see _no_identity)
         self._heartbeat_thread: threading.Thread | None = None
         transport.start(self._on_data, self._on_close)
         if heartbeat_period_s is not None:
@@ -145,12 +152,56 @@ class Link(EngineDriver):
         this is how the host reconnects after a reset. Raises :class:`SchemaMismatchError`
         naming both protocol versions and schema hashes when the firmware was built from
         another spec; the first two fields of ``identity`` keep their place in every version.
+        When no UTRF frame ever came, says what was on the line instead: :class:`PortBusyError`
+        (the peer said ``utrf busy: ...``: the emulated board has a host already),
+        :class:`NotABoardError` (bytes that are no frame, or a line closed without a word),
+        :class:`NoAnswerError` (silence).
         """
         start = time.monotonic()
-        with self._request_lock:
-            with self._cond:
-                self._engine.start_handshake(timeout_s, start)
-            return self._drive()
+        try:
+            with self._request_lock:
+                with self._cond:
+                    self._engine.start_handshake(timeout_s, start)
+                return self._drive()
+        except (ReplyTimeout, DisconnectedError) as exc:
+            raise self._no_identity(exc, time.monotonic() - start) from exc
+
+    #: the peer's first bytes kept to say what answered when no board did
+    HEARD_KEPT = 200
+    #: how a peer that refuses a second host says so: one text line, then it closes the line
+    BUSY_PREFIX = b"utrf busy: "
+
+    def _no_identity(self, exc: ReplyTimeout | DisconnectedError, waited: float) -> Exception:
+        """The handshake failed: say what was on the line, when no UTRF frame ever came."""
+        with self._cond:
+            stats = self._engine.stats()
+            heard = bytes(self._heard)
+        if stats.rx_frames:
+            return exc  # a board spoke: the error as it is
+        where = getattr(self._transport, "url", "the line")
+        gone = isinstance(exc, DisconnectedError)
+        if heard.startswith(self.BUSY_PREFIX):
+            line = heard[len(self.BUSY_PREFIX) :].split(b"\n", 1)[0].decode("ascii", "replace")
+            return PortBusyError(f"{where}: {line}")
+        if heard:
+            text = heard[:60].decode("ascii", "backslashreplace")
+            return NotABoardError(
+                f"not a UTRF board (no identity answer on {where}): it sent {len(heard)}"
+                f"{'+' if len(heard) >= self.HEARD_KEPT else ''} bytes that are no UTRF frame "
+                f"({text!r}{'...' if len(heard) > 60 else ''})"
+                + (" and closed the line" if gone else "")
+                + ": is it the right port, is --baud the board's?"
+            )
+        if isinstance(exc, DisconnectedError):
+            return NotABoardError(
+                f"not a UTRF board (no identity answer on {where}): the line closed without a "
+                f"word ({exc})"
+            )
+        return NoAnswerError(
+            f"no answer on {where} to identify in {waited:.1f} s ({exc.attempts} attempts): is "
+            "the board powered, is it the right port, is another program using it?",
+            exc,
+        )
 
     # --- driving the engine ----------------------------------------------------------------
 
@@ -220,6 +271,12 @@ class Link(EngineDriver):
         now = time.monotonic()
         engine, cond = self._engine, self._cond
         with cond:
+            if len(self._heard) < self.HEARD_KEPT:
+                self._heard += data[: self.HEARD_KEPT - len(self._heard)]
+                busy = self._heard.startswith(self.BUSY_PREFIX) and b"\n" in self._heard
+                if busy and not engine.stats().rx_frames:  # turned away: no need to wait
+                    engine.fail(PortBusyError("turned away"))
+                    cond.notify_all()
             events = engine.frames(data)
         for event in events:
             with cond:

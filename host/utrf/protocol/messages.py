@@ -16,7 +16,7 @@ from utrf.protocol.codec import Direction, Field, Message, Request
 
 PROTOCOL_VERSION = 2
 #: CRC-32 of the canonical spec (doc texts excluded), compared at the handshake.
-SCHEMA_HASH = 0xC951C151
+SCHEMA_HASH = 0x8E3DAEF7
 MAX_PAYLOAD = 64
 FINGER_COUNT = 5
 DEFAULT_BAUD = 1000000
@@ -195,6 +195,23 @@ class Heartbeat(Request["Ack"]):
 
     NAME: ClassVar[str] = "heartbeat"
     ID: ClassVar[int] = 0x03
+    SIZE: ClassVar[int] = 0
+    DIRECTION: ClassVar[Direction] = Direction.HOST_TO_BOARD
+    IDEMPOTENT: ClassVar[bool] = True
+    REPLY_TIMEOUT_S: ClassVar[float] = 0.1
+
+
+@dataclass(frozen=True, slots=True)
+class Goodbye(Request["Ack"]):
+    """The host is leaving on purpose: the host-silence rule stands down, so the fingers keep what
+    they do (a pose held in POSITION stays held) and no HOST_TIMEOUT latches. The host's last
+    frame: the next valid frame from any host arms the rule again (a new connection takes over).
+    The other rules (encoder, joint limit, stall, overrun, loop alive) keep running. A resend is
+    answered again (its ack is not cached), so a lost ack cannot re-arm the rule.
+    """
+
+    NAME: ClassVar[str] = "goodbye"
+    ID: ClassVar[int] = 0x04
     SIZE: ClassVar[int] = 0
     DIRECTION: ClassVar[Direction] = Direction.HOST_TO_BOARD
     IDEMPOTENT: ClassVar[bool] = True
@@ -1113,6 +1130,7 @@ class Nack(Message):
 Identify.REPLY = Identity
 Ping.REPLY = Pong
 Heartbeat.REPLY = Ack
+Goodbye.REPLY = Ack
 SetTargets.REPLY = Ack
 SetMode.REPLY = Ack
 SetTelemetry.REPLY = Ack
@@ -1141,6 +1159,7 @@ MESSAGES: tuple[type[Message], ...] = (
     Identify,
     Ping,
     Heartbeat,
+    Goodbye,
     SetTargets,
     SetMode,
     SetTelemetry,

@@ -7,6 +7,8 @@ soon as it arrives and reports once, through another callback, when the line goe
 
 from __future__ import annotations
 
+import errno
+import os
 import select
 import threading
 from collections.abc import Callable
@@ -14,7 +16,7 @@ from typing import Protocol
 
 import serial
 
-from utrf.protocol.errors import DisconnectedError
+from utrf.protocol.errors import DisconnectedError, PortBusyError
 from utrf.protocol.messages import DEFAULT_BAUD
 
 DataCallback = Callable[[bytes], None]
@@ -41,9 +43,16 @@ class SerialTransport:
     POLL_S = 0.05
 
     def __init__(self, url: str, baudrate: int = DEFAULT_BAUD, **serial_kwargs: object) -> None:
+        if "://" not in url and os.name == "posix":
+            # One program at a time on a serial port (an advisory lock, as other tools take).
+            serial_kwargs.setdefault("exclusive", True)
         try:
-            self._serial = serial.serial_for_url(url, baudrate=baudrate, timeout=0, **serial_kwargs)
+            self._serial = self._open(url, baudrate, serial_kwargs)
         except (serial.SerialException, ValueError) as exc:
+            if getattr(exc, "errno", None) in (errno.EBUSY, errno.EAGAIN) or "lock" in str(exc):
+                raise PortBusyError(
+                    f"{url} is in use by another program (the OS says: {exc})"
+                ) from exc
             raise DisconnectedError(f"cannot open {url!r}: {exc}") from exc
         self.url = url
         self._write_lock = threading.Lock()
@@ -53,6 +62,16 @@ class SerialTransport:
             self._fd: int | None = self._serial.fileno()
         except (AttributeError, NotImplementedError, OSError, serial.SerialException):
             self._fd = None  # loop:// and friends: poll instead of select
+
+    @staticmethod
+    def _open(url: str, baudrate: int, kwargs: dict[str, object]) -> serial.SerialBase:
+        port = serial.serial_for_url(url, baudrate=baudrate, timeout=0, do_not_open=True, **kwargs)
+        if url.startswith("socket://"):
+            # A new connection holds no stale bytes, but pyserial's open() reads and drops
+            # whatever came at once: a server's first words (why it refuses us) with it.
+            port.reset_input_buffer = lambda: None
+        port.open()
+        return port
 
     def start(self, on_data: DataCallback, on_close: CloseCallback) -> None:
         if self._thread is not None:
@@ -75,8 +94,7 @@ class SerialTransport:
                 self._wait_readable()
                 if self._closing.is_set():
                     break
-                # Non-blocking (timeout=0): everything that has arrived, at once.
-                data = self._serial.read(4096)
+                data = self._read()
                 if data:
                     on_data(data)
         except (serial.SerialException, OSError, ValueError, TypeError) as exc:
@@ -84,6 +102,21 @@ class SerialTransport:
                 error = exc
         finally:
             on_close(error)
+
+    def _read(self) -> bytes:
+        """Everything that has arrived, at once (non-blocking)."""
+        sock = getattr(self._serial, "_socket", None)
+        if sock is None:
+            return bytes(self._serial.read(4096))
+        # socket://: pyserial's read drops what it got when the peer then hangs up (a server
+        # that says why it refuses and closes): take it from the (non-blocking) socket.
+        try:
+            data = sock.recv(4096)
+        except (BlockingIOError, InterruptedError):
+            return b""
+        if not data:
+            raise serial.SerialException("socket disconnected")
+        return bytes(data)
 
     def write(self, data: bytes) -> None:
         with self._write_lock:

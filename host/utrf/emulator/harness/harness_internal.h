@@ -157,6 +157,7 @@ struct utrf_sim {
     char pty_path[128];
     int pty_open;
     int pty_dtr; /* the modelled DTR line of the pty (see serve.c) */
+    int pty_refused; /* the pty was opened while a TCP host was attached: turned away */
     int listen_fd;
     int client_fd;
     int auto_reset;

@@ -12,6 +12,10 @@
  * no edge and does not reset the board (`Hand.connect(url, reset=False)`). The pty models
  * exactly that: the slave's termios (which the master reads) is checked while nobody has it
  * open. A TCP connection has no DTR line: every connection is an open that raises it.
+ *
+ * One host at a time, as on a serial port: while a host is attached (on the pty or on TCP),
+ * a second one is turned away with one text line, `utrf busy: ...` (the host's Link reports it:
+ * protocol/README.md), and hears nothing of the board; a TCP one is then hung up on.
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -36,6 +40,24 @@ void serve_init(utrf_sim_t *s)
     s->client_fd = -1;
     s->pty_open = 0;
     s->pty_dtr = 0;
+    s->pty_refused = 0;
+}
+
+/* The pty's opener is the board's host (not one turned away). */
+static int pty_host(const utrf_sim_t *s)
+{
+    return s->pty_open && !s->pty_refused;
+}
+
+static void refuse(int fd, const char *holder)
+{
+    char line[160];
+    int n = snprintf(line, sizeof line,
+                     "utrf busy: the emulator already has a host attached (%s); one host at a time\n",
+                     holder);
+    if (n > 0 && write(fd, line, (size_t)n) < 0) {
+        /* nothing more to do for a host that is turned away */
+    }
 }
 
 static void client_connected(utrf_sim_t *s, int dtr_edge)
@@ -124,7 +146,7 @@ void utrf_sim_drop_client(utrf_sim_t *s)
 
 int utrf_sim_clients(const utrf_sim_t *s)
 {
-    return (s->pty_open ? 1 : 0) | (s->client_fd >= 0 ? 2 : 0);
+    return (pty_host(s) ? 1 : 0) | (s->client_fd >= 0 ? 2 : 0);
 }
 
 static void read_into_queue(utrf_sim_t *s, int fd, int is_socket)
@@ -166,23 +188,36 @@ void serve_poll(utrf_sim_t *s, int timeout_ms)
         if (open_now && !s->pty_open) {
             s->pty_open = 1;
             tcflush(s->pty_fd, TCIOFLUSH);
-            client_connected(s, !s->pty_dtr);
-            s->pty_dtr = 1;
+            if (s->client_fd >= 0) {
+                s->pty_refused = 1; /* until it closes: the TCP host keeps the board */
+                refuse(s->pty_fd, "a TCP client, on its socket");
+            } else {
+                client_connected(s, !s->pty_dtr);
+                s->pty_dtr = 1;
+            }
         } else if (!open_now) {
             s->pty_open = 0;
+            s->pty_refused = 0;
             /* Closed (or opened and closed between two polls): HUPCL set means DTR dropped. */
             struct termios t;
             if (tcgetattr(s->pty_fd, &t) == 0 && (t.c_cflag & HUPCL))
                 s->pty_dtr = 0;
         }
-        if (open_now && (p[ipty].revents & POLLIN))
-            read_into_queue(s, s->pty_fd, 0);
+        if (open_now && (p[ipty].revents & POLLIN)) {
+            if (s->pty_refused)
+                tcflush(s->pty_fd, TCIFLUSH); /* a host turned away is not heard */
+            else
+                read_into_queue(s, s->pty_fd, 0);
+        }
     }
     if (ilisten >= 0 && (p[ilisten].revents & POLLIN)) {
         int fd = accept4(s->listen_fd, NULL, NULL, SOCK_NONBLOCK | SOCK_CLOEXEC);
         if (fd >= 0) {
-            if (s->client_fd >= 0) {
-                close(fd); /* one client at a time, like a serial port */
+            if (s->client_fd >= 0 || pty_host(s)) {
+                /* one host at a time, like a serial port */
+                refuse(fd, s->client_fd >= 0 ? "a TCP client, on its socket" : s->pty_path);
+                shutdown(fd, SHUT_WR);
+                close(fd);
             } else {
                 int one = 1;
                 setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
@@ -200,7 +235,7 @@ void serve_write(utrf_sim_t *s, const uint8_t *buf, size_t n)
 {
     /* A byte is heard when at least one sink takes it. */
     size_t taken = s->capture_on ? n : 0;
-    if (s->pty_fd >= 0 && s->pty_open) {
+    if (s->pty_fd >= 0 && pty_host(s)) {
         ssize_t w = write(s->pty_fd, buf, n);
         if (w > 0 && (size_t)w > taken)
             taken = (size_t)w;
@@ -224,4 +259,5 @@ void serve_close(utrf_sim_t *s)
         close(s->pty_fd);
     s->listen_fd = s->pty_fd = -1;
     s->pty_open = 0;
+    s->pty_refused = 0;
 }
