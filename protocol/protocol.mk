@@ -16,11 +16,13 @@ BENCH_TARGETS += protocol-bench
 
 .PHONY: protocol-generate protocol-bench
 
-# Regenerate the bindings, the README tables and the golden vectors from protocol/spec.toml
+# Regenerate the bindings, the README tables, the golden vectors and the fuzzers' seeds (which
+# follow from the vectors) from protocol/spec.toml
 # (part of `make generate`, tools/tools.mk).
 protocol-generate: setup
 	$(PY) -m protocol.generate
 	$(PY) -m protocol.make_vectors
+	$(PY) tests/fuzz/make_seeds.py
 
 protocol-bench: setup $(PROTO_HOST_LIB)
 	$(PY) -m tools.bench_protocol
