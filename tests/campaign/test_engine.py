@@ -58,6 +58,8 @@ def trace(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, address: str) -> Path
     path = tmp_path / "trace.txt"
     with Client(address) as client:
         client.run(funcs.set_trace, str(path))
+    # A worker the nanny restarts (after a kill) inherits the nanny's environment: this process's.
+    monkeypatch.setenv("UTRF_TEST_TRACE", str(path))
     return path
 
 
