@@ -21,7 +21,11 @@ from typing import Any
 
 import pytest
 from selenium import webdriver
-from selenium.common.exceptions import StaleElementReferenceException, WebDriverException
+from selenium.common.exceptions import (
+    ElementNotInteractableException,
+    StaleElementReferenceException,
+    WebDriverException,
+)
 from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.by import By
 from selenium.webdriver.remote.webdriver import WebDriver
@@ -162,14 +166,17 @@ def wait_connected(driver: WebDriver, timeout: float = 60.0) -> None:
     )
 
 
-def click(driver: WebDriver, css: str) -> None:
+def click(driver: WebDriver, css: str, timeout: float = 15.0) -> None:
+    """Click once the element takes clicks: the page redraws it (stale) and enables it
+    (not interactable) when the server's state reaches it, later on a loaded machine."""
     wait_connected(driver)
-    for _ in range(20):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
         try:
             driver.find_element(By.CSS_SELECTOR, css).click()
             return
-        except StaleElementReferenceException:
-            time.sleep(0.05)
+        except (StaleElementReferenceException, ElementNotInteractableException):
+            time.sleep(0.1)
     driver.find_element(By.CSS_SELECTOR, css).click()
 
 
