@@ -171,6 +171,22 @@ class NativeBoard:
         return self._lib.utrf_sim_run_plant_until(self._h, cycle, period, wake)
 
     @property
+    def plant_cycle(self) -> int:
+        """The plant's clock: where the next exchange period starts."""
+        return int(self._lib.utrf_sim_plant_cycle(self._h))
+
+    @property
+    def plant_threads(self) -> int:
+        return int(self._lib.utrf_sim_plant_threads(self._h))
+
+    def set_plant_threads(self, threads: int) -> None:
+        rc = self._lib.utrf_sim_set_plant_threads(self._h, threads)
+        if rc == -1:
+            raise HarnessError(f"the plant steps on 1 or 2 threads, not {threads!r}")
+        if rc:
+            raise HarnessError("the plant's thread could not start")
+
+    @property
     def cycle(self) -> int:
         return self._lib.utrf_sim_cycle(self.handle)
 

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from utrf import artifacts
-from utrf.emulator import _native
+from utrf.emulator import _native, twin_threads
 from utrf.emulator._native import F_CPU_HZ, HarnessError, NativeBoard
 from utrf.emulator.board_driven import BoardDriven
 from utrf.emulator.board_faults import BoardFaults
@@ -117,6 +117,7 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
         exchange_period: float | None = None,
         plant: str | MujocoPlant = "mujoco",
         build: BuildFaults | None = None,
+        plant_threads: int | None = None,
     ) -> None:
         if elf is None:
             try:
@@ -141,6 +142,7 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
             raise EmulatorError(f"tcp_port must be 0..65535 (0: any free port), got {tcp_port!r}")
         if isinstance(hand, str | Path):
             hand = HandGeometry.from_toml(hand)
+        threads = twin_threads.plant_threads(plant_threads, paced=realtime and speed is not None)
         self.realtime = bool(realtime)
         self.speed = None if speed is None else float(speed)
         self.seed = int(seed)
@@ -167,6 +169,7 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
         self._native = NativeBoard(self.elf, self.seed)
         self._holder["native"] = self._native
         self._native.attach_plant(self.plant.native)
+        self._native.set_plant_threads(threads)
         self._finalizer = weakref.finalize(self, _shutdown, self._stop, self._holder)
         try:
             if self.eeprom_path is not None and self.eeprom_path.exists():
@@ -252,6 +255,12 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
         return self._period_cycles / F_CPU_HZ
 
     @property
+    def plant_threads(self) -> int:
+        """1: the plant steps after the MCU on one thread; 2: on a thread of its own while
+        the MCU runs (``utrf.emulator.twin_threads`` chooses; the same results)."""
+        return self._board().plant_threads
+
+    @property
     def sim_time(self) -> float:
         """Simulated seconds since power-on (the MCU's cycle count / 16 MHz)."""
         return self._cycle / F_CPU_HZ
@@ -322,7 +331,7 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
             with self._lock:
                 if not self._finalizer.alive:
                     return
-                self._run_plant(self._cycle + batch * self._period_cycles)
+                self._run_plant(self._exchanges_on(batch))
                 sim = self.sim_time
             t1 = time.perf_counter()
             self._busy += t1 - t0

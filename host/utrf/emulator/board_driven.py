@@ -48,9 +48,14 @@ class BoardDriven:
             self._status = status
             self.crash_pc = self._native.pc if status == 1 else None
 
+    def _exchanges_on(self, n: int) -> int:
+        """The cycle ``n`` exchange periods on: the plant steps whole periods on its own clock,
+        which the MCU's overshoot (a few cycles past each period's end) does not move."""
+        return self._native.plant_cycle + n * self._period_cycles
+
     def _exchange(self) -> None:
         """One lockstep period."""
-        self._run_plant(self._cycle + self._period_cycles)
+        self._run_plant(self._exchanges_on(1))
 
     def _run_driven(self, seconds: float, until: Callable[[Any], bool] | None = None) -> bool:
         target = self._cycle + round(seconds * F_CPU_HZ)
@@ -95,8 +100,7 @@ class BoardDriven:
             raise EmulatorError("run_until_output needs capture=True")
         with self._lock:
             self._board()
-            period = self._period_cycles
-            target = self._cycle - (-round(seconds * F_CPU_HZ) // period) * period
+            target = self._exchanges_on(-(-round(seconds * F_CPU_HZ) // self._period_cycles))
             with self._timed():
                 while self._cycle < target:
                     self._run_plant(target, byte)

@@ -502,6 +502,7 @@ utrf_sim_t *utrf_sim_open(const char *elf_path, uint64_t seed, char *err, size_t
         return NULL;
     }
     s->pending_cause = -1;
+    s->plant_threads = 1;
     s->eempe_cycle = -1;
     s->wake_byte = -1;
     s->rng = seed;
@@ -528,6 +529,7 @@ void utrf_sim_close(utrf_sim_t *s)
 {
     if (!s)
         return;
+    plant_thread_stop(s);
     serve_close(s);
     if (s->avr) {
         /* Our hook is not simavr's to free: unlink it first. */

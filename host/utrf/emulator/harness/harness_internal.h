@@ -184,6 +184,11 @@ struct utrf_sim {
     int jump_interrupts;
 
     /* the plant stepped in lockstep (mjplant.c, lockstep.c); not owned */
+    uint64_t plant_cycle;    /* the plant's clock: it has stepped up to this cycle */
+    uint64_t lock_mcu_cycle; /* the MCU's cycle when the lockstep last left it */
+    double hold[UTRF_SIM_PIN_VALUES]; /* the pins the plant steps the period with */
+    int plant_threads;       /* 2: the plant steps on its own thread (plant_thread.c) */
+    struct utrf_plant_thread *plant_thread;
     void *plant_ctx;
     void (*plant_step)(void *ctx, double dt, const double *pins);
     void (*plant_volts)(void *ctx, double *out5);
@@ -213,6 +218,15 @@ static inline void utrf_sim_attach_ops(utrf_sim_t *s, void *ctx,
     s->plant_step = ctx ? step : NULL;
     s->plant_volts = ctx ? volts : NULL;
 }
+
+/* plant_thread.c: the plant's thread, started (again in a forked child) or stopped; one
+ * period handed over (the plant steps dt with s->hold), and waited for */
+typedef struct utrf_plant_thread utrf_plant_thread_t;
+int plant_thread_start(utrf_sim_t *s);
+void plant_thread_stop(utrf_sim_t *s);
+void plant_thread_step(utrf_sim_t *s, double dt);
+void plant_thread_wait(utrf_sim_t *s);
+void plant_thread_park(utrf_sim_t *s); /* the caller leaves the lockstep: the plant sleeps */
 
 /* uart_bridge.c */
 void bridge_init(utrf_sim_t *s);

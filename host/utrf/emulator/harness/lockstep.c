@@ -1,12 +1,54 @@
 /* Lockstep of the MCU with the plant attached to the board (mjplant.c attaches the MuJoCo
  * hand): the MCU runs each exchange period with the encoders as the plant had them at its
- * start, then the plant the same period with the pins as they were at its start.
+ * start, and the plant steps the same period with the pins as they were at its start.
+ *
+ * The plant keeps its own clock in MCU cycles and steps exact periods (plant_cycle + period,
+ * or up to the run's target): the MCU ends a run at the first instruction boundary at or past
+ * the period's end, and that overshoot is carried into its next period, which is shorter by
+ * it. Within a period neither side reads what the other writes, so the plant may step on its
+ * own thread (plant_thread.c) while the MCU runs: the same results either way.
  */
 #include <string.h>
 
 #include "harness_internal.h"
 
 #define CPU_HZ 16e6
+
+/* The plant's clock. When the MCU ran without it since the last exchange (utrf_sim_run_to),
+ * the plant takes up again from where the MCU is (it skipped that time). */
+static uint64_t plant_clock(utrf_sim_t *s)
+{
+    if (s->avr->cycle != s->lock_mcu_cycle) {
+        s->plant_cycle = s->avr->cycle;
+        s->lock_mcu_cycle = s->avr->cycle;
+    }
+    return s->plant_cycle;
+}
+
+uint64_t utrf_sim_plant_cycle(utrf_sim_t *s)
+{
+    return plant_clock(s);
+}
+
+int utrf_sim_set_plant_threads(utrf_sim_t *s, int threads)
+{
+    if (threads == 1) {
+        plant_thread_stop(s);
+        s->plant_threads = 1;
+        return 0;
+    }
+    if (threads != 2)
+        return -1;
+    if (plant_thread_start(s))
+        return -2;
+    s->plant_threads = 2;
+    return 0;
+}
+
+int utrf_sim_plant_threads(const utrf_sim_t *s)
+{
+    return s->plant_threads;
+}
 
 int utrf_sim_run_plant(utrf_sim_t *s, uint64_t target, uint64_t period)
 {
@@ -20,22 +62,31 @@ int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, in
         period = 1;
     s->wake_byte = wake >= 0 && wake <= 255 ? wake : -1;
     s->woke = 0;
+    uint64_t at = plant_clock(s);
+    /* a forked child has no plant thread: it starts its own */
+    int threaded = s->plant_step && s->plant_threads == 2 && plant_thread_start(s) == 0;
     while (s->avr->cycle < target && !s->woke) {
-        uint64_t start = s->avr->cycle, end = start + period;
-        if (end > target)
-            end = target;
-        double hold[UTRF_SIM_PIN_VALUES];
-        memcpy(hold, s->pins, sizeof hold);
+        uint64_t end = at + period < target ? at + period : target;
+        double dt = (double)(end - at) / CPU_HZ;
+        memcpy(s->hold, s->pins, sizeof s->hold);
         if (s->plant_volts)
             s->plant_volts(s->plant_ctx, s->adc_volts);
+        if (threaded)
+            plant_thread_step(s, dt);
         int now = utrf_sim_run_to(s, end);
-        if (s->plant_step)
-            s->plant_step(s->plant_ctx, (double)(s->avr->cycle - start) / CPU_HZ, hold);
+        if (threaded)
+            plant_thread_wait(s);
+        else if (s->plant_step)
+            s->plant_step(s->plant_ctx, dt, s->hold);
+        at = s->plant_cycle = end;
+        s->lock_mcu_cycle = s->avr->cycle;
         if (now != status) {
             status = now;
             break;
         }
     }
+    if (threaded)
+        plant_thread_park(s);
     s->wake_byte = -1;
     return status;
 }

@@ -236,12 +236,17 @@ void utrf_mjplant_step(utrf_mjplant_t *mp, double dt, const double *pins)
     if (pins)
         decode(mp, pins);
     /* As many mj_steps as the model's timestep fits in dt (the exchange period: 1 ms, two
-     * steps of the MJCF's 0.5 ms), the pins held; the motors' currents follow each step. */
-    double ts = mp->m->opt.timestep;
+     * steps of the MJCF's 0.5 ms), the pins held; the motors' currents follow each step. A dt
+     * that is not a whole number of timesteps (a run that ends between exchanges) is cut
+     * into equal steps MuJoCo takes as they are: its clock stays the plant's. */
+    mjModel *m = (mjModel *)mp->m;
+    double ts = m->opt.timestep;
     int n = ts > 0.0 ? (int)lround(dt / ts) : 1;
     if (n < 1)
         n = 1;
     double h = dt / n;
+    if (h != ts)
+        m->opt.timestep = h;
     if (h != mp->decay_dt) {
         mp->decay_dt = h;
         mp->decay = exp(-h / mp->p.electrical_time_constant);
@@ -264,9 +269,10 @@ void utrf_mjplant_step(utrf_mjplant_t *mp, double dt, const double *pins)
             }
         }
         apply_loads(mp, h);
-        mp->step(mp->m, mp->d);
+        mp->step(m, mp->d);
         mp->st.time += h;
     }
+    m->opt.timestep = ts;
 #else
     (void)mp;
     (void)dt;

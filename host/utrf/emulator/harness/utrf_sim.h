@@ -6,7 +6,8 @@
  * returns, so the plant model can exchange pins and ADC values with it in lockstep.
  *
  * Threading: one utrf_sim_t must not be used from two threads at once; the Python wrapper
- * holds a lock around every call.
+ * holds a lock around every call. With utrf_sim_set_plant_threads(s, 2) the lockstep steps
+ * the plant on a thread of its own, inside the call.
  */
 #ifndef UTRF_SIM_H
 #define UTRF_SIM_H
@@ -14,7 +15,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 15
+#define UTRF_SIM_ABI 16
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -247,15 +248,25 @@ int utrf_sim_write_io(utrf_sim_t *s, uint32_t addr, uint8_t value);
 int utrf_sim_poke(utrf_sim_t *s, uint32_t addr, uint8_t value);
 
 /* ---- Lockstep with the plant (lockstep.c) ------------------------------------------------- */
-/* Run in lockstep with the plant up to `target`, one exchange every `period` cycles: the MCU
- * runs each period with the encoders as the plant had them at its start, then the plant the
- * same period with the pins as they were at its start. Returns the status; stops early
- * after a period in which it changed. */
+/* Run in lockstep with the plant up to `target`, one exchange every `period` cycles of the
+ * plant's clock: the MCU runs each period with the encoders as the plant had them at its
+ * start, and the plant steps the same period with the pins as they were at its start. The
+ * plant steps exact periods (the last one up to `target`); the MCU's few cycles past a
+ * period's end are carried into its next. Returns the status; stops early after a period in
+ * which it changed. */
 int utrf_sim_run_plant(utrf_sim_t *s, uint64_t target, uint64_t period);
 /* The same, and it also stops after the period in which the captured output (capture on) got
  * the byte `wake` (0..255; 0 ends every protocol frame; -1: never): a driven client looks at
  * the output when a frame has come, not every period. */
 int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, int wake);
+/* The plant's clock (cycle): the next exchange period starts there (at most a few cycles
+ * behind the MCU's; when the MCU ran alone since, utrf_sim_run_to, from where it is). */
+uint64_t utrf_sim_plant_cycle(utrf_sim_t *s);
+/* 1: the plant steps on the caller's thread after the MCU's period; 2: on a thread of its
+ * own while the MCU runs the period (the same results). 0, or -1 for another count, -2 when
+ * the thread cannot start. */
+int utrf_sim_set_plant_threads(utrf_sim_t *s, int threads);
+int utrf_sim_plant_threads(const utrf_sim_t *s);
 
 /* ---- The MuJoCo plant (mjplant.c) ----------------------------------------------------------
  * The MuJoCo hand (utrf.models.mjcf, drive "force") stepped here; its mjModel and mjData
