@@ -120,18 +120,23 @@ def reference_tree(commit: str) -> Path:
     return tree
 
 
-def _env(tree: Path) -> dict[str, str]:
+def _env(tree: Path, threads: int | None = None) -> dict[str, str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = str(tree / "host")
     env.pop("UTRF_SIM_LIB", None)  # each tree's own harness, from its build/
+    env.pop("UTRF_TWIN_THREADS", None)  # the tree's own choice, unless asked
+    if threads is not None:
+        env["UTRF_TWIN_THREADS"] = str(threads)
     return env
 
 
-def _child(cmd: list[str], tree: Path) -> tuple[float, float, subprocess.CompletedProcess]:
+def _child(
+    cmd: list[str], tree: Path, threads: int | None = None
+) -> tuple[float, float, subprocess.CompletedProcess]:
     """Run ``cmd`` in ``tree``: wall seconds, CPU seconds (the child's user + system)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    done = subprocess.run(cmd, cwd=tree, env=_env(tree), capture_output=True, text=True)
+    done = subprocess.run(cmd, cwd=tree, env=_env(tree, threads), capture_output=True, text=True)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
@@ -141,13 +146,14 @@ def _child(cmd: list[str], tree: Path) -> tuple[float, float, subprocess.Complet
     return wall, cpu, done
 
 
-def hold(tree: Path, seconds: float) -> dict:
-    """The grasp hold, a fresh process: wall and CPU seconds."""
+def hold(tree: Path, seconds: float, threads: int | None = None) -> dict:
+    """The grasp hold, a fresh process: wall and CPU seconds (``threads``: the twin's, through
+    UTRF_TWIN_THREADS; None: the tree's own choice)."""
     out = Path(tempfile.mkdtemp(prefix="bench-twin-"))
     try:
         cmd = [sys.executable, "-m", "utrf", "hil", "grasp-hold", "--emulated",
                "--duration-s", f"{seconds:g}", "--out", str(out / "run"), "--quiet"]  # fmt: skip
-        wall, cpu, done = _child(cmd, tree)
+        wall, cpu, done = _child(cmd, tree, threads)
         results = json.loads((out / "run" / "results.json").read_text())
     finally:
         shutil.rmtree(out, ignore_errors=True)
@@ -169,8 +175,11 @@ def median(rows: list[dict], key: str) -> float:
 
 def report(ref: str, runs: dict[str, list[dict]], alone: dict, seconds: float, repeats: int) -> str:
     from tools.doc_sections import cpu_name
+    from utrf.emulator.twin_threads import plant_threads
 
-    new, old = runs["new"], runs["ref"]
+    threads = plant_threads()
+
+    new, old, one = runs["new"], runs["ref"], runs["one"]
     ratio_wall = median(new, "wall") / median(old, "wall")
     ratio_cpu = median(new, "cpu") / median(old, "cpu")
 
@@ -178,7 +187,7 @@ def report(ref: str, runs: dict[str, list[dict]], alone: dict, seconds: float, r
         each = [a[key] / b[key] for a, b in zip(new, old, strict=True)]
         return f"median {statistics.median(each):.2f} ({', '.join(f'{x:.2f}' for x in each)})"
 
-    loads = [r["load"] for r in new + old]
+    loads = [r["load"] for r in new + old + one]
 
     def cell(rows: list[dict], key: str) -> str:
         each = ", ".join(f"{r[key]:.1f}" for r in rows)
@@ -197,7 +206,9 @@ def report(ref: str, runs: dict[str, list[dict]], alone: dict, seconds: float, r
         f"Measured with `make bench-twin` (`python -m tools.bench_twin`) on {cpu_name()}, "
         f"{os.cpu_count()} cores, {date.today().isoformat()}: `utrf hil grasp-hold --emulated "
         f"--duration-s {seconds:g}` (the plain hold: grasp-bottle, 100 Hz telemetry, hits), a "
-        f"fresh process each time, this checkout against `{ref}` (a `git worktree` of it under "
+        f"fresh process each time, this checkout (its twin on {threads} threads, its own "
+        "choice: `utrf.emulator.twin_threads`) against "
+        f"`{ref}` (a `git worktree` of it under "
         f"`build/`, built by its own make), alternately, {repeats} times each; medians. CPU "
         "time is the process's user + system time; the machine was shared (load average "
         f"{min(loads):.1f}–{max(loads):.1f} during the runs), which moves wall time more than "
@@ -209,6 +220,12 @@ def report(ref: str, runs: dict[str, list[dict]], alone: dict, seconds: float, r
         f"pairs: {paired('wall')} |",
         f"| CPU time | {cell(new, 'cpu')} | {cell(old, 'cpu')} | **{ratio_cpu:.2f}**; "
         f"pairs: {paired('cpu')} |",
+        f"| CPU / wall (cores kept busy) | {median(new, 'cpu') / median(new, 'wall'):.2f} | "
+        f"{median(old, 'cpu') / median(old, 'wall'):.2f} | |",
+        f"| this checkout, the twin on one thread (`UTRF_TWIN_THREADS=1`): wall / CPU | "
+        f"{cell(one, 'wall')} / {cell(one, 'cpu')} | | wall **"
+        f"{median(one, 'wall') / median(old, 'wall'):.2f}**, CPU **"
+        f"{median(one, 'cpu') / median(old, 'cpu'):.2f}** of `{ref}`'s |",
         f"| each engine alone, CPU: the ELF on simavr with no plant / the MJCF stepped alone / "
         f"the rest of the hold (Python, start-up, the figure, the crossings) | {engines('new')} "
         f"| {engines('ref')} | |",
@@ -238,10 +255,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.repeats < 1 or not args.seconds > 0:
         p.error("--repeats must be >= 1 and --seconds > 0")
     trees = {"new": REPO_ROOT, "ref": reference_tree(args.reference)}
-    runs: dict[str, list[dict]] = {"new": [], "ref": []}
+    runs: dict[str, list[dict]] = {"new": [], "ref": [], "one": []}
     for i in range(args.repeats):
-        for tag in ("new", "ref") if i % 2 == 0 else ("ref", "new"):
-            runs[tag].append(hold(trees[tag], args.seconds))
+        for tag in ("new", "ref", "one") if i % 2 == 0 else ("one", "ref", "new"):
+            tree, threads = (trees["new"], 1) if tag == "one" else (trees[tag], None)
+            runs[tag].append(hold(tree, args.seconds, threads))
             print(f"{tag} {runs[tag][-1]}", file=sys.stderr, flush=True)
     alone = {
         tag: {which: engine(trees[tag], which, args.seconds) for which in ("elf", "mjcf")}

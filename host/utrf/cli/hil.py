@@ -404,6 +404,7 @@ def _grasp_hold(args: argparse.Namespace) -> int:
         )
         # The grasp hold uses the hand's own motors (no rig actuator).
         rig = _open(args, tracked, EmulatedTruth(actuator=None))
+        report.preload_plotting()  # the figure's imports, beside the hold
         try:
             _warn_rate(rig.tracker, config.sample_hz, "--sample-hz")
             geometry = rig.hand.geometry

@@ -5,6 +5,8 @@ and ``utrf hil analyse`` print."""
 from __future__ import annotations
 
 import math
+import sys
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +26,30 @@ def write(out: Path, hand_geometry: HandGeometry | None = None) -> dict[str, Any
     if result["samples"]:
         plot(result, rows or [], list(result["fingers"]), out / FIGURE)
     return result
+
+
+def preload_plotting() -> threading.Thread:
+    """Import matplotlib (about a second of CPU, most of the figure's cost) on a thread of its
+    own while the run goes on: the run's thread spends its time in the harness, outside the
+    interpreter. While it imports, the interpreter hands over every 0.1 ms (not 5), so the
+    run's thread, back from the harness, does not wait for it."""
+    thread = threading.Thread(target=_import_plotting, name="utrf-import-matplotlib", daemon=True)
+    thread.start()
+    return thread
+
+
+def _import_plotting() -> None:
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-4)
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot
+    except Exception:  # plot() imports it again and says what is wrong
+        pass
+    finally:
+        sys.setswitchinterval(interval)
 
 
 def _running_mean(t: np.ndarray, y: np.ndarray, window_s: float) -> np.ndarray:
