@@ -6,6 +6,7 @@ what it needs here, and fails with make's message if it cannot.
 
 from __future__ import annotations
 
+import os
 import subprocess
 from collections.abc import Callable
 from pathlib import Path
@@ -14,6 +15,10 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 FIRMWARE_ELF = REPO / "build" / "firmware" / "utrf.elf"
+
+# The suite runs a worker per core (pytest-xdist): each twin on one thread, as campaign workers
+# (tests/emulator/test_emu_twin_threads.py asks for two where it compares them).
+os.environ.setdefault("UTRF_TWIN_THREADS", "1")
 
 
 def _make(*targets: str) -> None:
