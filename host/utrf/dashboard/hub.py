@@ -28,6 +28,7 @@ import numpy as np
 from utrf.dashboard import settings as settings_
 from utrf.hand import Hand, HandState
 from utrf.protocol import messages as m
+from utrf.recording import schemas
 
 T = TypeVar("T")
 
@@ -327,17 +328,7 @@ class DashboardHub:
         }
         if st is not None:
             out["board_time_s"] = st.board_time
-            out["fingers"] = {
-                f.name: {
-                    "theta2_rad": f.theta2,
-                    "target_rad": f.target,
-                    "duty_a": f.duty_a,
-                    "duty_b": f.duty_b,
-                    "mode": f.mode.name,
-                    "faults": int(f.faults),
-                }
-                for f in st
-            }
+            out["fingers"] = {f.name: schemas.finger_fields(f) for f in st}
         return out
 
     def close(self) -> None:
