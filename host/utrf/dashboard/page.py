@@ -336,9 +336,9 @@ class DashboardPage:
             return False
         self._shown[f"plot{i}"] = s.board_time[-1]
         x = (s.board_time - s.board_time[-1]).round(3)
-        ys = (np.degrees(s.theta2[:, i]), np.degrees(s.target[:, i]))
-        ys += (100 * (s.duty_a[:, i] - s.duty_b[:, i]),)
+        duty = 100 * (s.duty_a[:, i] - s.duty_b[:, i])
+        ys = (np.degrees(s.theta2[:, i]), np.degrees(s.target[:, i]), duty)
         series = [{"data": np.column_stack((x, y.round(2))).tolist()} for y in ys]
-        self.charts[i].run_chart_method("setOption", {"series": series})
+        _ = self.charts[i].run_chart_method("setOption", {"series": series})  # sent, not awaited
         self.hub.pushed["plots"] += 1
         return True
