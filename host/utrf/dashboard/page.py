@@ -3,10 +3,10 @@ faults, the pose library as buttons, the settings, recording. Angles are shown i
 duties in percent (the page says so); everything sent is SI through :class:`DashboardHub`.
 
 One update loop per page at up to ``ui_hz``: the live view (3D hand, numbers, modes, faults,
-the newest sample's board time) and, every ``1 / plot_hz``, the plots (the last ``window_s``
-decimated to ``points_per_s``, only the points sent); then it waits until the browser has
-drawn them, so a slow browser gets fewer updates, never a backlog. Each pushes only what
-changed. Elements carry ``utrf-*`` classes for the tests.
+the newest sample's board time) and one finger's chart, each chart every ``1 / plot_hz``
+(the last ``window_s`` decimated to ``points_per_s``, only the points sent); then it waits
+until the browser has drawn them, so a slow browser gets fewer updates, never a backlog.
+Each pushes only what changed. Elements carry ``utrf-*`` classes for the tests.
 """
 
 from __future__ import annotations
