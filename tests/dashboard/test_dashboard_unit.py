@@ -4,6 +4,7 @@ clock on the host's, the decimation for the eye, who controls."""
 from __future__ import annotations
 
 import asyncio
+import json
 import math
 import time
 from types import SimpleNamespace
@@ -158,3 +159,35 @@ def test_a_page_in_control_that_goes_holds_the_fingers_unless_it_comes_back() ->
     hub.leave("a")
     hub.close()
     assert hand.pose_calls == ["hold [0]"] and hub.controller is None
+
+
+def test_the_status_and_the_recording_name_a_fingers_fields_alike(tmp_path: Any) -> None:
+    from utrf.recording import schemas
+    from utrf.recording.mcap_recorder import McapRecorder
+
+    hub = DashboardHub(FakeHand())  # type: ignore[arg-type]
+    hub._on_state(state(1.0, 2.0, theta=0.25))
+    finger = hub.status()["fingers"]["index"]
+    hub.close()
+    assert tuple(finger) == tuple(schemas.FIELD_UNITS) and finger["theta2_rad"] == 0.25
+    rec = McapRecorder(tmp_path / "r.mcap", ("index",), rate_hz=1000)
+    rec.write_state(state(1.0, 2.0, theta=0.25))
+    rec.close()
+    from mcap.reader import make_reader
+
+    with (tmp_path / "r.mcap").open("rb") as f:
+        docs = [
+            json.loads(msg.data)
+            for _, ch, msg in make_reader(f).iter_messages()
+            if ch.topic == schemas.STATE_TOPIC
+        ]
+    assert docs[0]["fingers"]["index"] == finger
+
+
+def test_the_ring_keeps_the_host_times_for_the_clock() -> None:
+    ring = SampleRing(1, 100)
+    for k in range(250):  # wraps twice
+        ring.add(state(k * 1e-3, 10.0 + k * 1e-3))
+    board, host = ring.clock(0.0495)
+    np.testing.assert_allclose(board, np.arange(200, 250) * 1e-3)
+    np.testing.assert_allclose(host - board, 10.0)

@@ -57,7 +57,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "loop holds where it is (default 1)",
     )
     p.add_argument("--ui-hz", type=float, default=30.0, help="live view updates a second")
-    p.add_argument("--plot-hz", type=float, default=10.0, help="plot updates a second")
+    p.add_argument("--plot-hz", type=float, default=5.0, help="each chart's updates a second")
     p.set_defaults(handler=run)
 
 

@@ -5,6 +5,7 @@ Only joints that moved are sent: a hand at rest costs nothing."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Sequence
 
@@ -74,16 +75,19 @@ class Hand3D:
                 self._chain(lengths, radius, joints, links)
 
     def show(self, theta2: Sequence[float], faulted: Sequence[bool]) -> None:
-        for i, f in enumerate(self.hand.fingers):
-            g = f.geometry
-            lo, hi = g.q_range_m
-            q = min(max(float(theta2[i]) * g.guide_radii_m[1], lo), hi)
-            angles = kinematics.joint_angles(g, q)
-            for k in range(3):
-                if not abs(angles[k] - self._shown[i][k]) < RESOLUTION:
-                    self._shown[i][k] = float(angles[k])
-                    self._joints[i][k].rotate(0.0, 0.0, float(angles[k]))
-            if faulted[i] != self._faulted[i]:
-                self._faulted[i] = bool(faulted[i])
-                for link in self._links[i]:
-                    link.material(FAULT_COLOR if faulted[i] else COLOR)
+        # every joint that moved in one message to the page (NiceGUI's own batching, as it
+        # uses to resend a scene), not one message and one task per joint
+        with getattr(self.scene, "_batch_calls", contextlib.nullcontext)():
+            for i, f in enumerate(self.hand.fingers):
+                g = f.geometry
+                lo, hi = g.q_range_m
+                q = min(max(float(theta2[i]) * g.guide_radii_m[1], lo), hi)
+                angles = kinematics.joint_angles(g, q)
+                for k in range(3):
+                    if not abs(angles[k] - self._shown[i][k]) < RESOLUTION:
+                        self._shown[i][k] = float(angles[k])
+                        self._joints[i][k].rotate(0.0, 0.0, float(angles[k]))
+                if faulted[i] != self._faulted[i]:
+                    self._faulted[i] = bool(faulted[i])
+                    for link in self._links[i]:
+                        link.material(FAULT_COLOR if faulted[i] else COLOR)

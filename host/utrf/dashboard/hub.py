@@ -28,6 +28,7 @@ import numpy as np
 from utrf.dashboard import settings as settings_
 from utrf.hand import Hand, HandState
 from utrf.protocol import messages as m
+from utrf.recording import schemas
 
 T = TypeVar("T")
 
@@ -60,42 +61,57 @@ class SampleRing:
 
     def __init__(self, fingers: int, capacity: int) -> None:
         self.capacity = capacity
-        self._t = np.zeros(capacity)
-        self._v = np.zeros((4, capacity, fingers))
+        self._t = np.zeros(capacity)  # board time
+        self._host = np.zeros(capacity)  # host receive time
+        self._v = np.zeros((capacity, 4, fingers))
         self._n = 0  # samples ever written
         self._lock = threading.Lock()
 
     def add(self, st: HandState) -> None:
+        row = [
+            [f.theta2 for f in st.fingers],
+            [f.target for f in st.fingers],
+            [f.duty_a for f in st.fingers],
+            [f.duty_b for f in st.fingers],
+        ]
         with self._lock:
             i = self._n % self.capacity
             self._t[i] = st.board_time
-            for k, f in enumerate(st.fingers):
-                self._v[0, i, k] = f.theta2
-                self._v[1, i, k] = f.target
-                self._v[2, i, k] = f.duty_a
-                self._v[3, i, k] = f.duty_b
+            self._host[i] = st.host_time
+            self._v[i] = row
             self._n += 1
 
     @property
     def count(self) -> int:
         return self._n
 
+    def _last(self, seconds: float) -> np.ndarray:
+        """Ring indices of the samples of the last ``seconds`` of board time, oldest first
+        (the caller holds the lock)."""
+        n = min(self._n, self.capacity)
+        idx = np.arange(self._n - n, self._n) % self.capacity
+        if n:
+            idx = idx[self._t[idx] >= self._t[idx[-1]] - seconds]
+        return idx
+
+    def clock(self, seconds: float) -> tuple[np.ndarray, np.ndarray]:
+        """(board times, host receive times) of the last ``seconds`` of samples."""
+        with self._lock:
+            idx = self._last(seconds)
+            return self._t[idx], self._host[idx]
+
     def series(self, seconds: float, points_per_s: float) -> Series:
         """The last ``seconds`` at most ``points_per_s`` (every k-th sample, newest kept)."""
         with self._lock:
-            n = min(self._n, self.capacity)
-            idx = (np.arange(self._n - n, self._n)) % self.capacity
-            t = self._t[idx]
-            v = self._v[:, idx]
-        if n:
-            keep = t >= t[-1] - seconds
-            t, v = t[keep], v[:, keep]
-            if len(t) > 1:
-                dt = (t[-1] - t[0]) / (len(t) - 1)
+            idx = self._last(seconds)
+            if len(idx) > 1:
+                t0, t1 = self._t[idx[0]], self._t[idx[-1]]
+                dt = (t1 - t0) / (len(idx) - 1)
                 step = max(1, round(1.0 / (points_per_s * dt))) if dt > 0 else 1
-                sel = np.arange(len(t) - 1, -1, -step)[::-1]
-                t, v = t[sel], v[:, sel]
-        return Series(t, v[0], v[1], v[2], v[3])
+                idx = idx[len(idx) - 1 :: -step][::-1]
+            t = self._t[idx]
+            v = self._v[idx]
+        return Series(t, v[:, 0], v[:, 1], v[:, 2], v[:, 3])
 
 
 class DashboardHub:
@@ -109,10 +125,6 @@ class DashboardHub:
         rate = max(hand.telemetry_hz, 1)
         self.ring = SampleRing(len(self.fingers), int(WINDOW_S * rate) + 1)
         self.latest: HandState | None = None
-        # (board time, host receive time) of the last samples: the board's clock on the host's
-        self._clock: collections.deque[tuple[float, float]] = collections.deque(
-            maxlen=int(OFFSET_WINDOW_S * rate) + 1
-        )
         self._lock = threading.Lock()
         self._controller: str | None = None
         self.watchers: set[str] = set()  # pages open (connected or not)
@@ -134,8 +146,6 @@ class DashboardHub:
     def _on_state(self, st: HandState) -> None:
         self.ring.add(st)
         self.latest = st
-        with self._lock:
-            self._clock.append((st.board_time, st.host_time))
 
     def wall_time_of(self, board_time: float) -> float:
         """When the board took a sample, on the host's wall clock, from its board time: the
@@ -143,13 +153,9 @@ class DashboardHub:
         through the least-delayed sample of each half of the window (so a board clock that
         runs at another pace than the host's, as an emulated board under load does, is
         followed; a sample's delay to the host is then what it took beyond the quickest)."""
-        with self._lock:
-            pts = np.array(self._clock) if len(self._clock) > 1 else None
-        if pts is None:
+        board, host = self.ring.clock(OFFSET_WINDOW_S)
+        if len(board) < 2:
             return math.nan
-        board, host = pts[:, 0], pts[:, 1]
-        keep = board >= board[-1] - OFFSET_WINDOW_S
-        board, host = board[keep], host[keep]
         half = len(board) // 2
         delay = host - board
         if half < 1 or board[-1] - board[0] < OFFSET_WINDOW_S / 4:
@@ -322,17 +328,7 @@ class DashboardHub:
         }
         if st is not None:
             out["board_time_s"] = st.board_time
-            out["fingers"] = {
-                f.name: {
-                    "theta2_rad": f.theta2,
-                    "target_rad": f.target,
-                    "duty_a": f.duty_a,
-                    "duty_b": f.duty_b,
-                    "mode": f.mode.name,
-                    "faults": int(f.faults),
-                }
-                for f in st
-            }
+            out["fingers"] = {f.name: schemas.finger_fields(f) for f in st}
         return out
 
     def close(self) -> None:

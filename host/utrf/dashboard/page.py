@@ -2,16 +2,20 @@
 faults, the pose library as buttons, the settings, recording. Angles are shown in degrees and
 duties in percent (the page says so); everything sent is SI through :class:`DashboardHub`.
 
-Two timers per page: the live view (3D hand, numbers, modes, faults, the newest sample's board
-time) at ``ui_hz``, the plots (the last ``window_s`` decimated to ``points_per_s``) at
-``plot_hz``. Each pushes only what changed. Elements carry ``utrf-*`` classes for the tests.
+One update loop per page at up to ``ui_hz``: the live view (3D hand, numbers, modes, faults,
+the newest sample's board time) and one finger's chart, each chart every ``1 / plot_hz``
+(the last ``window_s`` decimated to ``points_per_s``, only the points sent); then it waits
+until the browser has drawn them, so a slow browser gets fewer updates, never a backlog.
+Each pushes only what changed. Elements carry ``utrf-*`` classes for the tests.
 """
 
 from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import math
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -26,15 +30,18 @@ from utrf.hand.state import fault_names
 from utrf.models.geometry import HandGeometry
 
 CHART_STYLE = "height: 150px; width: 560px"
+#: resolves in the browser once the next frame is drawn: the page's updates are paced by it
+DRAWN = "new Promise((resolve) => requestAnimationFrame(() => resolve(0)))"
+DRAWN_TIMEOUT_S = 1.0
 
 
-def _chart(name: str, lo_deg: float, hi_deg: float) -> dict[str, Any]:
+def _chart(lo_deg: float, hi_deg: float) -> dict[str, Any]:
     line = {"type": "line", "showSymbol": False, "animation": False, "data": []}
     return {
         "animation": False,
-        "title": {"text": name, "textStyle": {"fontSize": 12}, "left": 4, "top": 0},
-        "grid": {"left": 40, "right": 40, "top": 24, "bottom": 20},
-        "legend": {"top": 0, "right": 4, "textStyle": {"fontSize": 10}},
+        # no title or legend drawn in the chart (each costs every redraw): the page says
+        # which finger and which line in text beside it
+        "grid": {"left": 40, "right": 40, "top": 8, "bottom": 20},
         "xAxis": {"type": "value", "min": -5, "max": 0},
         "yAxis": [
             {"type": "value", "min": lo_deg, "max": hi_deg},
@@ -74,8 +81,10 @@ class DashboardPage:
         client.on_connect(lambda: hub.join(self.id))
         client.on_delete(lambda: hub.leave(self.id))
         self._build(hub.hand.geometry)
-        ui.timer(1.0 / ui_hz, self._update_live)
-        ui.timer(1.0 / plot_hz, self._update_plots)
+        self.client = client
+        self.plot_period = 1.0 / plot_hz
+        self._next_plot = [0.0] * len(hub.fingers)  # when each finger's chart is next due
+        ui.timer(1.0 / ui_hz, self._update)
         self._show_control()
 
     # --- layout ---------------------------------------------------------------------------------
@@ -131,6 +140,10 @@ class DashboardPage:
         self.values: list[ui.label] = []
         self.modes: list[ui.label] = []
         self.faults: list[ui.label] = []
+        ui.label(
+            "Each finger over the last 5 s: the angle (solid) and setpoint (dashed) in degrees "
+            "on the left axis, the net duty A−B (thin) in percent on the right."
+        ).classes("text-caption")
         for i, name in enumerate(self.hub.fingers):
             lim = self.hub.limits[i]
             with ui.row().classes(f"utrf-finger-{name} items-center no-wrap w-full"):
@@ -162,7 +175,7 @@ class DashboardPage:
                     )
                     self._controls.append(slider)
                 lo, hi = math.degrees(lim.theta2_min), math.degrees(lim.theta2_max)
-                chart = ui.echart(_chart(name, 10 * math.floor(lo / 10), 10 * math.ceil(hi / 10)))
+                chart = ui.echart(_chart(10 * math.floor(lo / 10), 10 * math.ceil(hi / 10)))
                 self.charts.append(chart.classes(f"utrf-chart-{name}").style(CHART_STYLE))
 
     def _settings(self) -> None:
@@ -275,14 +288,30 @@ class DashboardPage:
             self._shown[key] = text
             element.text = text
 
-    def _update_live(self) -> None:
+    async def _update(self) -> None:
+        """One update of the page (the live view, and the plots when due), then wait until
+        the browser has drawn it: a browser that draws slower than ``ui_hz`` gets fewer
+        updates, never a queue of stale ones (each drawn update is the newest sample)."""
+        now = time.monotonic()
+        sent = self._update_live()
+        # at most one chart a frame (ECharts redraws a chart in milliseconds: five at once
+        # would hold a frame back), the one most overdue
+        i = int(np.argmin(self._next_plot))
+        if now >= self._next_plot[i]:
+            self._next_plot[i] = max(self._next_plot[i] + self.plot_period, now)
+            sent = self._update_plot(i) or sent
+        if sent:
+            with contextlib.suppress(TimeoutError):  # a hidden tab draws nothing: go on
+                await self.client.run_javascript(DRAWN, timeout=DRAWN_TIMEOUT_S)
+
+    def _update_live(self) -> bool:
         if (self.hub.controller == self.id) != self.in_control or (
             not self.in_control and self.hub.controller is None
         ):
             self._show_control()
         st = self.hub.latest
         if st is None or self._shown.get("t") == st.board_time:
-            return
+            return False
         self._shown["t"] = st.board_time
         for i, f in enumerate(st.fingers):
             self._set(f"m{i}", self.modes[i], f.mode.name)
@@ -297,22 +326,19 @@ class DashboardPage:
         self.board_time.text = f"board time {st.board_time:.3f} s"
         self.sample_wall.text = f"{1000 * self.hub.wall_time_of(st.board_time):.1f}"
         self.hub.pushed["live"] += 1
+        return True
 
-    def _update_plots(self) -> None:
+    def _update_plot(self, i: int) -> bool:
+        """Finger ``i``'s chart: only its series' points, as plain lists (the chart's options,
+        observed dicts and lists on the server, are left alone; ECharts merges the data in)."""
         s = self.hub.ring.series(self.window_s, self.points_per_s)
-        if len(s.board_time) < 2 or self._shown.get("plot") == s.board_time[-1]:
-            return
-        self._shown["plot"] = s.board_time[-1]
-        x = s.board_time - s.board_time[-1]
-        for i, chart in enumerate(self.charts):
-            series = chart.options["series"]
-            for k, y in enumerate(
-                (
-                    np.degrees(s.theta2[:, i]),
-                    np.degrees(s.target[:, i]),
-                    100 * (s.duty_a[:, i] - s.duty_b[:, i]),
-                )
-            ):
-                series[k]["data"] = np.column_stack((x, y)).round(3).tolist()
-            chart.update()
+        if len(s.board_time) < 2 or self._shown.get(f"plot{i}") == s.board_time[-1]:
+            return False
+        self._shown[f"plot{i}"] = s.board_time[-1]
+        x = (s.board_time - s.board_time[-1]).round(3)
+        duty = 100 * (s.duty_a[:, i] - s.duty_b[:, i])
+        ys = (np.degrees(s.theta2[:, i]), np.degrees(s.target[:, i]), duty)
+        series = [{"data": np.column_stack((x, y.round(2))).tolist()} for y in ys]
+        _ = self.charts[i].run_chart_method("setOption", {"series": series})  # sent, not awaited
         self.hub.pushed["plots"] += 1
+        return True

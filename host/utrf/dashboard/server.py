@@ -26,7 +26,7 @@ class ServerOptions:
     port: int = 8080
     token: str | None = None  # required when host is not a loopback name
     ui_hz: float = 30.0  # the live view: 3D hand, numbers, modes, faults
-    plot_hz: float = 10.0  # the plots
+    plot_hz: float = 5.0  # each chart (one chart a frame at most)
     window_s: float = 5.0  # the plots' span
     points_per_s: float = 25.0  # the plots' decimation for the eye
 
@@ -81,4 +81,7 @@ def serve(hub: DashboardHub, options: ServerOptions, on_ready: Callable[[str], N
         reload=False,
         show_welcome_message=False,
         reconnect_timeout=RECONNECT_TIMEOUT_S,
+        # small messages many times a second on a local line: compressing each costs both
+        # ends more CPU than it saves
+        ws_per_message_deflate=False,
     )

@@ -142,19 +142,7 @@ class McapRecorder:
             steps = round((st.board_time - self._last_board) / self._period)
             s.board_time_gaps += max(steps - 1, 0)
         self._last_board = s.last_board_time_s = st.board_time
-        fingers = {
-            f.name: {
-                "theta2_rad": f.theta2,
-                "target_rad": f.target,
-                "duty_a": f.duty_a,
-                "duty_b": f.duty_b,
-                "mode": f.mode.name,
-                "faults": int(f.faults),
-                "tip_x_m": f.tip_x,
-                "tip_y_m": f.tip_y,
-            }
-            for f in st.fingers
-        }
+        fingers = {f.name: schemas.finger_fields(f) for f in st.fingers}
         doc = {
             "board_time_s": st.board_time,
             "host_time_s": st.host_time,

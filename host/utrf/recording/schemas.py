@@ -11,6 +11,7 @@ import json
 from collections.abc import Sequence
 from typing import Any
 
+from utrf.hand.state import FingerState
 from utrf.hand.telemetry_log import FINGER_FIELDS, log_columns
 from utrf.protocol import messages as m
 
@@ -44,6 +45,21 @@ FIELD_DOCS = {
     "tip_x_m": "fingertip x in the finger frame, from the kinematics",
     "tip_y_m": "fingertip y in the finger frame, from the kinematics",
 }
+
+
+def finger_fields(f: FingerState) -> dict[str, float | int | str]:
+    """One finger of a sample under the field names of ``FIELD_UNITS``: what a recording's
+    ``/hand/state`` holds per finger, and the dashboard's ``/api/status``."""
+    return {
+        "theta2_rad": f.theta2,
+        "target_rad": f.target,
+        "duty_a": f.duty_a,
+        "duty_b": f.duty_b,
+        "mode": f.mode.name,
+        "faults": int(f.faults),
+        "tip_x_m": f.tip_x,
+        "tip_y_m": f.tip_y,
+    }
 
 
 def column_units(finger_names: Sequence[str]) -> dict[str, str]:
