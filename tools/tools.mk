@@ -83,7 +83,7 @@ $(FW_B_ELF): $(filter-out %/core/config.o,$(FW_OWN_OBJS)) $(FW_B_DIR)/config.o $
 	$(AVR_CXX) $(FW_MCU) -Wl,--gc-sections -o $@ $^ -lm
 AB_SCENARIOS ?= 40
 campaign-ab: setup $(EMU_LIB) $(FW_ELF) $(FW_B_ELF)
-	$(PY) -m tools.campaign_ab --a $(FW_ELF) --b $(FW_B_ELF) --b-defs '$(FW_B_DEFS)' \
+	$(PY) -m tools.campaign_ab --a $(FW_ELF) --b $(FW_B_ELF) --b-defs='$(FW_B_DEFS)' \
 	  --scenarios $(AB_SCENARIOS) --update docs/campaigns.md
 
 # Seeded builds of the twin brought up: faults against findings, into docs/bringup.md

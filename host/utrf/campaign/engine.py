@@ -63,6 +63,8 @@ class Summary:
     compute_s: float = 0.0  # the runs' own time (without writing their rows), summed
     task_cpu_s: float = 0.0  # the tasks' CPU time on the workers (runs and rows), summed
     spans: list[tuple[str, float, float]] = field(default_factory=list)  # worker, start, end
+    started_at: float = 0.0  # wall clock (time.time) at the first task submitted
+    driver_cpu_s: float = 0.0  # this process's CPU over wall_s (a local scheduler's included)
 
     @property
     def overhead(self) -> float:
@@ -180,13 +182,6 @@ def outcome(
     return r
 
 
-def running(client: Any) -> int:
-    """Runs executing now: tasks the scheduler has placed, at most a thread's worth each
-    (a worker also holds the next one or two it will run)."""
-    threads = client.nthreads()
-    return sum(min(len(keys), threads.get(w, 1)) for w, keys in client.processing().items())
-
-
 def salt(campaign: Campaign) -> str:
     return f"{campaign.kind}|{campaign.digest}"
 
@@ -268,7 +263,7 @@ def _drive(
     s = Summary(prog.total, prog.skipped, 0, 0, 0.0, 0.0, n_workers, 0.0)
     options = {**campaign.options, "firmware_paths": campaign.firmware}
     finished: queue.SimpleQueue[Any] = queue.SimpleQueue()  # futures done, from Dask's thread
-    start = time.perf_counter()
+    start, s.started_at, cpu0 = time.perf_counter(), time.time(), time.process_time()
 
     def submit() -> None:
         while pending and len(by_future) < window:
@@ -306,9 +301,9 @@ def _drive(
                 s.busy_s += r["end"] - r["start"]
                 s.spans.append((r.get("worker", ""), r["start"], r["end"]))
         submit()
-        if time.monotonic() - prog.last >= TICK_S:
-            prog.tick(running(client))
-    s.wall_s = time.perf_counter() - start
+        if time.monotonic() - prog.last >= TICK_S:  # no call to the scheduler: one per worker
+            prog.tick(min(len(by_future), n_workers))
+    s.wall_s, s.driver_cpu_s = time.perf_counter() - start, time.process_time() - cpu0
     prog.tick(0, force=True)
     s.ok, s.failed = prog.ok, prog.failed
     return s

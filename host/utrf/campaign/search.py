@@ -101,7 +101,7 @@ def run(
         ac = as_completed()
         trials: dict[Any, tuple[Any, dict[str, np.ndarray], np.ndarray]] = {}
         asked = skipped
-        start = time.perf_counter()
+        start, s.started_at, cpu0 = time.perf_counter(), time.time(), time.process_time()
         while asked < total or trials:
             while asked < total and len(trials) < s.workers:
                 trial = study.ask(free)
@@ -137,9 +137,9 @@ def run(
             if "start" in r:
                 s.busy_s += r["end"] - r["start"]
                 s.spans.append((r["worker"], r["start"], r["end"]))
-            prog.tick(engine.running(client))
+            prog.tick(min(len(trials), s.workers))
         prog.tick(0, force=True)
-        s.wall_s = time.perf_counter() - start
+        s.wall_s, s.driver_cpu_s = time.perf_counter() - start, time.process_time() - cpu0
     store.consolidate()
     s.ok, s.failed = prog.ok, prog.failed
     return s
