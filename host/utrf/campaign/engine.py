@@ -34,15 +34,23 @@ from utrf.campaign.store import Store, columns_table
 ProgressFn = Callable[[str], None]
 TICK_S = 1.0  # progress at most this often
 TAIL_CHUNKS = 4  # the last this many tasks' runs go in quarter tasks (a short wait at the end)
-# Dask's own monitoring, turned down on the local cluster: the workers' statistical profiler
-# (a stack sample every 10 ms), the event loops' tick (20 ms), the system and memory monitors.
-# Measured idle, they took 12 % of one core across the driver, 2 workers and their nannies;
-# with these, 1.3 % (docs/benchmarks.md, Campaigns). Nothing a campaign uses depends on them.
+# Dask's own settings on the local cluster. Its monitoring turned down: the workers'
+# statistical profiler (a stack sample every 10 ms), the event loops' tick (20 ms), the system
+# and memory monitors; idle, they took 9 % of a core across the driver, 2 workers and their
+# nannies, 2.4 % with these (docs/benchmarks.md, Campaigns). And the workers' environment
+# without MALLOC_TRIM_THRESHOLD_=65536 (which hands freed memory back to the system at once:
+# numpy's temporaries are then page-faulted in anew, 10x the faults, a design 25 us of CPU
+# instead of 14 us). Nothing a campaign uses depends on them.
 LOCAL_CONFIG: dict[str, Any] = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "1s",
     "distributed.admin.system-monitor.interval": "5s",
     "distributed.worker.memory.monitor-interval": "2s",
+    "distributed.nanny.pre-spawn-environ": {
+        "OMP_NUM_THREADS": 1,
+        "MKL_NUM_THREADS": 1,
+        "OPENBLAS_NUM_THREADS": 1,
+    },
 }
 # The twin's threads a run (the MCU and the plant on one core or two): one where a worker
 # shares its cores with another, read by the grasp runs (``utrf.campaign.grasp``).
