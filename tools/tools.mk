@@ -61,6 +61,31 @@ bench-campaign: setup $(EMU_LIB) $(filter firmware,$(DEMO_DEPS))
 	$(PY) -m tools.bench_campaign --update docs/benchmarks.md --json $(BUILD)/bench/campaign.json \
 	  $(BENCH_CAMPAIGN_ARGS)
 
+# A firmware A/B (docs/campaigns.md): a second ELF, the same sources with other defaults
+# (FW_B_DEFS: -D flags config.cpp reads; by default a 30 % duty cap instead of 80 %): only
+# config.cpp is compiled again, the rest is the main build's. build/firmware/b/, never
+# committed. `make campaign-ab` runs the two over the same scenarios and writes the verdict
+# into docs/campaigns.md; tests/campaign/test_ab.py runs a small one in `make test`.
+FW_B_DEFS ?= -DUTRF_DEFAULT_MAX_DUTY=300
+FW_B_DIR  := $(FW_BUILD)/b
+FW_B_ELF  := $(FW_B_DIR)/utrf.elf
+TEST_DEPS += $(FW_B_ELF)
+.PHONY: firmware-b campaign-ab FORCE_FW_B
+firmware-b: $(FW_B_ELF)
+$(FW_B_DIR)/defs.txt: FORCE_FW_B
+	@mkdir -p $(@D)
+	@if [ ! -f $@ ] || [ "$$(cat $@)" != '$(FW_B_DEFS)' ]; then echo '$(FW_B_DEFS)' > $@; fi
+FORCE_FW_B:
+$(FW_B_DIR)/config.o: $(FW_SRC)/core/config.cpp $(FW_B_DIR)/defs.txt $(FW_BUILT_WITH) | $(NEEDS_SETUP)
+	$(AVR_CXX) -c $(FW_MCU) $(FW_OPT) $(FW_CXXSTD) $(FW_WARN) $(FW_DEFS) $(FW_B_DEFS) $(FW_INC) \
+	  -o $@ $<
+$(FW_B_ELF): $(filter-out %/core/config.o,$(FW_OWN_OBJS)) $(FW_B_DIR)/config.o $(ARDUINO_LIB)
+	$(AVR_CXX) $(FW_MCU) -Wl,--gc-sections -o $@ $^ -lm
+AB_SCENARIOS ?= 40
+campaign-ab: setup $(EMU_LIB) $(FW_ELF) $(FW_B_ELF)
+	$(PY) -m tools.campaign_ab --a $(FW_ELF) --b $(FW_B_ELF) --b-defs='$(FW_B_DEFS)' \
+	  --scenarios $(AB_SCENARIOS) --update docs/campaigns.md
+
 # Seeded builds of the twin brought up: faults against findings, into docs/bringup.md
 # (BUILDS=50 by default; each whole-hand bring-up is minutes of wall time on a loaded machine).
 .PHONY: bringup-campaign

@@ -53,7 +53,7 @@ def test_a_design_exported_is_ready_to_flash_and_simulate(tmp_path: Path) -> Non
     store.claim(c)
     cols = sampling.columns(c)
     keys = sampling.run_keys(cols, engine.salt(c))
-    store.append(kinds.execute("design", {}, cols, keys))
+    store.append(kinds.table("design", {}, cols, keys))
     default = keys[np.flatnonzero(cols["link1_m"] == 0.070)[0]]
     assert main(["campaign", "export", str(tmp_path / "c"), str(default), "--out",
                  str(tmp_path / "x")]) == 0  # fmt: skip

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -182,9 +183,12 @@ def test_a_killed_driver_resumes_and_computes_nothing_twice(
     seen = len(traced(trace))
     done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
-    assert f"{len(first)} already done" in done.stdout
+    # the killed driver's tasks still running on the cluster finish and write their rows: at
+    # least what was stored at the kill is done; a task run again writes its part again
+    before = int(re.search(r"(\d+) already done", done.stdout).group(1))  # type: ignore[union-attr]
+    assert len(first) <= before < 16
     rows = run_rows(out)
-    assert sorted(r["x"] for r in rows) == [float(x) for x in range(16)]
+    assert sorted(r["x"] for r in rows) == [float(x) for x in range(16)]  # none twice
     assert not first & set(traced(trace)[seen:])  # what was stored is not computed again
 
 

@@ -16,6 +16,9 @@ namespace config {
 Gains default_gains() {
     Gains g;
     spec_defaults(g);
+#ifdef UTRF_DEFAULT_MAX_DUTY  // a build with another duty cap (a firmware A/B: make firmware-b)
+    g.max_duty = UTRF_DEFAULT_MAX_DUTY;
+#endif
     return g;
 }
 

@@ -42,6 +42,7 @@ BOUNDS: dict[str, tuple[float, float]] = {
     },
 }
 TEXT = ("object", "firmware")
+IMPORTS = ("utrf.hil.object_hold", "utrf.emulator", "utrf.emulator.mujoco_plant", "utrf.hand")
 OPTIONS = ("library", "sample_hz")
 
 

@@ -1,6 +1,6 @@
 """What a campaign's runs are, by kind: which parameters and options a kind takes (checked
 before anything runs), how many runs go in one task, and the task itself, which a Dask
-worker executes (``execute``: a plain module-level function, pickled by reference).
+worker executes (``task``: a plain module-level function, pickled by reference).
 
 - ``design``: finger designs through the vectorised models (``utrf.campaign.design``);
 - ``grasp``: object holds on the twin, the real firmware on the emulated board
@@ -9,7 +9,9 @@ worker executes (``execute``: a plain module-level function, pickled by referenc
   returning a dict of numbers (``[options] function = "..."``).
 
 A run that raises is recorded as failed, with the exception as its reason; the campaign
-goes on.
+goes on. A task (``task``) writes its runs' rows as a Parquet part itself when its worker
+sees the campaign's directory, and returns a summary of a few numbers: the driver's work per
+task does not grow with the task's rows.
 """
 
 from __future__ import annotations
@@ -25,8 +27,10 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 
-from utrf.campaign.sampling import Columns, row, row_count
+from utrf.campaign import store
+from utrf.campaign.sampling import Columns, hex_keys, row, row_count
 from utrf.campaign.spec import Campaign, CampaignError
 from utrf.campaign.store import columns_table
 
@@ -38,6 +42,7 @@ class Kind:
     chunk: int  # runs per task by default
     evaluate: Callable[[dict[str, Any], Columns], Columns] | None  # vectorised over runs
     run_one: Callable[[dict[str, Any], dict[str, Any]], dict[str, Any]] | None  # one run
+    imports: tuple[str, ...] = ()  # what its runs import (``warm``)
 
 
 def get(name: str) -> Kind:
@@ -48,7 +53,7 @@ def get(name: str) -> Kind:
     if name == "grasp":
         from utrf.campaign import grasp
 
-        return Kind("grasp", grasp.check, 1, None, grasp.run_one)
+        return Kind("grasp", grasp.check, 1, None, grasp.run_one, grasp.IMPORTS)
     if name == "function":
         return Kind("function", _check_function, 1, None, _call_function)
     raise CampaignError(f"unknown campaign kind {name!r}")
@@ -78,14 +83,66 @@ def _call_function(options: dict[str, Any], params: dict[str, Any]) -> dict[str,
     return out
 
 
+def warm(kind_name: str) -> None:
+    """On each worker at the cluster's start (``client.run``): what the first task would
+    import, imported now, so that it is start-up and not the first runs' time (seconds for
+    the twin: MuJoCo, the emulator; pyarrow imports pandas the first time it converts a
+    list)."""
+    for module in get(kind_name).imports:
+        importlib.import_module(module)
+    columns_table({"x": np.array(["x"], dtype=object)})
+
+
 def worker_name() -> str:
     return f"{socket.gethostname()}:{os.getpid()}"
 
 
-def execute(kind_name: str, options: dict[str, Any], cols: Columns, keys: np.ndarray) -> pa.Table:
-    """One task: the runs ``cols`` (keys ``keys``) of a kind, with status and timing columns,
-    as an Arrow table (made here, on the worker, not in the driver). Runs inside a Dask
-    worker; never raises for a run's own failure."""
+@dataclass(frozen=True)
+class Sink:
+    """Where a task's rows go: the campaign's ``runs/`` directory (absolute) and its token
+    (``store.sees``)."""
+
+    parts: str
+    token: str
+
+
+def task(
+    kind_name: str,
+    options: dict[str, Any],
+    cols: Columns,
+    words: np.ndarray,
+    sink: Sink | None,
+    want: tuple[str, ...] = (),
+) -> dict[str, Any]:
+    """One task on a Dask worker: the runs ``cols`` (key words ``words``), their rows written
+    as a part in ``sink`` when this worker sees it (else returned as ``table`` for the driver
+    to write), and a summary: rows, ok, the runs' compute and CPU time, the task's own time
+    on the worker (start and end, wall clock), and the ``want`` columns as lists (what an
+    Optuna search tells its study). Never raises for a run's own failure."""
+    start, c0 = time.time(), time.process_time()
+    t = table(kind_name, options, cols, hex_keys(words))
+    out: dict[str, Any] = {
+        "worker": worker_name(),
+        "rows": t.num_rows,
+        "ok": pc.sum(pc.equal(t.column("status"), "ok")).as_py() or 0,
+        "compute_s": pc.sum(t.column("compute_s")).as_py() or 0.0,
+        "cpu_s": pc.sum(t.column("cpu_s")).as_py() or 0.0,
+        "columns": {
+            n: t.column(n).to_pylist() if n in t.column_names else [None] * t.num_rows for n in want
+        },
+    }
+    if sink is not None and store.sees(sink.parts, sink.token):
+        out["part"] = store.write_part(sink.parts, t).name
+    else:
+        out["table"] = t
+    out["task_cpu_s"] = time.process_time() - c0
+    out["start"], out["end"] = start, time.time()
+    return out
+
+
+def table(kind_name: str, options: dict[str, Any], cols: Columns, keys: np.ndarray) -> pa.Table:
+    """The runs ``cols`` (keys ``keys``) of a kind, with status and timing columns, as an
+    Arrow table; in this process."""
     return columns_table(_execute(kind_name, options, cols, keys))
 
 

@@ -106,11 +106,11 @@ def _digest64(text: str) -> int:
     return int.from_bytes(hashlib.blake2b(text.encode(), digest_size=8).digest(), "little")
 
 
-def run_keys(cols: Columns, salt: str) -> np.ndarray:
-    """Each run's key: a 64-bit hash of its parameters (names and values: numbers as their
-    float64 bits, text through BLAKE2b) and ``salt`` (the kind and its options), as 16 hex
-    digits. Vectorised (a million runs in well under a second); the same run in another
-    campaign file has the same key."""
+def key_words(cols: Columns, salt: str) -> np.ndarray:
+    """Each run's key as a 64-bit word: a hash of its parameters (names and values: numbers
+    as their float64 bits, text through BLAKE2b) and ``salt`` (the kind and its options).
+    Vectorised (a million runs in well under a second); the same run in another campaign
+    file has the same key."""
     names = sorted(cols)
     n = row_count(cols)
     h = np.full(n, _digest64(salt + "|" + ",".join(names)), dtype=np.uint64)
@@ -123,7 +123,24 @@ def run_keys(cols: Columns, salt: str) -> np.ndarray:
                 uniq, inverse = np.unique(col.astype(str), return_inverse=True)
                 words = np.array([_digest64(u) for u in uniq], dtype=np.uint64)[inverse]
             h = _mix(h ^ words)
-    return np.array([f"{v:016x}" for v in h.tolist()], dtype="U16")
+    return h
+
+
+def hex_keys(words: np.ndarray) -> np.ndarray:
+    """Key words as the ``run_key`` column's 16 hex digits (what the results hold)."""
+    raw = np.ascontiguousarray(words, dtype=">u8").tobytes().hex()
+    return np.frombuffer(raw.encode("ascii"), dtype="S16").astype("U16")
+
+
+def words_of(keys: list[str] | np.ndarray) -> np.ndarray:
+    """``hex_keys`` undone: the results' run keys as words (to skip the runs done)."""
+    text = "".join(np.asarray(keys, dtype="U16").tolist())
+    return np.frombuffer(bytes.fromhex(text), dtype=">u8").astype(np.uint64)
+
+
+def run_keys(cols: Columns, salt: str) -> np.ndarray:
+    """Each run's key (``key_words``) as 16 hex digits."""
+    return hex_keys(key_words(cols, salt))
 
 
 def row(cols: Columns, i: int) -> dict[str, object]:

@@ -47,6 +47,7 @@ def _values(campaign: Campaign, row: dict[str, Any]) -> list[float] | None:
 def run(
     campaign: Campaign,
     store: Store,
+    to: kinds.Sink,
     *,
     address: str | None,
     workers: int | None,
@@ -88,56 +89,57 @@ def run(
     prog = engine._Progress(total, skipped, progress)
     options = {**campaign.options, "firmware_paths": campaign.firmware}
     kind = kinds.get(campaign.kind)
-    busy = cpu = 0.0
+    want = ("status", *campaign.objectives)
+    s = engine.Summary(total, skipped, 0, 0, 0.0, 0.0, 0, 0.0)
     t0 = time.monotonic()
     with engine.cluster(address, workers) as client:
-        startup = time.monotonic() - t0
-        n_workers = max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
+        client.run(kinds.warm, campaign.kind)
+        s.startup_s = time.monotonic() - t0
+        s.workers = max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
         from distributed import as_completed
 
         ac = as_completed()
-        trials: dict[Any, Any] = {}
+        trials: dict[Any, tuple[Any, dict[str, np.ndarray], np.ndarray]] = {}
         asked = skipped
-        start = time.perf_counter()
+        start, s.started_at, cpu0 = time.perf_counter(), time.time(), time.process_time()
         while asked < total or trials:
-            while asked < total and len(trials) < n_workers:
+            while asked < total and len(trials) < s.workers:
                 trial = study.ask(free)
                 cols = {k: np.array([v]) for k, v in {**fixed, **trial.params}.items()}
-                key = sampling.run_keys(cols, salt)
+                words = sampling.key_words(cols, salt)
                 fut = client.submit(
-                    kinds.execute,
+                    kinds.task,
                     kind.name,
                     options,
                     cols,
-                    key,
-                    key=f"utrf-{kind.name}-{key[0]}-{trial.number}",
+                    words,
+                    to,
+                    want,
+                    key=f"utrf-{kind.name}-{int(words[0]):016x}-{trial.number}",
                 )
-                trials[fut] = trial
+                trials[fut] = (trial, cols, words)
                 ac.add(fut)
                 asked += 1
             fut = next(ac)
-            trial = trials.pop(fut)
-            if fut.status == "finished":
-                table = fut.result()
-            else:
-                exc = fut.exception()
-                cols = {k: np.array([v]) for k, v in {**fixed, **trial.params}.items()}
-                reason = f"{type(exc).__name__}: {exc}"
-                table = engine._table(engine._failed(cols, sampling.run_keys(cols, salt), reason))
-            store.append(table)
-            row = table.to_pylist()[0]
-            values = _values(campaign, row)
+            trial, cols, words = trials.pop(fut)
+            r = engine.outcome(fut, cols, np.arange(1), words, store)
+            row = {k: v[0] for k, v in r.get("columns", {}).items()}
+            values = _values(campaign, row or {"status": "failed"})
             if values is None:
                 study.tell(trial, state=optuna.trial.TrialState.FAIL)
             else:
                 study.tell(trial, values)
-            ok = row["status"] == "ok"
-            prog.ok += int(ok)
-            prog.failed += int(not ok)
-            busy += float(row["compute_s"])
-            cpu += float(row["cpu_s"])
-            prog.tick(engine.running(client))
+            prog.ok += r["ok"]
+            prog.failed += r["rows"] - r["ok"]
+            s.compute_s += r["compute_s"]
+            s.cpu_s += r["cpu_s"]
+            s.task_cpu_s += r.get("task_cpu_s", 0.0)
+            if "start" in r:
+                s.busy_s += r["end"] - r["start"]
+                s.spans.append((r["worker"], r["start"], r["end"]))
+            prog.tick(min(len(trials), s.workers))
         prog.tick(0, force=True)
-        wall = time.perf_counter() - start
+        s.wall_s, s.driver_cpu_s = time.perf_counter() - start, time.process_time() - cpu0
     store.consolidate()
-    return engine.Summary(total, skipped, prog.ok, prog.failed, wall, busy, n_workers, startup, cpu)
+    s.ok, s.failed = prog.ok, prog.failed
+    return s
