@@ -1414,7 +1414,10 @@ def render_readme_tables(spec: Spec) -> str:
         "(as many again at once on `BAD_CRC` hints) |"
     )
     period = p["heartbeat_period_s"]
-    w(f"| heartbeat period | {period:g} s | host: longest silence before a heartbeat |")
+    w(
+        f"| heartbeat period | {period:g} s | host: longest time with no frame answered and "
+        "no heartbeat sent |"
+    )
     w(f"| max telemetry rate | {p['max_telemetry_hz']} Hz | fastest state stream |")
     hb = spec.field_default("set_safety", "heartbeat_timeout")
     w(

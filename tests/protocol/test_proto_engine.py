@@ -303,7 +303,7 @@ def test_damaged_frames_and_bodies_are_counted_not_delivered() -> None:
     assert (stats.crc_errors, stats.decode_errors, stats.stream_frames) == (1, 1, 1)
 
 
-def test_heartbeats_fall_due_when_nothing_went_out_for_a_period() -> None:
+def test_heartbeats_fall_due_when_the_board_was_not_heard_for_a_period() -> None:
     engine = Engine(heartbeat_period_s=0.1)
     assert engine.heartbeat_due() is None and engine.heartbeat(5.0) is None  # no handshake
     shake_hands(engine, 1.0)
@@ -313,11 +313,14 @@ def test_heartbeats_fall_due_when_nothing_went_out_for_a_period() -> None:
     assert tx is not None and tx.kind is Kind.HEARTBEAT
     engine.sent(tx, 1.1)
     assert engine.heartbeat_due() == pytest.approx(1.2)
-    start(engine, M.Ping(1), 1.15)  # any frame sent puts it off
-    assert engine.heartbeat_due() == pytest.approx(1.25)
-    engine.receive(frame(seq_of(tx), M.Ack(M.Heartbeat.ID)), 1.16)  # its ack is absorbed
+    ping_seq = start(engine, M.Ping(1), 1.15)  # a frame sent does not put it off: it may be lost
+    assert engine.heartbeat_due() == pytest.approx(1.2)
+    engine.receive(frame(seq_of(tx), M.Ack(M.Heartbeat.ID)), 1.16)  # its ack is absorbed...
     stats = engine.stats()
     assert (stats.heartbeats, stats.stale_replies) == (1, 0)
+    assert engine.heartbeat_due() == pytest.approx(1.26)  # ...and says the board took it
+    engine.receive(frame(ping_seq, M.Pong(1, 0.0)), 1.21)  # the request's reply
+    assert engine.heartbeat_due() == pytest.approx(1.31)
     engine.heartbeat_period_s = None
     assert engine.heartbeat_due() is None
 

@@ -28,11 +28,10 @@ def test_a_noisy_line_applies_nothing_wrong_and_loses_nothing(
     assert sum(res.line_faults.values()) > 0, "the line was not noisy"
     assert res.wrong_applied == 0, res.notes[:5]
     assert res.silent_losses == 0, res.notes[:5]
-    # HOLD's targets (the measured angle) only after a HOST_TIMEOUT: at 1e-2 the line loses
-    # every frame of half a second now and then (test_host_timeout_at_1e_2_...)
+    # HOLD's targets (the measured angle) only after a HOST_TIMEOUT; none here: the Hand's
+    # heartbeats go out while a long request is being resent (the engine's heartbeat rule)
     assert res.held_targets == 0 or res.host_timeouts > 0
-    if rate <= 1e-3:
-        assert res.host_timeouts == 0
+    assert res.host_timeouts == 0, res.host_timeout_events
     assert res.recovered and res.recovery_ping_s < 0.01, res.notes[-3:]
     # The goal: a resend is safe, so the Hand retries set_targets, set_mode and config sets
     # to a definite answer and the user sees no error.

@@ -30,6 +30,7 @@ from utrf.campaign import kinds, sampling
 from utrf.campaign.sampling import Columns
 from utrf.campaign.spec import Campaign, CampaignError
 from utrf.campaign.store import Store, columns_table
+from utrf.emulator import twin_threads
 
 ProgressFn = Callable[[str], None]
 TICK_S = 1.0  # progress at most this often
@@ -53,8 +54,8 @@ LOCAL_CONFIG: dict[str, Any] = {
     },
 }
 # The twin's threads a run (the MCU and the plant on one core or two): one where a worker
-# shares its cores with another, read by the grasp runs (``utrf.campaign.grasp``).
-TWIN_THREADS_ENV = "UTRF_TWIN_THREADS"
+# shares its cores with another; the emulator reads it (``utrf.emulator.twin_threads``).
+TWIN_THREADS_ENV = twin_threads.ENV
 
 
 @dataclass

@@ -136,23 +136,35 @@ class SimLink(EngineDriver):
         """Write what the engine asks and run the board until its request ends."""
         engine = self._engine
         try:
-            action = engine.poll(self.now())
+            now = self.now()
+            action = engine.poll(now)
             while not isinstance(action, Done):
                 if isinstance(action, Transmit):
                     self._send(action)
                     now = self.now()
                 else:  # Wait: run the board until something arrives or the time comes
+                    until = self._heartbeat_until(action.until, now)
                     arrived = self._pump() or self.board.run_until_output(
-                        action.until - self.now(), self._pump
+                        until - self.now(), self._pump
                     )
                     # run_until moves in whole exchanges of whole cycles: when it gave up, the
                     # time has come, even if rounding left it a fraction of a cycle short
-                    now = self.now() if arrived else max(self.now(), action.until)
+                    now = self.now() if arrived else max(self.now(), until)
                 action = engine.poll(now)
             return action.result()
         except BaseException:
             engine.abandon()
             raise
+
+    def _heartbeat_until(self, until: float, now: float) -> float:
+        """A heartbeat if one is due at ``now`` (a request waiting on its resends does not keep
+        the board's watchdog fed); then ``until``, or the next heartbeat's time if sooner.
+        ``now`` is the drive's clock, which may be a fraction of a cycle past the board's."""
+        heartbeat = self._engine.heartbeat(now)
+        if heartbeat is not None:
+            self._send(heartbeat)
+        due = self._engine.heartbeat_due()
+        return until if due is None else min(until, due)
 
     def _send(self, tx: Transmit) -> None:
         self.board.write(tx.data)

@@ -173,8 +173,10 @@ class Engine:
 
     ``retries``: resends of an idempotent request after a timeout; as many again at once on
     BAD_CRC nacks naming it (the board saw a damaged frame: a millisecond, not a timeout).
-    ``heartbeat_period_s``: after a successful handshake, a heartbeat falls due when nothing
-    went out for this long (None: never). ``now``: the driver's clock at the start.
+    ``heartbeat_period_s``: after a successful handshake, a heartbeat falls due when for this
+    long the board has not been heard to take a frame (a reply to a request or a heartbeat)
+    and no heartbeat went out (None: never); a request being resent does not put it off.
+    ``now``: the driver's clock at the start.
     """
 
     def __init__(
@@ -199,7 +201,8 @@ class Engine:
         self._handshake: _Handshake | None = None
         self._heartbeat_seqs: set[int] = set()
         self._last_stream_seq: int | None = None
-        self._last_tx = now
+        self._last_heard = now  # the board's last reply to a frame of ours: it took that frame
+        self._last_heartbeat = now
         self._identity: m.Identity | None = None
         self._reset: BoardResetError | None = None
         self._closed: DisconnectedError | None = None
@@ -295,7 +298,6 @@ class Engine:
 
     def sent(self, tx: Transmit, now: float) -> None:
         """``tx`` went out at ``now``: the reply timeout runs from here."""
-        self._last_tx = now
         if tx.kind is Kind.REQUEST:
             self._counts["tx_frames"] += 1
             pending = self._pending
@@ -303,6 +305,7 @@ class Engine:
                 pending.deadline = now + pending.timeout_s
                 pending.maybe_applied += 1
         elif tx.kind is Kind.HEARTBEAT:
+            self._last_heartbeat = now
             self._counts["tx_frames"] += 1
             self._counts["heartbeats"] += 1
 
@@ -372,6 +375,7 @@ class Engine:
             except ProtocolError as exc:
                 return Done(error=exc)
             self._identity = identity
+            self._last_heard = now
             return Done(identity)
 
     # --- heartbeats ---------------------------------------------------------------------------
@@ -386,7 +390,9 @@ class Engine:
             or self._closed is not None
         ):
             return None
-        return self._last_tx + self.heartbeat_period_s
+        # Counted from what the board is known to have taken, not from what went out: a long
+        # request resent on a noisy line may all be lost, and the board's watchdog with it.
+        return max(self._last_heard, self._last_heartbeat) + self.heartbeat_period_s
 
     def heartbeat(self, now: float) -> Transmit | None:
         """A heartbeat to write if one is due at ``now``; its ack will not count as stale."""
@@ -441,10 +447,11 @@ class Engine:
         if msg_id in STREAM_IDS and frame.seq & m.BOARD_SEQ_FLAG:
             return self._on_stream(frame, now)
         if msg_id == m.Nack.ID:
-            self._on_nack(frame)
+            self._on_nack(frame, now)
             return None
         pending = self._pending
         if pending is not None and frame.seq == pending.seq:
+            self._last_heard = now
             request = pending.request
             reply_cls = type(request).REPLY
             if msg_id == reply_cls.ID:
@@ -460,11 +467,12 @@ class Engine:
             return None
         if msg_id == m.Ack.ID and frame.seq in self._heartbeat_seqs:
             self._heartbeat_seqs.discard(frame.seq)
+            self._last_heard = now
             return None
         counts["stale_replies"] += 1
         return None
 
-    def _on_nack(self, frame: Frame) -> None:
+    def _on_nack(self, frame: Frame, now: float) -> None:
         try:
             nack = m.Nack.decode(frame.body)
         except DecodeError:
@@ -476,6 +484,8 @@ class Engine:
             return
         request = pending.request
         matches = frame.seq == pending.seq and nack.msg_id == request.ID
+        if matches and nack.code is not m.ErrorCode.BAD_CRC:
+            self._last_heard = now
         error = NackError(nack.code, nack.detail, request)
         if nack.code is m.ErrorCode.BAD_CRC:
             # The board saw a damaged frame, maybe ours. A hint: resend an idempotent request
