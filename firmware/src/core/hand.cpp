@@ -47,6 +47,22 @@ void Hand::stall_rules() {
     }
 }
 
+void Hand::safe_action_tick(const hal::EncoderReading* enc, bool step_law) {
+    const bool hold = safe_action_ == 0;  // proto::SafeAction::HOLD
+    hal::MotorCommand out;
+    static_assert(kFingers == 5, "five finger ticks written out");
+    fingers_[0].tick_safe_action(enc[0], out, hold, step_law);
+    hal::motor_write<0>(out);
+    fingers_[1].tick_safe_action(enc[1], out, hold, step_law);
+    hal::motor_write<1>(out);
+    fingers_[2].tick_safe_action(enc[2], out, hold, step_law);
+    hal::motor_write<2>(out);
+    fingers_[3].tick_safe_action(enc[3], out, hold, step_law);
+    hal::motor_write<3>(out);
+    fingers_[4].tick_safe_action(enc[4], out, hold, step_law);
+    hal::motor_write<4>(out);
+}
+
 void Hand::set_safety(uint16_t timeout_ms, uint8_t safe_action) {
     timeout_ticks_ = (uint16_t)(((uint32_t)timeout_ms * kTickHz + 999u) / 1000u);
     if (timeout_ticks_ == 0) timeout_ticks_ = 1;

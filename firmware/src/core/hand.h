@@ -120,6 +120,10 @@ class Hand {
     inline void tick(const hal::EncoderReading* enc);
     inline void record_timing(uint16_t cycles, bool overran);
     inline void sample_finger(StateSample& s, uint8_t f) const;
+    // The tick at the host-silence timeout: each finger's Finger::tick_safe_action() in place
+    // of its law step (out of line: once per silence). `step_law`: the general path, for the
+    // tests that compare the two (firmware/README.md, Timing).
+    void safe_action_tick(const hal::EncoderReading* enc, bool step_law = false);
 
    private:
     finger::Finger fingers_[kFingers];
@@ -154,21 +158,14 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
 
     // ---- host silence: any valid frame feeds it; the safe action once per silence ----
     // A countdown from the last frame's tick: the timeout falls timeout_ticks_ ticks after it
-    // (0: fallen, until the next frame).
+    // (0: fallen, until the next frame). The fingers take the safe action in this tick, after
+    // the rules below (safe_action_tick()).
+    bool timed_out = false;
     if (frame_seen_) {
         frame_seen_ = 0;
         silence_left_ = timeout_ticks_;
     } else if (UTRF_UNLIKELY(silence_left_ != 0 && --silence_left_ == 0)) {
-        for (uint8_t f = 0; f < kFingers; ++f) {
-            finger::Finger& fg = fingers_[f];
-            if (!fg.active()) continue;  // nothing runs unsupervised on an idle finger
-            fg.latch(finger::HOST_TIMEOUT);
-            if (safe_action_ == 0) {  // proto::SafeAction::HOLD
-                fg.hold_here();
-            } else {
-                fg.set_mode(finger::COAST, 0, 0);
-            }
-        }
+        timed_out = true;
     }
 
     // ---- the previous tick overran: every finger stops ----
@@ -189,6 +186,10 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
     }
     if (UTRF_UNLIKELY(halted_)) {
         hal::motors_all_off();
+        return;
+    }
+    if (UTRF_UNLIKELY(timed_out)) {
+        safe_action_tick(enc);
         return;
     }
 
