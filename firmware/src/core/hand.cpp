@@ -24,7 +24,8 @@ Hand::Hand()
       stream_head_(0),
       stream_tail_(0),
       stream_skip_(0),
-      stream_put_(stream_) {
+      stream_put_(stream_),
+      safe_action_general_(false) {
     timing_.ticks = 0;
     timing_.overruns = 0;
     timing_.worst_cycles = 0;
@@ -47,8 +48,9 @@ void Hand::stall_rules() {
     }
 }
 
-void Hand::safe_action_tick(const hal::EncoderReading* enc, bool step_law) {
+void Hand::safe_action_tick(const hal::EncoderReading* enc) {
     const bool hold = safe_action_ == 0;  // proto::SafeAction::HOLD
+    const bool step_law = safe_action_general_;
     hal::MotorCommand out;
     static_assert(kFingers == 5, "five finger ticks written out");
     fingers_[0].tick_safe_action(enc[0], out, hold, step_law);

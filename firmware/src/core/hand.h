@@ -84,6 +84,8 @@ class Hand {
         silence_left_ = 0;
     }
     void note_loop() { loop_count_ = (uint8_t)(loop_count_ + 1); }
+    // The host-silence tick's general path instead of its fast one (the test comparing them).
+    void use_general_safe_action(bool on) { safe_action_general_ = on; }
     bool halted() const { return halted_ != 0; }
     // Stop driving for good (until the watchdog resets the board): every motor off, every
     // finger in COAST (so the state reports what the motors do), the hang mark left for the
@@ -121,9 +123,9 @@ class Hand {
     inline void record_timing(uint16_t cycles, bool overran);
     inline void sample_finger(StateSample& s, uint8_t f) const;
     // The tick at the host-silence timeout: each finger's Finger::tick_safe_action() in place
-    // of its law step (out of line: once per silence). `step_law`: the general path, for the
-    // tests that compare the two (firmware/README.md, Timing).
-    void safe_action_tick(const hal::EncoderReading* enc, bool step_law = false);
+    // of its law step (out of line: once per silence); the fast path unless the general one
+    // (the law's step as well) is chosen, for the test that compares the two.
+    void safe_action_tick(const hal::EncoderReading* enc);
 
    private:
     finger::Finger fingers_[kFingers];
@@ -151,6 +153,7 @@ class Hand {
     volatile uint8_t stream_tail_;  // written by loop()
     uint8_t stream_skip_;
     StateSample* stream_put_;  // the slot stream_head_ names: the next sample's
+    bool safe_action_general_;
 };
 
 UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
