@@ -74,9 +74,9 @@ MUTANTS = [
     Mutant(
         "host-silence-always-hold",
         "host silence (safe action COAST)",
-        "firmware/src/core/hand.h",
-        "if (safe_action_ == 0) {",
-        "if (true) {",
+        "firmware/src/core/hand.cpp",
+        "const bool hold = safe_action_ == 0;",
+        "const bool hold = true;",
     ),
     # The encoder's rules each have one home: the band (the driver's valid band, as5600_reading)
     # and the limits in encoder::judge(), which the sampler runs on each sample and the tick

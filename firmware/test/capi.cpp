@@ -91,6 +91,7 @@ void fw_freeze_adc(int frozen) { state().adc_frozen = frozen != 0; }
 // Every reading through the tick's general encoder path (Finger::judge_reading()), not its
 // fast one: the two must judge alike.
 void fw_encoder_general_path(int on) { state().adc_rejudge = on != 0; }
+void fw_safe_action_general_path(int on) { app::board().hand.use_general_safe_action(on != 0); }
 void fw_set_tick_cycles(uint32_t c) { state().tick_cycles = c; }
 void fw_set_period_elapsed(int on) { state().period_elapsed = on != 0; }
 

@@ -97,6 +97,7 @@ def load_library(path: Path = LIB_PATH) -> ctypes.CDLL:
         "fw_set_adc": (None, [c.c_uint8, c.c_uint16]),
         "fw_freeze_adc": (None, [c.c_int]),
         "fw_encoder_general_path": (None, [c.c_int]),
+        "fw_safe_action_general_path": (None, [c.c_int]),
         "fw_set_tick_cycles": (None, [c.c_uint32]),
         "fw_set_period_elapsed": (None, [c.c_int]),
         "fw_rx": (c.c_uint16, [c.c_char_p, c.c_uint16]),

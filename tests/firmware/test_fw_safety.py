@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import ctypes
+
 import pytest
 from fwsim import BRAKE, COAST, FORWARD, ClosedLoop, FingerPlant, Sim, m
 
@@ -451,3 +453,51 @@ def test_brake_asked_of_a_faulted_finger_keeps_its_driver_off(sim: Sim) -> None:
     faulted, healthy = sim.motor(0), sim.motor(1)
     assert not faulted.stby and (faulted.counts_a, faulted.counts_b) == (0, 0)
     assert (healthy.drive_a, healthy.drive_b, healthy.stby) == (BRAKE, BRAKE, 1)
+
+
+def safe_action_run(sim: Sim, general: bool) -> list[tuple]:
+    """Fingers in DUTY, POSITION away from its target and GRASP, their encoders moving every
+    tick, then silence: each tick's finger states and driver commands from two ticks before
+    the timeout to 20 after, with the host-silence tick on its fast path or its general one."""
+    sim.lib.fw_safe_action_general_path(1 if general else 0)
+    sim.ok(m.SetSafety(heartbeat_timeout=0.05, safe_action=m.SafeAction.HOLD))
+    for f, a in ((1, 0.2), (2, 0.1), (3, 0.3)):
+        move_to(sim, f, a)
+    set_mode(sim, 1, DUTY, duty=0.3)
+    set_target(sim, 2, 0.4)
+    set_mode(sim, 2, POSITION)
+    set_mode(sim, 3, GRASP, effort=0.5)
+    seen = []
+    for k in range(70):
+        sim.set_angles([0.0, 0.2 + 0.002 * k, 0.1 + 0.003 * k, 0.3 - 0.001 * k, 0.0])
+        sim.run(1)
+        fgs = [sim.finger(f) for f in range(5)]
+        if fgs[1].faults or seen:
+            seen.append(
+                [(g.mode, g.faults, g.target, g.output, g.duty_a, g.duty_b) for g in fgs]
+                + [(sim.motor(f).counts_a, sim.motor(f).counts_b) for f in range(5)]
+            )
+    sim.lib.fw_safe_action_general_path(0)
+    return seen
+
+
+def test_the_silence_ticks_fast_path_holds_as_its_general_twin(fwlib) -> None:
+    """The host-silence tick's fast path (no law step after hold_here(): at zero error it
+    gives the present output) against its general twin (hold_here() and the law's step), on
+    the same inputs: the same modes, faults and held angles, and the same outputs within a
+    count of the deadband's inverse."""
+    runs = []
+    for general in (False, True):
+        sim = Sim(fwlib)
+        ctypes.memset(sim.eeprom(), 0xFF, len(sim.eeprom()))  # blank: the default gains
+        sim.power_on()
+        runs.append(safe_action_run(sim, general))
+    fast, general = runs
+    assert len(fast) == len(general) >= 15
+    assert fast[0][1][1] == F.HOST_TIMEOUT and fast[0][1][0] == POSITION  # DUTY went to HOLD
+    for a, b in zip(fast, general, strict=True):
+        for fa, fb in zip(a[:5], b[:5], strict=True):
+            assert fa[:3] == fb[:3]  # mode, faults, target
+            assert all(abs(x - y) <= 2 for x, y in zip(fa[3:], fb[3:], strict=True)), (fa, fb)
+        for ma, mb in zip(a[5:], b[5:], strict=True):
+            assert all(abs(x - y) <= 1 for x, y in zip(ma, mb, strict=True)), (ma, mb)

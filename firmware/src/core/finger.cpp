@@ -172,6 +172,23 @@ void Finger::hold_here() {
     mode_ = mode;
 }
 
+void Finger::tick_safe_action(const hal::EncoderReading& enc, hal::MotorCommand& out,
+                              bool hold, bool step_law) {
+    const bool driving = active();  // nothing runs unsupervised on an idle finger
+    const int16_t th = take_reading(enc);
+    if (driving) {
+        latch(HOST_TIMEOUT);
+        if (!hold) set_mode(COAST, 0, 0);
+    }
+    const uint8_t mode = mode_;  // a stop fault of this reading has made it COAST
+    if (mode == COAST || mode == BRAKE) {
+        out = idle_outputs(mode);
+        return;
+    }
+    hold_here();  // a driving finger (an idle one has returned): HOLD at this tick's reading
+    drive(step_law ? pid_.step(limit_, target_, th, 0) : pid_.output(), out);
+}
+
 void Finger::halt() {
     set_mode(COAST, 0, 0);
     duty_a_ = duty_b_ = 0;

@@ -115,6 +115,13 @@ class Finger {
     void latch(uint8_t bits);
     // Safe action HOLD: hold the measured angle in closed loop, starting from the present output.
     void hold_here();
+    // The host-silence tick (Hand::tick() at the timeout): the encoder's rules on this tick's
+    // reading, then a driving finger latches HOST_TIMEOUT and takes the safe action (HOLD:
+    // hold_here() at this reading; else COAST). Fast path (step_law false): no law step, since
+    // right after hold_here() the law's step at zero error gives the present output; the
+    // general one (true) runs it. Out of line: it replaces the five law steps of that tick.
+    void tick_safe_action(const hal::EncoderReading& enc, hal::MotorCommand& out, bool hold,
+                          bool step_law);
     // The board stops driving (the hand halted: its motors are all off): COAST, duties 0, so
     // the state reports what the motors do.
     void halt();
@@ -168,6 +175,11 @@ class Finger {
     // limit, or judged with an earlier setup): judged again with this finger's setup
     // (encoder::judge()), then its faults. The tick's fast path takes an unflagged reading.
     uint8_t judge_reading(const hal::EncoderReading& enc);
+    // The encoder's rules on a reading (the sampler's judgment taken as it is, or the general
+    // path), faults latched; returns the angle. Both ticks run it.
+    inline int16_t take_reading(const hal::EncoderReading& enc);
+    // The driver command for the controller's output u (the finger drives).
+    inline void drive(int16_t u, hal::MotorCommand& out);
     // Bumpless re-entry into `mode`: its output limit, the PID restarted from the output `u`
     // at the measured angle, the stall watch from here. Every mode change goes through it.
     void restart(uint8_t mode, int16_t u);
@@ -230,7 +242,7 @@ UTRF_HOT uint8_t Finger::take_angle(int16_t th) {
     return found;
 }
 
-UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& out) {
+UTRF_HOT int16_t Finger::take_reading(const hal::EncoderReading& enc) {
     // ---- encoder: band and plausibility; joint limits ----
     // Angles are BU within +-pi, so every difference below fits int16. The faults found are
     // latched together, after theta_ took the new reading: the same bits as one at a time, and
@@ -251,7 +263,11 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
         th = theta_;
     }
     if (UTRF_UNLIKELY(found)) latch(found);
+    return th;
+}
 
+UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& out) {
+    const int16_t th = take_reading(enc);
     const uint8_t mode = mode_;  // after the latches: a stop fault has made it COAST
     if (UTRF_UNLIKELY(mode == COAST || mode == BRAKE)) {
         out = idle_outputs(mode);
@@ -267,7 +283,10 @@ UTRF_HOT void Finger::tick(const hal::EncoderReading& enc, hal::MotorCommand& ou
         const int16_t ff = UTRF_UNLIKELY(path_.active()) ? path_.tick(target_) : 0;
         u = pid_.step(limit_, target_, th, ff);
     }
+    drive(u, out);
+}
 
+UTRF_HOT void Finger::drive(int16_t u, hal::MotorCommand& out) {
     // ---- driver channels (the finger drives: no stop fault, or its mode would be COAST) ----
     const hal::Drive pull = params_.pull;
     if (UTRF_UNLIKELY(params_.rotary)) {

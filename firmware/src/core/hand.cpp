@@ -24,7 +24,8 @@ Hand::Hand()
       stream_head_(0),
       stream_tail_(0),
       stream_skip_(0),
-      stream_put_(stream_) {
+      stream_put_(stream_),
+      safe_action_general_(false) {
     timing_.ticks = 0;
     timing_.overruns = 0;
     timing_.worst_cycles = 0;
@@ -45,6 +46,23 @@ void Hand::stall_rules() {
         if (fingers_[f].stall_rule(elapsed)) hal::motor_off(f);  // stopped now, not next tick
         hal::tick_unlock();
     }
+}
+
+void Hand::safe_action_tick(const hal::EncoderReading* enc) {
+    const bool hold = safe_action_ == 0;  // proto::SafeAction::HOLD
+    const bool step_law = safe_action_general_;
+    hal::MotorCommand out;
+    static_assert(kFingers == 5, "five finger ticks written out");
+    fingers_[0].tick_safe_action(enc[0], out, hold, step_law);
+    hal::motor_write<0>(out);
+    fingers_[1].tick_safe_action(enc[1], out, hold, step_law);
+    hal::motor_write<1>(out);
+    fingers_[2].tick_safe_action(enc[2], out, hold, step_law);
+    hal::motor_write<2>(out);
+    fingers_[3].tick_safe_action(enc[3], out, hold, step_law);
+    hal::motor_write<3>(out);
+    fingers_[4].tick_safe_action(enc[4], out, hold, step_law);
+    hal::motor_write<4>(out);
 }
 
 void Hand::set_safety(uint16_t timeout_ms, uint8_t safe_action) {

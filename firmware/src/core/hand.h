@@ -84,6 +84,8 @@ class Hand {
         silence_left_ = 0;
     }
     void note_loop() { loop_count_ = (uint8_t)(loop_count_ + 1); }
+    // The host-silence tick's general path instead of its fast one (the test comparing them).
+    void use_general_safe_action(bool on) { safe_action_general_ = on; }
     bool halted() const { return halted_ != 0; }
     // Stop driving for good (until the watchdog resets the board): every motor off, every
     // finger in COAST (so the state reports what the motors do), the hang mark left for the
@@ -120,6 +122,10 @@ class Hand {
     inline void tick(const hal::EncoderReading* enc);
     inline void record_timing(uint16_t cycles, bool overran);
     inline void sample_finger(StateSample& s, uint8_t f) const;
+    // The tick at the host-silence timeout: each finger's Finger::tick_safe_action() in place
+    // of its law step (out of line: once per silence); the fast path unless the general one
+    // (the law's step as well) is chosen, for the test that compares the two.
+    void safe_action_tick(const hal::EncoderReading* enc);
 
    private:
     finger::Finger fingers_[kFingers];
@@ -147,6 +153,7 @@ class Hand {
     volatile uint8_t stream_tail_;  // written by loop()
     uint8_t stream_skip_;
     StateSample* stream_put_;  // the slot stream_head_ names: the next sample's
+    bool safe_action_general_;
 };
 
 UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
@@ -154,21 +161,14 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
 
     // ---- host silence: any valid frame feeds it; the safe action once per silence ----
     // A countdown from the last frame's tick: the timeout falls timeout_ticks_ ticks after it
-    // (0: fallen, until the next frame).
+    // (0: fallen, until the next frame). The fingers take the safe action in this tick, after
+    // the rules below (safe_action_tick()).
+    bool timed_out = false;
     if (frame_seen_) {
         frame_seen_ = 0;
         silence_left_ = timeout_ticks_;
     } else if (UTRF_UNLIKELY(silence_left_ != 0 && --silence_left_ == 0)) {
-        for (uint8_t f = 0; f < kFingers; ++f) {
-            finger::Finger& fg = fingers_[f];
-            if (!fg.active()) continue;  // nothing runs unsupervised on an idle finger
-            fg.latch(finger::HOST_TIMEOUT);
-            if (safe_action_ == 0) {  // proto::SafeAction::HOLD
-                fg.hold_here();
-            } else {
-                fg.set_mode(finger::COAST, 0, 0);
-            }
-        }
+        timed_out = true;
     }
 
     // ---- the previous tick overran: every finger stops ----
@@ -189,6 +189,10 @@ UTRF_HOT void Hand::tick(const hal::EncoderReading* enc) {
     }
     if (UTRF_UNLIKELY(halted_)) {
         hal::motors_all_off();
+        return;
+    }
+    if (UTRF_UNLIKELY(timed_out)) {
+        safe_action_tick(enc);
         return;
     }
 

@@ -312,8 +312,10 @@ __attribute__((noinline)) void run_one_tick() {
     const uint16_t cycles = cycles_from(g_tick_start);
     const bool overran = g_tick_deferred != 0 || lost != 0;
     app::tick_done(cycles, overran);
-    cli();
+    // Timer 0's waiting overflow runs here, with the tick's registers still saved, not after
+    // the handler's restores: a byte that arrives then waits for one of the two, not both.
     TIMSK0 |= _BV(TOIE0);
+    cli();
     g_tick_running = 0;
 }
 
@@ -322,9 +324,9 @@ inline __attribute__((always_inline)) void run_due_ticks() {
         run_one_tick();
     } while (g_tick_deferred && !g_tick_locked);
 }
-}  // namespace
 
-ISR(TIMER2_COMPA_vect) {
+// A compare: its tick, or, while one runs (or a lock the mask below missed), a deferred one.
+inline __attribute__((always_inline)) void take_compare() {
     GPIOR0 |= _BV(kWake) | _BV(kTickSeen);  // loop() after the tick (sleep_until_interrupt)
     if (g_tick_running || g_tick_locked) {
         if (g_tick_deferred) g_tick_lost = 1;
@@ -333,25 +335,27 @@ ISR(TIMER2_COMPA_vect) {
     }
     run_due_ticks();
 }
+}  // namespace
+
+ISR(TIMER2_COMPA_vect) { take_compare(); }
 
 // With the interrupts on from its first instruction (ISR_NOBLOCK, before the register saves):
 // the UART's two-byte receive FIFO gives a byte two byte times (20 us at 1 Mbaud) and this
-// handler takes about 14. The tick must not run inside the round's bookkeeping (it would
-// restart the round): from the lock on, a compare waits as under the tick lock, and its tick
-// runs at the end. (One that comes before the lock runs first, harmlessly: the round goes on
-// and the result register holds until the next conversion starts, below.)
+// handler takes about 14. It holds no tick lock: the tick reads only the last complete round
+// (g_adc_done), never the one filled here, and starts a round only when none runs
+// (encoders_sample()); the round's hand-over is one short stretch with interrupts off.
 ISR(ADC_vect, ISR_NOBLOCK) {
-    const uint8_t was_locked = g_tick_locked;  // the tick leaves it as it found it
-    g_tick_locked = 1;
     const uint16_t code = ADC;
-    uint8_t i = g_adc_at;
+    const uint8_t i = g_adc_at;
     // Judged here, between ticks (the round runs after each tick), not in the tick: the band,
     // the angle and the joint limits (core/encoder.h, judge()).
     EncoderReading* const fill = g_adc_fill;
     fill[i] = encoder::judge(code, g_setup[i]);
-    if (++i < UTRF_FINGER_COUNT) {
-        g_adc_at = i;
-        adc_select(i);
+    const uint8_t next = (uint8_t)(i + 1);
+    cli();
+    if (next < UTRF_FINGER_COUNT) {
+        g_adc_at = next;
+        adc_select(next);
         ADCSRA |= _BV(ADSC);
     } else {
         g_adc_at = 0xFF;
@@ -359,10 +363,7 @@ ISR(ADC_vect, ISR_NOBLOCK) {
         g_adc_done = fill;
         g_adc_round = (uint8_t)(g_adc_round + 1);
     }
-    cli();  // only the tick touches the round's state, and it waits for the lock
-    g_tick_locked = was_locked;
-    if (!was_locked && g_tick_deferred && !g_tick_running) run_due_ticks();
-    sei();  // the register restores, too, with the interrupts on
+    sei();  // the register restores with the interrupts on
 }
 
 // A received byte into the ring; a byte that finds the ring full is counted in g_rx_lost.
@@ -537,12 +538,35 @@ void tick_start() {
     TIMSK2 = _BV(OCIE2A);
 }
 
-void tick_lock() { g_tick_locked = 1; }
+// The lock masks the compare interrupt as well as setting the flag: a compare meanwhile
+// raises only OCF2A, and no handler runs (its register saves would hold a received byte up
+// for some 100 cycles). The unlock takes that compare itself: its tick runs now, late.
+// (simavr drops an interrupt raised while masked, so the flag is read, not left to the
+// hardware; on the chip it would fire at the unmask: cleared first.)
+// Only a started tick is masked (setup() takes the lock before tick_start()). No handler
+// writes TIMSK2: no lock needed around it.
+static uint8_t g_tick_masked;
+void tick_lock() {
+    g_tick_locked = 1;
+    if (TIMSK2 & _BV(OCIE2A)) {
+        TIMSK2 &= (uint8_t)~_BV(OCIE2A);
+        g_tick_masked = 1;
+    }
+}
 
 void tick_unlock() {
     cli();
     g_tick_locked = 0;
-    if (g_tick_deferred && !g_tick_running) run_due_ticks();  // the tick that came meanwhile
+    if (g_tick_masked) {
+        g_tick_masked = 0;
+        TIMSK2 |= _BV(OCIE2A);
+        if (TIFR2 & _BV(OCF2A)) {
+            TIFR2 = _BV(OCF2A);
+            take_compare();
+        }
+    }
+    // A compare whose handler found the flag (raised before the mask took).
+    if (g_tick_deferred && !g_tick_running) run_due_ticks();
     sei();
 }
 
