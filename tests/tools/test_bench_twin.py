@@ -32,8 +32,14 @@ def test_the_section_gives_the_ratio_of_the_medians_and_each_engine() -> None:
 
     alone = {tag: {"elf": {"cpu": 2.0}, "mjcf": {"cpu": 1.0}} for tag in ("new", "ref")}
     text = bench_twin.report(
-        "f500c49", {"new": runs(5.0, 6.0, 50.0), "ref": runs(12.0, 11.0, 10.0)}, alone, 120, 3
+        "f500c49",
+        {"new": runs(5.0, 6.0, 50.0), "ref": runs(12.0, 11.0, 10.0), "one": runs(9.0, 8.0, 10.0)},
+        alone,
+        120,
+        3,
     )
     assert text.startswith(bench_twin.BEGIN) and text.endswith(bench_twin.END)
     assert "**0.55**" in text  # median 6 against median 11: one slow run does not move it
-    assert "2.0 s / 1.0 s / 0.0 s" in text  # the new tree: CPU median 3.0 = 2 + 1 + 0
+    assert "wall **0.82**, CPU **0.82**" in text  # the one-thread twin: median 9 against 11
+    # the new tree's engines beside its one-thread hold (CPU median 4.5 = 2 + 1 + 1.5)
+    assert "2.0 s / 1.0 s / 1.5 s" in text
