@@ -19,7 +19,14 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from utrf.bringup.diagnose import encoder_check, find_stop, wiring
+from utrf.bringup.diagnose import (
+    STOP_DUTY,
+    encoder_check,
+    find_stop,
+    reading_curve,
+    take_up_s,
+    wiring,
+)
 from utrf.bringup.findings import Finding, FingerConfig
 from utrf.bringup.identify import Check, Plant, check, identify, tune
 from utrf.bringup.pulses import Bounds, Recorder, brake, pulse, settle
@@ -32,10 +39,21 @@ SAME_ANGLE_RAD = 0.03
 SAME_GAIN = 0.3
 #: set_finger_config's default encoder_offset (protocol/spec.toml): the straight finger mid-turn
 DEFAULT_OFFSET = 3.14159265
-#: more friction (duty) than the model's, and more backlash (rad), make findings
+#: more friction (duty) than the model's makes a finding
 FRICTION_DUTY = 0.03
-SLACK_RAD = 0.06
-SLOW = 0.55  # of the model motors' speed gain
+SLOW = 0.5  # of the model motors' speed gain
+#: a step from rest's lag over the model motors' (at the speed measured): the two ways'
+#: mean above WEAK_LAG, a weak motor (the ±30 % spread of builds gives at most 1.43); opening above
+#: SLACK_LAG and SLACK_SKEW times closing's, slack (Joint 2 hangs free, gravity-led)
+WEAK_LAG = 2.2
+SLACK_LAG = 4.0
+SLACK_SKEW = 1.6
+#: a reading that goes back this much (rad), or whose speed at one duty varies this much
+#: (fastest over slowest), across the travel: the magnet is off-centre or loose
+BACKWARD_RAD = 0.03
+SPEED_SPREAD = 1.2
+#: a span between the stops longer than the model's by this: the reading's scale is wrong
+SPAN_EXTRA_RAD = 0.1
 #: the steps of a finger's bring-up, in order
 UPTO = ("wiring", "stops", "plant", "check")
 
@@ -175,7 +193,28 @@ def _bring_up_finger(
     span = math.remainder(s * (closed.raw - open_.raw) - math.pi, 2 * math.pi) + math.pi
     offset = math.remainder(open_.raw - s * lo, 2 * math.pi)
     closed_at = lo + span
-    res.stops = {"open_rad": lo, "closed_rad": closed_at, "span_rad": span, "offset_rad": offset}
+    res.stops = {
+        "open_rad": lo,
+        "closed_rad": closed_at,
+        "span_rad": span,
+        "offset_rad": offset,
+        # from the open stop, how long the motor ran before Joint 2 moved (the slack)
+        "take_up_s": take_up_s(closed.first, 1),
+    }
+    if span > (hi - lo) + SPAN_EXTRA_RAD:
+        res.findings.append(
+            Finding(
+                name,
+                "not-monotonic",
+                f"between its stops the reading turns {math.degrees(span):.0f}°, further "
+                f"than the joint can ({math.degrees(hi - lo):.0f}°): the reading is not the "
+                "joint's angle, the encoder's magnet is off-centre on the shaft (or loose)",
+                "centre the magnet on Joint 2's shaft and glue it; then run the bring-up again",
+                False,
+                {"span_rad": span, "model_span_rad": hi - lo},
+            )
+        )
+        return res
     if abs(math.remainder(offset - DEFAULT_OFFSET, 2 * math.pi)) > 0.05:
         res.findings.append(
             Finding(
@@ -218,18 +257,57 @@ def _bring_up_finger(
     mid = min(max(0.3, th_min + 0.6), th_max - 0.6)
     hand.clear_faults([f])
     here = hand.state().fingers[f].theta2
-    pulse(hand, rec, f, math.copysign(0.35, mid - here), bounds, seconds=3.0, travel=3.5, until=mid)
+    # from the closed stop (where Joint 2 leans flexed), opening: the slack shows as take-up
+    to_mid = pulse(
+        hand, rec, f, math.copysign(0.35, mid - here), bounds, seconds=3.0, travel=3.5, until=mid
+    )
+    res.stops["take_up_closed_s"] = take_up_s(to_mid, -1)
+    curve = reading_curve(closed.trace, to_mid)
+    res.stops.update({f"curve_{k}": v for k, v in curve.items()})
+    if curve["backward_rad"] > BACKWARD_RAD or curve["spread"] > SPEED_SPREAD:
+        # the zero and the range came from this reading: not findings of their own
+        res.findings = [
+            fd for fd in res.findings if fd.kind not in ("magnet-offset", "narrow-range")
+        ]
+        res.findings.append(
+            Finding(
+                name,
+                "not-monotonic",
+                "driven at one duty across its travel, the finger's reading "
+                + (
+                    f"went back {math.degrees(curve['backward_rad']):.1f}°"
+                    if curve["backward_rad"] > BACKWARD_RAD
+                    else f"ran {curve['spread']:.2f} times faster in places than in others"
+                )
+                + " where the model's turns at a steady speed: the encoder's magnet is "
+                "off-centre on the shaft or loose (the reading is not the joint's angle, so the "
+                "stops and the zero from it are not trusted)",
+                "centre the magnet on Joint 2's shaft and glue it; then run the bring-up again",
+                False,
+                dict(curve),
+            )
+        )
+        return res
     settle(hand, 0.1)
     plant, _ = identify(hand, rec, f, bounds, mid)
     res.plant = plant.to_dict()
-    res.findings += _plant_findings(name, plant, hand, f)
+    res.plant["slack_rad"] = slack_rad(plant, model_plant(hand, f), res.stops["take_up_s"])
+    res.findings += plant_findings(name, plant, model_plant(hand, f), res.plant["slack_rad"])
     if not (plant.K > 0 and math.isfinite(plant.tau)):
         res.findings.append(
             Finding(name, "no-motion", "the duty steps gave no usable response", "-", False)
         )
         return res
     g = saved["gains"]
-    tuned = tune(plant, model_plant(hand, f), g["d_cutoff_hz"], g["pretension_duty"], g["max_duty"])
+    weak = any(fd.kind == "weak-motor" for fd in res.findings)
+    tuned = tune(
+        plant,
+        model_plant(hand, f),
+        g["d_cutoff_hz"],
+        g["pretension_duty"],
+        g["max_duty"],
+        measured_tau=weak,
+    )
     res.tuning = asdict(tuned)
     res.config.gains = dict(tuned.gains)
     res.config.motion = dict(tuned.motion)
@@ -252,10 +330,58 @@ def _bring_up_finger(
     return res
 
 
-def _plant_findings(name: str, p: Plant, hand: Hand, f: int) -> list[Finding]:
-    """The plant against the model's motors (``model_plant``)."""
-    ref = model_plant(hand, f)
+def slack_rad(p: Plant, model: Plant, take_up: float) -> float:
+    """The slack as Joint-2 travel: how far the motor ran (at the stop search's duty, at the
+    identified speed) before Joint 2 moved from the open stop, less what the motor's own lag
+    and the 0.01 rad of the take-up's threshold account for."""
+    v = p.K * max(0.0, STOP_DUTY - p.u_f)
+    tau = model.tau * p.K / model.K
+    return max(0.0, v * (take_up - tau) - 0.01) if math.isfinite(take_up) else math.nan
+
+
+def lag_ratios(p: Plant, ref: Plant) -> dict[str, float]:
+    """Each way's time constant over the one the model's motors would have at the speed gain
+    measured (τ ∝ m v_no_load / F_stall, K ∝ v_no_load: τ / K measures the force alone)."""
+    expected = ref.tau * p.K / ref.K
+    return {k: v / expected for k, v in p.lag_s.items()} if expected > 0 else {}
+
+
+def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> list[Finding]:
+    """The plant against the model's motors' (``ref``, ``model_plant``)."""
     out = []
+    r = lag_ratios(p, ref)
+    flex, ext = r.get("flex", math.nan), r.get("extend", math.nan)
+    loose = ext > SLACK_LAG and ext > SLACK_SKEW * flex
+    weak = not loose and (flex + ext) / 2 > WEAK_LAG
+    if loose:
+        out.append(
+            Finding(
+                name,
+                "slack",
+                f"from rest, Joint 2 follows the motor {ext:.1f} times later opening (and "
+                f"{flex:.1f} times closing) than the motors' lag explains: the motor runs "
+                "before Joint 2 moves, slack in the coupling tendon (Tendon 2, Joint 1 to "
+                "Joint 2) lets Joint 2 hang free between its strands",
+                "tighten Tendon 2 and run the bring-up again (Joint 2 is loose between its "
+                "strands: no gain holds it)",
+                False,
+                {"lag_ratio": r, "slack_rad": slack},
+            )
+        )
+    if weak:
+        out.append(
+            Finding(
+                name,
+                "weak-motor",
+                f"from rest the finger takes {(flex + ext) / 2:.1f} times the time to come up to "
+                "speed that the model's motors take at its speed: its motors give less force "
+                "(a weaker motor or gearing, a current-limited supply or driver)",
+                "gains tuned for the lag measured (the derivative's zero on it); if it must "
+                "lift more than the model's, fit the model's motors",
+                True,
+                {"lag_ratio": r, "tau_s": p.tau},
+            )
+        )
     if p.K < SLOW * ref.K:
         out.append(
             Finding(
@@ -273,25 +399,11 @@ def _plant_findings(name: str, p: Plant, hand: Hand, f: int) -> list[Finding]:
             Finding(
                 name,
                 "friction",
-                f"it takes {p.u_f:.2f} duty to move (the model: {ref.u_f:.2f}): friction in a "
-                "guide, a tight tendon or a carriage, or a weaker motor (less force per amp: "
-                "the steps cannot tell the two apart)",
+                f"it takes {p.u_f:.2f} duty to move (the model: {ref.u_f:.2f}), at the model's "
+                "lag: friction in a guide, a tight tendon or a carriage",
                 "deadband_duty set to it; free the tendon or the guide if it is much more",
                 True,
                 {"u_f": p.u_f, "u_f_model": ref.u_f},
-            )
-        )
-    if p.backlash_rad > SLACK_RAD:
-        out.append(
-            Finding(
-                name,
-                "slack",
-                "reversing toward flexion, the motor moves about "
-                f"{math.degrees(p.backlash_rad):.0f}° of Joint 2 before the joint follows: "
-                "slack in the coupling tendon (Tendon 2)",
-                "tighten Tendon 2 (Joint 2 is loose between its strands: no gain holds it)",
-                False,
-                {"backlash_rad": p.backlash_rad},
             )
         )
     return out

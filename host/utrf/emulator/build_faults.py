@@ -43,6 +43,8 @@ KINDS: dict[str, tuple[str, str]] = {
     "swap-encoders": ("two fingers' encoder cables swapped between ADC inputs", "pair"),
 }
 PAIR_KINDS = ("swap-cables", "swap-encoders")
+#: a motor constant below this times the model's is a fault (a wrong part), not the spread
+WRONG_PART = 0.5
 
 
 @dataclass(frozen=True)
@@ -73,6 +75,9 @@ class FingerBuild:
             ("magnet-offset", abs(self.magnet_offset_rad) > 0.0),
             ("off-centre", abs(self.magnet_eccentric_rad) > 0.0),
             ("slack", self.slack_m > 0.0),
+            # a motor far outside the spread any build's motors have (a wrong part)
+            ("weak-motor", self.force_scale < WRONG_PART),
+            ("slow-motor", self.speed_scale < WRONG_PART),
             ("narrow-range", self.closed_stop_rad is not None),
             ("friction", self.friction_n > 0.0),
             ("unpowered", self.unpowered),
@@ -206,7 +211,7 @@ class BuildFaults:
                 force_scale=float(1 + rng.uniform(-spread, spread)),
                 speed_scale=float(1 + rng.uniform(-spread, spread)),
             )
-        kinds = [k for k in KINDS if k not in ("weak-motor", "slow-motor", "off-centre")]
+        kinds = list(KINDS)
         free = list(rng.permutation(FINGERS))
         for kind in rng.permutation(kinds)[: max(0, int(faults))]:
             need = 2 if kind in PAIR_KINDS else 1
@@ -218,6 +223,10 @@ class BuildFaults:
                 "slack": rng.uniform(0.001, 0.002),
                 "narrow-range": rng.uniform(1.45, 1.55),
                 "friction": rng.uniform(5.0, 12.0),
+                # well outside the ±spread every motor has, as a wrong part would be
+                "weak-motor": rng.uniform(0.3, 0.4),
+                "slow-motor": rng.uniform(0.3, 0.42),
+                "off-centre": rng.uniform(0.3, 0.5) * rng.choice([-1, 1]),
             }.get(str(kind))
             word = f"{kind}:{','.join(map(str, fs))}" + (f"={value:.4f}" if value else "")
             build = build._add(word)
