@@ -114,7 +114,8 @@ def table(rows: list[dict[str, Any]], command: str, wall_s: float | None, worker
         )
     missed = sum(len(r["missed"]) for r in rows)
     false = sum(len(r["false"]) for r in rows)
-    worst = max(float(r["board_time_s"]) for r in rows)
+    worst = max((float(r["board_time_s"]) for r in rows), default=float("nan"))
+    build_wall = sum(float(r.get("wall_s", 0.0)) for r in rows)
     fixable = [r for r in rows if r["fixable"]]
     passed = sum(1 for r in fixable if r.get("demo") and r["demo"]["ok"])
     lines += [
@@ -122,12 +123,9 @@ def table(rows: list[dict[str, Any]], command: str, wall_s: float | None, worker
         f"{len(rows)} builds: {missed} faults missed, {false} false diagnoses; "
         f"{passed} of the {len(fixable)} fixable builds met the demo's tracking goal after "
         f"bring-up; the longest whole-hand bring-up took {worst:.1f} s of board time "
-        "(goal ≤ 120 s)"
-        + (
-            f"; {wall_s / 60:.1f} min of wall time for the builds run in this sitting."
-            if wall_s
-            else "."
-        ),
+        f"(goal ≤ 120 s); each build took {build_wall / max(len(rows), 1) / 60:.1f} min of "
+        "wall time on average (bring-up and demo, one worker each)"
+        + (f"; {wall_s / 60:.1f} min of wall time for this sitting." if wall_s else "."),
         END,
     ]
     return "\n".join(lines)
@@ -150,6 +148,9 @@ def main() -> None:
     ap.add_argument("--no-demo", action="store_true", help="skip the demo after bring-up")
     ap.add_argument("--update", type=Path, help="write the table into this Markdown file")
     ap.add_argument("--json", type=Path, help="results as JSON lines (resumed from)")
+    ap.add_argument(
+        "--table-only", action="store_true", help="no builds run: the table of those in --json"
+    )
     args = ap.parse_args()
     from distributed import as_completed
 
@@ -157,7 +158,7 @@ def main() -> None:
 
     seeds = list(range(args.first_seed, args.first_seed + args.builds))
     done = _done(args.json, args.faults)
-    todo = [s for s in seeds if s not in done]
+    todo = [] if args.table_only else [s for s in seeds if s not in done]
     print(f"{len(seeds) - len(todo)} builds done before, {len(todo)} to run", flush=True)
     t0 = time.monotonic()
     workers = 0

@@ -15,7 +15,7 @@ import contextlib
 import json
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -262,7 +262,14 @@ def _bring_up_finger(
         hand, rec, f, math.copysign(0.35, mid - here), bounds, seconds=3.0, travel=3.5, until=mid
     )
     res.stops["take_up_closed_s"] = take_up_s(to_mid, -1)
-    curve = reading_curve(closed.trace, to_mid)
+    # the closing leg was read in the search's frame (its zero where the leg began): in the
+    # calibrated one, it ends at the closed stop
+    closing = closed.trace
+    if len(closing.t):
+        th = closing.theta2.copy()
+        th[:, f] += closed_at - closing.end
+        closing = replace(closing, theta2=th)
+    curve = reading_curve(closing, to_mid)
     res.stops.update({f"curve_{k}": v for k, v in curve.items()})
     if curve["backward_rad"] > BACKWARD_RAD or curve["spread"] > SPEED_SPREAD:
         # the zero and the range came from this reading: not findings of their own
