@@ -42,8 +42,8 @@ DEFAULT_OFFSET = 3.14159265
 #: more friction (duty) than the model's makes a finding
 FRICTION_DUTY = 0.03
 SLOW = 0.5  # of the model motors' speed gain
-#: a step from rest's lag over the model motors' (at the speed measured): the two ways'
-#: mean above WEAK_LAG, a weak motor (the ±30 % spread of builds gives at most 1.43); opening above
+#: a step from rest's lag over the model motors' (at the speed measured): both ways above
+#: WEAK_LAG, a weak motor (the ±30 % spread of builds gives at most 1.43); opening above
 #: SLACK_LAG and SLACK_SKEW times closing's, slack (Joint 2 hangs free, gravity-led)
 WEAK_LAG = 2.2
 SLACK_LAG = 4.0
@@ -358,8 +358,10 @@ def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> 
     out = []
     r = lag_ratios(p, ref)
     flex, ext = r.get("flex", math.nan), r.get("extend", math.nan)
-    loose = ext > SLACK_LAG and ext > SLACK_SKEW * flex
-    weak = not loose and (flex + ext) / 2 > WEAK_LAG
+    # a slow motor's lag is far under one count (v τ): neither is judged from it
+    resolved = p.K >= SLOW * ref.K
+    loose = resolved and ext > SLACK_LAG and ext > SLACK_SKEW * flex
+    weak = resolved and not loose and min(flex, ext) > WEAK_LAG
     if loose:
         out.append(
             Finding(
@@ -380,7 +382,7 @@ def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> 
             Finding(
                 name,
                 "weak-motor",
-                f"from rest the finger takes {(flex + ext) / 2:.1f} times the time to come up to "
+                f"from rest the finger takes {min(flex, ext):.1f} times the time to come up to "
                 "speed that the model's motors take at its speed: its motors give less force "
                 "(a weaker motor or gearing, a current-limited supply or driver)",
                 "gains tuned for the lag measured (the derivative's zero on it); if it must "

@@ -224,7 +224,7 @@ class BuildFaults:
                 "narrow-range": rng.uniform(1.45, 1.55),
                 "friction": rng.uniform(5.0, 12.0),
                 # well outside the ±spread every motor has, as a wrong part would be
-                "weak-motor": rng.uniform(0.3, 0.4),
+                "weak-motor": rng.uniform(0.25, 0.35),
                 "slow-motor": rng.uniform(0.3, 0.42),
                 "off-centre": rng.uniform(0.3, 0.5) * rng.choice([-1, 1]),
             }.get(str(kind))
