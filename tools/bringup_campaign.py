@@ -172,6 +172,9 @@ def main() -> None:
                 for s in todo
             ]
             for fut in as_completed(futures):
+                if fut.status != "finished":  # the build's run raised: say so, run the rest
+                    print(f"{fut.key}: {fut.exception()!r}", flush=True)
+                    continue
                 row = fut.result()
                 done[row["seed"]] = row
                 print(json.dumps(row), flush=True)
