@@ -47,16 +47,21 @@ EXPECTED = {
     "swap-encoders": "cable-swap",
 }
 BEGIN, END = "<!-- BEGIN bringup-campaign -->", "<!-- END bringup-campaign -->"
+#: the table of builds with only faults the configuration can fix (``--fixable``)
+BEGIN_FIX = "<!-- BEGIN bringup-campaign-fixable -->"
+END_FIX = "<!-- END bringup-campaign-fixable -->"
 
 
-def run_build(seed: int, faults: int, demo: bool = True) -> dict[str, Any]:
-    """One seeded build brought up (and its demo run when fixable); a row of the table."""
+def run_build(seed: int, faults: int, demo: bool = True, fixable: bool = False) -> dict[str, Any]:
+    """One seeded build brought up (and its demo run when fixable); a row of the table.
+    ``fixable``: its faults drawn only from the kinds the configuration can fix."""
     from utrf.bringup import bringup
     from utrf.bringup.demo_goal import demo_goal
     from utrf.emulator import BuildFaults, EmulatedBoard
+    from utrf.emulator.build_faults import FIXABLE_KINDS
     from utrf.hand import Hand
 
-    build = BuildFaults.random(seed, faults)
+    build = BuildFaults.random(seed, faults, kinds=FIXABLE_KINDS if fixable else None)
     truth = {(EXPECTED[k], f) for k, fs in build.faults() for f in fs}
     t0 = time.monotonic()
     goal: dict[str, Any] | None = None
@@ -72,6 +77,7 @@ def run_build(seed: int, faults: int, demo: bool = True) -> dict[str, Any]:
     return {
         "seed": seed,
         "n_faults": faults,
+        "fixable_only": fixable,
         "faults": [f"{k}:{','.join(map(str, fs))}" for k, fs in build.faults()],
         "missed": sorted(f"{k}@{f}" for k, f in truth - found),
         "false": sorted(f"{k}@{f}" for k, f in found - truth),
@@ -95,9 +101,15 @@ def _demo_cell(r: dict[str, Any]) -> str:
     return f"{'pass' if d['ok'] else 'FAIL'} ({rms:.2f} / {worst:.2f}{unsettled})"
 
 
-def table(rows: list[dict[str, Any]], command: str, wall_s: float | None, workers: int) -> str:
+def table(
+    rows: list[dict[str, Any]],
+    command: str,
+    wall_s: float | None,
+    workers: int,
+    markers: tuple[str, str] = (BEGIN, END),
+) -> str:
     lines = [
-        BEGIN,
+        markers[0],
         f"Measured with `{command}` on {cpu_name()} (2 cores shared with other jobs, "
         f"{workers} Dask worker(s)); board time is simulated time. Demo: the goal met or not, "
         "then the largest RMS / worst tracking error over the five fingers (°).",
@@ -126,16 +138,21 @@ def table(rows: list[dict[str, Any]], command: str, wall_s: float | None, worker
         f"(goal ≤ 120 s); each build took {build_wall / max(len(rows), 1) / 60:.1f} min of "
         "wall time on average (bring-up and demo, one worker each)"
         + (f"; {wall_s / 60:.1f} min of wall time for this sitting." if wall_s else "."),
-        END,
+        markers[1],
     ]
     return "\n".join(lines)
 
 
-def _done(path: Path | None, faults: int) -> dict[int, dict[str, Any]]:
+def _done(path: Path | None, faults: int, fixable: bool = False) -> dict[int, dict[str, Any]]:
+    """The builds of this campaign (its fault count and kinds) already in ``path``."""
     if path is None or not path.exists():
         return {}
     rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    return {r["seed"]: r for r in rows if r.get("n_faults") == faults}
+    return {
+        r["seed"]: r
+        for r in rows
+        if r.get("n_faults") == faults and r.get("fixable_only", False) == fixable
+    }
 
 
 def main() -> None:
@@ -146,6 +163,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=None, help="local Dask workers (cores)")
     ap.add_argument("--address", default=None, help="a running Dask scheduler instead")
     ap.add_argument("--no-demo", action="store_true", help="skip the demo after bring-up")
+    ap.add_argument("--fixable", action="store_true", help="only faults the configuration can fix")
     ap.add_argument("--update", type=Path, help="write the table into this Markdown file")
     ap.add_argument("--json", type=Path, help="results as JSON lines (resumed from)")
     ap.add_argument(
@@ -157,7 +175,7 @@ def main() -> None:
     from utrf.campaign.engine import cluster
 
     seeds = list(range(args.first_seed, args.first_seed + args.builds))
-    done = _done(args.json, args.faults)
+    done = _done(args.json, args.faults, args.fixable)
     todo = [] if args.table_only else [s for s in seeds if s not in done]
     print(f"{len(seeds) - len(todo)} builds done before, {len(todo)} to run", flush=True)
     t0 = time.monotonic()
@@ -168,7 +186,14 @@ def main() -> None:
         with cluster(args.address, args.workers) as client:
             workers = len(client.scheduler_info(n_workers=-1)["workers"])
             futures = [
-                client.submit(run_build, s, args.faults, not args.no_demo, key=f"bringup-{s}")
+                client.submit(
+                    run_build,
+                    s,
+                    args.faults,
+                    not args.no_demo,
+                    args.fixable,
+                    key=f"bringup-{s}-{int(args.fixable)}",
+                )
                 for s in todo
             ]
             for fut in as_completed(futures):
@@ -183,11 +208,16 @@ def main() -> None:
                         fh.write(json.dumps(row) + "\n")
     wall = time.monotonic() - t0 if todo else None
     rows = [done[s] for s in seeds if s in done]
-    command = f"python -m tools.bringup_campaign --builds {args.builds} --faults {args.faults}"
-    text = table(rows, command, wall, workers or (args.workers or 0))
+    command = (
+        f"python -m tools.bringup_campaign --builds {args.builds} --faults {args.faults}"
+        + (" --fixable" if args.fixable else "")
+        + (f" --first-seed {args.first_seed}" if args.first_seed else "")
+    )
+    markers = (BEGIN_FIX, END_FIX) if args.fixable else (BEGIN, END)
+    text = table(rows, command, wall, workers or (args.workers or 0), markers)
     print(text)
     if args.update:
-        write_section(args.update, text, BEGIN, END)
+        write_section(args.update, text, *markers)
 
 
 if __name__ == "__main__":
