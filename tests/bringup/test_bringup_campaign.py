@@ -43,7 +43,8 @@ def test_the_table_counts_misses_false_diagnoses_and_the_demo() -> None:
         _row(1, [], ["friction@2"], True),
         _row(2, [], [], False),
     ]
-    text = table(rows, "cmd", 120.0, 2)
+    text = table(rows, "cmd", 120.0, 2, ("<!-- B -->", "<!-- E -->"))
+    assert text.startswith("<!-- B -->") and text.endswith("<!-- E -->")
     assert "3 builds: 1 faults missed, 1 false diagnoses" in text
     assert "1 of the 2 fixable builds met the demo's tracking goal" in text
     assert "92.0 s of board time" in text
@@ -55,4 +56,15 @@ def test_a_second_sitting_resumes_from_the_results(tmp_path: Path) -> None:
     other = {**_row(5, [], [], True), "n_faults": 2}  # another campaign's: not reused
     path.write_text("".join(json.dumps(r) + "\n" for r in [_row(3, [], [], True), other]))
     assert sorted(_done(path, 3)) == [3]
+    assert _done(path, 3, fixable=True) == {}  # the fixable-only campaign's builds differ
     assert _done(tmp_path / "none.jsonl", 3) == {}
+
+
+def test_fixable_builds_draw_only_fixable_kinds() -> None:
+    from utrf.emulator import BuildFaults
+    from utrf.emulator.build_faults import FIXABLE_KINDS
+
+    kinds = {
+        k for s in range(20) for k, _ in BuildFaults.random(s, 3, kinds=FIXABLE_KINDS).faults()
+    }
+    assert kinds <= set(FIXABLE_KINDS) and len(kinds) >= 5
