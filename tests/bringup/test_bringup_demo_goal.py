@@ -15,6 +15,7 @@ from utrf.bringup.demo_goal import GOAL_RMS_RAD, demo_goal
 def test_the_model_build_meets_the_demo_goal(built: Built) -> None:
     with built() as (board, hand):
         goal = demo_goal(hand)
+        board.run_for(0.05)  # the brake command's tick
         assert all(mode in ("coast", "brake") for a, b in board.drive for mode in (a[0], b[0]))
     assert goal.ok, goal.line()
     assert len(goal.settled) == 5 and all(t.samples > 500 for t in goal.tracking.values())
