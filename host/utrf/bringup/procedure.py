@@ -180,11 +180,13 @@ def _bring_up_finger(
         res.findings.append(
             Finding(
                 name,
-                "no-motion",
-                "the search for the joint's stops did not end at a stop (the finger stopped "
-                "moving before one, or faulted): a jammed joint, a broken tendon or a motor "
-                "too weak to move it",
-                "free the joint and check its tendons",
+                "friction",
+                "the finger moved when pulsed, but the search for the joint's stops did not "
+                "end at a stop (it stopped moving before one at the search's duty, or "
+                "faulted): too much friction or a jammed joint (a tight guide, tendon or "
+                "carriage), or a broken tendon",
+                "free the joint, the guides and the carriages and check the tendons; then run "
+                "the bring-up again",
                 False,
             )
         )
@@ -302,7 +304,15 @@ def _bring_up_finger(
     res.findings += plant_findings(name, plant, model_plant(hand, f), res.plant["slack_rad"])
     if not (plant.K > 0 and math.isfinite(plant.tau)):
         res.findings.append(
-            Finding(name, "no-motion", "the duty steps gave no usable response", "-", False)
+            Finding(
+                name,
+                "friction",
+                "the finger moved when pulsed, but not both ways at two of the plant's step "
+                "duties within the bring-up's duty bound: too much friction (a tight guide, "
+                "tendon or carriage) or a jammed joint",
+                "free the joint, the guides and the carriages; then run the bring-up again",
+                False,
+            )
         )
         return res
     g = saved["gains"]
