@@ -57,9 +57,11 @@ def test_a_weak_motor_is_named_and_fixable() -> None:
     assert [f.kind for f in got] == ["weak-motor"] and got[0].fixable
 
 
-def test_slack_is_named_not_weakness() -> None:
+def test_slack_is_named_not_weakness_nor_friction() -> None:
     got = plant_findings("index", _plant(2.2, 0.001, 0.062), REF)  # measured, slack 1 mm
     assert [f.kind for f in got] == ["slack"] and not got[0].fixable
+    # Joint 2 loose between its strands also makes the steps' friction look high
+    assert [f.kind for f in plant_findings("i", _plant(2.2, 0.001, 0.062, 0.1), REF)] == ["slack"]
 
 
 def test_friction_and_a_slow_motor_are_named() -> None:
