@@ -46,8 +46,11 @@ setup:
 
 test: setup
 	@$(SUBMAKE) test-after-setup
+# The suite on every core (pytest-xdist; a module's tests stay on one worker, so its fixtures
+# start once): PYTEST_WORKERS=0 runs it in one process.
+PYTEST_WORKERS ?= auto
 test-after-setup: $(TEST_DEPS)
-	$(PY) -m pytest $(PYTEST_ARGS)
+	$(PY) -m pytest -n $(PYTEST_WORKERS) --dist loadscope $(PYTEST_ARGS)
 
 # Minutes of pip and builds in a clone with a new .venv: its own target, run by .ci/run after
 # `make test`, so the suite stays quick.

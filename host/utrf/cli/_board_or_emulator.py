@@ -8,30 +8,14 @@ import contextlib
 from collections.abc import Iterator
 from pathlib import Path
 
+from utrf.cli._hand_common import add_port, connect
 from utrf.hand import Hand
 from utrf.hand.client import OnClose
-from utrf.protocol import messages as m
 
 
-def add_board_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--port",
-        metavar="URL",
-        help="the board: a serial port (/dev/ttyACM0) or a pyserial URL "
-        "(socket://127.0.0.1:PORT from `utrf emulate`); default: an emulated board started "
-        "for this command",
-    )
-    p.add_argument(
-        "--baud", type=int, default=m.DEFAULT_BAUD, help=f"default {m.DEFAULT_BAUD} (8N1)"
-    )
-    p.add_argument(
-        "--boot-wait",
-        type=float,
-        default=2.5,
-        metavar="S",
-        help="seconds to wait for the board's boot frame after opening the port (the MEGA's "
-        "auto-reset); 0 skips",
-    )
+def add_board_options(p: argparse.ArgumentParser, *, reset: bool = True) -> None:
+    """``_hand_common.add_port`` with --port optional, and --elf for the emulated board."""
+    add_port(p, reset=reset, emulated=True)
     p.add_argument("--elf", type=Path, help="the emulated board's firmware ELF (no --port)")
 
 
@@ -41,13 +25,7 @@ def open_hand(
 ) -> Iterator[Hand]:
     """The Hand on ``--port``, or on an emulated board that lives as long as it does."""
     if args.port:
-        with Hand.connect(
-            args.port,
-            baudrate=args.baud,
-            boot_wait_s=args.boot_wait,
-            telemetry_hz=telemetry_hz,
-            on_close=on_close,
-        ) as hand:
+        with connect(args, telemetry_hz=telemetry_hz, on_close=on_close) as hand:
             yield hand
         return
     from utrf.emulator import EmulatedBoard

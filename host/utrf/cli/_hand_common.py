@@ -37,15 +37,17 @@ EXIT_BUSY = 4
 EXIT_INTERRUPTED = 130
 
 
-def add_port(p: argparse.ArgumentParser, *, reset: bool = True) -> None:
+def add_port(p: argparse.ArgumentParser, *, reset: bool = True, emulated: bool = False) -> None:
     """--port, --baud, --boot-wait, and --no-reset (or --reset where ``reset`` is False: the
-    command then connects without resetting the board unless asked)."""
+    command then connects without resetting the board unless asked). ``emulated``: --port may
+    be left out, and the command starts an emulated board (``_board_or_emulator``)."""
     p.add_argument(
         "--port",
-        required=True,
+        required=not emulated,
         metavar="URL",
         help="the board: a serial port (/dev/ttyACM0, COM3) or a pyserial URL "
-        "(socket://127.0.0.1:PORT, which `utrf emulate` prints)",
+        "(socket://127.0.0.1:PORT, which `utrf emulate` prints)"
+        + ("; default: an emulated board started for this command" if emulated else ""),
     )
     p.add_argument(
         "--baud", type=int, default=m.DEFAULT_BAUD, help=f"default {m.DEFAULT_BAUD} (8N1)"

@@ -33,7 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("out", type=Path, metavar="OUT.mcap", help="the recording to write")
-    add_board_options(p)
+    add_board_options(p, reset=False)  # a pose held on --port stays held
     p.add_argument(
         "--rate",
         type=int,
