@@ -55,6 +55,10 @@ def test_the_spread_of_builds_is_not_a_finding(force: float, speed: float) -> No
 def test_a_weak_motor_is_named_and_fixable() -> None:
     got = plant_findings("index", _plant(1.9, 0.044, 0.035), REF)  # measured, weak-motor 0.3
     assert [f.kind for f in got] == ["weak-motor"] and got[0].fixable
+    # u_f = 2 F_coulomb / F_stall: the same friction takes more duty on a weaker motor
+    assert [f.kind for f in plant_findings("i", _plant(1.9, 0.044, 0.035, 0.1), REF)] == [
+        "weak-motor"
+    ]
 
 
 def test_slack_is_named_not_weakness_nor_friction() -> None:

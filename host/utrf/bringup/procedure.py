@@ -413,7 +413,8 @@ def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> 
                 {"K": p.K, "K_model": ref.K},
             )
         )
-    if p.u_f > ref.u_f + FRICTION_DUTY and not loose:  # Joint 2 loose: its steps mislead
+    # Joint 2 loose misleads the steps; a weak motor's friction duty is larger by its weakness
+    if p.u_f > ref.u_f + FRICTION_DUTY and not loose and not weak:
         out.append(
             Finding(
                 name,
