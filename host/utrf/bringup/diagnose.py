@@ -208,7 +208,75 @@ def _interpret(w: Wiring, f: int, name: str, names: list[str]) -> None:
 @dataclass
 class Stop:
     raw: float  # the encoder's reading there (rad of turn, the configuration's frame undone)
-    trace: Trace
+    trace: Trace  # the leg that ended at the stop
+    first: Trace  # the search's first leg (from rest: where the take-up shows)
+
+
+def take_up_s(trace: Trace, direction: int, moved: float = 0.01) -> float:
+    """The time from a pulse's start until the finger's reading moved ``moved`` rad its way:
+    the motor's travel before Joint 2 follows, as a time (NaN: it never moved)."""
+    th = trace.theta2[:, trace.finger] if len(trace.t) else np.zeros(0)
+    idx = np.nonzero(direction * (th - th[0]) > moved)[0] if len(th) else np.zeros(0, int)
+    return float(trace.t[idx[0]] - trace.t[0]) if len(idx) else math.nan
+
+
+def _speed_by_angle(trace: Trace, direction: int, edges: np.ndarray) -> np.ndarray:
+    """The reading's mean speed (rad/s, positive its driven way) across each bin of ``edges``:
+    the bin's width over the time the reading took to cross it (NaN where not crossed), from
+    after the take-up to before the stop that ended the leg."""
+    out = np.full(len(edges) - 1, np.nan)
+    if len(trace.t) < 50:
+        return out
+    start = take_up_s(trace, direction)
+    if not math.isfinite(start):
+        return out
+    t, y = trace.t, direction * trace.theta2[:, trace.finger]
+    use = (t >= t[0] + start + 0.1) & (t <= t[-1] - 0.3)
+    t, y = t[use], y[use]
+    if len(t) < 50:
+        return out
+    run = np.maximum.accumulate(y)  # the running extreme: noise cannot send it back
+    for i in range(len(edges) - 1):
+        a, b = sorted((direction * edges[i], direction * edges[i + 1]))
+        if run[0] > a or run[-1] < b:
+            continue
+        dt = np.interp(b, run, t) - np.interp(a, run, t)
+        if dt > 0:
+            out[i] = (b - a) / dt
+    return out
+
+
+def reading_curve(closing: Trace, opening: Trace, bin_rad: float = 0.2) -> dict[str, float]:
+    """The reading against the model's curve over the travel two legs at one duty crossed,
+    closing and opening: at a steady duty the joint turns at a steady speed, a load (gravity,
+    a weaker motor) speeding one leg as much as it slows the other, so the two legs' speeds
+    summed at each angle are the same all along; a magnet off-centre scales both by its
+    once-per-turn error, and a loose one sends the reading back. ``spread``: the largest of
+    those sums over the smallest; ``backward_rad``: the most the reading went back against the
+    drive; ``covered_rad``: the travel compared."""
+    out = {"spread": math.nan, "backward_rad": 0.0, "covered_rad": 0.0}
+    for tr, d in ((closing, 1), (opening, -1)):
+        if len(tr.t) > 50:
+            y = d * tr.theta2[:, tr.finger]
+            start = take_up_s(tr, d)
+            if math.isfinite(start):
+                y = y[tr.t >= tr.t[0] + start]
+                out["backward_rad"] = max(
+                    out["backward_rad"], float(np.max(np.maximum.accumulate(y) - y))
+                )
+    if len(closing.t) < 50 or len(opening.t) < 50:
+        return out
+    lo = max(closing.theta2[:, closing.finger].min(), opening.theta2[:, opening.finger].min())
+    hi = min(closing.theta2[:, closing.finger].max(), opening.theta2[:, opening.finger].max())
+    if hi - lo < 3 * bin_rad:
+        return out
+    edges = np.arange(lo, hi, bin_rad)
+    total = _speed_by_angle(closing, 1, edges) + _speed_by_angle(opening, -1, edges)
+    ok = np.isfinite(total) & (total > 0)
+    if ok.sum() >= 3:
+        out["spread"] = float(total[ok].max() / total[ok].min())
+        out["covered_rad"] = float(ok.sum() * bin_rad)
+    return out
 
 
 def _raw(theta: float, offset: float, invert: int) -> float:
@@ -224,7 +292,7 @@ def find_stop(
     them: the encoder offset is moved so the reading starts mid-range, again each time a
     limit (not a stop) ended the leg."""
     lim = hand.limits(f)
-    trace = None
+    trace = first = None
     for _ in range(3):
         st = hand.state().fingers[f]
         cfg = hand.finger_config(f)
@@ -240,6 +308,7 @@ def find_stop(
             seconds=STOP_LEG_S,
             travel=4.0,
         )
+        first = first or trace
         settle(hand, 0.05)
         end = trace.end
         at_limit = end >= lim.theta2_max - 0.03 if direction > 0 else end <= lim.theta2_min + 0.03
@@ -248,7 +317,7 @@ def find_stop(
         )  # the host's stall rule, or the board's own behind it
         hand.clear_faults([f])
         if stalled and not at_limit:
-            return Stop(_raw(end, _wrap(here), invert), trace)
+            return Stop(_raw(end, _wrap(here), invert), trace, first)
         if not stalled and trace.stop not in ("time", "travel"):
             return None
     return None
@@ -259,4 +328,13 @@ def _wrap(a: float) -> float:
     return math.remainder(a, 2 * math.pi)
 
 
-__all__ = ["Stop", "Wiring", "brake", "encoder_check", "find_stop", "wiring"]
+__all__ = [
+    "Stop",
+    "Wiring",
+    "brake",
+    "encoder_check",
+    "find_stop",
+    "reading_curve",
+    "take_up_s",
+    "wiring",
+]

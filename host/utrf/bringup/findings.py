@@ -20,7 +20,8 @@ KINDS = {
     "narrow-range": "this build's joint range is narrower than the model's",
     "slack": "slack between Joint 1 and Joint 2",
     "slow-motor": "the motor is slower than the model's",
-    "friction": "more friction than the model's (or a weaker motor)",
+    "weak-motor": "the motor is weaker than the model's",
+    "friction": "more friction than the model's",
 }
 
 

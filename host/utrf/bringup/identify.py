@@ -48,8 +48,12 @@ class Plant:
     u_f: float  # duty
     backlash_rad: float
     steps: int
+    #: per step size, the median time a reversal took to move the joint 0.01 rad back
+    reversal_s: dict[str, float] = field(default_factory=dict)
+    #: the time constant of a step from rest each way ("flex", "extend")
+    lag_s: dict[str, float] = field(default_factory=dict)
 
-    def to_dict(self) -> dict[str, float]:
+    def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
@@ -72,6 +76,52 @@ def _fit_step(t: np.ndarray, th: np.ndarray, u: float) -> tuple[float, float] | 
     return float(r.x[0]), float(r.x[1])
 
 
+#: the steps from rest that time the motor's lag: their duty and length (s)
+LAG_DUTY = 0.3
+LAG_S = 0.25
+
+
+def _fit_from_rest(tr: Trace, sign: int) -> tuple[float, float] | None:
+    """(steady speed, τ) of a step from rest, timed from the sample whose duties show the
+    board applying it: θ − θ0 = v (t − τ (1 − e^(−t/τ))). The speed's lag v τ is the intercept
+    of the ramp the reading settles on, resolved by fitting the whole ramp (a few counts)."""
+    f = tr.finger
+    if len(tr.t) < 50:
+        return None
+    drive = sign * (tr.duty_a[:, f] - tr.duty_b[:, f])
+    on = np.nonzero(drive > 0.5 * LAG_DUTY)[0]
+    if not len(on) or len(tr.t) - on[0] < 50:
+        return None
+    i = max(0, on[0] - 1)
+    t = tr.t[i:] - tr.t[i]
+    th = sign * (tr.theta2[i:, f] - tr.theta2[i, f])
+
+    def model(p: np.ndarray) -> np.ndarray:
+        v, tau = p[0], max(p[1], 1e-4)
+        return v * (t - tau * (1 - np.exp(-t / tau)))
+
+    r = least_squares(
+        lambda p: model(p) - th, x0=[max(th[-1] / t[-1], 0.1), 0.02], bounds=([0, 1e-3], [50, 0.3])
+    )
+    return float(r.x[0]), float(r.x[1])
+
+
+def lag(hand: Hand, rec: Recorder, f: int, bounds: Bounds) -> tuple[dict[str, float], list[Trace]]:
+    """The finger's time constant from two steps from rest (held by the pretension), one each
+    way: {"flex": τ, "extend": τ}, NaN where a step did not fit."""
+    taus: dict[str, float] = {}
+    traces: list[Trace] = []
+    for sign in (1, -1):
+        rest = pulse(hand, rec, f, 0.0, bounds, seconds=0.3)
+        tr = pulse(hand, rec, f, sign * LAG_DUTY, bounds, seconds=LAG_S, travel=0.5)
+        traces += [rest, tr]
+        hand.clear_faults([f])
+        got = _fit_from_rest(tr, sign)
+        ok = got is not None and got[0] > MOVING_RAD_S
+        taus["flex" if sign > 0 else "extend"] = got[1] if got is not None and ok else math.nan
+    return taus, traces
+
+
 def _mean_speed(speeds: dict[tuple[float, int], list[float]], u: float) -> float:
     up, down = speeds[(u, 1)], speeds[(u, -1)]
     if not up or not down or min(np.median(up), np.median(down)) < MOVING_RAD_S:
@@ -89,11 +139,13 @@ def identify(
     }
     taus: list[float] = []
     dead: dict[int, list[float]] = {1: [], -1: []}
+    rev: dict[float, list[float]] = {u: [] for u in STEP_DUTIES}
     pretension = hand.gains(f).pretension_duty
     good: list[float] = []
     for u in STEP_DUTIES:
         if len(good) == 2 or u + pretension > bounds.duty + 1e-9:
             break
+        from_rest = True
         for sign in (1, -1, 1, -1):
             room = 0.5
             tr = pulse(
@@ -107,14 +159,18 @@ def identify(
                 moved = np.nonzero(sign * (th - th[0]) > 0.01)[0]
                 if len(moved):
                     dead[sign].append(float(tr.t[moved[0]] - tr.t[0]))
+                    if not from_rest:  # a reversal: the step before ran the other way
+                        rev[u].append(dead[sign][-1])
                     got = _fit_step(tr.t[moved[0] :], th[moved[0] :], u)
                     if got is not None:
                         speeds[(u, sign)].append(abs(got[0]))
                         taus.append(got[1])
             settle(hand, 0.0)
+            from_rest = tr.stop != "time"
             # toward the middle again if the steps walked away from it
             here = hand.state().fingers[f].theta2
             if abs(here - mid) > 0.35:
+                from_rest = True
                 pulse(
                     hand,
                     rec,
@@ -136,11 +192,21 @@ def identify(
         v1, v2 = (_mean_speed(speeds, u) for u in good)
         K = (v2 - v1) / (good[1] - good[0])
         u_f = max(0.0, good[0] - v1 / K) if K > 0 else math.nan
-    tau = float(np.median(taus)) if taus else math.nan
     flex, ext = dead[1][1:], dead[-1]  # the first flexion step starts from rest
     extra = (np.median(flex) - np.median(ext)) if flex and ext else 0.0
     backlash = max(0.0, float(extra)) * v2
-    return Plant(float(K), tau, float(u_f), backlash, sum(map(len, speeds.values()))), traces
+    reversal = {f"{u:g}": float(np.median(v)) for u, v in rev.items() if v}
+    here = hand.state().fingers[f].theta2
+    if abs(here - mid) > 0.2:
+        pulse(hand, rec, f, math.copysign(0.35, mid - here), bounds, seconds=1.0, until=mid)
+    lags, more = lag(hand, rec, f, bounds)
+    traces += more
+    fin = [v for v in lags.values() if math.isfinite(v)]
+    tau = min(fin) if fin else math.nan  # the motor's; slack lengthens one way only
+    plant = Plant(
+        float(K), tau, float(u_f), backlash, sum(map(len, speeds.values())), reversal, lags
+    )
+    return plant, traces
 
 
 @dataclass
@@ -154,13 +220,19 @@ class Tuned:
 
 
 def tune(
-    plant: Plant, model: Plant, d_cutoff_hz: float, pretension: float, max_duty: float
+    plant: Plant,
+    model: Plant,
+    d_cutoff_hz: float,
+    pretension: float,
+    max_duty: float,
+    measured_tau: bool = False,
 ) -> Tuned:
     """Gains for ``plant``. Its time constant is taken from the ``model`` motors' scaled by the
-    speed gain measured (τ = m v_no_load / F_stall: a slower motor's is shorter in proportion):
-    the fitted τ is reported, not used, since the 10-bit reading does not resolve a lag of
-    v τ (a few mrad at these speeds, under one count)."""
-    tau = model.tau * plant.K / model.K
+    speed gain measured (τ = m v_no_load / F_stall: a slower motor's is shorter in proportion),
+    or, with ``measured_tau`` (a weak motor found: its force is not the model's), the one the
+    steps from rest measured (``lag``: resolved by fitting the whole ramp, where a single
+    reading's lag v τ is under one count)."""
+    tau = plant.tau if measured_tau else model.tau * plant.K / model.K
     delay = 1.5e-3 + 1.0 / (2 * math.pi * d_cutoff_hz)
     wc = min(MAX_CROSSOVER, PHASE_BUDGET / delay)
     kp = wc / plant.K

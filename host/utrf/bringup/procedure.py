@@ -15,13 +15,21 @@ import contextlib
 import json
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from utrf.bringup.diagnose import encoder_check, find_stop, wiring
+from utrf.bringup.diagnose import (
+    STOP_DUTY,
+    encoder_check,
+    find_stop,
+    reading_curve,
+    take_up_s,
+    wiring,
+)
 from utrf.bringup.findings import Finding, FingerConfig
 from utrf.bringup.identify import Check, Plant, check, identify, tune
+from utrf.bringup.plant_check import model_plant, plant_findings
 from utrf.bringup.pulses import Bounds, Recorder, brake, pulse, settle
 from utrf.hand import Hand
 
@@ -32,10 +40,12 @@ SAME_ANGLE_RAD = 0.03
 SAME_GAIN = 0.3
 #: set_finger_config's default encoder_offset (protocol/spec.toml): the straight finger mid-turn
 DEFAULT_OFFSET = 3.14159265
-#: more friction (duty) than the model's, and more backlash (rad), make findings
-FRICTION_DUTY = 0.03
-SLACK_RAD = 0.06
-SLOW = 0.55  # of the model motors' speed gain
+#: a reading that goes back this much (rad), or whose speed at one duty varies this much
+#: (fastest over slowest), across the travel: the magnet is off-centre or loose
+BACKWARD_RAD = 0.03
+SPEED_SPREAD = 1.2
+#: a span between the stops longer than the model's by this: the reading's scale is wrong
+SPAN_EXTRA_RAD = 0.1
 #: the steps of a finger's bring-up, in order
 UPTO = ("wiring", "stops", "plant", "check")
 
@@ -162,11 +172,13 @@ def _bring_up_finger(
         res.findings.append(
             Finding(
                 name,
-                "no-motion",
-                "the search for the joint's stops did not end at a stop (the finger stopped "
-                "moving before one, or faulted): a jammed joint, a broken tendon or a motor "
-                "too weak to move it",
-                "free the joint and check its tendons",
+                "friction",
+                "the finger moved when pulsed, but the search for the joint's stops did not "
+                "end at a stop (it stopped moving before one at the search's duty, or "
+                "faulted): too much friction or a jammed joint (a tight guide, tendon or "
+                "carriage), or a broken tendon",
+                "free the joint, the guides and the carriages and check the tendons; then run "
+                "the bring-up again",
                 False,
             )
         )
@@ -175,7 +187,28 @@ def _bring_up_finger(
     span = math.remainder(s * (closed.raw - open_.raw) - math.pi, 2 * math.pi) + math.pi
     offset = math.remainder(open_.raw - s * lo, 2 * math.pi)
     closed_at = lo + span
-    res.stops = {"open_rad": lo, "closed_rad": closed_at, "span_rad": span, "offset_rad": offset}
+    res.stops = {
+        "open_rad": lo,
+        "closed_rad": closed_at,
+        "span_rad": span,
+        "offset_rad": offset,
+        # from the open stop, how long the motor ran before Joint 2 moved (the slack)
+        "take_up_s": take_up_s(closed.first, 1),
+    }
+    if span > (hi - lo) + SPAN_EXTRA_RAD:
+        res.findings.append(
+            Finding(
+                name,
+                "not-monotonic",
+                f"between its stops the reading turns {math.degrees(span):.0f}°, further "
+                f"than the joint can ({math.degrees(hi - lo):.0f}°): the reading is not the "
+                "joint's angle, the encoder's magnet is off-centre on the shaft (or loose)",
+                "centre the magnet on Joint 2's shaft and glue it; then run the bring-up again",
+                False,
+                {"span_rad": span, "model_span_rad": hi - lo},
+            )
+        )
+        return res
     if abs(math.remainder(offset - DEFAULT_OFFSET, 2 * math.pi)) > 0.05:
         res.findings.append(
             Finding(
@@ -218,18 +251,72 @@ def _bring_up_finger(
     mid = min(max(0.3, th_min + 0.6), th_max - 0.6)
     hand.clear_faults([f])
     here = hand.state().fingers[f].theta2
-    pulse(hand, rec, f, math.copysign(0.35, mid - here), bounds, seconds=3.0, travel=3.5, until=mid)
+    # from the closed stop (where Joint 2 leans flexed), opening: the slack shows as take-up
+    to_mid = pulse(
+        hand, rec, f, math.copysign(0.35, mid - here), bounds, seconds=3.0, travel=3.5, until=mid
+    )
+    res.stops["take_up_closed_s"] = take_up_s(to_mid, -1)
+    # the closing leg was read in the search's frame (its zero where the leg began): in the
+    # calibrated one, it ends at the closed stop
+    closing = closed.trace
+    if len(closing.t):
+        th = closing.theta2.copy()
+        th[:, f] += closed_at - closing.end
+        closing = replace(closing, theta2=th)
+    curve = reading_curve(closing, to_mid)
+    res.stops.update({f"curve_{k}": v for k, v in curve.items()})
+    if curve["backward_rad"] > BACKWARD_RAD or curve["spread"] > SPEED_SPREAD:
+        # the zero and the range came from this reading: not findings of their own
+        res.findings = [
+            fd for fd in res.findings if fd.kind not in ("magnet-offset", "narrow-range")
+        ]
+        res.findings.append(
+            Finding(
+                name,
+                "not-monotonic",
+                "driven at one duty across its travel, the finger's reading "
+                + (
+                    f"went back {math.degrees(curve['backward_rad']):.1f}°"
+                    if curve["backward_rad"] > BACKWARD_RAD
+                    else f"ran {curve['spread']:.2f} times faster in places than in others"
+                )
+                + " where the model's turns at a steady speed: the encoder's magnet is "
+                "off-centre on the shaft or loose (the reading is not the joint's angle, so the "
+                "stops and the zero from it are not trusted)",
+                "centre the magnet on Joint 2's shaft and glue it; then run the bring-up again",
+                False,
+                dict(curve),
+            )
+        )
+        return res
     settle(hand, 0.1)
     plant, _ = identify(hand, rec, f, bounds, mid)
     res.plant = plant.to_dict()
-    res.findings += _plant_findings(name, plant, hand, f)
+    res.plant["slack_rad"] = slack_rad(plant, model_plant(hand, f), res.stops["take_up_s"])
+    res.findings += plant_findings(name, plant, model_plant(hand, f), res.plant["slack_rad"])
     if not (plant.K > 0 and math.isfinite(plant.tau)):
         res.findings.append(
-            Finding(name, "no-motion", "the duty steps gave no usable response", "-", False)
+            Finding(
+                name,
+                "friction",
+                "the finger moved when pulsed, but not both ways at two of the plant's step "
+                "duties within the bring-up's duty bound: too much friction (a tight guide, "
+                "tendon or carriage) or a jammed joint",
+                "free the joint, the guides and the carriages; then run the bring-up again",
+                False,
+            )
         )
         return res
     g = saved["gains"]
-    tuned = tune(plant, model_plant(hand, f), g["d_cutoff_hz"], g["pretension_duty"], g["max_duty"])
+    weak = any(fd.kind == "weak-motor" for fd in res.findings)
+    tuned = tune(
+        plant,
+        model_plant(hand, f),
+        g["d_cutoff_hz"],
+        g["pretension_duty"],
+        g["max_duty"],
+        measured_tau=weak,
+    )
     res.tuning = asdict(tuned)
     res.config.gains = dict(tuned.gains)
     res.config.motion = dict(tuned.motion)
@@ -252,66 +339,13 @@ def _bring_up_finger(
     return res
 
 
-def _plant_findings(name: str, p: Plant, hand: Hand, f: int) -> list[Finding]:
-    """The plant against the model's motors (``model_plant``)."""
-    ref = model_plant(hand, f)
-    out = []
-    if p.K < SLOW * ref.K:
-        out.append(
-            Finding(
-                name,
-                "slow-motor",
-                f"the finger moves at {p.K:.2f} rad/s per unit duty, the model's motors at "
-                f"{ref.K:.2f}: a slower motor (another gear ratio or winding), or a low supply",
-                "gains, feedforward and max_speed tuned for it",
-                True,
-                {"K": p.K, "K_model": ref.K},
-            )
-        )
-    if p.u_f > ref.u_f + FRICTION_DUTY:
-        out.append(
-            Finding(
-                name,
-                "friction",
-                f"it takes {p.u_f:.2f} duty to move (the model: {ref.u_f:.2f}): friction in a "
-                "guide, a tight tendon or a carriage, or a weaker motor (less force per amp: "
-                "the steps cannot tell the two apart)",
-                "deadband_duty set to it; free the tendon or the guide if it is much more",
-                True,
-                {"u_f": p.u_f, "u_f_model": ref.u_f},
-            )
-        )
-    if p.backlash_rad > SLACK_RAD:
-        out.append(
-            Finding(
-                name,
-                "slack",
-                "reversing toward flexion, the motor moves about "
-                f"{math.degrees(p.backlash_rad):.0f}° of Joint 2 before the joint follows: "
-                "slack in the coupling tendon (Tendon 2)",
-                "tighten Tendon 2 (Joint 2 is loose between its strands: no gain holds it)",
-                False,
-                {"backlash_rad": p.backlash_rad},
-            )
-        )
-    return out
-
-
-def model_plant(hand: Hand, f: int) -> Plant:
-    """The plant the hand's model motors make (``MotorParams`` defaults, the finger's guide
-    radius): two motors resisting (one pulls, the antagonist is back-driven at its pretension),
-    so K = v_no_load / (2 R2), τ = m v_no_load / F_stall, u_f = 2 F_coulomb / F_stall."""
-    from utrf.emulator.plant_params import MotorParams  # constants only: no MuJoCo
-
-    mot = MotorParams()
-    r2 = hand.geometry.fingers[f].geometry.guide_radii_m[1]
-    return Plant(
-        K=mot.no_load_speed_m_s / (2 * r2),
-        tau=mot.moving_mass_kg * mot.no_load_speed_m_s / mot.stall_force_n,
-        u_f=2 * mot.coulomb_friction_n / mot.stall_force_n,
-        backlash_rad=0.0,
-        steps=0,
-    )
+def slack_rad(p: Plant, model: Plant, take_up: float) -> float:
+    """The slack as Joint-2 travel: how far the motor ran (at the stop search's duty, at the
+    identified speed) before Joint 2 moved from the open stop, less what the motor's own lag
+    and the 0.01 rad of the take-up's threshold account for."""
+    v = p.K * max(0.0, STOP_DUTY - p.u_f)
+    tau = model.tau * p.K / model.K
+    return max(0.0, v * (take_up - tau) - 0.01) if math.isfinite(take_up) else math.nan
 
 
 #: per field, how far a proposal may be from the saved value and still be the same (absolute

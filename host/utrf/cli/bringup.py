@@ -37,6 +37,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--upto", choices=("wiring", "stops", "plant", "check"), default="check",
         help="the last step on each finger (default: all of them)",
     )  # fmt: skip
+    p.add_argument(
+        "--demo", action="store_true",
+        help="then the demo's poses: does its tracking goal hold (RMS <= 1 deg, worst <= 3 deg)",
+    )  # fmt: skip
     p.set_defaults(handler=run)
 
 
@@ -67,8 +71,16 @@ def run(args: argparse.Namespace) -> int:
             resume=args.resume,
             upto=args.upto,
         )
+        goal = None
+        if args.demo and result.ok and (result.saved or result.unchanged):
+            from utrf.bringup.demo_goal import demo_goal
+
+            print("- the demo's poses on the hand brought up", flush=True)
+            goal = demo_goal(hand)
     for fd in result.findings:
         print(f"  {fd}")
     print(result.message)
+    if goal is not None:
+        print(goal.line())
     print(f"report: {args.out / 'report.md'}", file=sys.stderr)
-    return EXIT_OK if result.ok else EXIT_NOT_DONE
+    return EXIT_OK if result.ok and (goal is None or goal.ok) else EXIT_NOT_DONE

@@ -43,6 +43,18 @@ KINDS: dict[str, tuple[str, str]] = {
     "swap-encoders": ("two fingers' encoder cables swapped between ADC inputs", "pair"),
 }
 PAIR_KINDS = ("swap-cables", "swap-encoders")
+#: the kinds a finger's configuration (and its tuning) can fix
+FIXABLE_KINDS = (
+    "swap-leads",
+    "invert-magnet",
+    "magnet-offset",
+    "weak-motor",
+    "slow-motor",
+    "narrow-range",
+    "friction",
+)
+#: a motor constant below this times the model's is a fault (a wrong part), not the spread
+WRONG_PART = 0.5
 
 
 @dataclass(frozen=True)
@@ -73,6 +85,9 @@ class FingerBuild:
             ("magnet-offset", abs(self.magnet_offset_rad) > 0.0),
             ("off-centre", abs(self.magnet_eccentric_rad) > 0.0),
             ("slack", self.slack_m > 0.0),
+            # a motor far outside the spread any build's motors have (a wrong part)
+            ("weak-motor", self.force_scale < WRONG_PART),
+            ("slow-motor", self.speed_scale < WRONG_PART),
             ("narrow-range", self.closed_stop_rad is not None),
             ("friction", self.friction_n > 0.0),
             ("unpowered", self.unpowered),
@@ -194,10 +209,17 @@ class BuildFaults:
 
     # -- seeded builds ---------------------------------------------------------------------------
     @classmethod
-    def random(cls, seed: int, faults: int = 3, spread: float = 0.3) -> BuildFaults:
+    def random(
+        cls,
+        seed: int,
+        faults: int = 3,
+        spread: float = 0.3,
+        kinds: tuple[str, ...] | None = None,
+    ) -> BuildFaults:
         """A seeded build: every motor's stall force and speed drawn within ±``spread`` of the
         model's (not faults: what any build has), and ``faults`` faults on distinct fingers
-        drawn from the kinds, with values in the ranges a bring-up must handle."""
+        drawn from ``kinds`` (default: every kind), with values in the ranges a bring-up must
+        handle."""
         rng = np.random.default_rng([0xB01D, int(seed)])
         build = cls()
         for f in range(FINGERS):
@@ -206,9 +228,11 @@ class BuildFaults:
                 force_scale=float(1 + rng.uniform(-spread, spread)),
                 speed_scale=float(1 + rng.uniform(-spread, spread)),
             )
-        kinds = [k for k in KINDS if k not in ("weak-motor", "slow-motor", "off-centre")]
+        pool = list(KINDS) if kinds is None else [k for k in KINDS if k in kinds]
+        if kinds is not None and len(pool) != len(set(kinds)):
+            raise PlantError(f"unknown build fault kinds in {kinds!r}; kinds: {', '.join(KINDS)}")
         free = list(rng.permutation(FINGERS))
-        for kind in rng.permutation(kinds)[: max(0, int(faults))]:
+        for kind in rng.permutation(pool)[: max(0, int(faults))]:
             need = 2 if kind in PAIR_KINDS else 1
             if len(free) < need:
                 break
@@ -218,6 +242,10 @@ class BuildFaults:
                 "slack": rng.uniform(0.001, 0.002),
                 "narrow-range": rng.uniform(1.45, 1.55),
                 "friction": rng.uniform(5.0, 12.0),
+                # well outside the ±spread every motor has, as a wrong part would be
+                "weak-motor": rng.uniform(0.25, 0.35),
+                "slow-motor": rng.uniform(0.3, 0.42),
+                "off-centre": rng.uniform(0.3, 0.5) * rng.choice([-1, 1]),
             }.get(str(kind))
             word = f"{kind}:{','.join(map(str, fs))}" + (f"={value:.4f}" if value else "")
             build = build._add(word)

@@ -1,0 +1,110 @@
+"""The finger's identified plant against the model's motors: what it says about the build
+(a slow or weak motor, slack, friction), each named in plain words with its likely cause."""
+
+from __future__ import annotations
+
+import math
+
+from utrf.bringup.findings import Finding
+from utrf.bringup.identify import Plant
+from utrf.hand import Hand
+
+#: more friction (duty) than the model's makes a finding
+FRICTION_DUTY = 0.03
+SLOW = 0.5  # of the model motors' speed gain
+#: a step from rest's lag over the model motors' (at the speed measured): both ways above
+#: WEAK_LAG, a weak motor (the ±30 % spread of builds gives at most 1.43); opening above
+#: SLACK_LAG and SLACK_SKEW times closing's, slack (Joint 2 hangs free, gravity-led)
+WEAK_LAG = 2.2
+SLACK_LAG = 4.0
+SLACK_SKEW = 1.6
+
+
+def lag_ratios(p: Plant, ref: Plant) -> dict[str, float]:
+    """Each way's time constant over the one the model's motors would have at the speed gain
+    measured (τ ∝ m v_no_load / F_stall, K ∝ v_no_load: τ / K measures the force alone)."""
+    expected = ref.tau * p.K / ref.K
+    return {k: v / expected for k, v in p.lag_s.items()} if expected > 0 else {}
+
+
+def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> list[Finding]:
+    """The plant against the model's motors' (``ref``, ``model_plant``)."""
+    out = []
+    r = lag_ratios(p, ref)
+    flex, ext = r.get("flex", math.nan), r.get("extend", math.nan)
+    # a slow motor's lag is far under one count (v τ): neither is judged from it
+    resolved = p.K >= SLOW * ref.K
+    loose = resolved and ext > SLACK_LAG and ext > SLACK_SKEW * flex
+    weak = resolved and not loose and min(flex, ext) > WEAK_LAG
+    if loose:
+        out.append(
+            Finding(
+                name,
+                "slack",
+                f"from rest, Joint 2 follows the motor {ext:.1f} times later opening (and "
+                f"{flex:.1f} times closing) than the motors' lag explains: the motor runs "
+                "before Joint 2 moves, slack in the coupling tendon (Tendon 2, Joint 1 to "
+                "Joint 2) lets Joint 2 hang free between its strands",
+                "tighten Tendon 2 and run the bring-up again (Joint 2 is loose between its "
+                "strands: no gain holds it)",
+                False,
+                {"lag_ratio": r, "slack_rad": slack},
+            )
+        )
+    if weak:
+        out.append(
+            Finding(
+                name,
+                "weak-motor",
+                f"from rest the finger takes {min(flex, ext):.1f} times the time to come up to "
+                "speed that the model's motors take at its speed: its motors give less force "
+                "(a weaker motor or gearing, a current-limited supply or driver)",
+                "gains tuned for the lag measured (the derivative's zero on it); if it must "
+                "lift more than the model's, fit the model's motors",
+                True,
+                {"lag_ratio": r, "tau_s": p.tau},
+            )
+        )
+    if p.K < SLOW * ref.K:
+        out.append(
+            Finding(
+                name,
+                "slow-motor",
+                f"the finger moves at {p.K:.2f} rad/s per unit duty, the model's motors at "
+                f"{ref.K:.2f}: a slower motor (another gear ratio or winding), or a low supply",
+                "gains, feedforward and max_speed tuned for it",
+                True,
+                {"K": p.K, "K_model": ref.K},
+            )
+        )
+    # Joint 2 loose misleads the steps; a weak motor's friction duty is larger by its weakness
+    if p.u_f > ref.u_f + FRICTION_DUTY and not loose and not weak:
+        out.append(
+            Finding(
+                name,
+                "friction",
+                f"it takes {p.u_f:.2f} duty to move (the model: {ref.u_f:.2f}), at the model's "
+                "lag: friction in a guide, a tight tendon or a carriage",
+                "deadband_duty set to it; free the tendon or the guide if it is much more",
+                True,
+                {"u_f": p.u_f, "u_f_model": ref.u_f},
+            )
+        )
+    return out
+
+
+def model_plant(hand: Hand, f: int) -> Plant:
+    """The plant the hand's model motors make (``MotorParams`` defaults, the finger's guide
+    radius): two motors resisting (one pulls, the antagonist is back-driven at its pretension),
+    so K = v_no_load / (2 R2), τ = m v_no_load / F_stall, u_f = 2 F_coulomb / F_stall."""
+    from utrf.emulator.plant_params import MotorParams  # constants only: no MuJoCo
+
+    mot = MotorParams()
+    r2 = hand.geometry.fingers[f].geometry.guide_radii_m[1]
+    return Plant(
+        K=mot.no_load_speed_m_s / (2 * r2),
+        tau=mot.moving_mass_kg * mot.no_load_speed_m_s / mot.stall_force_n,
+        u_f=2 * mot.coulomb_friction_n / mot.stall_force_n,
+        backlash_rad=0.0,
+        steps=0,
+    )
