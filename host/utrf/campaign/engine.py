@@ -82,6 +82,15 @@ class Summary:
         capacity = self.wall_s * max(self.workers, 1)
         return max(0.0, 1.0 - self.busy_s / capacity) if capacity > 0 else 0.0
 
+    def add_task(self, r: dict[str, Any]) -> None:
+        """A task's summary (``outcome``) counted: its runs' times and its span."""
+        self.compute_s += r["compute_s"]
+        self.cpu_s += r["cpu_s"]
+        self.task_cpu_s += r.get("task_cpu_s", 0.0)
+        if "start" in r:
+            self.busy_s += r["end"] - r["start"]
+            self.spans.append((r.get("worker", ""), r["start"], r["end"]))
+
     def line(self) -> str:
         rate = (self.ok + self.failed) / self.wall_s if self.wall_s > 0 else 0.0
         return (
@@ -139,6 +148,10 @@ class _Progress:
         self.ok = self.failed = 0
         self.start = time.monotonic()
         self.last = 0.0
+
+    def add_task(self, r: dict[str, Any]) -> None:
+        self.ok += r["ok"]
+        self.failed += r["rows"] - r["ok"]
 
     def tick(self, running: int, force: bool = False) -> None:
         now = time.monotonic()
@@ -301,14 +314,8 @@ def _drive(
         for fut in batch:
             idx = by_future.pop(fut)
             r = outcome(fut, cols, idx, words, store)
-            prog.ok += r["ok"]
-            prog.failed += r["rows"] - r["ok"]
-            s.compute_s += r["compute_s"]
-            s.cpu_s += r["cpu_s"]
-            s.task_cpu_s += r.get("task_cpu_s", 0.0)
-            if "start" in r:
-                s.busy_s += r["end"] - r["start"]
-                s.spans.append((r.get("worker", ""), r["start"], r["end"]))
+            prog.add_task(r)
+            s.add_task(r)
         submit()
         if time.monotonic() - prog.last >= TICK_S:  # no call to the scheduler: one per worker
             prog.tick(min(len(by_future), n_workers))

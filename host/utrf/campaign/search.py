@@ -129,14 +129,8 @@ def run(
                 study.tell(trial, state=optuna.trial.TrialState.FAIL)
             else:
                 study.tell(trial, values)
-            prog.ok += r["ok"]
-            prog.failed += r["rows"] - r["ok"]
-            s.compute_s += r["compute_s"]
-            s.cpu_s += r["cpu_s"]
-            s.task_cpu_s += r.get("task_cpu_s", 0.0)
-            if "start" in r:
-                s.busy_s += r["end"] - r["start"]
-                s.spans.append((r["worker"], r["start"], r["end"]))
+            prog.add_task(r)
+            s.add_task(r)
             prog.tick(min(len(trials), s.workers))
         prog.tick(0, force=True)
         s.wall_s, s.driver_cpu_s = time.perf_counter() - start, time.process_time() - cpu0
