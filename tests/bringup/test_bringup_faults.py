@@ -24,32 +24,10 @@ CASES = [
     ("narrow-range:1=1.3", "stops", "narrow-range", True),
     ("slow-motor:1=0.45", "plant", "slow-motor", True),
     # from its steps from rest: a weaker motor comes up to speed later than the model's
-    pytest.param(
-        "weak-motor:1=0.3",
-        "plant",
-        "weak-motor",
-        True,
-        marks=pytest.mark.xfail(
-            strict=True,
-            reason="named slack on the merged tree (opening lag 9.2x the model's, closing "
-            "3.4x): the lag thresholds were fit before the plant's own clock and the new tick",
-        ),
-        id="weak-motor:1=0.3",
-    ),
+    ("weak-motor:1=0.3", "plant", "weak-motor", True),
     ("friction:1=8", "plant", "friction", True),
-    # Joint 2 loose between its strands: it follows late, opening
-    pytest.param(
-        "slack:1=0.0015",
-        "plant",
-        "slack",
-        False,
-        marks=pytest.mark.xfail(
-            strict=True,
-            reason="not seen on the merged tree: the lag thresholds were fit before the "
-            "plant's own clock and the new tick",
-        ),
-        id="slack:1=0.0015",
-    ),
+    # Joint 2 loose between its strands: the motor runs a travel before it leaves the open stop
+    ("slack:1=0.0015", "plant", "slack", False),
     # the reading turns further between the stops than the joint can
     ("off-centre:1=0.3", "stops", "not-monotonic", False),
 ]

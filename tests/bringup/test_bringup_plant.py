@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from utrf.bringup.identify import LAG_DUTY, Plant, _fit_from_rest
-from utrf.bringup.plant_check import plant_findings
+from utrf.bringup.plant_check import SLACK_RAD, plant_findings
+from utrf.bringup.procedure import slack_rad
 from utrf.bringup.pulses import Trace
 
 REF = Plant(K=2.63, tau=0.010, u_f=0.03, backlash_rad=0.0, steps=0)
@@ -53,19 +54,41 @@ def test_the_spread_of_builds_is_not_a_finding(force: float, speed: float) -> No
 
 
 def test_a_weak_motor_is_named_and_fixable() -> None:
-    got = plant_findings("index", _plant(1.9, 0.044, 0.035), REF)  # measured, weak-motor 0.3
+    got = plant_findings("index", _plant(1.94, 0.0252, 0.0679), REF)  # measured, weak-motor 0.3
     assert [f.kind for f in got] == ["weak-motor"] and got[0].fixable
     # u_f = 2 F_coulomb / F_stall: the same friction takes more duty on a weaker motor
-    assert [f.kind for f in plant_findings("i", _plant(1.9, 0.044, 0.035, 0.1), REF)] == [
+    assert [f.kind for f in plant_findings("i", _plant(1.94, 0.0252, 0.0679, 0.1), REF)] == [
         "weak-motor"
     ]
+    # the slowest random build measured (late both ways, 2.8x and 2.1x) is not weak
+    assert plant_findings("i", _plant(2.88, 0.0308, 0.0232), REF) == []
 
 
 def test_slack_is_named_not_weakness_nor_friction() -> None:
-    got = plant_findings("index", _plant(2.2, 0.001, 0.062), REF)  # measured, slack 1 mm
+    # measured, slack 1.5 mm: the lag fits at their bound, the take-up 0.064 s
+    p = _plant(2.30, 0.001, 0.001, 0.014)
+    got = plant_findings("index", p, REF, slack_rad(p, REF, 0.064))
     assert [f.kind for f in got] == ["slack"] and not got[0].fixable
     # Joint 2 loose between its strands also makes the steps' friction look high
-    assert [f.kind for f in plant_findings("i", _plant(2.2, 0.001, 0.062, 0.1), REF)] == ["slack"]
+    p = _plant(2.30, 0.001, 0.001, 0.1)
+    assert [f.kind for f in plant_findings("i", p, REF, 0.04)] == ["slack"]
+
+
+@pytest.mark.parametrize(
+    ("plant", "take_up"),
+    [
+        (_plant(2.54, 0.0123, 0.0178, 0.025), 0.038),  # the model build
+        (_plant(1.94, 0.0252, 0.0679, 0.047), 0.043),  # weak-motor 0.3
+        (_plant(2.88, 0.0308, 0.0232, 0.034), 0.050),  # random build, seed 2
+    ],
+)
+def test_a_late_motor_is_not_slack(plant: Plant, take_up: float) -> None:
+    """Slack is a travel beyond the motor's own lag: a motor slow to come up to speed (its
+    lag measured, not the model's) leaves the open stop as late without any slack."""
+    assert slack_rad(plant, REF, take_up) < SLACK_RAD
+    assert slack_rad(_plant(plant.K, 0.001, 0.001, plant.u_f), REF, take_up) > slack_rad(
+        plant, REF, take_up
+    )
 
 
 def test_friction_and_a_slow_motor_are_named() -> None:

@@ -12,12 +12,12 @@ from utrf.hand import Hand
 #: more friction (duty) than the model's makes a finding
 FRICTION_DUTY = 0.03
 SLOW = 0.5  # of the model motors' speed gain
-#: a step from rest's lag over the model motors' (at the speed measured): both ways above
-#: WEAK_LAG, a weak motor (the ±30 % spread of builds gives at most 1.43); opening above
-#: SLACK_LAG and SLACK_SKEW times closing's, slack (Joint 2 hangs free, gravity-led)
-WEAK_LAG = 2.2
-SLACK_LAG = 4.0
-SLACK_SKEW = 1.6
+#: slack is a travel: the motor runs this far (Joint-2 rad, its own lag taken off) before
+#: Joint 2 leaves the open stop (``slack_rad``); margins in docs/bringup.md
+SLACK_RAD = 0.025
+#: a weak motor is late both ways: the two steps' lag over the model motors' (at the speed
+#: measured), their geometric mean above this (margins in docs/bringup.md)
+WEAK_LAG = 3.5
 
 
 def lag_ratios(p: Plant, ref: Plant) -> dict[str, float]:
@@ -34,17 +34,16 @@ def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> 
     flex, ext = r.get("flex", math.nan), r.get("extend", math.nan)
     # a slow motor's lag is far under one count (v τ): neither is judged from it
     resolved = p.K >= SLOW * ref.K
-    loose = resolved and ext > SLACK_LAG and ext > SLACK_SKEW * flex
-    weak = resolved and not loose and min(flex, ext) > WEAK_LAG
+    loose = resolved and slack > SLACK_RAD
+    weak = resolved and not loose and math.sqrt(flex * ext) > WEAK_LAG
     if loose:
         out.append(
             Finding(
                 name,
                 "slack",
-                f"from rest, Joint 2 follows the motor {ext:.1f} times later opening (and "
-                f"{flex:.1f} times closing) than the motors' lag explains: the motor runs "
-                "before Joint 2 moves, slack in the coupling tendon (Tendon 2, Joint 1 to "
-                "Joint 2) lets Joint 2 hang free between its strands",
+                f"from the open stop the motor runs {slack:.3f} rad of Joint 2's travel beyond "
+                "its own lag before Joint 2 moves: slack in the coupling tendon (Tendon 2, "
+                "Joint 1 to Joint 2) lets Joint 2 hang free between its strands",
                 "tighten Tendon 2 and run the bring-up again (Joint 2 is loose between its "
                 "strands: no gain holds it)",
                 False,
@@ -56,9 +55,9 @@ def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> 
             Finding(
                 name,
                 "weak-motor",
-                f"from rest the finger takes {min(flex, ext):.1f} times the time to come up to "
-                "speed that the model's motors take at its speed: its motors give less force "
-                "(a weaker motor or gearing, a current-limited supply or driver)",
+                f"from rest the finger takes {math.sqrt(flex * ext):.1f} times the time to come "
+                "up to speed (both ways) that the model's motors take at its speed: its motors "
+                "give less force (a weaker motor or gearing, a current-limited supply or driver)",
                 "gains tuned for the lag measured (the derivative's zero on it); if it must "
                 "lift more than the model's, fit the model's motors",
                 True,

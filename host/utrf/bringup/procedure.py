@@ -342,9 +342,10 @@ def _bring_up_finger(
 def slack_rad(p: Plant, model: Plant, take_up: float) -> float:
     """The slack as Joint-2 travel: how far the motor ran (at the stop search's duty, at the
     identified speed) before Joint 2 moved from the open stop, less what the motor's own lag
-    and the 0.01 rad of the take-up's threshold account for."""
+    (measured: a weak or spread motor's is not the model's) and the 0.01 rad of the take-up's
+    threshold account for."""
     v = p.K * max(0.0, STOP_DUTY - p.u_f)
-    tau = model.tau * p.K / model.K
+    tau = p.tau if math.isfinite(p.tau) else model.tau * p.K / model.K
     return max(0.0, v * (take_up - tau) - 0.01) if math.isfinite(take_up) else math.nan
 
 
