@@ -51,18 +51,17 @@ def test_the_campaign_is_deterministic(firmware_elf) -> None:  # type: ignore[no
 def test_host_timeout_at_1e_2_is_half_a_second_of_lost_frames(
     board: EmulatedBoard, hand: Hand
 ) -> None:
-    """Why HOST_TIMEOUT was once seen at 1e-2 with heartbeats flowing.
+    """What it takes for HOST_TIMEOUT at 1e-2 with heartbeats flowing.
 
     The board latches it when no *valid* frame arrives for heartbeat_timeout (0.5 s); the
-    Hand sends one at least every 100 ms (a heartbeat when nothing else goes out), so it takes
-    every frame of a window lost. Measured here: the share of the Hand's frames the board takes
-    whole at 1e-2, and the longest silence between the Hand's frames. The chance that every
-    frame of a window is lost is loss ** frames_per_window: small but not negligible, and
-    larger for the long frames of a request being resent (each attempt ~25-35 % lost at this
-    rate) than for heartbeats (6 bytes, ~6 %): at the issue's ~200 commands a run, about one
-    run in a few, as seen. Then the mechanism itself, deterministically: the Hand's heartbeats
-    keep flowing while none reaches the board, and every driving finger latches HOST_TIMEOUT
-    after 0.5 s."""
+    Hand sends a heartbeat when the board has answered nothing for 100 ms (a request being
+    resent does not put it off: its long attempts, ~25-35 % lost at this rate, once held the
+    6-byte heartbeats back), so it takes every frame of a window lost. Measured here: the
+    share of the Hand's frames the board takes whole at 1e-2, and the longest silence between
+    the Hand's frames; the chance that every frame of a window is lost is
+    loss ** frames_per_window. Then the mechanism itself, deterministically: the Hand's
+    heartbeats keep flowing while none reaches the board, and every driving finger latches
+    HOST_TIMEOUT after 0.5 s."""
     res = run_campaign(board, hand, 1e-2, 150, seed=21)
     timeout = hand.safety().heartbeat_timeout
     assert res.longest_tx_gap_s <= 0.1 + 1e-3  # a heartbeat at least every 100 ms

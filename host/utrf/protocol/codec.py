@@ -313,8 +313,7 @@ class Message:
     @classmethod
     def decode_checked(cls, body: bytes | bytearray | memoryview) -> Self:
         """:meth:`decode` by the general path: every wire value checked against its field."""
-        if len(body) != cls.SIZE:
-            raise DecodeError(cls.NAME, None, f"body is {len(body)} bytes, expected {cls.SIZE}")
+        _check_size(cls.NAME, cls.SIZE, body)
         values = cls._STRUCT.unpack(body)
         kwargs: dict[str, Value] = {}
         pos = 0
@@ -346,6 +345,11 @@ class Message:
                 f.check_raw(v, cls.NAME, f"{f.name}[{i}]")
             out.append(f.from_raw(v))
         return tuple(out)
+
+
+def _check_size(name: str, size: int, body: bytes | bytearray | memoryview) -> None:
+    if len(body) != size:
+        raise DecodeError(name, None, f"body is {len(body)} bytes, expected {size}")
 
 
 def _needs_check(f: Field) -> bool:
@@ -381,8 +385,7 @@ def plain_decoder(
         pos += f.n
 
     def decode(body: bytes | bytearray | memoryview) -> Any:
-        if len(body) != size:
-            raise DecodeError(name, None, f"body is {len(body)} bytes, expected {size}")
+        _check_size(name, size, body)
         values = unpack(body)
         return cls(*[convert(values) for convert in converters])
 
