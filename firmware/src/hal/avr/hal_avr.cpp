@@ -2,7 +2,8 @@
 //
 //   timers 1, 3, 4, 5  fast PWM mode 14, TOP = ICRn = 799: 20 kHz, prescaler 1
 //   timer 2            CTC, clk/64, OCR2A = 249: the 1 kHz control tick
-//   timer 0            left to the Arduino core (millis)
+//   timer 0            the firmware's own millisecond (init(), below: the core's wiring.c is
+//                      not linked)
 //   ADC                interrupt-driven round robin over the five encoder channels
 //   UART0              own interrupt-driven driver: counts lost bytes, never blocks
 //   idle sleep         loop() sleeps (idle mode) until an interrupt gives it work
@@ -24,8 +25,6 @@
 #include "../../generated/protocol_messages.h"
 #include "../hal.h"
 
-extern "C" unsigned long millis(void);  // Arduino core (timer 0)
-extern "C" volatile unsigned long timer0_overflow_count;  // Arduino core: timer 0's overflows
 
 namespace utrf {
 namespace hal {
@@ -236,6 +235,46 @@ volatile uint8_t g_rx_dor, g_rx_fe;  // DOR0 and FE0 seen since serial_take_uart
 static_assert(sizeof g_tx_buf == 256, "the transmit index wraps by itself at 256");
 static_assert(sizeof g_rx_buf == 128, "the receive ring is 128 slots");
 
+// ---- timer 0: the millisecond of loop()'s tick-alive rule and its wake-up ---------------------
+// The firmware's own, in place of the Arduino core's (wiring.c: init(), millis() and a timer-0
+// overflow handler that runs its ~100 cycles with interrupts off, above the UART's receive
+// interrupt in priority). Defining init() here keeps wiring.c's object out of the link: the
+// core is an archive (the Makefile's, PlatformIO's and the IDE's), and nothing else names a
+// symbol of it (firmware/README.md, Timing). The count is the core's: 1.024 ms an overflow,
+// a millisecond more each time its fraction passes 1.
+namespace {
+volatile uint32_t g_ms;
+uint8_t g_ms_fract;           // eighths of a microsecond ... of the overflows' 24 us, in 8 us
+volatile uint8_t g_t0_overflows;  // wraps: the idle sleep's "a millisecond since"
+}  // namespace
+
+// The Arduino core's main() calls init() before setup(): interrupts on, timer 0 as the core
+// sets it (fast PWM, clk/64: an overflow every 1.024 ms) with its overflow interrupt. The
+// other timers, the ADC and UART0 are set in full by avr_init().
+extern "C" void init(void) {
+    sei();
+    TCCR0A = _BV(WGM01) | _BV(WGM00);
+    TCCR0B = _BV(CS01) | _BV(CS00);
+    TIMSK0 = _BV(TOIE0);
+}
+
+// With interrupts on from its first instruction: a received byte waits for its vector and
+// sei only. The overflow masks itself while it counts, so another cannot nest in it (a tick
+// that nests here may run past the next overflow).
+ISR(TIMER0_OVF_vect, ISR_NOBLOCK) {
+    TIMSK0 = 0;
+    uint32_t m = g_ms + 1;
+    uint8_t f = (uint8_t)(g_ms_fract + 3);  // 24 us in units of 8 us
+    if (f >= 125) {                         // 1000 us
+        f = (uint8_t)(f - 125);
+        ++m;
+    }
+    g_ms_fract = f;
+    g_ms = m;
+    g_t0_overflows = (uint8_t)(g_t0_overflows + 1);
+    TIMSK0 = _BV(TOIE0);
+}
+
 // ---- interrupts --------------------------------------------------------------------------------
 extern "C" void utrf_read_reset_flags(void) __attribute__((naked, used, section(".init3")));
 extern "C" void utrf_read_reset_flags(void) {
@@ -291,8 +330,7 @@ __attribute__((always_inline)) inline uint16_t cycles_from(const Stamp& start) {
 }
 
 // Runs ticks while any is due. Called with interrupts disabled; returns with them disabled.
-// Timer 0's overflow (millis()) waits during the tick: its flag keeps one overflow, and the
-// tick lasts far less than its 1.024 ms. The UART's interrupts stay on: receiving, or bytes
+// Timer 0's overflow nests in the tick (it blocks nothing). The UART's interrupts stay on: receiving, or bytes
 // would be lost; transmitting, or the line would stand idle for the tick's 250-370 us and the
 // 1 kHz state stream (39 bytes, 0.39 ms of line a frame) would lose frames behind replies.
 // The tick's measured time includes those nested interrupts.
@@ -305,16 +343,12 @@ __attribute__((noinline)) void run_one_tick() {
     g_tick_lost = 0;
     g_tick_deferred = 0;
     g_tick_running = 1;
-    TIMSK0 &= (uint8_t)~_BV(TOIE0);
     g_tick_start = read_stamp();
     sei();
     app::tick();
     const uint16_t cycles = cycles_from(g_tick_start);
     const bool overran = g_tick_deferred != 0 || lost != 0;
     app::tick_done(cycles, overran);
-    // Timer 0's waiting overflow runs here, with the tick's registers still saved, not after
-    // the handler's restores: a byte that arrives then waits for one of the two, not both.
-    TIMSK0 |= _BV(TOIE0);
     cli();
     g_tick_running = 0;
 }
@@ -525,9 +559,9 @@ void encoders_sample() {
 void tick_start() {
     // Let the ADC finish a round first, so the first tick judges real readings (an encoder
     // that is really unplugged is still caught then). At most ~5 ms.
-    const uint32_t t0 = ::millis();
+    const uint32_t t0 = millis();
     encoders_sample();
-    while (g_adc_round == 0 && ::millis() - t0 < 5) {
+    while (g_adc_round == 0 && millis() - t0 < 5) {
     }
     g_tick_locked = 0;
     g_tick_running = 0;
@@ -574,7 +608,11 @@ Stamp stamp() { return read_stamp(); }
 
 bool tick_period_elapsed() { return g_tick_deferred != 0; }
 
-uint32_t millis() { return ::millis(); }
+uint32_t millis() {
+    uint32_t m;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { m = g_ms; }
+    return m;
+}
 
 uint8_t serial_rx_peek(const uint8_t** data) {
     const uint8_t tail = GPIOR2;
@@ -630,7 +668,7 @@ void sleep_until_interrupt(bool (*idle)(), void (*take_bytes)()) {
     set_sleep_mode(SLEEP_MODE_IDLE);
     cli();
     GPIOR0 &= (uint8_t)~_BV(kWake);  // before the check: what comes after it wakes us
-    uint8_t ms = (uint8_t)timer0_overflow_count;
+    uint8_t ms = g_t0_overflows;
     // The check runs with interrupts on: it takes some 300 cycles, and a byte the UART
     // received may wait at most two byte times (320 cycles at 1 Mbaud). Whatever the check
     // saw and an interrupt changed meanwhile raises kWake (a tick, a frame's end, the transmit
@@ -639,7 +677,7 @@ void sleep_until_interrupt(bool (*idle)(), void (*take_bytes)()) {
     sei();
     const bool go = idle();
     cli();
-    if (go && !(GPIOR0 & _BV(kWake)) && (uint8_t)timer0_overflow_count == ms) {
+    if (go && !(GPIOR0 & _BV(kWake)) && g_t0_overflows == ms) {
         for (;;) {
             sleep_enable();
             sei();  // SLEEP runs before any interrupt pending now, which then wakes it at once
@@ -658,7 +696,7 @@ void sleep_until_interrupt(bool (*idle)(), void (*take_bytes)()) {
                     if (GPIOR0 & _BV(kWake)) break;
                 }
             }
-            const uint8_t now = (uint8_t)timer0_overflow_count;
+            const uint8_t now = g_t0_overflows;
             if (now == ms) continue;
             // Timer 0's overflow: a new millisecond for the tick-alive check. While the tick
             // runs, its own wake-up brings loop() round every period and that check with it;
