@@ -161,6 +161,16 @@ __attribute__((always_inline)) inline int32_t apply(const Gain& g, int16_t x, in
     }
 }
 
+// apply()'s fast path for a gain that can never saturate, chosen once where the gain is
+// compiled (plain()): shift 0 and |x m| <= ymax for every |x| <= 32767, so the product alone
+// (no saturation test, no exponent switch). Equal to apply() for x != -32768.
+inline bool plain(const Gain& g, int32_t ymax) {
+    return g.shift == 0 && (int32_t)g.m * 32767L <= ymax;
+}
+__attribute__((always_inline)) inline int32_t apply_plain(const Gain& g, int16_t x) {
+    return mul_su(x, g.m);
+}
+
 // The same for a term kept in 16 bits (ymax <= 32767): for gains of shift -16, -8 or 0 the
 // result is a byte-aligned slice of the product; a larger gain saturates every x but 0
 // (its xlim is 0).
@@ -170,6 +180,14 @@ __attribute__((always_inline)) inline int16_t apply16(const Gain& g, int16_t x, 
     if (g.shift == -16) return prod_hi16(q);
     if (g.shift == -8) return prod_mid16(q);
     return prod_lo16(q);
+}
+
+// apply16()'s fast path for a gain of shift -16 that cannot saturate for |x| <= xmax, chosen
+// once where the gain is compiled (hi16_plain()): the product's high word alone. Equal to
+// apply16() for |x| <= xmax.
+inline bool hi16_plain(const Gain& g, int16_t xmax) { return g.shift == -16 && g.xlim >= xmax; }
+__attribute__((always_inline)) inline int16_t apply16_hi(const Gain& g, int16_t x) {
+    return prod_hi16(prod_su(x, g.m));
 }
 
 // x * c / 65536 for any int32 x (the result must fit), c an unsigned Q16 fraction: two

@@ -44,12 +44,15 @@ struct Coeffs {
     int16_t slew;         // Q15 duty per tick
     int16_t deadband;     // Q15 duty
     uint16_t db_inverse;  // Q16: ramp / (ramp + deadband), to undo the compensation
+    bool ki_plain;        // ki can never saturate: the step takes fx::apply_plain()
+    bool kd_plain;        // kd (shift -16) never saturates for |v| <= kMaxV8: fx::apply16_hi()
 };
 
 // Saturation levels of the terms, chosen so no sum can overflow.
 static const int16_t kTermMax14 = 32767;       // P and D terms: +-2 duty, Q14
 static const int32_t kIStepMax31 = 1L << 29;  // integrator step: +-0.25 duty per tick
 static const int16_t kMaxDm = 63;                // d(measured) clamp, BU per tick
+static const int16_t kMaxV8 = kMaxDm * 256;      // |v|, Q8: the low-pass of 256 dm stays within
 static const int16_t kDeadbandRamp15 = 256;      // 1/128 duty: the compensation ramps in
 
 Coeffs compile(const config::Gains& g, float dt_s);
@@ -111,10 +114,22 @@ UTRF_HOT sum_t add_deadband(sum_t v, int16_t db) {
     return v + fx::prod_mid16(fx::prod_su((int16_t)v, (uint16_t)db));
 }
 
+// The derivative term, Q14: the fast path or its general twin, as compile() chose.
+UTRF_HOT int16_t d_term(const Coeffs& c, int16_t v8) {
+    if (c.kd_plain) return fx::apply16_hi(c.kd, v8);
+    return fx::apply16(c.kd, v8, kTermMax14);
+}
+
 // The proportional term less the derivative one, Q14 (+-2 duty each): the law's P - D, for the
 // step and for the rebase of a gain change (Pid::set_coeffs()).
 UTRF_HOT sum_t p_minus_d(const Coeffs& c, int16_t e, int16_t v8) {
-    return (sum_t)fx::apply16(c.kp, e, kTermMax14) - fx::apply16(c.kd, v8, kTermMax14);
+    return (sum_t)fx::apply16(c.kp, e, kTermMax14) - d_term(c, v8);
+}
+
+// The integrator's step, Q31: the fast path or its general twin, as compile() chose.
+UTRF_HOT int32_t ki_step(const Coeffs& c, int16_t e) {
+    if (c.ki_plain) return fx::apply_plain(c.ki, e);
+    return fx::apply(c.ki, e, kIStepMax31);
 }
 
 UTRF_HOT int16_t slew_limit(int16_t want, int16_t last, int16_t slew) {
@@ -167,7 +182,7 @@ UTRF_HOT int16_t Pid::step(int16_t limit, int16_t target, int16_t measured, int1
         // min(i31 + step, limit) for a step up, max(i31 + step, -limit) for a step down, the
         // sum exact: i31 + step may overflow int32 near the limit (the add's overflow flag),
         // and the limit is a whole Q15 duty (low word 0), so the compare is of the high word.
-        const int32_t step = fx::apply(c.ki, e, kIStepMax31);
+        const int32_t step = ki_step(c, e);
         int32_t sum;
         const bool over = __builtin_add_overflow(i31_, step, &sum);
         const int16_t hi = (int16_t)(sum >> 16);
