@@ -190,6 +190,14 @@ __attribute__((always_inline)) inline int16_t apply16_hi(const Gain& g, int16_t 
     return prod_hi16(prod_su(x, g.m));
 }
 
+// apply16() for a gain of shift -8 (mid16(): chosen once where the gain is compiled): the
+// saturation test and the product's middle word, no exponent switch. Equal to apply16().
+inline bool mid16(const Gain& g) { return g.shift == -8; }
+__attribute__((always_inline)) inline int16_t apply16_mid(const Gain& g, int16_t x, int16_t ymax) {
+    if (__builtin_expect(beyond(g, x), 0)) return x > 0 ? ymax : (int16_t)-ymax;
+    return prod_mid16(prod_su(x, g.m));
+}
+
 // x * c / 65536 for any int32 x (the result must fit), c an unsigned Q16 fraction: two
 // 16 x 16 multiplies instead of one 32 x 32 into 64 bits, which avr-gcc makes slow. Floors.
 __attribute__((always_inline)) inline int32_t mul_q16(int32_t x, uint16_t c) {

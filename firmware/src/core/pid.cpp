@@ -18,7 +18,7 @@ Coeffs compile(const config::Gains& g, float dt_s) {
     c.ki_plain = fx::plain(c.ki, kIStepMax31);
     // v is Q8 BU per tick: rad/s = v / 256 * kRadPerBu / dt.
     c.kd = fx::make_gain(g.kd * kRadPerBu / (256.0f * dt_s) * 16384.0f, kTermMax14);
-    c.kd_plain = fx::hi16_plain(c.kd, kMaxV8);
+    c.pd_plain = fx::mid16(c.kp) && fx::hi16_plain(c.kd, kMaxV8);
     // Matched pole of a first-order low-pass: alpha = 1 - exp(-2 pi fc dt).
     const float a = 1.0f - expf(-2.0f * 3.14159265f * g.d_cutoff_hz * dt_s);
     c.alpha = (uint16_t)fx::clamp32(fx::round_sat(a * 65536.0f), 1, 65535);

@@ -45,7 +45,9 @@ struct Coeffs {
     int16_t deadband;     // Q15 duty
     uint16_t db_inverse;  // Q16: ramp / (ramp + deadband), to undo the compensation
     bool ki_plain;        // ki can never saturate: the step takes fx::apply_plain()
-    bool kd_plain;        // kd (shift -16) never saturates for |v| <= kMaxV8: fx::apply16_hi()
+    // P - D's fast path: kp of shift -8 (fx::apply16_mid()) and kd of shift -16 that never
+    // saturates for |v| <= kMaxV8 (fx::apply16_hi()).
+    bool pd_plain;
 };
 
 // Saturation levels of the terms, chosen so no sum can overflow.
@@ -114,16 +116,14 @@ UTRF_HOT sum_t add_deadband(sum_t v, int16_t db) {
     return v + fx::prod_mid16(fx::prod_su((int16_t)v, (uint16_t)db));
 }
 
-// The derivative term, Q14: the fast path or its general twin, as compile() chose.
-UTRF_HOT int16_t d_term(const Coeffs& c, int16_t v8) {
-    if (c.kd_plain) return fx::apply16_hi(c.kd, v8);
-    return fx::apply16(c.kd, v8, kTermMax14);
-}
-
 // The proportional term less the derivative one, Q14 (+-2 duty each): the law's P - D, for the
-// step and for the rebase of a gain change (Pid::set_coeffs()).
+// step and for the rebase of a gain change (Pid::set_coeffs()). The fast path or its general
+// twin, as compile() chose.
 UTRF_HOT sum_t p_minus_d(const Coeffs& c, int16_t e, int16_t v8) {
-    return (sum_t)fx::apply16(c.kp, e, kTermMax14) - d_term(c, v8);
+    if (c.pd_plain) {
+        return (sum_t)fx::apply16_mid(c.kp, e, kTermMax14) - fx::apply16_hi(c.kd, v8);
+    }
+    return (sum_t)fx::apply16(c.kp, e, kTermMax14) - fx::apply16(c.kd, v8, kTermMax14);
 }
 
 // The integrator's step, Q31: the fast path or its general twin, as compile() chose.
