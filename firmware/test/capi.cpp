@@ -252,6 +252,16 @@ int fw_pid_regain(const uint8_t* set_gains_body, uint8_t len, int16_t limit) {
     return 0;
 }
 
+// The PID's fast paths as compile() chose them for the gains (bit 0 ki_plain, bit 1 pd_plain);
+// fw_pid_general_path() turns them off in the running Pid, state kept, so a test can run the
+// general twins on the same inputs.
+int fw_pid_fast_paths(void) { return (g_pc.ki_plain ? 1 : 0) | (g_pc.pd_plain ? 2 : 0); }
+void fw_pid_general_path(void) {
+    g_pc.ki_plain = false;
+    g_pc.pd_plain = false;
+    g_pid.load(g_pc);
+}
+
 void fw_pid_reset(int16_t u, int16_t measured) { g_pid.reset(g_plimit, u, measured); }
 int16_t fw_pid_step(int16_t target, int16_t measured) {
     return g_pid.step(g_plimit, target, measured);
@@ -274,6 +284,26 @@ double fw_gain_roundtrip(double value) {
 }
 int32_t fw_gain_apply(double value, int16_t x, int32_t ymax) {
     return fx::apply(fx::make_gain((float)value, ymax), x, ymax);
+}
+// The gain's fast paths beside their general twins (fx::apply_plain(), apply16_hi(),
+// apply16_mid()): which ones a gain takes (bit 0 plain() for ymax, bit 1 hi16_plain() for
+// |x| <= pid::kMaxV8, bit 2 mid16()), and each path's result.
+int fw_gain_paths(double value, int32_t ymax) {
+    const fx::Gain g = fx::make_gain((float)value, ymax);
+    return (fx::plain(g, ymax) ? 1 : 0) | (fx::hi16_plain(g, pid::kMaxV8) ? 2 : 0) |
+           (fx::mid16(g) ? 4 : 0);
+}
+int32_t fw_gain_apply_plain(double value, int16_t x, int32_t ymax) {
+    return fx::apply_plain(fx::make_gain((float)value, ymax), x);
+}
+int16_t fw_gain_apply16(double value, int16_t x, int16_t ymax) {
+    return fx::apply16(fx::make_gain((float)value, ymax), x, ymax);
+}
+int16_t fw_gain_apply16_hi(double value, int16_t x, int16_t ymax) {
+    return fx::apply16_hi(fx::make_gain((float)value, ymax), x);
+}
+int16_t fw_gain_apply16_mid(double value, int16_t x, int16_t ymax) {
+    return fx::apply16_mid(fx::make_gain((float)value, ymax), x, ymax);
 }
 int32_t fw_mul_q16(int32_t x, uint16_t c) { return fx::mul_q16(x, c); }
 

@@ -22,6 +22,8 @@ from fwsim import (
     step_figures,
     step_response,
 )
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 LIMIT = round(0.7 * Q15)  # default max_duty 0.8 less the pretension 0.1
 
@@ -279,3 +281,84 @@ def test_mul_q16_matches_exact(fwlib: ctypes.CDLL) -> None:
     for x in (-(2**31) + 1, -123456789, -65536, -1, 0, 1, 65535, 987654321, 2**31 - 1):
         for c in (0, 1, 411, 32768, 65535):
             assert fwlib.fw_mul_q16(x, c) == (x * c) >> 16
+
+
+# ---- the gains' fast paths beside their general twins (fx::apply_plain(), apply16_hi(),
+# apply16_mid(), chosen once by pid::compile()) ----
+
+I_STEP_MAX31 = 1 << 29  # pid::kIStepMax31
+TERM_MAX14 = 32767  # pid::kTermMax14
+MAX_V8 = 63 * 256  # pid::kMaxV8
+GAINS = st.floats(-4.0, 7.0).map(lambda x: 10.0**x)  # every exponent alike: each path's edges
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    value=GAINS,
+    xs=st.lists(st.integers(-32767, 32767) | st.integers(-300, 300), min_size=1, max_size=40),
+)
+def test_gain_fast_paths_equal_their_general_twins(
+    fwlib: ctypes.CDLL, value: float, xs: list[int]
+) -> None:
+    """Where a gain takes a fast path, it gives apply()'s or apply16()'s result on its domain
+    (|x| <= 32767 for the integrator's, |x| <= kMaxV8 for the derivative's)."""
+    paths_i = fwlib.fw_gain_paths(value, I_STEP_MAX31)
+    paths_t = fwlib.fw_gain_paths(value, TERM_MAX14)
+    for x in [*xs, -32767, -MAX_V8, MAX_V8, 32767]:
+        if paths_i & 1:
+            assert fwlib.fw_gain_apply_plain(value, x, I_STEP_MAX31) == fwlib.fw_gain_apply(
+                value, x, I_STEP_MAX31
+            )
+        general = fwlib.fw_gain_apply16(value, x, TERM_MAX14)
+        if paths_t & 2 and abs(x) <= MAX_V8:
+            assert fwlib.fw_gain_apply16_hi(value, x, TERM_MAX14) == general
+        if paths_t & 4:
+            assert fwlib.fw_gain_apply16_mid(value, x, TERM_MAX14) == general
+
+
+def test_gain_fast_paths_cover_the_default_gains(fwlib: ctypes.CDLL) -> None:
+    """The spec's default gains take both PID fast paths (what make bench-firmware measures),
+    and a gain outside a path's condition does not."""
+    pid_config(fwlib, LIMIT)
+    assert fwlib.fw_pid_fast_paths() == 3
+    pid_config(fwlib, LIMIT, kp=500.0, ki=5000.0)  # kp of shift 0, ki that may saturate
+    assert fwlib.fw_pid_fast_paths() == 0
+    assert fwlib.fw_gain_paths(1e6, I_STEP_MAX31) & 1 == 0
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    kp=st.floats(0.0, 100.0),
+    ki=st.floats(0.0, 50.0),
+    kd=st.floats(0.0, 2.0),
+    deadband=st.sampled_from([0.0, 0.04, 0.2]),
+    u0=st.integers(-LIMIT, LIMIT),
+    seq=st.lists(
+        st.tuples(st.integers(-16384, 16383), st.integers(-16384, 16383)),
+        min_size=1,
+        max_size=60,
+    ),
+)
+def test_pid_fast_paths_step_like_the_general_ones(
+    fwlib: ctypes.CDLL,
+    kp: float,
+    ki: float,
+    kd: float,
+    deadband: float,
+    u0: int,
+    seq: list[tuple[int, int]],
+) -> None:
+    """The law with the fast paths compile() chose and with the general twins, on the same
+    inputs: the same outputs and state every step (random gains, targets and angles)."""
+    runs = []
+    for general in (False, True):
+        pid_config(fwlib, LIMIT, kp=kp, ki=ki, kd=kd, deadband_duty=deadband, slew_per_s=50.0)
+        if general:
+            fwlib.fw_pid_general_path()
+            assert fwlib.fw_pid_fast_paths() == 0
+        fwlib.fw_pid_reset(u0, seq[0][1])
+        trace = []
+        for target, measured in seq:
+            trace.append((fwlib.fw_pid_step(target, measured), pid_state(fwlib)))
+        runs.append(trace)
+    assert runs[0] == runs[1]
