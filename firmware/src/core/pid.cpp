@@ -43,6 +43,8 @@ int16_t remove_deadband(int16_t u, int16_t db, uint16_t db_inverse) {
     return (int16_t)(((int32_t)u * db_inverse) >> 16);
 }
 
+int32_t ki_step_general(const Coeffs& c, int16_t e) { return fx::apply(c.ki, e, kIStepMax31); }
+
 Pid::Pid() : i31_(0), v8_(0), m_prev_(0), e_last_(0), u_(0), saturated_(false), c_() {}
 
 void Pid::reset(int16_t limit, int16_t u, int16_t measured) {

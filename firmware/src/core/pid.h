@@ -116,11 +116,15 @@ UTRF_HOT sum_t add_deadband(sum_t v, int16_t db) {
     return v + fx::prod_mid16(fx::prod_su((int16_t)v, (uint16_t)db));
 }
 
+// The integrator's general twin, out of line (pid.cpp): one copy of its 32-bit exponent
+// switch in flash, not one in each of the five finger ticks.
+int32_t ki_step_general(const Coeffs& c, int16_t e);
+
 // The proportional term less the derivative one, Q14 (+-2 duty each): the law's P - D, for the
 // step and for the rebase of a gain change (Pid::set_coeffs()). The fast path or its general
 // twin, as compile() chose.
 UTRF_HOT sum_t p_minus_d(const Coeffs& c, int16_t e, int16_t v8) {
-    if (c.pd_plain) {
+    if (UTRF_LIKELY(c.pd_plain)) {
         return (sum_t)fx::apply16_mid(c.kp, e, kTermMax14) - fx::apply16_hi(c.kd, v8);
     }
     return (sum_t)fx::apply16(c.kp, e, kTermMax14) - fx::apply16(c.kd, v8, kTermMax14);
@@ -128,8 +132,8 @@ UTRF_HOT sum_t p_minus_d(const Coeffs& c, int16_t e, int16_t v8) {
 
 // The integrator's step, Q31: the fast path or its general twin, as compile() chose.
 UTRF_HOT int32_t ki_step(const Coeffs& c, int16_t e) {
-    if (c.ki_plain) return fx::apply_plain(c.ki, e);
-    return fx::apply(c.ki, e, kIStepMax31);
+    if (UTRF_LIKELY(c.ki_plain)) return fx::apply_plain(c.ki, e);
+    return ki_step_general(c, e);
 }
 
 UTRF_HOT int16_t slew_limit(int16_t want, int16_t last, int16_t slew) {
