@@ -30,8 +30,9 @@ from utrf.hand.state import fault_names
 from utrf.models.geometry import HandGeometry
 
 CHART_STYLE = "height: 150px; width: 560px"
-#: resolves in the browser once the next frame is drawn: the page's updates are paced by it
-DRAWN = "new Promise((resolve) => requestAnimationFrame(() => resolve(0)))"
+#: resolves in the browser once the next frame is drawn (first running ``{draw}`` in that
+#: frame's callback): the page's updates are paced by it
+DRAWN = "new Promise((resolve) => requestAnimationFrame(() => {{ {draw}; resolve(0); }}))"
 DRAWN_TIMEOUT_S = 1.0
 
 
@@ -97,7 +98,8 @@ class DashboardPage:
             self.take_button = ui.button("Take control", on_click=self._take).classes("utrf-take")
             ui.space()
             self.board_time = ui.label("board time –").classes("utrf-board-time")
-            # the newest sample's board time on the host's wall clock (ms): the latency probe
+            # the newest sample's board time on the host's wall clock, and when the server
+            # sent it (ms): the latency probe's
             self.sample_wall = ui.label("").classes("utrf-sample-wall hidden")
         ui.label(
             f"If this server stops, the board latches HOST_TIMEOUT after "
@@ -293,7 +295,8 @@ class DashboardPage:
         the browser has drawn it: a browser that draws slower than ``ui_hz`` gets fewer
         updates, never a queue of stale ones (each drawn update is the newest sample)."""
         now = time.monotonic()
-        sent = self._update_live()
+        live = self._update_live()
+        sent, moved = live is not None, bool(live)
         # at most one chart a frame (ECharts redraws a chart in milliseconds: five at once
         # would hold a frame back), the one most overdue
         i = int(np.argmin(self._next_plot))
@@ -301,17 +304,21 @@ class DashboardPage:
             self._next_plot[i] = max(self._next_plot[i] + self.plot_period, now)
             sent = self._update_plot(i) or sent
         if sent:
+            # the 3D hand drawn in the frame that shows the numbers, when it moved
+            drawn = DRAWN.format(draw=self.hand3d.draw_js() if moved else "")
             with contextlib.suppress(TimeoutError):  # a hidden tab draws nothing: go on
-                await self.client.run_javascript(DRAWN, timeout=DRAWN_TIMEOUT_S)
+                await self.client.run_javascript(drawn, timeout=DRAWN_TIMEOUT_S)
 
-    def _update_live(self) -> bool:
+    def _update_live(self) -> bool | None:
+        """The newest sample's numbers, modes, faults and 3D hand; returns None when there
+        is no new sample, else whether the 3D hand moved."""
         if (self.hub.controller == self.id) != self.in_control or (
             not self.in_control and self.hub.controller is None
         ):
             self._show_control()
         st = self.hub.latest
         if st is None or self._shown.get("t") == st.board_time:
-            return False
+            return None
         self._shown["t"] = st.board_time
         for i, f in enumerate(st.fingers):
             self._set(f"m{i}", self.modes[i], f.mode.name)
@@ -322,11 +329,15 @@ class DashboardPage:
                 f"duty {100 * f.duty_a:+4.0f}/{100 * f.duty_b:+4.0f} %",
             )
             self._set(f"f{i}", self.faults[i], f"faults: {fault_names(int(f.faults))}")
-        self.hand3d.show([f.theta2 for f in st.fingers], [bool(f.faults) for f in st.fingers])
+        moved = self.hand3d.show(
+            [f.theta2 for f in st.fingers], [bool(f.faults) for f in st.fingers]
+        )
         self.board_time.text = f"board time {st.board_time:.3f} s"
-        self.sample_wall.text = f"{1000 * self.hub.wall_time_of(st.board_time):.1f}"
+        sampled = 1000 * self.hub.wall_time_of(st.board_time)
+        self.sample_wall.text = f"{sampled:.1f} {1000 * time.time():.1f}"
         self.hub.pushed["live"] += 1
-        return True
+        self.hub.pushed["hand3d"] += moved
+        return moved
 
     def _update_plot(self, i: int) -> bool:
         """Finger ``i``'s chart: only its series' points, as plain lists (the chart's options,
