@@ -253,6 +253,7 @@ def measure(elf: Path | None, seconds: float, rate: int, tmp: Path) -> dict:
 
 def section(r: dict) -> str:
     lat = r["latency_ms"]
+    parts = r["parts_ms"]
 
     def ok(good: bool) -> str:
         return "met" if good else "**not met**"
@@ -266,7 +267,8 @@ def section(r: dict) -> str:
             f"with other work: load average {r['load_average']:.1f} at the end). The board is "
             f"`utrf emulate` in its own process, streaming at {r['rate_hz']} Hz; the dashboard "
             "(`utrf dashboard --port`, default rates: live view up to 30 Hz, paced by the "
-            "page's frames; each chart 5 Hz, one chart a frame) with one "
+            "page's frames; each chart 5 Hz, one an update; the 3D hand drawn when it moved) "
+            "with one "
             f"page open in headless chromium, for {r['seconds']:.0f} s while the page moves the "
             f"hand through four poses ({r['samples']} samples reached the server).",
             "",
@@ -290,6 +292,18 @@ def section(r: dict) -> str:
             f"busy thread gets about {200 / max(r['load_average'], 1):.0f} % of a core; above "
             "2 the figures measure that starvation as much as the dashboard. Re-measure on a "
             "quiet machine.",
+            "",
+            "Per unit of work (load moves these less than the shares of a core): the server "
+            f"spent {r['server_us_per_sample']:.0f} us of CPU per sample received (its event "
+            f"loop {100 * r['server_loop_cpu_core']:.1f} % of a core, the Hand's threads "
+            f"{100 * r['server_other_cpu_core']:.1f} %), the page's renderer "
+            f"{r['renderer_ms_per_frame']:.1f} ms per frame drawn, chromium's GPU process "
+            f"{100 * r['browser_cpu_by_kind'].get('gpu-process', 0.0):.0f} % of a core; the 3D "
+            f"hand was drawn {r['pushed'].get('hand3d', 0) / r['seconds']:.1f} times a second. "
+            "The latency in parts (p50 / p99, ms): the sample's age when the server sent it "
+            f"{parts['to_push'][0]:.1f} / {parts['to_push'][1]:.1f}, from then to the page's "
+            f"DOM {parts['push_to_dom'][0]:.1f} / {parts['push_to_dom'][1]:.1f}, from then to "
+            f"the frame drawn {parts['dom_to_frame'][0]:.1f} / {parts['dom_to_frame'][1]:.1f}.",
             "",
             "Latency: the probe takes the time after the frame that drew each new sample "
             "(`requestAnimationFrame`, then a task) minus the sample's board time on the host's "

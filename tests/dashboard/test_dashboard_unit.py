@@ -133,10 +133,10 @@ def test_the_ring_decimates_for_the_eye_and_keeps_the_newest() -> None:
 
 def test_the_ring_keeps_each_fingers_fields_apart() -> None:
     ring = SampleRing(3, 100)
+    mode = m.ControlMode.POSITION
     for k in range(10):
         fingers = tuple(
-            FingerState("f", i, k + i, 10 * (k + i), 0.1 * i, 0.01 * i,
-                        m.ControlMode.POSITION, m.FaultBits(0), 0, 0)  # fmt: skip
+            FingerState("f", i, k + i, 10 * (k + i), 0.1 * i, 0.01 * i, mode, m.FaultBits(0), 0, 0)
             for i in range(3)
         )
         ring.add(HandState(board_time=k * 1e-3, host_time=0.0, seq=k, fingers=fingers))

@@ -291,23 +291,25 @@ class DashboardPage:
             element.text = text
 
     async def _update(self) -> None:
-        """One update of the page (the live view, and the plots when due), then wait until
-        the browser has drawn it: a browser that draws slower than ``ui_hz`` gets fewer
+        """One update of the page: the live view, then (when due) one chart; each waits until
+        the browser has drawn it, so a browser that draws slower than ``ui_hz`` gets fewer
         updates, never a queue of stale ones (each drawn update is the newest sample)."""
         now = time.monotonic()
         live = self._update_live()
-        sent, moved = live is not None, bool(live)
-        # at most one chart a frame (ECharts redraws a chart in milliseconds: five at once
-        # would hold a frame back), the one most overdue
+        if live is not None:  # the numbers, and the 3D hand in the same frame if it moved
+            await self._drawn(DRAWN.format(draw=self.hand3d.draw_js() if live else ""))
+        # then at most one chart (ECharts redraws a chart in milliseconds: not in the frame
+        # of the numbers, nor five at once), the one most overdue; drawn while the next
+        # sample is awaited
         i = int(np.argmin(self._next_plot))
         if now >= self._next_plot[i]:
             self._next_plot[i] = max(self._next_plot[i] + self.plot_period, now)
-            sent = self._update_plot(i) or sent
-        if sent:
-            # the 3D hand drawn in the frame that shows the numbers, when it moved
-            drawn = DRAWN.format(draw=self.hand3d.draw_js() if moved else "")
-            with contextlib.suppress(TimeoutError):  # a hidden tab draws nothing: go on
-                await self.client.run_javascript(drawn, timeout=DRAWN_TIMEOUT_S)
+            if self._update_plot(i) and live is None:
+                await self._drawn(DRAWN.format(draw=""))
+
+    async def _drawn(self, script: str) -> None:
+        with contextlib.suppress(TimeoutError):  # a hidden tab draws nothing: go on
+            await self.client.run_javascript(script, timeout=DRAWN_TIMEOUT_S)
 
     def _update_live(self) -> bool | None:
         """The newest sample's numbers, modes, faults and 3D hand; returns None when there
