@@ -62,6 +62,12 @@ class Hand3D:
         )
         self._shown = [math.nan] * len(hand.fingers)  # each finger's Joint-2 angle shown
         self._faulted = [False] * len(hand.fingers)
+        # once the browser has the scene (and again after a remount), the next update draws
+        # it and installs the drawing on a drag (draw_js), even with the hand at rest
+        self.scene.on("init", self._forget_shown)
+
+    def _forget_shown(self) -> None:
+        self._shown = [math.nan] * len(self.hand.fingers)
 
     def _chain(
         self, lengths: list[float], radius: float, joints: list[Group], links: list[Cylinder]
