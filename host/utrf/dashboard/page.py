@@ -330,7 +330,9 @@ class DashboardPage:
                 f"{math.degrees(f.theta2):6.1f}° → {math.degrees(f.target):6.1f}°, "
                 f"duty {100 * f.duty_a:+4.0f}/{100 * f.duty_b:+4.0f} %",
             )
-            self._set(f"f{i}", self.faults[i], f"faults: {fault_names(int(f.faults))}")
+            if self._shown.get(f"f{i}") != (faults := int(f.faults)):  # named when changed
+                self._shown[f"f{i}"] = faults
+                self.faults[i].text = f"faults: {fault_names(faults)}"
         moved = self.hand3d.show(
             [f.theta2 for f in st.fingers], [bool(f.faults) for f in st.fingers]
         )
