@@ -21,6 +21,8 @@ from utrf.models.mjcf_layout import load_layout
 #: ask for (a resize, the camera's first placement): the page draws it when the hand moved
 #: and while the view is dragged (software WebGL on a machine without a GPU is costly)
 SCENE_FPS = 1
+#: at most this many draws a second while the hand moves (as NiceGUI's loop drew it before)
+DRAW_HZ = 15.0
 #: metres to the scene's units
 SCALE = 10.0
 #: a finger is turned on the page when its Joint-2 angle moved more than this from the angle

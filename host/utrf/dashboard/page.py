@@ -24,7 +24,7 @@ from nicegui import Client, ui
 from nicegui.elements.mixins.disableable_element import DisableableElement
 
 from utrf.dashboard import settings as settings_
-from utrf.dashboard.hand3d import Hand3D
+from utrf.dashboard.hand3d import DRAW_HZ, Hand3D
 from utrf.dashboard.hub import DashboardHub, NotInControl
 from utrf.hand.state import fault_names
 from utrf.models.geometry import HandGeometry
@@ -85,6 +85,8 @@ class DashboardPage:
         self.client = client
         self.plot_period = 1.0 / plot_hz
         self._next_plot = [0.0] * len(hub.fingers)  # when each finger's chart is next due
+        self._hand_moved = False  # the 3D hand moved since it was last drawn
+        self._next_hand_draw = 0.0  # when it may be drawn next
         ui.timer(1.0 / ui_hz, self._update)
         self._show_control()
 
@@ -296,8 +298,15 @@ class DashboardPage:
         updates, never a queue of stale ones (each drawn update is the newest sample)."""
         now = time.monotonic()
         live = self._update_live()
+        self._hand_moved = self._hand_moved or bool(live)
         if live is not None:  # the numbers, and the 3D hand in the same frame if it moved
-            await self._drawn(DRAWN.format(draw=self.hand3d.draw_js() if live else ""))
+            # (at most DRAW_HZ a second: a move not drawn yet is drawn at the next update)
+            draw = self._hand_moved and now >= self._next_hand_draw
+            if draw:
+                self._hand_moved = False
+                self._next_hand_draw = now + 1.0 / DRAW_HZ
+                self.hub.pushed["hand3d"] += 1
+            await self._drawn(DRAWN.format(draw=self.hand3d.draw_js() if draw else ""))
         # then at most one chart (ECharts redraws a chart in milliseconds: not in the frame
         # of the numbers, nor five at once), the one most overdue; drawn while the next
         # sample is awaited
@@ -340,7 +349,6 @@ class DashboardPage:
         sampled = 1000 * self.hub.wall_time_of(st.board_time)
         self.sample_wall.text = f"{sampled:.1f} {1000 * time.time():.1f}"
         self.hub.pushed["live"] += 1
-        self.hub.pushed["hand3d"] += moved
         return moved
 
     def _update_plot(self, i: int) -> bool:
