@@ -53,12 +53,16 @@ STATUS = "return fetch('/api/status').then(r => r.text())"
 # Also, at every frame, the age of the newest sample drawn so far (what a person sees: it
 # includes the wait for the next update, which the first figure does not).
 PROBE = """
-window.utrfLat = []; window.utrfFrames = []; window.utrfAge = []; let drawn = NaN;
+window.utrfLat = []; window.utrfFrames = []; window.utrfAge = []; window.utrfParts = [];
+let drawn = NaN;
 const el = document.querySelector('.utrf-sample-wall');
 new MutationObserver(() => {
-  const wall = Number(el.textContent);
+  const [wall, pushed] = el.textContent.split(' ').map(Number);
+  const seen = performance.timeOrigin + performance.now();
   requestAnimationFrame(() => setTimeout(() => {
-    window.utrfLat.push(performance.timeOrigin + performance.now() - wall);
+    const now = performance.timeOrigin + performance.now();
+    window.utrfLat.push(now - wall);
+    window.utrfParts.push([pushed - wall, seen - pushed, now - seen]);
     drawn = wall;
   }, 0));
 }).observe(el, {childList: true, characterData: true, subtree: true});
@@ -93,6 +97,25 @@ def wait_for(test: object, timeout: float, what: str) -> None:
 def cpu_s(p: psutil.Process) -> float:
     t = p.cpu_times()
     return float(t.user + t.system)
+
+
+def thread_cpu_s(p: psutil.Process) -> dict[int, float]:
+    """Each thread's user + system time (the main thread's id is the process's)."""
+    return {t.id: float(t.user_time + t.system_time) for t in p.threads()}
+
+
+def browser_kinds(procs: list[psutil.Process]) -> dict[int, str]:
+    """Each of chromium's processes by its ``--type`` (renderer, gpu-process, ...; the
+    browser process has none)."""
+    out = {}
+    for p in procs:
+        try:
+            args = p.cmdline()
+        except psutil.Error:
+            continue
+        kind = next((a.split("=", 1)[1] for a in args if a.startswith("--type=")), "browser")
+        out[p.pid] = kind
+    return out
 
 
 def measure(elf: Path | None, seconds: float, rate: int, tmp: Path) -> dict:
@@ -144,23 +167,29 @@ def measure(elf: Path | None, seconds: float, rate: int, tmp: Path) -> dict:
         driver.execute_script(PROBE)
         server = psutil.Process(dash.pid)
         browser = psutil.Process(driver.service.process.pid).children(recursive=True)
+        kinds = browser_kinds(browser)
         b0 = {p.pid: cpu_s(p) for p in browser}
-        pushed0 = json.loads(driver.execute_script(STATUS))["pushed"].get("live", 0)
+        status0 = json.loads(driver.execute_script(STATUS))
+        pushed0 = status0["pushed"].get("live", 0)
+        samples0 = status0["samples"]
+        t0 = thread_cpu_s(server)
         c0, w0 = cpu_s(server), time.monotonic()
         poses = ["fist", "open", "point", "open"]
         for k, pose in enumerate(poses):
             driver.find_element(By.CSS_SELECTOR, f".utrf-pose-{pose}").click()
             time.sleep(max(seconds / len(poses) - (time.monotonic() - w0 - k * seconds / 4), 0.1))
         c1, w1 = cpu_s(server), time.monotonic()
+        t1 = thread_cpu_s(server)
         b1 = {p.pid: cpu_s(p) for p in browser if p.is_running()}
-        renderer = [p.pid for p in browser if "--type=renderer" in " ".join(p.cmdline())]
-        lat_, frames_, age_ = driver.execute_script(
-            "return [window.utrfLat, window.utrfFrames, window.utrfAge]"
+        renderer = [pid for pid, kind in kinds.items() if kind == "renderer"]
+        lat_, frames_, age_, parts_ = driver.execute_script(
+            "return [window.utrfLat, window.utrfFrames, window.utrfAge, window.utrfParts]"
         )
         if lat_ is None or frames_ is None:
             raise SystemExit("bench-dashboard: the page reloaded during the run: the probe is gone")
         lat, frames = np.array(lat_, dtype=float), np.array(frames_, dtype=float)
         age = np.array(age_, dtype=float)
+        parts = np.array(parts_, dtype=float).reshape(-1, 3)
         status = json.loads(
             driver.execute_script("return fetch('/api/status').then(r => r.text())")
         )
@@ -175,6 +204,12 @@ def measure(elf: Path | None, seconds: float, rate: int, tmp: Path) -> dict:
                 except subprocess.TimeoutExpired:
                     p.kill()
     span = (frames[-1] - frames[0]) / 1000 if len(frames) > 1 else float("nan")
+    main_cpu = t1.get(server.pid, 0.0) - t0.get(server.pid, 0.0)
+    by_kind: dict[str, float] = {}
+    for pid, kind in kinds.items():
+        if pid in b1:
+            by_kind[kind] = by_kind.get(kind, 0.0) + (b1[pid] - b0[pid]) / (w1 - w0)
+    samples = status["samples"] - samples0
     return {
         "seconds": w1 - w0,
         "rate_hz": rate,
@@ -185,23 +220,40 @@ def measure(elf: Path | None, seconds: float, rate: int, tmp: Path) -> dict:
             "p99": float(np.percentile(lat, 99)),
             "max": float(lat.max()),
         },
+        # the latency in three: the sample's age when the server sent it, from then to the
+        # page's DOM holding it, from then to the frame drawn (p50 and p99 of each)
+        "parts_ms": {
+            name: [float(np.percentile(parts[:, k], q)) for q in (50, 99)]
+            for k, name in enumerate(("to_push", "push_to_dom", "dom_to_frame"))
+        },
         "display_age_ms": {
             "p50": float(np.percentile(age, 50)) if len(age) else math.nan,
             "p99": float(np.percentile(age, 99)) if len(age) else math.nan,
         },
         "server_cpu_core": (c1 - c0) / (w1 - w0),
+        # load moves these less than the fractions of a core: CPU time per unit of work
+        "server_us_per_sample": 1e6 * (c1 - c0) / max(samples, 1),
+        "server_loop_cpu_core": main_cpu / (w1 - w0),  # NiceGUI's event loop (main thread)
+        "server_other_cpu_core": (c1 - c0 - main_cpu) / (w1 - w0),  # the Hand's threads
+        "browser_cpu_by_kind": by_kind,
         "browser_cpu_core": sum(b1[k] - b0[k] for k in b1) / (w1 - w0),
         "renderer_cpu_core": sum(b1[k] - b0[k] for k in renderer if k in b1) / (w1 - w0),
         "fps": (len(frames) - 1) / span,
         "updates_per_s": len(lat) / (w1 - w0),
+        "renderer_ms_per_frame": 1000
+        * by_kind.get("renderer", 0.0)
+        * (w1 - w0)
+        / max(len(frames) - 1, 1),
         "pushed_per_s": (status["pushed"].get("live", 0) - pushed0) / (w1 - w0),
         "load_average": os.getloadavg()[0],
         "sent": status["sent"],
+        "pushed": {k: v - status0["pushed"].get(k, 0) for k, v in status["pushed"].items()},
     }
 
 
 def section(r: dict) -> str:
     lat = r["latency_ms"]
+    parts = r["parts_ms"]
 
     def ok(good: bool) -> str:
         return "met" if good else "**not met**"
@@ -215,7 +267,8 @@ def section(r: dict) -> str:
             f"with other work: load average {r['load_average']:.1f} at the end). The board is "
             f"`utrf emulate` in its own process, streaming at {r['rate_hz']} Hz; the dashboard "
             "(`utrf dashboard --port`, default rates: live view up to 30 Hz, paced by the "
-            "page's frames; each chart 5 Hz, one chart a frame) with one "
+            "page's frames; each chart 5 Hz, one an update; the 3D hand drawn when it moved) "
+            "with one "
             f"page open in headless chromium, for {r['seconds']:.0f} s while the page moves the "
             f"hand through four poses ({r['samples']} samples reached the server).",
             "",
@@ -239,6 +292,18 @@ def section(r: dict) -> str:
             f"busy thread gets about {200 / max(r['load_average'], 1):.0f} % of a core; above "
             "2 the figures measure that starvation as much as the dashboard. Re-measure on a "
             "quiet machine.",
+            "",
+            "Per unit of work (load moves these less than the shares of a core): the server "
+            f"spent {r['server_us_per_sample']:.0f} us of CPU per sample received (its event "
+            f"loop {100 * r['server_loop_cpu_core']:.1f} % of a core, the Hand's threads "
+            f"{100 * r['server_other_cpu_core']:.1f} %), the page's renderer "
+            f"{r['renderer_ms_per_frame']:.1f} ms per frame drawn, chromium's GPU process "
+            f"{100 * r['browser_cpu_by_kind'].get('gpu-process', 0.0):.0f} % of a core; the 3D "
+            f"hand was drawn {r['pushed'].get('hand3d', 0) / r['seconds']:.1f} times a second. "
+            "The latency in parts (p50 / p99, ms): the sample's age when the server sent it "
+            f"{parts['to_push'][0]:.1f} / {parts['to_push'][1]:.1f}, from then to the page's "
+            f"DOM {parts['push_to_dom'][0]:.1f} / {parts['push_to_dom'][1]:.1f}, from then to "
+            f"the frame drawn {parts['dom_to_frame'][0]:.1f} / {parts['dom_to_frame'][1]:.1f}.",
             "",
             "Latency: the probe takes the time after the frame that drew each new sample "
             "(`requestAnimationFrame`, then a task) minus the sample's board time on the host's "

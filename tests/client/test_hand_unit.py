@@ -379,3 +379,33 @@ def test_tip_model_interpolates_as_numpy_does_to_the_bit() -> None:
         [model.tip(i, t)[0] for i, t in enumerate([0.1, 0.2, 0.3, 0.4, 0.5])],
         [model.tip(i, t)[1] for i, t in enumerate([0.1, 0.2, 0.3, 0.4, 0.5])],
     )
+
+
+def test_each_sample_takes_the_modes_and_faults_of_the_status_it_is_given() -> None:
+    """from_message keeps the last status's modes and faults as enums (samples come at
+    1 kHz, a status rarely): a new status, or none, must still be the one a sample shows."""
+    from utrf.hand.state import HandState
+
+    names = ("thumb", "index", "middle", "ring", "little")
+    msg = M.State(board_time=1.0, status_seq=2, theta2=(0.1,) * 5, target=(0.2,) * 5,
+                  duty_a=(0.3,) * 5, duty_b=(0.0,) * 5)  # fmt: skip
+    hold = M.Status(change=2, mode=(M.ControlMode.POSITION,) * 5, faults=(M.FaultBits(0),) * 5)
+    stall = M.Status(
+        change=3,
+        mode=(M.ControlMode.BRAKE, *(M.ControlMode.POSITION,) * 4),
+        faults=(M.FaultBits.STALL, *(M.FaultBits(0),) * 4),
+    )
+    for status, mode, faults in [
+        (hold, M.ControlMode.POSITION, 0),
+        (hold, M.ControlMode.POSITION, 0),
+        (stall, M.ControlMode.BRAKE, M.FaultBits.STALL),
+        (None, M.ControlMode.COAST, 0),
+        (hold, M.ControlMode.POSITION, 0),
+    ]:
+        st = HandState.from_message(msg, names, status)
+        assert (st[0].mode, int(st[0].faults)) == (mode, int(faults))
+        assert type(st[0].mode) is M.ControlMode and type(st[0].faults) is M.FaultBits
+        assert st[1].mode == (M.ControlMode.COAST if status is None else M.ControlMode.POSITION)
+        assert st.status_current == (status is hold)
+    three = HandState.from_message(msg, names[:3], stall)  # fewer fingers, same status
+    assert [f.mode for f in three] == [M.ControlMode.BRAKE, *(M.ControlMode.POSITION,) * 2]

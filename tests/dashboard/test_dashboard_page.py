@@ -52,6 +52,8 @@ def test_page_loads_live_against_the_emulated_board(first: WebDriver) -> None:
 
 
 def test_a_pose_button_moves_the_hand(first: WebDriver, dashboard: Dashboard) -> None:
+    scene = first.find_element(By.CSS_SELECTOR, ".nicegui-scene")
+    hand_before = scene.screenshot_as_png
     click(first, ".utrf-pose-fist")
     st = dashboard.wait_status(
         lambda s: (
@@ -63,6 +65,8 @@ def test_a_pose_button_moves_the_hand(first: WebDriver, dashboard: Dashboard) ->
     assert st["sent"].get("pose") == 1
     assert {f["mode"] for f in st["fingers"].values()} <= {"POSITION"}
     time.sleep(0.5)  # the page catches up for the picture
+    # the 3D hand is drawn when it moves (not on a clock): it shows the fist
+    assert scene.screenshot_as_png != hand_before
     screenshot(first, "pose-fist")
 
 

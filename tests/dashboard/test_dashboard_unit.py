@@ -131,6 +131,25 @@ def test_the_ring_decimates_for_the_eye_and_keeps_the_newest() -> None:
     np.testing.assert_array_equal(s.theta2[:, 0], s.board_time)
 
 
+def test_the_ring_keeps_each_fingers_fields_apart() -> None:
+    ring = SampleRing(3, 100)
+    mode = m.ControlMode.POSITION
+    for k in range(10):
+        fingers = tuple(
+            FingerState("f", i, k + i, 10 * (k + i), 0.1 * i, 0.01 * i, mode, m.FaultBits(0), 0, 0)
+            for i in range(3)
+        )
+        ring.add(HandState(board_time=k * 1e-3, host_time=0.0, seq=k, fingers=fingers))
+    s = ring.series(1.0, points_per_s=1000)
+    assert s.theta2.shape == (10, 3)
+    k = np.arange(10)[:, None]
+    i = np.arange(3)[None, :]
+    np.testing.assert_allclose(s.theta2, k + i)
+    np.testing.assert_allclose(s.target, 10 * (k + i))
+    np.testing.assert_allclose(s.duty_a, np.broadcast_to(0.1 * i, (10, 3)))
+    np.testing.assert_allclose(s.duty_b, np.broadcast_to(0.01 * i, (10, 3)))
+
+
 def test_one_page_controls_the_others_watch() -> None:
     hand = FakeHand()
     hub = DashboardHub(hand)  # type: ignore[arg-type]

@@ -1,7 +1,8 @@
 """The hand in 3D on the page (NiceGUI's ``ui.scene``, three.js): the palm and each finger's
 three links placed as the MJCF places them (``utrf/data/mjcf.toml``), each joint a group
 turned by its angle on the rigid coupling (θ_i = q / R_i from the measured Joint-2 angle).
-Only joints that moved are sent: a hand at rest costs nothing."""
+Only joints that moved are sent, and the scene is drawn when they moved (:meth:`Hand3D.draw_js`)
+or the view is dragged, not on a clock: a hand at rest costs nothing."""
 
 from __future__ import annotations
 
@@ -16,12 +17,17 @@ from utrf.models import kinematics
 from utrf.models.geometry import HandGeometry
 from utrf.models.mjcf_layout import load_layout
 
-#: three.js redraws the scene this often (software WebGL on a headless machine is costly)
-SCENE_FPS = 15
+#: three.js's own render loop (NiceGUI's) at this rate, only to catch what the page does not
+#: ask for (a resize, the camera's first placement): the page draws it when the hand moved
+#: and while the view is dragged (software WebGL on a machine without a GPU is costly)
+SCENE_FPS = 1
+#: at most this many draws a second while the hand moves (as NiceGUI's loop drew it before)
+DRAW_HZ = 15.0
 #: metres to the scene's units
 SCALE = 10.0
-#: a joint is turned on the page when it moved more than this (rad)
-RESOLUTION = 0.004
+#: a finger is turned on the page when its Joint-2 angle moved more than this from the angle
+#: shown (rad, 0.6 degree): above the one-count dither of a finger at rest (docs/dashboard.md)
+RESOLUTION = math.radians(0.6)
 COLOR = "#5b8fd9"
 FAULT_COLOR = "#d9534f"
 
@@ -56,8 +62,14 @@ class Hand3D:
         self.scene.move_camera(
             x=2.2, y=-2.6, z=2.4, look_at_x=0.3, look_at_y=0.0, look_at_z=0.3, duration=0.0
         )
-        self._shown = [[math.nan] * 3 for _ in hand.fingers]
+        self._shown = [math.nan] * len(hand.fingers)  # each finger's Joint-2 angle shown
         self._faulted = [False] * len(hand.fingers)
+        # once the browser has the scene (and again after a remount), the next update draws
+        # it and installs the drawing on a drag (draw_js), even with the hand at rest
+        self.scene.on("init", self._forget_shown)
+
+    def _forget_shown(self) -> None:
+        self._shown = [math.nan] * len(self.hand.fingers)
 
     def _chain(
         self, lengths: list[float], radius: float, joints: list[Group], links: list[Cylinder]
@@ -74,20 +86,40 @@ class Hand3D:
             if k + 1 < len(lengths):
                 self._chain(lengths, radius, joints, links)
 
-    def show(self, theta2: Sequence[float], faulted: Sequence[bool]) -> None:
+    def draw_js(self) -> str:
+        """JavaScript (an expression) that draws the scene now, as NiceGUI's render loop does
+        a frame, and the first time also draws it at each pointer move or wheel turn over it
+        (the view is dragged or zoomed). Run inside a ``requestAnimationFrame`` callback."""
+        return (
+            f"((s) => {{ if (!s || !s.renderer) return;"
+            " if (!s.utrfDraw) { s.utrfDraw = () => { s.camera_tween?.update();"
+            " s.controls.update(s.clock.getDelta()); s.renderer.render(s.scene, s.camera); };"
+            " let due = false; const later = () => { if (due) return; due = true;"
+            " requestAnimationFrame(() => { due = false; s.utrfDraw(); }); };"
+            " for (const e of ['pointermove', 'pointerup', 'wheel'])"
+            " s.$el.addEventListener(e, later, {passive: true}); }"
+            f" s.utrfDraw(); }})(getElement({self.scene.id}))"
+        )
+
+    def show(self, theta2: Sequence[float], faulted: Sequence[bool]) -> bool:
+        """Turn the joints that moved (and colour a finger by its fault); returns whether
+        anything was sent (the scene is then to be drawn: :meth:`draw_js`)."""
+        sent = False
         # every joint that moved in one message to the page (NiceGUI's own batching, as it
         # uses to resend a scene), not one message and one task per joint
         with getattr(self.scene, "_batch_calls", contextlib.nullcontext)():
             for i, f in enumerate(self.hand.fingers):
-                g = f.geometry
-                lo, hi = g.q_range_m
-                q = min(max(float(theta2[i]) * g.guide_radii_m[1], lo), hi)
-                angles = kinematics.joint_angles(g, q)
-                for k in range(3):
-                    if not abs(angles[k] - self._shown[i][k]) < RESOLUTION:
-                        self._shown[i][k] = float(angles[k])
-                        self._joints[i][k].rotate(0.0, 0.0, float(angles[k]))
+                if not abs(theta2[i] - self._shown[i]) < RESOLUTION:
+                    self._shown[i] = float(theta2[i])
+                    g = f.geometry
+                    lo, hi = g.q_range_m
+                    q = min(max(float(theta2[i]) * g.guide_radii_m[1], lo), hi)
+                    for k, angle in enumerate(kinematics.joint_angles(g, q)):
+                        self._joints[i][k].rotate(0.0, 0.0, float(angle))
+                    sent = True
                 if faulted[i] != self._faulted[i]:
                     self._faulted[i] = bool(faulted[i])
                     for link in self._links[i]:
                         link.material(FAULT_COLOR if faulted[i] else COLOR)
+                    sent = True
+        return sent

@@ -63,17 +63,17 @@ class SampleRing:
         self.capacity = capacity
         self._t = np.zeros(capacity)  # board time
         self._host = np.zeros(capacity)  # host receive time
-        self._v = np.zeros((capacity, 4, fingers))
+        self.fingers = fingers
+        # per finger: theta2, target, duty_a, duty_b (one flat row: the cheapest to fill, on
+        # the Hand's reader thread for every sample)
+        self._v = np.zeros((capacity, fingers * 4))
         self._n = 0  # samples ever written
         self._lock = threading.Lock()
 
     def add(self, st: HandState) -> None:
-        row = [
-            [f.theta2 for f in st.fingers],
-            [f.target for f in st.fingers],
-            [f.duty_a for f in st.fingers],
-            [f.duty_b for f in st.fingers],
-        ]
+        row: list[float] = []
+        for f in st.fingers:
+            row += (f.theta2, f.target, f.duty_a, f.duty_b)
         with self._lock:
             i = self._n % self.capacity
             self._t[i] = st.board_time
@@ -110,8 +110,8 @@ class SampleRing:
                 step = max(1, round(1.0 / (points_per_s * dt))) if dt > 0 else 1
                 idx = idx[len(idx) - 1 :: -step][::-1]
             t = self._t[idx]
-            v = self._v[idx]
-        return Series(t, v[:, 0], v[:, 1], v[:, 2], v[:, 3])
+            v = self._v[idx].reshape(len(idx), self.fingers, 4)
+        return Series(t, v[:, :, 0], v[:, :, 1], v[:, :, 2], v[:, :, 3])
 
 
 class DashboardHub:

@@ -24,14 +24,15 @@ from nicegui import Client, ui
 from nicegui.elements.mixins.disableable_element import DisableableElement
 
 from utrf.dashboard import settings as settings_
-from utrf.dashboard.hand3d import Hand3D
+from utrf.dashboard.hand3d import DRAW_HZ, Hand3D
 from utrf.dashboard.hub import DashboardHub, NotInControl
 from utrf.hand.state import fault_names
 from utrf.models.geometry import HandGeometry
 
 CHART_STYLE = "height: 150px; width: 560px"
-#: resolves in the browser once the next frame is drawn: the page's updates are paced by it
-DRAWN = "new Promise((resolve) => requestAnimationFrame(() => resolve(0)))"
+#: resolves in the browser once the next frame is drawn (first running ``{draw}`` in that
+#: frame's callback): the page's updates are paced by it
+DRAWN = "new Promise((resolve) => requestAnimationFrame(() => {{ {draw}; resolve(0); }}))"
 DRAWN_TIMEOUT_S = 1.0
 
 
@@ -84,6 +85,8 @@ class DashboardPage:
         self.client = client
         self.plot_period = 1.0 / plot_hz
         self._next_plot = [0.0] * len(hub.fingers)  # when each finger's chart is next due
+        self._hand_moved = False  # the 3D hand moved since it was last drawn
+        self._next_hand_draw = 0.0  # when it may be drawn next
         ui.timer(1.0 / ui_hz, self._update)
         self._show_control()
 
@@ -97,7 +100,8 @@ class DashboardPage:
             self.take_button = ui.button("Take control", on_click=self._take).classes("utrf-take")
             ui.space()
             self.board_time = ui.label("board time –").classes("utrf-board-time")
-            # the newest sample's board time on the host's wall clock (ms): the latency probe
+            # the newest sample's board time on the host's wall clock, and when the server
+            # sent it (ms): the latency probe's
             self.sample_wall = ui.label("").classes("utrf-sample-wall hidden")
         ui.label(
             f"If this server stops, the board latches HOST_TIMEOUT after "
@@ -289,29 +293,43 @@ class DashboardPage:
             element.text = text
 
     async def _update(self) -> None:
-        """One update of the page (the live view, and the plots when due), then wait until
-        the browser has drawn it: a browser that draws slower than ``ui_hz`` gets fewer
+        """One update of the page: the live view, then (when due) one chart; each waits until
+        the browser has drawn it, so a browser that draws slower than ``ui_hz`` gets fewer
         updates, never a queue of stale ones (each drawn update is the newest sample)."""
         now = time.monotonic()
-        sent = self._update_live()
-        # at most one chart a frame (ECharts redraws a chart in milliseconds: five at once
-        # would hold a frame back), the one most overdue
+        live = self._update_live()
+        self._hand_moved = self._hand_moved or bool(live)
+        if live is not None:  # the numbers, and the 3D hand in the same frame if it moved
+            # (at most DRAW_HZ a second: a move not drawn yet is drawn at the next update)
+            draw = self._hand_moved and now >= self._next_hand_draw
+            if draw:
+                self._hand_moved = False
+                self._next_hand_draw = now + 1.0 / DRAW_HZ
+                self.hub.pushed["hand3d"] += 1
+            await self._drawn(DRAWN.format(draw=self.hand3d.draw_js() if draw else ""))
+        # then at most one chart (ECharts redraws a chart in milliseconds: not in the frame
+        # of the numbers, nor five at once), the one most overdue; drawn while the next
+        # sample is awaited
         i = int(np.argmin(self._next_plot))
         if now >= self._next_plot[i]:
             self._next_plot[i] = max(self._next_plot[i] + self.plot_period, now)
-            sent = self._update_plot(i) or sent
-        if sent:
-            with contextlib.suppress(TimeoutError):  # a hidden tab draws nothing: go on
-                await self.client.run_javascript(DRAWN, timeout=DRAWN_TIMEOUT_S)
+            if self._update_plot(i) and live is None:
+                await self._drawn(DRAWN.format(draw=""))
 
-    def _update_live(self) -> bool:
+    async def _drawn(self, script: str) -> None:
+        with contextlib.suppress(TimeoutError):  # a hidden tab draws nothing: go on
+            await self.client.run_javascript(script, timeout=DRAWN_TIMEOUT_S)
+
+    def _update_live(self) -> bool | None:
+        """The newest sample's numbers, modes, faults and 3D hand; returns None when there
+        is no new sample, else whether the 3D hand moved."""
         if (self.hub.controller == self.id) != self.in_control or (
             not self.in_control and self.hub.controller is None
         ):
             self._show_control()
         st = self.hub.latest
         if st is None or self._shown.get("t") == st.board_time:
-            return False
+            return None
         self._shown["t"] = st.board_time
         for i, f in enumerate(st.fingers):
             self._set(f"m{i}", self.modes[i], f.mode.name)
@@ -321,12 +339,17 @@ class DashboardPage:
                 f"{math.degrees(f.theta2):6.1f}° → {math.degrees(f.target):6.1f}°, "
                 f"duty {100 * f.duty_a:+4.0f}/{100 * f.duty_b:+4.0f} %",
             )
-            self._set(f"f{i}", self.faults[i], f"faults: {fault_names(int(f.faults))}")
-        self.hand3d.show([f.theta2 for f in st.fingers], [bool(f.faults) for f in st.fingers])
+            if self._shown.get(f"f{i}") != (faults := int(f.faults)):  # named when changed
+                self._shown[f"f{i}"] = faults
+                self.faults[i].text = f"faults: {fault_names(faults)}"
+        moved = self.hand3d.show(
+            [f.theta2 for f in st.fingers], [bool(f.faults) for f in st.fingers]
+        )
         self.board_time.text = f"board time {st.board_time:.3f} s"
-        self.sample_wall.text = f"{1000 * self.hub.wall_time_of(st.board_time):.1f}"
+        sampled = 1000 * self.hub.wall_time_of(st.board_time)
+        self.sample_wall.text = f"{sampled:.1f} {1000 * time.time():.1f}"
         self.hub.pushed["live"] += 1
-        return True
+        return moved
 
     def _update_plot(self, i: int) -> bool:
         """Finger ``i``'s chart: only its series' points, as plain lists (the chart's options,

@@ -123,20 +123,25 @@ class HandState:
             tip_x, tip_y = tips.tips(msg.theta2[:n])
         else:
             tip_x = tip_y = [math.nan] * n
+        modes, faults = _modes_faults(status, n)
+        theta2, target, duty_a, duty_b = msg.theta2, msg.target, msg.duty_a, msg.duty_b
+        # positional and in a list: each telemetry sample (1 kHz) builds five
         fingers = tuple(
-            FingerState(
-                name=names[i],
-                index=i,
-                theta2=msg.theta2[i],
-                target=msg.target[i],
-                duty_a=msg.duty_a[i],
-                duty_b=msg.duty_b[i],
-                mode=m.ControlMode(status.mode[i]) if status else m.ControlMode.COAST,
-                faults=m.FaultBits(status.faults[i]) if status else m.FaultBits(0),
-                tip_x=float(tip_x[i]),
-                tip_y=float(tip_y[i]),
-            )
-            for i in range(n)
+            [
+                FingerState(
+                    names[i],
+                    i,
+                    theta2[i],
+                    target[i],
+                    duty_a[i],
+                    duty_b[i],
+                    modes[i],
+                    faults[i],
+                    float(tip_x[i]),
+                    float(tip_y[i]),
+                )
+                for i in range(n)
+            ]
         )
         return cls(
             board_time=msg.board_time if board_time is None else board_time,
@@ -145,6 +150,26 @@ class HandState:
             fingers=fingers,
             status_current=status is not None and status.change == msg.status_seq,
         )
+
+
+#: the last status's modes and faults as enums (a status changes rarely, samples come at 1 kHz)
+_last_status: tuple[object, tuple[m.ControlMode, ...], tuple[m.FaultBits, ...]] = (None, (), ())
+
+
+def _modes_faults(
+    status: m.Status | None, n: int
+) -> tuple[tuple[m.ControlMode, ...], tuple[m.FaultBits, ...]]:
+    """Each finger's mode and faults of ``status`` (COAST and none when None)."""
+    global _last_status
+    last = _last_status
+    if status is not None and last[0] is status and len(last[1]) == n:
+        return last[1], last[2]
+    if status is None:
+        return (m.ControlMode.COAST,) * n, (m.FaultBits(0),) * n
+    modes = tuple(m.ControlMode(status.mode[i]) for i in range(n))
+    faults = tuple(m.FaultBits(status.faults[i]) for i in range(n))
+    _last_status = (status, modes, faults)
+    return modes, faults
 
 
 class TipModel:
