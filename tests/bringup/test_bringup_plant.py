@@ -103,3 +103,13 @@ def test_a_slow_motors_unresolved_lag_is_not_weakness() -> None:
     slow-motor 0.45: 0.048 s closing, at the fit's bound opening); only its speed is named."""
     got = plant_findings("i", _plant(1.06, 0.048, 0.001), REF)
     assert [f.kind for f in got] == ["slow-motor"]
+
+
+def test_friction_beyond_what_a_late_motor_explains_is_friction() -> None:
+    """Heavy friction also makes the steps from rest late (measured, friction 11 N: 6.5 and
+    3.0 times the model's lag, u_f 0.25); a weak motor's friction duty grows only as its lag."""
+    got = plant_findings("i", _plant(2.6, 0.065, 0.030, 0.249), REF)
+    assert [f.kind for f in got] == ["friction"] and got[0].fixable
+    assert [f.kind for f in plant_findings("i", _plant(2.6, 0.065, 0.030, 0.1), REF)] == [
+        "weak-motor"
+    ]

@@ -35,7 +35,11 @@ def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> 
     # a slow motor's lag is far under one count (v τ): neither is judged from it
     resolved = p.K >= SLOW * ref.K
     loose = resolved and slack > SLACK_RAD
-    weak = resolved and not loose and math.sqrt(flex * ext) > WEAK_LAG
+    late = math.sqrt(flex * ext)
+    # a weaker motor takes more duty for the same friction as it comes up to speed later (both
+    # ∝ 1 / F_stall): a friction duty beyond what its lag explains is friction, not weakness
+    explained = ref.u_f * late + FRICTION_DUTY
+    weak = resolved and not loose and late > WEAK_LAG and not p.u_f > explained
     if loose:
         out.append(
             Finding(
@@ -55,7 +59,7 @@ def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> 
             Finding(
                 name,
                 "weak-motor",
-                f"from rest the finger takes {math.sqrt(flex * ext):.1f} times the time to come "
+                f"from rest the finger takes {late:.1f} times the time to come "
                 "up to speed (both ways) that the model's motors take at its speed: its motors "
                 "give less force (a weaker motor or gearing, a current-limited supply or driver)",
                 "gains tuned for the lag measured (the derivative's zero on it); if it must "
