@@ -29,7 +29,7 @@ GOAL_WORST_RAD = math.radians(3.0)
 #: the take-up at the pretension: at least, at most (s); still: every finger within this (rad)
 #: over the last ``TAKE_UP_STILL_S``
 TAKE_UP_S = (0.5, 3.0)
-TAKE_UP_STILL_RAD = 0.005
+TAKE_UP_STILL_RAD = 0.025  # three counts of the reading as it comes (7.7 mrad each)
 TAKE_UP_STILL_S = 0.3
 
 

@@ -46,6 +46,9 @@ BACKWARD_RAD = 0.03
 SPEED_SPREAD = 1.2
 #: a span between the stops longer than the model's by this: the reading's scale is wrong
 SPAN_EXTRA_RAD = 0.1
+#: a closing search that stops before this fraction of the model's span has stuck (no build's
+#: range is that short: narrow-range stops at most 12 % early)
+JAM_SPAN = 0.5
 #: the steps of a finger's bring-up, in order
 UPTO = ("wiring", "stops", "plant", "check")
 
@@ -195,6 +198,22 @@ def _bring_up_finger(
         # from the open stop, how long the motor ran before Joint 2 moved (the slack)
         "take_up_s": take_up_s(closed.first, 1),
     }
+    if span < JAM_SPAN * (hi - lo):
+        res.findings.append(
+            Finding(
+                name,
+                "friction",
+                f"closing from its open stop, the finger stopped after {math.degrees(span):.0f}° "
+                f"of the joint's {math.degrees(hi - lo):.0f}° at the search's duty: no build's "
+                "range is that short, it stuck: too much friction for the bring-up's duty bound "
+                "(a tight guide, tendon or carriage) or a jammed joint",
+                "free the joint, the guides and the carriages and check the tendons; then run "
+                "the bring-up again",
+                False,
+                {"span_rad": span, "model_span_rad": hi - lo},
+            )
+        )
+        return res
     if span > (hi - lo) + SPAN_EXTRA_RAD:
         res.findings.append(
             Finding(
@@ -323,7 +342,7 @@ def _bring_up_finger(
     if upto == "plant":
         return res
     step(f"{name}: closed loop")
-    a, b = mid - 0.25, mid + 0.25
+    a, b = max(th_min, mid - 0.25), min(th_max, mid + 0.25)  # inside a narrow range's limits
     hand.set_gains(f, max_duty=min(g["max_duty"], bounds.duty))
     hand.set_gains(f, **{k: g[k] for k in tuned.gains})
     hand.set_motion(f, **{k: saved["motion"][k] for k in tuned.motion})
