@@ -100,7 +100,9 @@ def wiring(
         held = True
         for sign in (1, -1):
             w.moved[(invert, sign)] = None
-            for duty, seconds in TRY_PULSES:
+            for i, (duty, seconds) in enumerate(TRY_PULSES):
+                if i == len(TRY_PULSES) - 1 and not held:
+                    break  # a motor pushes: the longest pulse would only run it to the stroke's end
                 duty = min(duty, bounds.duty - pretension)
                 seconds = min(seconds, bounds.pulse_s)
                 rest = pulse(hand, rec, f, 0.0, bounds, seconds=seconds)
