@@ -284,35 +284,20 @@ def _bring_up_finger(
         closing = replace(closing, theta2=th)
     curve = reading_curve(closing, to_mid)
     res.stops.update({f"curve_{k}": v for k, v in curve.items()})
-    if curve["backward_rad"] > BACKWARD_RAD or curve["spread"] > SPEED_SPREAD:
-        # the zero and the range came from this reading: not findings of their own
-        res.findings = [
-            fd for fd in res.findings if fd.kind not in ("magnet-offset", "narrow-range")
-        ]
-        res.findings.append(
-            Finding(
-                name,
-                "not-monotonic",
-                "driven at one duty across its travel, the finger's reading "
-                + (
-                    f"went back {math.degrees(curve['backward_rad']):.1f}°"
-                    if curve["backward_rad"] > BACKWARD_RAD
-                    else f"ran {curve['spread']:.2f} times faster in places than in others"
-                )
-                + " where the model's turns at a steady speed: the encoder's magnet is "
-                "off-centre on the shaft or loose (the reading is not the joint's angle, so the "
-                "stops and the zero from it are not trusted)",
-                "centre the magnet on Joint 2's shaft and glue it; then run the bring-up again",
-                False,
-                dict(curve),
-            )
-        )
-        return res
+    uneven = curve["backward_rad"] > BACKWARD_RAD or curve["spread"] > SPEED_SPREAD
     settle(hand, 0.1)
     plant, _ = identify(hand, rec, f, bounds, mid)
     res.plant = plant.to_dict()
     res.plant["slack_rad"] = slack_rad(plant, model_plant(hand, f), res.stops["take_up_s"])
     res.findings += plant_findings(name, plant, model_plant(hand, f), res.plant["slack_rad"])
+    if uneven and not any(fd.kind == "slack" for fd in res.findings):
+        # not Joint 2 hanging loose between its strands (slack, which runs the legs unevenly
+        # too): the reading is not the joint's angle, and the zero and range from it are void
+        res.findings = [
+            fd for fd in res.findings if fd.kind in ("encoder-inverted", "leads-swapped")
+        ]
+        res.findings.append(_uneven_finding(name, curve))
+        return res
     if not (plant.K > 0 and math.isfinite(plant.tau)):
         res.findings.append(
             Finding(
@@ -356,6 +341,25 @@ def _bring_up_finger(
     brake(hand, [f])
     res.board_time_s = hand.state().board_time - t0
     return res
+
+
+def _uneven_finding(name: str, curve: dict[str, float]) -> Finding:
+    how = (
+        f"went back {math.degrees(curve['backward_rad']):.1f}°"
+        if curve["backward_rad"] > BACKWARD_RAD
+        else f"ran {curve['spread']:.2f} times faster in places than in others"
+    )
+    return Finding(
+        name,
+        "not-monotonic",
+        f"driven at one duty across its travel, the finger's reading {how} where the model's "
+        "turns at a steady speed, and Joint 2 is not loose: the encoder's magnet is off-centre "
+        "on the shaft or loose (the reading is not the joint's angle, so the stops and the zero "
+        "from it are not trusted)",
+        "centre the magnet on Joint 2's shaft and glue it; then run the bring-up again",
+        False,
+        dict(curve),
+    )
 
 
 def slack_rad(p: Plant, model: Plant, take_up: float) -> float:
