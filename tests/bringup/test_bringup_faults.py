@@ -32,6 +32,9 @@ CASES = [
     # late from rest too (6.5 and 3 times the model's lag), but its friction duty is far beyond
     # what a weak motor's lag explains
     ("friction:1=11", "plant", "friction", True),
+    # more than the duty bound moves through the travel: the closing search sticks at once (a
+    # jam); it ends with the motors off and nothing saved
+    ("friction:1=14", "stops", "friction", False),
     # Joint 2 loose between its strands: the motor runs a travel before it leaves the open stop
     ("slack:1=0.0015", "plant", "slack", False),
     # the reading turns further between the stops than the joint can
