@@ -23,9 +23,18 @@ CASES = [
     ("magnet-offset:1=0.4", "stops", "magnet-offset", True),
     ("narrow-range:1=1.3", "stops", "narrow-range", True),
     ("slow-motor:1=0.45", "plant", "slow-motor", True),
+    # the slowest the campaign draws: seen only by the wiring's longest pulse at the duty bound,
+    # its stops by a search of more legs
+    ("slow-motor:1=0.32", "plant", "slow-motor", True),
     # from its steps from rest: a weaker motor comes up to speed later than the model's
     ("weak-motor:1=0.3", "plant", "weak-motor", True),
     ("friction:1=8", "plant", "friction", True),
+    # late from rest too (6.5 and 3 times the model's lag), but its friction duty is far beyond
+    # what a weak motor's lag explains
+    ("friction:1=11", "plant", "friction", True),
+    # more than the duty bound moves through the travel: the closing search sticks at once (a
+    # jam); it ends with the motors off and nothing saved
+    ("friction:1=14", "stops", "friction", False),
     # Joint 2 loose between its strands: the motor runs a travel before it leaves the open stop
     ("slack:1=0.0015", "plant", "slack", False),
     # the reading turns further between the stops than the joint can

@@ -103,3 +103,29 @@ def test_a_slow_motors_unresolved_lag_is_not_weakness() -> None:
     slow-motor 0.45: 0.048 s closing, at the fit's bound opening); only its speed is named."""
     got = plant_findings("i", _plant(1.06, 0.048, 0.001), REF)
     assert [f.kind for f in got] == ["slow-motor"]
+
+
+def test_friction_beyond_what_a_late_motor_explains_is_friction() -> None:
+    """Heavy friction also makes the steps from rest late (measured, friction 11 N: 6.5 and
+    3.0 times the model's lag, u_f 0.25); a weak motor's friction duty grows only as its lag."""
+    got = plant_findings("i", _plant(2.6, 0.065, 0.030, 0.249), REF)
+    assert [f.kind for f in got] == ["friction"] and got[0].fixable
+    assert [f.kind for f in plant_findings("i", _plant(2.6, 0.065, 0.030, 0.1), REF)] == [
+        "weak-motor"
+    ]
+
+
+@pytest.mark.parametrize(
+    ("flex", "ext", "slack"),
+    # measured lag ratios of slack fingers of campaign seeds 4, 1 and 7 (the travel before
+    # Joint 2 left the open stop under the threshold on each)
+    [(0.09, 27.3, True), (0.13, 8.31, True), (0.11, 19.4, True),
+     # and of fingers without slack: spread builds, a weak motor, friction
+     (2.69, 0.14, False), (0.14, 2.27, False), (0.38, 3.97, False), (3.42, 9.21, False),
+     (6.5, 3.0, False)],
+)  # fmt: skip
+def test_slack_shows_as_a_lag_one_way_only(flex: float, ext: float, slack: bool) -> None:
+    tau = REF.tau  # K as the model's: the ratios are the lags over the model's
+    p = _plant(REF.K, flex * tau, ext * tau, 0.03 if ext < 5 else 0.05)
+    kinds = [f.kind for f in plant_findings("i", p, REF, 0.01)]
+    assert ("slack" in kinds) is slack, kinds

@@ -17,9 +17,9 @@ from utrf.protocol import messages as m
 
 #: a channel whose reading moves this much more under a pulse than at rest has moved
 MOVED_RAD = 0.05
-#: pulse duties tried in turn to see a finger move (a stiff or weak finger needs more)
-TRY_DUTIES = (0.2, 0.35)
-WIRING_PULSE_S = 0.25
+#: pulses (duty, s) tried in turn to see a finger move: a stiff, weak or slow finger needs
+#: more (the last: the duty bound less the pretension, for the diagnostic pulse's longest)
+TRY_PULSES = ((0.2, 0.25), (0.35, 0.25), (0.4, 0.4))
 #: both motors pull this hard, balanced, this long (as built; then the other way, after a
 #: round that may have pushed the carriages to their ends) to take up the tendons
 TAKE_UP = (0.1, 0.35)
@@ -29,6 +29,8 @@ HELD_RAD = 0.1
 #: a stop is searched for at this duty, for at most this long per leg
 STOP_DUTY = 0.35
 STOP_LEG_S = 4.0
+#: legs a search may take while the finger still moves (a slow motor crosses the travel late)
+STOP_LEGS = 5
 
 
 @dataclass
@@ -98,10 +100,14 @@ def wiring(
         held = True
         for sign in (1, -1):
             w.moved[(invert, sign)] = None
-            for duty in TRY_DUTIES:
-                rest = pulse(hand, rec, f, 0.0, bounds, seconds=WIRING_PULSE_S)
+            for i, (duty, seconds) in enumerate(TRY_PULSES):
+                if i == len(TRY_PULSES) - 1 and not held:
+                    break  # a motor pushes: the longest pulse would only run it to the stroke's end
+                duty = min(duty, bounds.duty - pretension)
+                seconds = min(seconds, bounds.pulse_s)
+                rest = pulse(hand, rec, f, 0.0, bounds, seconds=seconds)
                 settle(hand, 0.05)
-                drive = pulse(hand, rec, f, sign * duty, bounds, seconds=WIRING_PULSE_S)
+                drive = pulse(hand, rec, f, sign * duty, bounds, seconds=seconds)
                 w.traces += [rest, drive]
                 settle(hand, 0.05)
                 hand.clear_faults([f])
@@ -293,7 +299,7 @@ def find_stop(
     limit (not a stop) ended the leg."""
     lim = hand.limits(f)
     trace = first = None
-    for _ in range(3):
+    for _ in range(STOP_LEGS):
         st = hand.state().fingers[f]
         cfg = hand.finger_config(f)
         here = _raw(st.theta2, cfg.encoder_offset, invert)

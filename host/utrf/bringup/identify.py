@@ -279,9 +279,10 @@ def check(hand: Hand, rec: Recorder, f: int, a: float, b: float, label: str) -> 
     settle_s = math.nan
     start = math.nan
     try:
-        hand.move({name: a}, duration=0.8, wait=False)
-        hand.clock.sleep(0.8)
-        hand.wait_settled(timeout=2.0, fingers=[f])
+        if abs(hand.state().fingers[f].theta2 - a) > 0.02:  # not already there (a check before)
+            hand.move({name: a}, duration=0.8, wait=False)
+            hand.clock.sleep(0.8)
+            hand.wait_settled(timeout=2.0, fingers=[f])
         start = hand.state().board_time
         hand.move({name: b}, duration=0.8, wait=False)
         hand.clock.sleep(0.8)

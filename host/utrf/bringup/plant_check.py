@@ -18,6 +18,11 @@ SLACK_RAD = 0.025
 #: a weak motor is late both ways: the two steps' lag over the model motors' (at the speed
 #: measured), their geometric mean above this (margins in docs/bringup.md)
 WEAK_LAG = 3.5
+#: slack seen from the steps from rest: one way this many times the model motors' lag while the
+#: other way's is under ``PROMPT_LAG`` (Joint 2 loose: it starts at once one way and waits for
+#: the strand the other); margins in docs/bringup.md
+ONE_WAY_LAG = 6.0
+PROMPT_LAG = 0.5
 
 
 def lag_ratios(p: Plant, ref: Plant) -> dict[str, float]:
@@ -34,16 +39,27 @@ def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> 
     flex, ext = r.get("flex", math.nan), r.get("extend", math.nan)
     # a slow motor's lag is far under one count (v τ): neither is judged from it
     resolved = p.K >= SLOW * ref.K
-    loose = resolved and slack > SLACK_RAD
-    weak = resolved and not loose and math.sqrt(flex * ext) > WEAK_LAG
+    one_way = max(flex, ext) > ONE_WAY_LAG and min(flex, ext) < PROMPT_LAG
+    loose = resolved and (slack > SLACK_RAD or one_way)
+    late = math.sqrt(flex * ext)
+    # a weaker motor takes more duty for the same friction as it comes up to speed later (both
+    # ∝ 1 / F_stall): a friction duty beyond what its lag explains is friction, not weakness
+    explained = ref.u_f * late + FRICTION_DUTY
+    weak = resolved and not loose and late > WEAK_LAG and not p.u_f > explained
     if loose:
         out.append(
             Finding(
                 name,
                 "slack",
-                f"from the open stop the motor runs {slack:.3f} rad of Joint 2's travel beyond "
-                "its own lag before Joint 2 moves: slack in the coupling tendon (Tendon 2, "
-                "Joint 1 to Joint 2) lets Joint 2 hang free between its strands",
+                (
+                    f"from the open stop the motor runs {slack:.3f} rad of Joint 2's travel "
+                    "beyond its own lag before Joint 2 moves"
+                    if slack > SLACK_RAD
+                    else f"from rest Joint 2 follows the motor at once one way and "
+                    f"{max(flex, ext):.0f} times the model's lag late the other"
+                )
+                + ": slack in the coupling tendon (Tendon 2, Joint 1 to Joint 2) lets Joint 2 "
+                "hang free between its strands",
                 "tighten Tendon 2 and run the bring-up again (Joint 2 is loose between its "
                 "strands: no gain holds it)",
                 False,
@@ -55,7 +71,7 @@ def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> 
             Finding(
                 name,
                 "weak-motor",
-                f"from rest the finger takes {math.sqrt(flex * ext):.1f} times the time to come "
+                f"from rest the finger takes {late:.1f} times the time to come "
                 "up to speed (both ways) that the model's motors take at its speed: its motors "
                 "give less force (a weaker motor or gearing, a current-limited supply or driver)",
                 "gains tuned for the lag measured (the derivative's zero on it); if it must "

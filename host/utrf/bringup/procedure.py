@@ -46,6 +46,9 @@ BACKWARD_RAD = 0.03
 SPEED_SPREAD = 1.2
 #: a span between the stops longer than the model's by this: the reading's scale is wrong
 SPAN_EXTRA_RAD = 0.1
+#: a closing search that stops before this fraction of the model's span has stuck (no build's
+#: range is that short: narrow-range stops at most 12 % early)
+JAM_SPAN = 0.5
 #: the steps of a finger's bring-up, in order
 UPTO = ("wiring", "stops", "plant", "check")
 
@@ -195,6 +198,22 @@ def _bring_up_finger(
         # from the open stop, how long the motor ran before Joint 2 moved (the slack)
         "take_up_s": take_up_s(closed.first, 1),
     }
+    if span < JAM_SPAN * (hi - lo):
+        res.findings.append(
+            Finding(
+                name,
+                "friction",
+                f"closing from its open stop, the finger stopped after {math.degrees(span):.0f}° "
+                f"of the joint's {math.degrees(hi - lo):.0f}° at the search's duty: no build's "
+                "range is that short, it stuck: too much friction for the bring-up's duty bound "
+                "(a tight guide, tendon or carriage) or a jammed joint",
+                "free the joint, the guides and the carriages and check the tendons; then run "
+                "the bring-up again",
+                False,
+                {"span_rad": span, "model_span_rad": hi - lo},
+            )
+        )
+        return res
     if span > (hi - lo) + SPAN_EXTRA_RAD:
         res.findings.append(
             Finding(
@@ -265,35 +284,20 @@ def _bring_up_finger(
         closing = replace(closing, theta2=th)
     curve = reading_curve(closing, to_mid)
     res.stops.update({f"curve_{k}": v for k, v in curve.items()})
-    if curve["backward_rad"] > BACKWARD_RAD or curve["spread"] > SPEED_SPREAD:
-        # the zero and the range came from this reading: not findings of their own
-        res.findings = [
-            fd for fd in res.findings if fd.kind not in ("magnet-offset", "narrow-range")
-        ]
-        res.findings.append(
-            Finding(
-                name,
-                "not-monotonic",
-                "driven at one duty across its travel, the finger's reading "
-                + (
-                    f"went back {math.degrees(curve['backward_rad']):.1f}°"
-                    if curve["backward_rad"] > BACKWARD_RAD
-                    else f"ran {curve['spread']:.2f} times faster in places than in others"
-                )
-                + " where the model's turns at a steady speed: the encoder's magnet is "
-                "off-centre on the shaft or loose (the reading is not the joint's angle, so the "
-                "stops and the zero from it are not trusted)",
-                "centre the magnet on Joint 2's shaft and glue it; then run the bring-up again",
-                False,
-                dict(curve),
-            )
-        )
-        return res
+    uneven = curve["backward_rad"] > BACKWARD_RAD or curve["spread"] > SPEED_SPREAD
     settle(hand, 0.1)
     plant, _ = identify(hand, rec, f, bounds, mid)
     res.plant = plant.to_dict()
     res.plant["slack_rad"] = slack_rad(plant, model_plant(hand, f), res.stops["take_up_s"])
     res.findings += plant_findings(name, plant, model_plant(hand, f), res.plant["slack_rad"])
+    if uneven and not any(fd.kind == "slack" for fd in res.findings):
+        # not Joint 2 hanging loose between its strands (slack, which runs the legs unevenly
+        # too): the reading is not the joint's angle, and the zero and range from it are void
+        res.findings = [
+            fd for fd in res.findings if fd.kind in ("encoder-inverted", "leads-swapped")
+        ]
+        res.findings.append(_uneven_finding(name, curve))
+        return res
     if not (plant.K > 0 and math.isfinite(plant.tau)):
         res.findings.append(
             Finding(
@@ -323,7 +327,7 @@ def _bring_up_finger(
     if upto == "plant":
         return res
     step(f"{name}: closed loop")
-    a, b = mid - 0.25, mid + 0.25
+    a, b = max(th_min, mid - 0.25), min(th_max, mid + 0.25)  # inside a narrow range's limits
     hand.set_gains(f, max_duty=min(g["max_duty"], bounds.duty))
     hand.set_gains(f, **{k: g[k] for k in tuned.gains})
     hand.set_motion(f, **{k: saved["motion"][k] for k in tuned.motion})
@@ -337,6 +341,25 @@ def _bring_up_finger(
     brake(hand, [f])
     res.board_time_s = hand.state().board_time - t0
     return res
+
+
+def _uneven_finding(name: str, curve: dict[str, float]) -> Finding:
+    how = (
+        f"went back {math.degrees(curve['backward_rad']):.1f}°"
+        if curve["backward_rad"] > BACKWARD_RAD
+        else f"ran {curve['spread']:.2f} times faster in places than in others"
+    )
+    return Finding(
+        name,
+        "not-monotonic",
+        f"driven at one duty across its travel, the finger's reading {how} where the model's "
+        "turns at a steady speed, and Joint 2 is not loose: the encoder's magnet is off-centre "
+        "on the shaft or loose (the reading is not the joint's angle, so the stops and the zero "
+        "from it are not trusted)",
+        "centre the magnet on Joint 2's shaft and glue it; then run the bring-up again",
+        False,
+        dict(curve),
+    )
 
 
 def slack_rad(p: Plant, model: Plant, take_up: float) -> float:
