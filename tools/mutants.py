@@ -240,6 +240,9 @@ def prepare(m: Mutant | None) -> Path:
         src = REPO / "build" / name
         if src.is_dir():
             shutil.copytree(src, root / "build" / name, symlinks=True)
+    # This checkout's environment, not a set-up of the copy's own: a new .venv and its pip
+    # install took minutes a mutant (the tests' `make` runs the set-up too).
+    (root / ".venv").symlink_to(REPO / ".venv")
     if m is None:
         return root
     for e in m.edits:
@@ -265,9 +268,12 @@ def _pytest(root: Path, timeout: float, args: list[str]) -> subprocess.Completed
     )
 
 
+BUILT = ("firmware", "firmware-host", "emulator")
+
+
 def _build(root: Path) -> subprocess.CompletedProcess:
     return subprocess.run(
-        ["make", "-s", "--no-print-directory", "firmware", "firmware-host", "emulator"],
+        ["make", "-s", "--no-print-directory", "SETUP_DONE=1", *BUILT],
         cwd=root,
         capture_output=True,
         text=True,
