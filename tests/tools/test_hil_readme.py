@@ -19,9 +19,12 @@ REPO = Path(__file__).resolve().parents[2]
 def firmware_id0() -> Path:
     """The firmware with build id 0, as make hil-readme runs it (the id is the git commit,
     whose bytes in identify would make the table depend on the commit)."""
+    # The paths as make hil-readme names them (relative): the objects' dependency files name
+    # their targets so, and an absolute BUILD would not see them (a header changed, a stale
+    # object kept: an ELF that did not answer).
+    cmd = ["make", "-s", "--no-print-directory", "BUILD=build/id0", "FW_GIT_ID=",
+           "build/id0/firmware/utrf.elf"]  # fmt: skip
     elf = REPO / "build" / "id0" / "firmware" / "utrf.elf"
-    build = REPO / "build" / "id0"
-    cmd = ["make", "-s", "--no-print-directory", f"BUILD={build}", "FW_GIT_ID=", str(elf)]
     subprocess.run(cmd, cwd=REPO, check=True, capture_output=True)
     return elf
 
