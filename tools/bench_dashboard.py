@@ -118,7 +118,9 @@ def browser_kinds(procs: list[psutil.Process]) -> dict[int, str]:
     return out
 
 
-def measure(elf: Path | None, seconds: float, rate: int, tmp: Path) -> dict:
+def measure(
+    elf: Path | None, seconds: float, rate: int, tmp: Path, extra: list[str] | None = None
+) -> dict:
     url_file = tmp / "emulator.url"
     emu_cmd = [sys.executable, "-m", "utrf", "emulate", "--no-pty", "--url-file", str(url_file),
                "--status-interval", "0", "--no-commands"]  # fmt: skip
@@ -147,6 +149,7 @@ def measure(elf: Path | None, seconds: float, rate: int, tmp: Path) -> dict:
                 str(rate),
                 "--record-dir",
                 str(tmp),
+                *(extra or []),
             ],
             tmp / "dashboard.log",
         )
@@ -323,9 +326,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rate", type=int, default=1000)
     p.add_argument("--update", type=Path, help="write the section into this Markdown file")
     p.add_argument("--json", type=Path)
+    p.add_argument(
+        "--dashboard-arg",
+        action="append",
+        default=[],
+        help="an option for `utrf dashboard` (repeatable, e.g. --dashboard-arg=--plot-hz=2)",
+    )
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="utrf-bench-dash-") as tmp:
-        r = measure(args.elf, args.seconds, args.rate, Path(tmp))
+        r = measure(args.elf, args.seconds, args.rate, Path(tmp), args.dashboard_arg)
     print(json.dumps(r, indent=1))
     text = section(r)
     print(text)
