@@ -104,7 +104,9 @@ def test_paced_to_the_wall_clock(fixture_elf: Path) -> None:
         board.run_for(0.5)
         wall = time.monotonic() - t0
         assert board.sim_time - s0 >= 0.5
-        assert wall >= 0.5 - 2e-3
+        # A board that lagged before t0 (a starved thread) catches up by running ahead of
+        # real time, at most the 0.1 s it keeps before it accepts the lag instead
+        assert wall >= 0.5 - 0.1 - 2e-3
         assert board.realtime_factor < 1.01
 
 
