@@ -244,7 +244,7 @@ static_assert(sizeof g_rx_buf == 128, "the receive ring is 128 slots");
 // a millisecond more each time its fraction passes 1.
 namespace {
 volatile uint32_t g_ms;
-uint8_t g_ms_fract;           // eighths of a microsecond ... of the overflows' 24 us, in 8 us
+uint8_t g_ms_fract;           // each overflow's 24 us past a millisecond, in 8 us (125: 1 ms)
 volatile uint8_t g_t0_overflows;  // wraps: the idle sleep's "a millisecond since"
 }  // namespace
 
@@ -330,9 +330,10 @@ __attribute__((always_inline)) inline uint16_t cycles_from(const Stamp& start) {
 }
 
 // Runs ticks while any is due. Called with interrupts disabled; returns with them disabled.
-// Timer 0's overflow nests in the tick (it blocks nothing). The UART's interrupts stay on: receiving, or bytes
-// would be lost; transmitting, or the line would stand idle for the tick's 250-370 us and the
-// 1 kHz state stream (39 bytes, 0.39 ms of line a frame) would lose frames behind replies.
+// Timer 0's overflow nests in the tick (it blocks nothing). The UART's interrupts stay on:
+// receiving, or bytes would be lost; transmitting, or the line would stand idle for the tick's
+// 250-370 us and the 1 kHz state stream (39 bytes, 0.39 ms of line a frame) would lose frames
+// behind replies.
 // The tick's measured time includes those nested interrupts.
 // One tick, timed. Out of line, so that its timing arithmetic is not hoisted into registers
 // the loop below would keep (and save) across the tick's call; the start is in memory for the
