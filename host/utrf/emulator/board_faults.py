@@ -5,10 +5,9 @@ A mixin of :class:`utrf.emulator.board.EmulatedBoard`; every method holds the bo
 from __future__ import annotations
 
 import math
+import random
 from contextlib import AbstractContextManager
 from typing import TYPE_CHECKING, Any
-
-import numpy as np
 
 from utrf.emulator import _native
 from utrf.emulator._native import F_CPU_HZ
@@ -98,11 +97,8 @@ class BoardFaults:
         if isinstance(data, int):
             if data < 0:
                 raise EmulatorError(f"noise burst length must be >= 0, got {data}")
-            data = (
-                np.random.default_rng([self.seed, int(self._cycle)])
-                .integers(0, 256, data, dtype=np.uint8)
-                .tobytes()
-            )
+            # stdlib random: numpy.random loads lazily, and its first load mid-soak looked like a leak
+            data = random.Random(f"{self.seed}:{int(self._cycle)}").randbytes(data)
         d = {"to_board": _native.TO_BOARD, "to_host": _native.TO_HOST}.get(direction)
         if d is None:
             raise EmulatorError(f"direction must be 'to_board' or 'to_host', got {direction!r}")
