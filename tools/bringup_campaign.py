@@ -69,6 +69,7 @@ def run_build(seed: int, faults: int, demo: bool = True, fixable: bool = False) 
         with Hand.emulated(board) as hand:
             result = bringup(hand, confirm=lambda text: True)
             found = {(fd.kind, hand.finger_index(fd.finger)) for fd in result.findings}
+            detail = [_measured(r) for r in result.fingers]
         bringup_wall = time.monotonic() - t0
         if demo and result.ok:
             board.reset("power_on")  # it boots on what the bring-up saved
@@ -88,6 +89,20 @@ def run_build(seed: int, faults: int, demo: bool = True, fixable: bool = False) 
         "bringup_wall_s": bringup_wall,
         "wall_s": time.monotonic() - t0,
         "demo": goal,
+        "fingers": detail,
+    }
+
+
+def _measured(r: Any) -> dict[str, Any]:
+    """What a finger's bring-up measured, for tracing a miss to its measurement (no traces)."""
+    return {
+        "findings": {fd.kind: fd.data for fd in r.findings},
+        "wiring": r.wiring,
+        "stops": r.stops,
+        "plant": r.plant,
+        "checks": [(c.label, c.rms_rad, c.worst_rad) for c in r.checks],
+        "steps_s": r.steps_s,
+        "board_time_s": r.board_time_s,
     }
 
 
@@ -160,6 +175,9 @@ def main() -> None:
     ap.add_argument("--builds", type=int, default=50)
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--faults", type=int, default=3)
+    ap.add_argument(
+        "--seeds", default=None, help="only these seeds, e.g. 4,7,9 (re-running failing builds)"
+    )
     ap.add_argument("--workers", type=int, default=None, help="local Dask workers (cores)")
     ap.add_argument("--address", default=None, help="a running Dask scheduler instead")
     ap.add_argument("--no-demo", action="store_true", help="skip the demo after bring-up")
@@ -175,6 +193,8 @@ def main() -> None:
     from utrf.campaign.engine import cluster
 
     seeds = list(range(args.first_seed, args.first_seed + args.builds))
+    if args.seeds:
+        seeds = [int(x) for x in args.seeds.split(",")]
     done = _done(args.json, args.faults, args.fixable)
     todo = [] if args.table_only else [s for s in seeds if s not in done]
     print(f"{len(seeds) - len(todo)} builds done before, {len(todo)} to run", flush=True)
@@ -212,6 +232,7 @@ def main() -> None:
         f"python -m tools.bringup_campaign --builds {args.builds} --faults {args.faults}"
         + (" --fixable" if args.fixable else "")
         + (f" --first-seed {args.first_seed}" if args.first_seed else "")
+        + (f" --seeds {args.seeds}" if args.seeds else "")
     )
     markers = (BEGIN_FIX, END_FIX) if args.fixable else (BEGIN, END)
     text = table(rows, command, wall, workers or (args.workers or 0), markers)

@@ -35,18 +35,10 @@ CASES = [
     # more than the duty bound moves through the travel: the closing search sticks at once (a
     # jam); it ends with the motors off and nothing saved
     ("friction:1=14", "stops", "friction", False),
-    # Joint 2 loose between its strands: the motor runs a travel before it leaves the open stop
-    # Passes on the bring-up's branch (main's firmware at bf5d5c6); on the merged firmware (timer
-    # 0's own handler, the PID's fast paths) the steps from rest read 7.6 times the model's lag
-    # both ways and name a weak motor: the slack rule's margin is open work (docs/bringup.md)
-    pytest.param(
-        "slack:1=0.0015",
-        "plant",
-        "slack",
-        False,
-        marks=pytest.mark.xfail(strict=True, reason="named weak-motor on the merged firmware"),
-        id="slack:1=0.0015",
-    ),
+    # Joint 2 loose between its strands: driven at one duty, its reading goes back (it swings)
+    # before any plant step (on the merged firmware its steps from rest read 7.6 times the
+    # model's lag both ways, which named a weak motor when the plant came first)
+    ("slack:1=0.0015", "plant", "slack", False),
     # the reading turns further between the stops than the joint can
     ("off-centre:1=0.3", "stops", "not-monotonic", False),
 ]
@@ -60,7 +52,7 @@ def _kinds(result: object) -> list[str]:
 @pytest.mark.parametrize(
     ("fault", "upto", "kind", "fixable"),
     CASES,
-    ids=[c[0] if isinstance(c, tuple) else c.id for c in CASES],
+    ids=[c[0] for c in CASES],
 )
 def test_a_build_fault_is_named(
     built: Built, fault: str, upto: str, kind: str, fixable: bool

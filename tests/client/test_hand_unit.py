@@ -219,7 +219,10 @@ def test_move_holds_an_idle_finger_before_its_path(board: HandBoard, hand: Hand)
     hand.move({"ring": 0.6}, 0.2, wait=False)
     (hold,) = board.requests(M.SetTargets)
     assert hold.mask == 0b01000 and hold.value[3] == pytest.approx(0.25, abs=1e-4)
-    (mode,) = board.requests(M.SetMode)
+    # its motors were off: first its tendons taken up at the pretension (DUTY 0), then held
+    take_up, mode = board.requests(M.SetMode)
+    assert take_up.mask == 0b01000 and take_up.mode[3] == M.ControlMode.DUTY
+    assert take_up.duty[3] == 0.0
     assert mode.mask == 0b01000 and mode.mode[3] == M.ControlMode.POSITION
     assert board.received[-1].msg_id == M.Move.ID  # the move goes last
 

@@ -6,10 +6,10 @@ setpoint its controller used, over every closed-loop sample (``utrf.hand.trackin
 The goal (issue 19, the demo's): RMS at most 1°, worst at most 3°, every pose settled.
 
 A hand that has stood braked (after a bring-up, a power-on) has sagged and its tendons are
-slack; its first closed-loop move then takes them up against the controller (4.6-6.2° worst
-on the model build on its default gains after 20 s braked, docs/bringup.md). So, as a fresh
-twin starts, the tendons are first taken up at the pretension (DUTY mode at 0: both motors
-pull it, open loop, not tracking) until the fingers are still, then the demo runs.
+slack; a closed-loop move from there takes them up against the controller (4.6-6.2° worst on
+the model build on its default gains after 20 s braked, docs/bringup.md). ``Hand.move`` takes
+them up at the pretension first (``Hand.take_up``) for fingers whose motors are off; here it
+is done for the whole hand before the poses, timed and not counted in the tracking.
 """
 
 from __future__ import annotations
@@ -26,11 +26,6 @@ from utrf.hand.tracking import Tracking, tracking
 
 GOAL_RMS_RAD = math.radians(1.0)
 GOAL_WORST_RAD = math.radians(3.0)
-#: the take-up at the pretension: at least, at most (s); still: every finger within this (rad)
-#: over the last ``TAKE_UP_STILL_S``
-TAKE_UP_S = (0.5, 3.0)
-TAKE_UP_STILL_RAD = 0.025  # three counts of the reading as it comes (7.7 mrad each)
-TAKE_UP_STILL_S = 0.3
 
 
 @dataclass
@@ -74,25 +69,6 @@ class DemoGoal:
         }
 
 
-def take_up(hand: Hand, rec: Recorder) -> float:
-    """Both motors of every finger at the pretension (DUTY 0, open loop) until the fingers
-    are still (``TAKE_UP_*``); the board time it took (s)."""
-    start = hand.state().board_time
-    mark = rec.mark()
-    hand.set_mode("duty", duty=0.0)
-    while True:
-        hand.clock.sleep(0.05)
-        now = hand.state().board_time
-        if now - start >= TAKE_UP_S[1]:
-            break
-        recent = [s.theta2 for s in rec.since(mark) if s.board_time >= now - TAKE_UP_STILL_S]
-        if now - start >= TAKE_UP_S[0] and recent:
-            spread = max(max(c) - min(c) for c in zip(*recent, strict=True))
-            if spread < TAKE_UP_STILL_RAD:
-                break
-    return hand.state().board_time - start
-
-
 def demo_goal(
     hand: Hand,
     sequence: Sequence[str] = DEFAULT_SEQUENCE,
@@ -100,14 +76,15 @@ def demo_goal(
     take_up_first: bool = True,
 ) -> DemoGoal:
     """Run the demo's poses on ``hand`` and measure its tracking against the goal; the motors
-    are braked at the end. ``take_up_first``: the tendons taken up at the pretension before
-    (:func:`take_up`; not counted in the tracking)."""
+    are braked at the end. ``take_up_first``: the whole hand's tendons taken up at the
+    pretension before (``Hand.take_up``; not counted in the tracking; without it each move from
+    motors off takes up its fingers)."""
     rec = Recorder(hand)
     out = DemoGoal()
     mark = 0
     try:
         if take_up_first:
-            out.take_up_s = take_up(hand, rec)
+            out.take_up_s = hand.take_up()
         mark = rec.mark()
         for i, name in enumerate(sequence):
             key = f"{i + 1}:{name}"

@@ -28,7 +28,7 @@ TAKE_UP_S = (1.2, 3.0)
 HELD_RAD = 0.1
 #: a stop is searched for at this duty, for at most this long per leg
 STOP_DUTY = 0.35
-STOP_LEG_S = 4.0
+STOP_LEG_S = 6.0
 #: legs a search may take while the finger still moves (a slow motor crosses the travel late)
 STOP_LEGS = 5
 
@@ -41,6 +41,8 @@ class Wiring:
     moved: dict[tuple[int, int], tuple[int, int] | None] = field(default_factory=dict)
     held: dict[int, bool] = field(default_factory=dict)  # the pretension held it at rest
     drift: dict[int, float] = field(default_factory=dict)  # how far the take-up ran it
+    #: per setting and direction, the most a pulse moved the finger's own reading beyond its rest
+    pulsed: dict[tuple[int, int], float] = field(default_factory=dict)
     motor_invert: int = 0
     encoder_invert: int = 0
     findings: list[Finding] = field(default_factory=list)
@@ -70,9 +72,12 @@ def encoder_check(hand: Hand, rec: Recorder, f: int, name: str) -> Finding | Non
 
 
 def _moved(rest: Trace, drive: Trace) -> tuple[int, int] | None:
-    """The channel the pulse moved (beyond what it drifts at rest, e.g. under gravity)."""
+    """The channel the pulse moved (beyond what it drifts at rest, e.g. under gravity): the
+    finger's own when its reading moved (another finger sagging or swinging while braked is
+    not this pulse's doing), else the one that moved most."""
     extra = drive.delta() - rest.delta()
-    ch = int(np.argmax(np.abs(extra)))
+    f = drive.finger
+    ch = f if abs(extra[f]) >= MOVED_RAD else int(np.argmax(np.abs(extra)))
     if abs(extra[ch]) < MOVED_RAD:
         return None
     return ch, int(np.sign(extra[ch]))
@@ -114,11 +119,17 @@ def wiring(
                 if abs(rest.delta()[f]) > HELD_RAD:
                     held = False  # the pretension does not hold it: a motor pushes, or none pulls
                 got = _moved(rest, drive)
-                if got is not None and (held or got[0] != f):
+                extra = float(abs(drive.delta()[f] - rest.delta()[f]))
+                w.pulsed[(invert, sign)] = max(w.pulsed.get((invert, sign), 0.0), extra)
+                if got is not None and got[0] != f:
+                    w.moved[(invert, sign)] = got  # another channel: a larger pulse may still
+                    continue  # move its own (then the other was a finger moving on its own)
+                if got is not None and held:
                     w.moved[(invert, sign)] = got
                     break
         w.held[invert] = held
-        if invert == 0 and held and w.moved[(0, 1)] and w.moved[(0, -1)]:
+        both = all((w.moved[(0, d)] or (-1, 0))[0] == f for d in (1, -1))
+        if invert == 0 and held and both:  # both ways: known; one way: a lead swapped
             break  # both motors move it and the pretension holds it: the wiring is known
     _interpret(w, f, name, names)
     return w
@@ -127,7 +138,8 @@ def wiring(
 def _interpret(w: Wiring, f: int, name: str, names: list[str]) -> None:
     seen = [v for v in w.moved.values() if v is not None]
     others = sorted({ch for ch, _ in seen if ch != f})
-    if others:
+    # another channel counts only while the finger's own reading never moved under a pulse
+    if others and max(w.pulsed.values(), default=0.0) < MOVED_RAD:
         g = others[0]
         w.findings.append(
             Finding(
@@ -144,9 +156,20 @@ def _interpret(w: Wiring, f: int, name: str, names: list[str]) -> None:
             )
         )
         return
-    a0, b0 = w.moved.get((0, 1)), w.moved.get((0, -1))
-    a1, b1 = w.moved.get((1, 1)), w.moved.get((1, -1))
+    own = {k: v for k, v in w.moved.items() if v is not None and v[0] == f}
+    a0, b0 = own.get((0, 1)), own.get((0, -1))
+    a1, b1 = own.get((1, 1)), own.get((1, -1))
     d0, d1 = w.drift.get(0, 0.0), w.drift.get(1, 0.0)
+    # both motors' pulses moved it the same way, held or not: toward the side of the motor
+    # that pulls (as built: A's side is closing, +1; driven the other way the sides swap)
+    one_way = next(
+        (
+            (1 - 2 * inv) * p[1]
+            for inv, (p, q) in enumerate(((a0, b0), (a1, b1)))
+            if p and q and p[1] == q[1]
+        ),
+        0,
+    )
     if w.held.get(0) and a0 and b0 and a0[1] != b0[1]:
         w.motor_invert, sa = 0, a0[1]
     elif w.held.get(1) and a1 and b1 and a1[1] != b1[1]:
@@ -162,18 +185,22 @@ def _interpret(w: Wiring, f: int, name: str, names: list[str]) -> None:
                 True,
             )
         )
-    elif abs(d0) > HELD_RAD and abs(d1) > HELD_RAD and d0 * d1 < 0:
+    elif (abs(d0) > HELD_RAD and abs(d1) > HELD_RAD and d0 * d1 < 0) or one_way:
         # taking up, one motor pulls and the other pushes: the finger runs to the puller's
-        # side, and to the other side once both are driven the other way
-        bad = "A" if d0 < 0 else "B"
+        # side, and to the other side once both are driven the other way; or pulsing either
+        # motor harder runs it the same way (the pusher's harder push lets the puller pull)
+        bad = "A" if (one_way or d0) < 0 else "B"
+        how = (
+            f"pulsing either motor harder runs the finger {'open' if bad == 'A' else 'closed'}"
+            if one_way
+            else f"with both motors pulling, the finger runs {'open' if bad == 'A' else 'closed'}"
+            f" and, with the motors driven the other way, {'closed' if bad == 'A' else 'open'}"
+        )
         w.findings.append(
             Finding(
                 name,
                 "lead-a-swapped" if bad == "A" else "lead-b-swapped",
-                f"with both motors pulling, the finger runs {'open' if bad == 'A' else 'closed'} "
-                "and, with the "
-                f"motors driven the other way, {'closed' if bad == 'A' else 'open'}: motor "
-                f"{bad} pushes where it should pull, its two leads are swapped",
+                f"{how}: motor {bad} pushes where it should pull, its two leads are swapped",
                 f"swap motor {bad}'s two wires ({'AO1/AO2' if bad == 'A' else 'BO1/BO2'} on "
                 f"{name}'s TB6612); the configuration turns both motors together and cannot "
                 "fix one",
@@ -252,6 +279,19 @@ def _speed_by_angle(trace: Trace, direction: int, edges: np.ndarray) -> np.ndarr
     return out
 
 
+def backward_rad(trace: Trace, direction: int) -> float:
+    """The most the reading went back against a leg driven ``direction`` (rad), from when it
+    first moved (0 for a leg too short to judge)."""
+    if len(trace.t) <= 50:
+        return 0.0
+    y = direction * trace.theta2[:, trace.finger]
+    start = take_up_s(trace, direction)
+    if not math.isfinite(start):
+        return 0.0
+    y = y[trace.t >= trace.t[0] + start]
+    return float(np.max(np.maximum.accumulate(y) - y))
+
+
 def reading_curve(closing: Trace, opening: Trace, bin_rad: float = 0.2) -> dict[str, float]:
     """The reading against the model's curve over the travel two legs at one duty crossed,
     closing and opening: at a steady duty the joint turns at a steady speed, a load (gravity,
@@ -260,16 +300,8 @@ def reading_curve(closing: Trace, opening: Trace, bin_rad: float = 0.2) -> dict[
     once-per-turn error, and a loose one sends the reading back. ``spread``: the largest of
     those sums over the smallest; ``backward_rad``: the most the reading went back against the
     drive; ``covered_rad``: the travel compared."""
-    out = {"spread": math.nan, "backward_rad": 0.0, "covered_rad": 0.0}
-    for tr, d in ((closing, 1), (opening, -1)):
-        if len(tr.t) > 50:
-            y = d * tr.theta2[:, tr.finger]
-            start = take_up_s(tr, d)
-            if math.isfinite(start):
-                y = y[tr.t >= tr.t[0] + start]
-                out["backward_rad"] = max(
-                    out["backward_rad"], float(np.max(np.maximum.accumulate(y) - y))
-                )
+    out = {"spread": math.nan, "covered_rad": 0.0}
+    out["backward_rad"] = max(backward_rad(closing, 1), backward_rad(opening, -1))
     if len(closing.t) < 50 or len(opening.t) < 50:
         return out
     lo = max(closing.theta2[:, closing.finger].min(), opening.theta2[:, opening.finger].min())
@@ -337,6 +369,7 @@ def _wrap(a: float) -> float:
 __all__ = [
     "Stop",
     "Wiring",
+    "backward_rad",
     "brake",
     "encoder_check",
     "find_stop",

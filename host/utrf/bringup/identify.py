@@ -117,7 +117,8 @@ def lag(hand: Hand, rec: Recorder, f: int, bounds: Bounds) -> tuple[dict[str, fl
         traces += [rest, tr]
         hand.clear_faults([f])
         got = _fit_from_rest(tr, sign)
-        ok = got is not None and got[0] > MOVING_RAD_S
+        # a time constant at the fit's bounds is unresolved (the fit failed), not a lag
+        ok = got is not None and got[0] > MOVING_RAD_S and 1.01e-3 < got[1] < 0.299
         taus["flex" if sign > 0 else "extend"] = got[1] if got is not None and ok else math.nan
     return taus, traces
 
@@ -271,15 +272,21 @@ class Check:
         return asdict(self)
 
 
-def check(hand: Hand, rec: Recorder, f: int, a: float, b: float, label: str) -> Check:
-    """POSITION: hold ``a``, move to ``b`` in 0.8 s, settle, back to ``a``; the tracking error
-    against the board's own setpoint, the overshoot past ``b`` and the time to settle there."""
+def check(
+    hand: Hand, rec: Recorder, f: int, a: float, b: float, label: str, back: bool = True
+) -> Check:
+    """POSITION: hold ``a`` (unless the finger holds it already), move to ``b`` in 0.8 s and
+    settle; with ``back``, then back to ``a`` and left holding it (the next check starts there),
+    else left to the caller. The tracking error against the board's own setpoint over the move
+    to ``b`` and its settling, the overshoot past ``b`` and the time to settle there. Braked
+    when a fault, a lost control or a timeout ends it."""
     name = hand.fingers[f]
     mark = rec.mark()
     settle_s = math.nan
-    start = math.nan
+    start = stop = math.nan
     try:
-        if abs(hand.state().fingers[f].theta2 - a) > 0.02:  # not already there (a check before)
+        st = hand.state().fingers[f]
+        if not (st.closed_loop and abs(st.target - a) < 0.01):
             hand.move({name: a}, duration=0.8, wait=False)
             hand.clock.sleep(0.8)
             hand.wait_settled(timeout=2.0, fingers=[f])
@@ -293,14 +300,20 @@ def check(hand: Hand, rec: Recorder, f: int, a: float, b: float, label: str) -> 
         except NotSettledError:
             settle_s = math.inf
         hand.clock.sleep(0.2)
-        hand.move({name: a}, duration=0.8, wait=False)
-        hand.clock.sleep(0.8)
-        hand.wait_settled(timeout=2.0, fingers=[f])
+        stop = hand.state().board_time
+        if back:
+            hand.move({name: a}, duration=0.8, wait=False)
+            hand.clock.sleep(0.8)
+            hand.wait_settled(timeout=2.0, fingers=[f])
     except (FingerFaultError, NotSettledError, NotControlledError):
-        pass
-    finally:
         brake(hand, [f])
-    got = [s for s in rec.since(mark) if s.fingers[f].closed_loop]
+    if not math.isfinite(stop):
+        stop = hand.state().board_time
+    got = [
+        s
+        for s in rec.since(mark)
+        if s.fingers[f].closed_loop and (math.isnan(start) or start <= s.board_time <= stop)
+    ]
     t = np.array([s.board_time for s in got])
     th = np.array([s.fingers[f].theta2 for s in got])
     tg = np.array([s.fingers[f].target for s in got])

@@ -108,6 +108,22 @@ def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> 
     return out
 
 
+def swing_finding(name: str, backward_rad: float) -> Finding:
+    """Slack seen as the reading going back against a steady drive (the stop search's closing
+    leg, or the opening leg after it): Joint 2 swings between its strands."""
+    return Finding(
+        name,
+        "slack",
+        f"driven at one duty across its travel, the finger's reading went back "
+        f"{math.degrees(backward_rad):.1f}° against the drive: Joint 2 swings loose between "
+        "its strands: slack in the coupling tendon (Tendon 2, Joint 1 to Joint 2)",
+        "tighten Tendon 2 and run the bring-up again (Joint 2 is loose between its strands: no "
+        "gain holds it)",
+        False,
+        {"backward_rad": backward_rad},
+    )
+
+
 def model_plant(hand: Hand, f: int) -> Plant:
     """The plant the hand's model motors make (``MotorParams`` defaults, the finger's guide
     radius): two motors resisting (one pulls, the antagonist is back-driven at its pretension),

@@ -21,6 +21,7 @@ from typing import Any
 
 from utrf.bringup.diagnose import (
     STOP_DUTY,
+    backward_rad,
     encoder_check,
     find_stop,
     reading_curve,
@@ -29,7 +30,7 @@ from utrf.bringup.diagnose import (
 )
 from utrf.bringup.findings import Finding, FingerConfig
 from utrf.bringup.identify import Check, Plant, check, identify, tune
-from utrf.bringup.plant_check import model_plant, plant_findings
+from utrf.bringup.plant_check import model_plant, plant_findings, swing_finding
 from utrf.bringup.pulses import Bounds, Recorder, brake, pulse, settle
 from utrf.hand import Hand
 
@@ -40,12 +41,16 @@ SAME_ANGLE_RAD = 0.03
 SAME_GAIN = 0.3
 #: set_finger_config's default encoder_offset (protocol/spec.toml): the straight finger mid-turn
 DEFAULT_OFFSET = 3.14159265
-#: a reading that goes back this much (rad), or whose speed at one duty varies this much
-#: (fastest over slowest), across the travel: the magnet is off-centre or loose
+#: a reading that goes back this much (rad) against a steady drive: Joint 2 swings loose (slack;
+#: fault-free fingers 2-3 counts of 7.7 mrad, margins in docs/bringup.md)
 BACKWARD_RAD = 0.03
+#: a reading whose speed at one duty varies this much (fastest over slowest) across the travel:
+#: the magnet is off-centre
 SPEED_SPREAD = 1.2
 #: a span between the stops longer than the model's by this: the reading's scale is wrong
 SPAN_EXTRA_RAD = 0.1
+#: shorter than the model's by this: a narrow range (or a magnet off-centre: the curve says)
+NARROW_RAD = 0.08
 #: a closing search that stops before this fraction of the model's span has stuck (no build's
 #: range is that short: narrow-range stops at most 12 % early)
 JAM_SPAN = 0.5
@@ -64,6 +69,10 @@ class FingerResult:
     tuning: dict[str, Any] = field(default_factory=dict)
     checks: list[Check] = field(default_factory=list)
     board_time_s: float = 0.0
+    #: what the wiring step measured: per setting, the take-up's run and whether it held
+    wiring: dict[str, Any] = field(default_factory=dict)
+    #: the board time each step took (s)
+    steps_s: dict[str, float] = field(default_factory=dict)
 
     @property
     def fixable(self) -> bool:
@@ -82,6 +91,7 @@ class FingerResult:
         r.stops, r.plant, r.tuning = d["stops"], d["plant"], d["tuning"]
         r.checks = [Check(**c) for c in d["checks"]]
         r.board_time_s = d.get("board_time_s", 0.0)
+        r.wiring, r.steps_s = d.get("wiring", {}), d.get("steps_s", {})
         return r
 
 
@@ -146,7 +156,12 @@ def _bring_up_finger(
     t0 = hand.state().board_time
     geo = hand.geometry.fingers[f].geometry
     lo, hi = geo.theta2_range_rad
-    step(f"{name}: encoder")
+
+    def begin(label: str) -> None:  # each step's start (the stream's time: no request)
+        res.steps_s[label] = _now(hand) - t0
+        step(f"{name}: {label}")
+
+    begin("encoder")
     brake(hand, [f])
     # the saved pretension: both motors pull, the finger is held against gravity between pulses
     hand.set_gains(f, pretension_duty=max(0.1, saved["gains"]["pretension_duty"]))
@@ -158,9 +173,15 @@ def _bring_up_finger(
     if found is not None:
         res.findings.append(found)
         return res
-    step(f"{name}: wiring")
+    begin("wiring")
     w = wiring(hand, rec, f, name, names, bounds)
     res.findings += w.findings
+    res.wiring = {
+        "drift_rad": w.drift,
+        "held": w.held,
+        "moved": {f"{k[0]},{k[1]}": v for k, v in w.moved.items()},
+        "pulsed_rad": {f"{k[0]},{k[1]}": v for k, v in w.pulsed.items()},
+    }
     if not w.ok:
         return res
     hand.set_finger_config(f, motor_invert=w.motor_invert, encoder_invert=w.encoder_invert)
@@ -168,7 +189,7 @@ def _bring_up_finger(
     res.config.finger_config = {"encoder_invert": w.encoder_invert, "motor_invert": w.motor_invert}
     if upto == "wiring":
         return res
-    step(f"{name}: stops")
+    begin("stops")
     open_ = find_stop(hand, rec, f, -1, w.encoder_invert, bounds)
     closed = find_stop(hand, rec, f, 1, w.encoder_invert, bounds) if open_ else None
     if open_ is None or closed is None:
@@ -198,6 +219,10 @@ def _bring_up_finger(
         # from the open stop, how long the motor ran before Joint 2 moved (the slack)
         "take_up_s": take_up_s(closed.first, 1),
     }
+    if span < JAM_SPAN * (hi - lo) and backward_rad(closed.trace, 1) > BACKWARD_RAD:
+        # it went back before it stopped: Joint 2 swinging loose paused it, not a jam
+        res.findings.append(swing_finding(name, backward_rad(closed.trace, 1)))
+        return res
     if span < JAM_SPAN * (hi - lo):
         res.findings.append(
             Finding(
@@ -243,7 +268,7 @@ def _bring_up_finger(
                 {"offset_rad": offset},
             )
         )
-    if span < (hi - lo) - 0.08:
+    if span < (hi - lo) - NARROW_RAD:
         res.findings.append(
             Finding(
                 name,
@@ -266,15 +291,29 @@ def _bring_up_finger(
     res.config.limits = {"theta2_min": th_min, "theta2_max": th_max}
     if upto == "stops":
         return res
-    step(f"{name}: plant")
+    begin("plant")
     mid = min(max(0.3, th_min + 0.6), th_max - 0.6)
     hand.clear_faults([f])
     here = hand.state().fingers[f].theta2
+    # a span short of the model's: a narrow range, or a magnet off-centre whose once-per-turn
+    # error shortens the reading's span and slows it most about the middle; the opening leg
+    # then runs on to the range's middle, so the reading's curve (below) covers it
+    low = min(mid, 0.5 * (th_min + th_max)) if span < (hi - lo) - NARROW_RAD else mid
     # from the closed stop (where Joint 2 leans flexed), opening: the slack shows as take-up
     to_mid = pulse(
-        hand, rec, f, math.copysign(0.35, mid - here), bounds, seconds=3.0, travel=3.5, until=mid
+        hand,
+        rec,
+        f,
+        math.copysign(STOP_DUTY, low - here),
+        bounds,
+        seconds=3.0 + 2.0 * (mid - low),
+        travel=3.5,
+        until=low,
     )
     res.stops["take_up_closed_s"] = take_up_s(to_mid, -1)
+    if low < mid:
+        settle(hand, 0.05)
+        pulse(hand, rec, f, STOP_DUTY, bounds, seconds=3.0, travel=3.5, until=mid)
     # the closing leg was read in the search's frame (its zero where the leg began): in the
     # calibrated one, it ends at the closed stop
     closing = closed.trace
@@ -284,7 +323,15 @@ def _bring_up_finger(
         closing = replace(closing, theta2=th)
     curve = reading_curve(closing, to_mid)
     res.stops.update({f"curve_{k}": v for k, v in curve.items()})
-    uneven = curve["backward_rad"] > BACKWARD_RAD or curve["spread"] > SPEED_SPREAD
+    if curve["backward_rad"] > BACKWARD_RAD:
+        # driven at a steady duty the reading went back: Joint 2 swings loose between its
+        # strands; its plant would be the swing's, and the stops' findings are doubtful
+        res.findings = [
+            fd for fd in res.findings if fd.kind in ("encoder-inverted", "leads-swapped")
+        ]
+        res.findings.append(swing_finding(name, curve["backward_rad"]))
+        return res
+    uneven = curve["spread"] > SPEED_SPREAD
     settle(hand, 0.1)
     plant, _ = identify(hand, rec, f, bounds, mid)
     res.plant = plant.to_dict()
@@ -326,29 +373,39 @@ def _bring_up_finger(
     res.config.motion = dict(tuned.motion)
     if upto == "plant":
         return res
-    step(f"{name}: closed loop")
+    begin("closed loop")
     a, b = max(th_min, mid - 0.25), min(th_max, mid + 0.25)  # inside a narrow range's limits
     hand.set_gains(f, max_duty=min(g["max_duty"], bounds.duty))
     hand.set_gains(f, **{k: g[k] for k in tuned.gains})
     hand.set_motion(f, **{k: saved["motion"][k] for k in tuned.motion})
     hand.clear_faults([f])
     res.checks.append(check(hand, rec, f, a, b, "before (saved gains)"))
+    # the tuned gains while it holds a (the second check starts there, not from a brake)
     hand.set_gains(f, **tuned.gains)
     hand.set_motion(f, **tuned.motion)
     hand.clear_faults([f])
-    res.checks.append(check(hand, rec, f, a, b, "after (tuned)"))
+    settle(hand, 0.2)
+    res.checks.append(check(hand, rec, f, a, b, "after (tuned)", back=False))
     hand.set_gains(f, max_duty=g["max_duty"])
     brake(hand, [f])
-    res.board_time_s = hand.state().board_time - t0
     return res
 
 
+def _now(hand: Hand) -> float:
+    """The board's time from the stream's last sample (a get_state would shift the steps)."""
+    st = hand.latest
+    return st.board_time if st is not None else hand.state().board_time
+
+
+def _durations(starts: dict[str, float], total: float) -> dict[str, float]:
+    """Each step's board time (s) from the steps' starts and the finger's whole time."""
+    keys = list(starts)
+    ends = [starts[k] for k in keys[1:]] + [total]
+    return {k: round(e - starts[k], 3) for k, e in zip(keys, ends, strict=True)}
+
+
 def _uneven_finding(name: str, curve: dict[str, float]) -> Finding:
-    how = (
-        f"went back {math.degrees(curve['backward_rad']):.1f}°"
-        if curve["backward_rad"] > BACKWARD_RAD
-        else f"ran {curve['spread']:.2f} times faster in places than in others"
-    )
+    how = f"ran {curve['spread']:.2f} times faster in places than in others"
     return Finding(
         name,
         "not-monotonic",
@@ -471,8 +528,11 @@ def bringup(
                 step(f"{hand.fingers[f]}: done before (resumed)")
                 result.fingers.append(done[f])
                 continue
+            t_f = _now(hand)
             r = _bring_up_finger(hand, rec, f, saved[f], bounds, step, upto)
             brake(hand, [f])
+            r.board_time_s = _now(hand) - t_f
+            r.steps_s = _durations(r.steps_s, r.board_time_s)
             result.fingers.append(r)
             if progress_path is not None:
                 progress_path.parent.mkdir(parents=True, exist_ok=True)

@@ -357,6 +357,7 @@ class Hand:
     move = Via("_motion", HandMotion.move)
     pose = Via("_motion", HandMotion.pose)
     wait_settled = Via("_motion", HandMotion.wait_settled)
+    take_up = Via("_motion", HandMotion.take_up)
 
     # --- configuration: the board's settings ----------------------------------------------------
 

@@ -28,6 +28,13 @@ MAX_MOVE_S = 60.0
 DEFAULT_MOVE_S = 1.0
 #: default settling tolerance on the Joint-2 angle: 2 degrees
 DEFAULT_TOLERANCE = math.radians(2.0)
+#: the take-up at the pretension before a move from motors off: at least, at most (s); still:
+#: every finger's reading within ``TAKE_UP_STILL_RAD`` over the last ``TAKE_UP_STILL_S``
+TAKE_UP_S = (0.5, 3.0)
+TAKE_UP_STILL_RAD = 0.025  # three counts of the reading as it comes (7.7 mrad each)
+TAKE_UP_STILL_S = 0.3
+#: the modes in which a finger's motors are off (it sags, its tendons go slack)
+MOTORS_OFF = (m.ControlMode.COAST, m.ControlMode.BRAKE)
 
 
 @dataclass(frozen=True)
@@ -102,10 +109,12 @@ class HandMotion:
         and the result says which fingers and how long their paths take.
 
         Each finger's path starts from the setpoint the board holds (closed loop) or where it
-        is (otherwise), at rest. ``mode``: POSITION, or GRASP with ``effort`` (the largest
-        closing duty) for the fingers that close by more than ``tolerance`` (those that open or
-        stay move in POSITION). Fingers not named keep what they do. A fault latched during the
-        move stops it with FingerFaultError.
+        is (otherwise), at rest; a finger whose motors are off (COAST, BRAKE) has sagged and
+        its tendons are slack, so they are first taken up at the pretension (:meth:`take_up`)
+        and its path starts where that leaves it. ``mode``: POSITION, or GRASP with ``effort``
+        (the largest closing duty) for the fingers that close by more than ``tolerance`` (those
+        that open or stay move in POSITION). Fingers not named keep what they do. A fault
+        latched during the move stops it with FingerFaultError.
         """
         if not (math.isfinite(duration) and 0 <= duration <= MAX_MOVE_S):
             raise ValueError(
@@ -122,6 +131,10 @@ class HandMotion:
         faulted = _faulted(st, idx)
         if faulted:
             raise FingerFaultError(faulted, "move")
+        off = [i for i in idx if st.fingers[i].mode in MOTORS_OFF]
+        if off:  # else the first closed-loop samples take the slack up against the controller
+            self.take_up(off)
+            st = self._telemetry.fresh_state(st)
         start = {
             i: (st.fingers[i].target if st.fingers[i].closed_loop else st.fingers[i].theta2)
             for i in idx
@@ -207,6 +220,30 @@ class HandMotion:
             if left <= 0 or now - last_progress > 1.0:
                 return
             clock.sleep(min(left, period))  # a fault or reset is seen within a period
+
+    def take_up(self, fingers: Iterable[FingerKey] | FingerKey | None = None) -> float:
+        """Both motors of ``fingers`` (default all) at the pretension (DUTY 0, open loop, not
+        tracking) until their readings are still (``TAKE_UP_*``); they are left so (the next
+        mode or move takes over). Returns the board time it took (s)."""
+        idx = self._fingers.select(fingers)
+        self._control.set_mode(m.ControlMode.DUTY, idx, duty=0.0)
+        clock = self._session.clock
+        period = self._telemetry.poll_period()
+        st = self._telemetry.fresh_state(None)
+        start = st.board_time
+        seen: list[tuple[float, np.ndarray]] = []
+        while True:
+            clock.sleep(period)
+            st = self._telemetry.fresh_state(st)
+            now = st.board_time
+            seen.append((now, st.theta2[idx]))
+            if now - start >= TAKE_UP_S[1]:
+                break
+            recent = np.array([th for t, th in seen if t >= now - TAKE_UP_STILL_S])
+            ready = now - start >= max(TAKE_UP_S[0], TAKE_UP_STILL_S) and len(recent) > 1
+            if ready and float(np.max(np.ptp(recent, axis=0))) < TAKE_UP_STILL_RAD:
+                break
+        return now - start
 
     @property
     def last_move(self) -> MoveResult | None:
