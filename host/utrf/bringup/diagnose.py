@@ -24,11 +24,13 @@ TRY_PULSES = ((0.2, 0.25), (0.35, 0.25), (0.4, 0.4))
 #: round that may have pushed the carriages to their ends) to take up the tendons
 TAKE_UP = (0.1, 0.35)
 TAKE_UP_S = (1.2, 3.0)
+#: a pulse that moves the finger's own reading no more than this (one count) did not move it
+STILL_RAD = 0.01
 #: a rest (both motors at the pretension) that moves the reading more: the finger is not held
 HELD_RAD = 0.1
 #: a stop is searched for at this duty, for at most this long per leg
 STOP_DUTY = 0.35
-STOP_LEG_S = 6.0
+STOP_LEG_S = 8.0
 #: legs a search may take while the finger still moves (a slow motor crosses the travel late)
 STOP_LEGS = 5
 
@@ -122,15 +124,23 @@ def wiring(
                 extra = float(abs(drive.delta()[f] - rest.delta()[f]))
                 w.pulsed[(invert, sign)] = max(w.pulsed.get((invert, sign), 0.0), extra)
                 if got is not None and got[0] != f:
-                    w.moved[(invert, sign)] = got  # another channel: a larger pulse may still
-                    continue  # move its own (then the other was a finger moving on its own)
+                    w.moved[(invert, sign)] = got
+                    if extra <= STILL_RAD:
+                        break  # its own reading did not move at all: another channel's doing
+                    continue  # a larger pulse may move its own (the other moved on its own)
                 if got is not None and held:
                     w.moved[(invert, sign)] = got
                     break
         w.held[invert] = held
         both = all((w.moved[(0, d)] or (-1, 0))[0] == f for d in (1, -1))
         if invert == 0 and held and both:  # both ways: known; one way: a lead swapped
-            break  # both motors move it and the pretension holds it: the wiring is known
+            break
+        if (
+            invert == 0
+            and all(w.moved[(0, d)] for d in (1, -1))
+            and max(w.pulsed.values()) <= STILL_RAD
+        ):
+            break  # another channel moves both ways, its own never: a cable swap
     _interpret(w, f, name, names)
     return w
 
