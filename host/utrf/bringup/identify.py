@@ -117,8 +117,9 @@ def lag(hand: Hand, rec: Recorder, f: int, bounds: Bounds) -> tuple[dict[str, fl
         traces += [rest, tr]
         hand.clear_faults([f])
         got = _fit_from_rest(tr, sign)
-        # a time constant at the fit's bounds is unresolved (the fit failed), not a lag
-        ok = got is not None and got[0] > MOVING_RAD_S and 1.01e-3 < got[1] < 0.299
+        # a time constant at the fit's lower bound is unresolved (the fit failed), not a
+        # prompt start (at the upper one it did not come up to speed: late, kept)
+        ok = got is not None and got[0] > MOVING_RAD_S and got[1] > 1.01e-3
         taus["flex" if sign > 0 else "extend"] = got[1] if got is not None and ok else math.nan
     return taus, traces
 

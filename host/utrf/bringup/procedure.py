@@ -49,7 +49,7 @@ BACKWARD_RAD = 0.03
 SPEED_SPREAD = 1.2
 #: a span between the stops longer than the model's by this: the reading's scale is wrong
 SPAN_EXTRA_RAD = 0.1
-#: shorter than the model's by this: a narrow range (or a magnet off-centre: the curve says)
+#: shorter than the model's by this: a narrow range
 NARROW_RAD = 0.08
 #: a closing search that stops before this fraction of the model's span has stuck (no build's
 #: range is that short: narrow-range stops at most 12 % early)
@@ -295,25 +295,18 @@ def _bring_up_finger(
     mid = min(max(0.3, th_min + 0.6), th_max - 0.6)
     hand.clear_faults([f])
     here = hand.state().fingers[f].theta2
-    # a span short of the model's: a narrow range, or a magnet off-centre whose once-per-turn
-    # error shortens the reading's span and slows it most about the middle; the opening leg
-    # then runs on to the range's middle, so the reading's curve (below) covers it
-    low = min(mid, 0.5 * (th_min + th_max)) if span < (hi - lo) - NARROW_RAD else mid
     # from the closed stop (where Joint 2 leans flexed), opening: the slack shows as take-up
     to_mid = pulse(
         hand,
         rec,
         f,
-        math.copysign(STOP_DUTY, low - here),
+        math.copysign(STOP_DUTY, mid - here),
         bounds,
-        seconds=3.0 + 2.0 * (mid - low),
+        seconds=3.0,
         travel=3.5,
-        until=low,
+        until=mid,
     )
     res.stops["take_up_closed_s"] = take_up_s(to_mid, -1)
-    if low < mid:
-        settle(hand, 0.05)
-        pulse(hand, rec, f, STOP_DUTY, bounds, seconds=3.0, travel=3.5, until=mid)
     # the closing leg was read in the search's frame (its zero where the leg began): in the
     # calibrated one, it ends at the closed stop
     closing = closed.trace
