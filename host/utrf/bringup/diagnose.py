@@ -30,7 +30,7 @@ STILL_RAD = 0.01
 HELD_RAD = 0.1
 #: a stop is searched for at this duty, for at most this long per leg
 STOP_DUTY = 0.35
-STOP_LEG_S = 4.0
+STOP_LEG_S = 6.0
 #: legs a search may take while the finger still moves (a slow motor crosses the travel late)
 STOP_LEGS = 5
 

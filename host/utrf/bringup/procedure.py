@@ -219,9 +219,10 @@ def _bring_up_finger(
         # from the open stop, how long the motor ran before Joint 2 moved (the slack)
         "take_up_s": take_up_s(closed.first, 1),
     }
-    if span < JAM_SPAN * (hi - lo) and backward_rad(closed.trace, 1) > BACKWARD_RAD:
+    back = max(backward_rad(closed.first, 1), backward_rad(closed.trace, 1))
+    if span < JAM_SPAN * (hi - lo) and back > BACKWARD_RAD:
         # it went back before it stopped: Joint 2 swinging loose paused it, not a jam
-        res.findings.append(swing_finding(name, backward_rad(closed.trace, 1)))
+        res.findings.append(swing_finding(name, back))
         return res
     if span < JAM_SPAN * (hi - lo):
         res.findings.append(
@@ -316,13 +317,16 @@ def _bring_up_finger(
         closing = replace(closing, theta2=th)
     curve = reading_curve(closing, to_mid)
     res.stops.update({f"curve_{k}": v for k, v in curve.items()})
-    if curve["backward_rad"] > BACKWARD_RAD:
+    # every closing leg of the search (its first and last), not only the one read as a curve
+    back = max(curve["backward_rad"], backward_rad(closed.first, 1))
+    res.stops["backward_rad"] = back
+    if back > BACKWARD_RAD:
         # driven at a steady duty the reading went back: Joint 2 swings loose between its
         # strands; its plant would be the swing's, and the stops' findings are doubtful
         res.findings = [
             fd for fd in res.findings if fd.kind in ("encoder-inverted", "leads-swapped")
         ]
-        res.findings.append(swing_finding(name, curve["backward_rad"]))
+        res.findings.append(swing_finding(name, back))
         return res
     uneven = curve["spread"] > SPEED_SPREAD
     settle(hand, 0.1)
