@@ -273,21 +273,15 @@ class Check:
         return asdict(self)
 
 
-def check(
-    hand: Hand, rec: Recorder, f: int, a: float, b: float, label: str, back: bool = True
-) -> Check:
-    """POSITION: hold ``a`` (unless the finger holds it already), move to ``b`` in 0.8 s and
-    settle; with ``back``, then back to ``a`` and left holding it (the next check starts there),
-    else left to the caller. The tracking error against the board's own setpoint over the move
-    to ``b`` and its settling, the overshoot past ``b`` and the time to settle there. Braked
-    when a fault, a lost control or a timeout ends it."""
+def check(hand: Hand, rec: Recorder, f: int, a: float, b: float, label: str) -> Check:
+    """POSITION: hold ``a``, move to ``b`` in 0.8 s, settle, back to ``a``; the tracking error
+    against the board's own setpoint, the overshoot past ``b`` and the time to settle there."""
     name = hand.fingers[f]
     mark = rec.mark()
     settle_s = math.nan
-    start = stop = math.nan
+    start = math.nan
     try:
-        st = hand.state().fingers[f]
-        if not (st.closed_loop and abs(st.target - a) < 0.01):
+        if abs(hand.state().fingers[f].theta2 - a) > 0.02:  # not already there (a check before)
             hand.move({name: a}, duration=0.8, wait=False)
             hand.clock.sleep(0.8)
             hand.wait_settled(timeout=2.0, fingers=[f])
@@ -301,20 +295,14 @@ def check(
         except NotSettledError:
             settle_s = math.inf
         hand.clock.sleep(0.2)
-        stop = hand.state().board_time
-        if back:
-            hand.move({name: a}, duration=0.8, wait=False)
-            hand.clock.sleep(0.8)
-            hand.wait_settled(timeout=2.0, fingers=[f])
+        hand.move({name: a}, duration=0.8, wait=False)
+        hand.clock.sleep(0.8)
+        hand.wait_settled(timeout=2.0, fingers=[f])
     except (FingerFaultError, NotSettledError, NotControlledError):
+        pass
+    finally:
         brake(hand, [f])
-    if not math.isfinite(stop):
-        stop = hand.state().board_time
-    got = [
-        s
-        for s in rec.since(mark)
-        if s.fingers[f].closed_loop and (math.isnan(start) or start <= s.board_time <= stop)
-    ]
+    got = [s for s in rec.since(mark) if s.fingers[f].closed_loop]
     t = np.array([s.board_time for s in got])
     th = np.array([s.fingers[f].theta2 for s in got])
     tg = np.array([s.fingers[f].target for s in got])

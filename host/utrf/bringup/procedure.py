@@ -377,12 +377,10 @@ def _bring_up_finger(
     hand.set_motion(f, **{k: saved["motion"][k] for k in tuned.motion})
     hand.clear_faults([f])
     res.checks.append(check(hand, rec, f, a, b, "before (saved gains)"))
-    # the tuned gains while it holds a (the second check starts there, not from a brake)
     hand.set_gains(f, **tuned.gains)
     hand.set_motion(f, **tuned.motion)
     hand.clear_faults([f])
-    settle(hand, 0.2)
-    res.checks.append(check(hand, rec, f, a, b, "after (tuned)", back=False))
+    res.checks.append(check(hand, rec, f, a, b, "after (tuned)"))
     hand.set_gains(f, max_duty=g["max_duty"])
     brake(hand, [f])
     return res
