@@ -97,7 +97,7 @@ class BoardFaults:
         if isinstance(data, int):
             if data < 0:
                 raise EmulatorError(f"noise burst length must be >= 0, got {data}")
-            # stdlib random: numpy.random loads lazily, and its first load mid-soak looked like a leak
+            # stdlib random: numpy.random loads lazily, a first load mid-soak looks like a leak
             data = random.Random(f"{self.seed}:{int(self._cycle)}").randbytes(data)
         d = {"to_board": _native.TO_BOARD, "to_host": _native.TO_HOST}.get(direction)
         if d is None:
