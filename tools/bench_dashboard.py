@@ -104,6 +104,20 @@ def thread_cpu_s(p: psutil.Process) -> dict[int, float]:
     return {t.id: float(t.user_time + t.system_time) for t in p.threads()}
 
 
+def named_thread_cpu_s(procs: list[psutil.Process]) -> dict[str, float]:
+    """The CPU time (user + system, s) of these processes' threads, summed by thread name
+    (``CrRendererMain``, ``Compositor``, ``CompositorTileW``, ...; Linux only)."""
+    out: dict[str, float] = {}
+    for p in procs:
+        for t in p.threads():
+            try:
+                name = Path(f"/proc/{p.pid}/task/{t.id}/comm").read_text().strip()
+            except OSError:
+                continue
+            out[name] = out.get(name, 0.0) + t.user_time + t.system_time
+    return out
+
+
 def browser_kinds(procs: list[psutil.Process]) -> dict[int, str]:
     """Each of chromium's processes by its ``--type`` (renderer, gpu-process, ...; the
     browser process has none)."""
@@ -118,8 +132,35 @@ def browser_kinds(procs: list[psutil.Process]) -> dict[int, str]:
     return out
 
 
+def page_metrics(driver: webdriver.Chrome) -> dict[str, float]:
+    """The page's counters from the DevTools protocol (``Performance.getMetrics``: the main
+    thread's task, script, style and layout time in seconds, ...)."""
+    out = driver.execute_cdp_cmd("Performance.getMetrics", {})
+    return {m["name"]: float(m["value"]) for m in out["metrics"]}
+
+
+def profile_summary(profile: dict, top: int = 25) -> list[tuple[float, str]]:
+    """The JavaScript CPU profile (``Profiler.stop``) as self time per function, in ms,
+    largest first, each named with its script's file and line."""
+    nodes = {n["id"]: n for n in profile["nodes"]}
+    self_us: dict[int, float] = {}
+    for node_id, dt in zip(profile["samples"], profile["timeDeltas"], strict=True):
+        self_us[node_id] = self_us.get(node_id, 0.0) + dt
+    by_name: dict[str, float] = {}
+    for node_id, us in self_us.items():
+        f = nodes[node_id]["callFrame"]
+        name = f"{f['functionName'] or '(anon)'} {f['url'].rsplit('/', 1)[-1]}:{f['lineNumber']}"
+        by_name[name] = by_name.get(name, 0.0) + us / 1000
+    return sorted(((ms, n) for n, ms in by_name.items()), reverse=True)[:top]
+
+
 def measure(
-    elf: Path | None, seconds: float, rate: int, tmp: Path, extra: list[str] | None = None
+    elf: Path | None,
+    seconds: float,
+    rate: int,
+    tmp: Path,
+    extra: list[str] | None = None,
+    js_profile: bool = False,
 ) -> dict:
     url_file = tmp / "emulator.url"
     emu_cmd = [sys.executable, "-m", "utrf", "emulate", "--no-pty", "--url-file", str(url_file),
@@ -168,10 +209,17 @@ def measure(
         )
         time.sleep(3.0)  # the page settles
         driver.execute_script(PROBE)
+        driver.execute_cdp_cmd("Performance.enable", {})
+        metrics0 = page_metrics(driver)
+        if js_profile:
+            driver.execute_cdp_cmd("Profiler.enable", {})
+            driver.execute_cdp_cmd("Profiler.setSamplingInterval", {"interval": 200})
+            driver.execute_cdp_cmd("Profiler.start", {})
         server = psutil.Process(dash.pid)
         browser = psutil.Process(driver.service.process.pid).children(recursive=True)
         kinds = browser_kinds(browser)
         b0 = {p.pid: cpu_s(p) for p in browser}
+        rt0 = named_thread_cpu_s([p for p in browser if kinds.get(p.pid) == "renderer"])
         status0 = json.loads(driver.execute_script(STATUS))
         pushed0 = status0["pushed"].get("live", 0)
         samples0 = status0["samples"]
@@ -184,6 +232,9 @@ def measure(
         c1, w1 = cpu_s(server), time.monotonic()
         t1 = thread_cpu_s(server)
         b1 = {p.pid: cpu_s(p) for p in browser if p.is_running()}
+        rt1 = named_thread_cpu_s([p for p in browser if kinds.get(p.pid) == "renderer"])
+        metrics1 = page_metrics(driver)
+        profile = driver.execute_cdp_cmd("Profiler.stop", {})["profile"] if js_profile else None
         renderer = [pid for pid, kind in kinds.items() if kind == "renderer"]
         lat_, frames_, age_, parts_ = driver.execute_script(
             "return [window.utrfLat, window.utrfFrames, window.utrfAge, window.utrfParts]"
@@ -213,7 +264,32 @@ def measure(
         if pid in b1:
             by_kind[kind] = by_kind.get(kind, 0.0) + (b1[pid] - b0[pid]) / (w1 - w0)
     samples = status["samples"] - samples0
+    n_frames = max(len(frames) - 1, 1)
+
+    def per_frame_ms(name: str) -> float:
+        return 1000 * (metrics1.get(name, 0.0) - metrics0.get(name, 0.0)) / n_frames
+
     return {
+        # the page's main thread per frame drawn (DevTools' counters): all its tasks, and of
+        # them JavaScript, style and layout
+        "main_ms_per_frame": {
+            k: per_frame_ms(name)
+            for k, name in (
+                ("cpu", "ThreadTime"),  # the main thread's CPU time
+                ("tasks", "TaskDuration"),  # its tasks' wall time
+                ("script", "ScriptDuration"),
+                ("style", "RecalcStyleDuration"),
+                ("layout", "LayoutDuration"),
+            )
+        },
+        "js_profile_ms": profile_summary(profile) if profile else [],
+        # the renderer's threads, ms of CPU per frame drawn (the main thread, the compositor,
+        # the raster workers, ...)
+        "renderer_threads_ms_per_frame": {
+            name: 1000 * (t - rt0.get(name, 0.0)) / n_frames
+            for name, t in sorted(rt1.items(), key=lambda kv: -kv[1])
+            if t - rt0.get(name, 0.0) > 0.01
+        },
         "seconds": w1 - w0,
         "rate_hz": rate,
         "samples": status["samples"],
@@ -300,7 +376,8 @@ def section(r: dict) -> str:
             f"spent {r['server_us_per_sample']:.0f} us of CPU per sample received (its event "
             f"loop {100 * r['server_loop_cpu_core']:.1f} % of a core, the Hand's threads "
             f"{100 * r['server_other_cpu_core']:.1f} %), the page's renderer "
-            f"{r['renderer_ms_per_frame']:.1f} ms per frame drawn, chromium's GPU process "
+            f"{r['renderer_ms_per_frame']:.1f} ms per frame drawn (its main thread "
+            f"{r['main_ms_per_frame']['cpu']:.1f} ms), chromium's GPU process "
             f"{100 * r['browser_cpu_by_kind'].get('gpu-process', 0.0):.0f} % of a core; the 3D "
             f"hand was drawn {r['pushed'].get('hand3d', 0) / r['seconds']:.1f} times a second. "
             "The latency in parts (p50 / p99, ms): the sample's age when the server sent it "
@@ -332,9 +409,17 @@ def main(argv: list[str] | None = None) -> int:
         default=[],
         help="an option for `utrf dashboard` (repeatable, e.g. --dashboard-arg=--plot-hz=2)",
     )
+    p.add_argument(
+        "--js-profile",
+        action="store_true",
+        help="also sample the page's JavaScript (DevTools' profiler) and list its costliest "
+        "functions (diagnosis: the profiler slows the page)",
+    )
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="utrf-bench-dash-") as tmp:
-        r = measure(args.elf, args.seconds, args.rate, Path(tmp), args.dashboard_arg)
+        r = measure(
+            args.elf, args.seconds, args.rate, Path(tmp), args.dashboard_arg, args.js_profile
+        )
     print(json.dumps(r, indent=1))
     text = section(r)
     print(text)

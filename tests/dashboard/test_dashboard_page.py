@@ -34,7 +34,7 @@ def first(dashboard: Dashboard, browser: Callable[[], WebDriver]) -> WebDriver:
     return d
 
 
-def test_page_loads_live_against_the_emulated_board(first: WebDriver) -> None:
+def test_page_loads_live_against_the_emulated_board(first: WebDriver, dashboard: Dashboard) -> None:
     def board_time(d: WebDriver) -> float | None:
         words = text_of(d, ".utrf-board-time").split()
         try:
@@ -49,6 +49,18 @@ def test_page_loads_live_against_the_emulated_board(first: WebDriver) -> None:
     WebDriverWait(first, 60).until(lambda d: (board_time(d) or 0.0) > t0)
     assert first.find_element(By.CSS_SELECTOR, ".utrf-chart-index canvas")
     assert "HOST_TIMEOUT" in first.find_element(By.TAG_NAME, "body").text
+
+    # each finger's numbers are written live: the index's angle as the board reports it (at
+    # rest: its one-count dither is 0.44 degree)
+    def index_deg(d: WebDriver) -> float | None:
+        try:
+            return float(text_of(d, ".utrf-value-index").split("°")[0])
+        except ValueError:  # "–" before the first sample
+            return None
+
+    WebDriverWait(first, 60).until(lambda d: index_deg(d) is not None)
+    board = math.degrees(dashboard.status()["fingers"]["index"]["theta2_rad"])
+    assert abs((index_deg(first) or math.inf) - board) < 2.0
 
 
 def test_a_pose_button_moves_the_hand(first: WebDriver, dashboard: Dashboard) -> None:

@@ -131,6 +131,21 @@ def test_the_ring_decimates_for_the_eye_and_keeps_the_newest() -> None:
     np.testing.assert_array_equal(s.theta2[:, 0], s.board_time)
 
 
+def test_the_rings_window_from_its_newest_samples_is_the_whole_rings() -> None:
+    # the window looks at the samples its rate says it holds; a rate too low for the stream
+    # (or a board clock at another pace) falls back to the whole ring: the same samples
+    for rate in (1000.0, 100.0, 10_000.0):
+        ring, whole = SampleRing(1, 5000, rate_hz=rate), SampleRing(1, 5000, rate_hz=1e9)
+        for k in range(7000):  # wraps
+            for r in (ring, whole):
+                r.add(state(k * 1e-3, 0.0, theta=k * 1e-3))
+        for seconds in (0.0, 0.05, 1.0, 2.0, 4.999, 10.0):
+            np.testing.assert_array_equal(ring.clock(seconds)[0], whole.clock(seconds)[0])
+            np.testing.assert_array_equal(
+                ring.series(seconds, 25).theta2, whole.series(seconds, 25).theta2
+            )
+
+
 def test_the_ring_keeps_each_fingers_fields_apart() -> None:
     ring = SampleRing(3, 100)
     mode = m.ControlMode.POSITION

@@ -59,8 +59,11 @@ class Series:
 class SampleRing:
     """The last ``WINDOW_S`` of samples in preallocated arrays (written by the reader thread)."""
 
-    def __init__(self, fingers: int, capacity: int) -> None:
+    def __init__(self, fingers: int, capacity: int, rate_hz: float | None = None) -> None:
         self.capacity = capacity
+        # samples a second of board time (the board stamps each with its own clock): a window
+        # looks only at the newest samples it can hold, not the whole ring
+        self.rate_hz = rate_hz if rate_hz else capacity / WINDOW_S
         self._t = np.zeros(capacity)  # board time
         self._host = np.zeros(capacity)  # host receive time
         self.fingers = fingers
@@ -89,7 +92,10 @@ class SampleRing:
         """Ring indices of the samples of the last ``seconds`` of board time, oldest first
         (the caller holds the lock)."""
         n = min(self._n, self.capacity)
-        idx = np.arange(self._n - n, self._n) % self.capacity
+        k = min(n, math.ceil(1.25 * seconds * self.rate_hz) + 16)  # what the window should hold
+        idx = np.arange(self._n - k, self._n) % self.capacity
+        if k < n and self._t[idx[0]] >= self._t[idx[-1]] - seconds:  # it reaches further back
+            idx = np.arange(self._n - n, self._n) % self.capacity
         if n:
             idx = idx[self._t[idx] >= self._t[idx[-1]] - seconds]
         return idx
@@ -123,7 +129,7 @@ class DashboardHub:
         self.hand = hand
         self.fingers = hand.fingers
         rate = max(hand.telemetry_hz, 1)
-        self.ring = SampleRing(len(self.fingers), int(WINDOW_S * rate) + 1)
+        self.ring = SampleRing(len(self.fingers), int(WINDOW_S * rate) + 1, rate)
         self.latest: HandState | None = None
         self._lock = threading.Lock()
         self._controller: str | None = None

@@ -14,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import json
 import math
 import time
 from collections.abc import Callable
@@ -21,6 +22,7 @@ from typing import Any
 
 import numpy as np
 from nicegui import Client, ui
+from nicegui import json as nicegui_json
 from nicegui.elements.mixins.disableable_element import DisableableElement
 
 from utrf.dashboard import settings as settings_
@@ -30,9 +32,28 @@ from utrf.hand.state import fault_names
 from utrf.models.geometry import HandGeometry
 
 CHART_STYLE = "height: 150px; width: 560px"
-#: resolves in the browser once the next frame is drawn (first running ``{draw}`` in that
-#: frame's callback): the page's updates are paced by it
-DRAWN = "new Promise((resolve) => requestAnimationFrame(() => {{ {draw}; resolve(0); }}))"
+#: one update in the browser (one message): each live label's text written into its text
+#: node (the one Vue made: NiceGUI's element update would re-render every element of the
+#: page, sliders and buttons too, 30 times a second); a promise resolved once the next frame
+#: is drawn (first running ``draw`` in that frame's callback), which paces the page's
+#: updates; then, after that frame, a chart's new points (``setOption``: ECharts redraws the
+#: chart at once, in milliseconds, so not in the frame of the numbers), given as JSON text
+#: (parsed faster than the same as code)
+LIVE_JS = """<script>
+window.utrfLive = (texts, draw, chart, points) => {
+  for (const [id, text] of texts) {
+    const node = document.getElementById("c" + id)?.firstChild;
+    if (node) node.nodeValue = text;
+  }
+  return new Promise((resolve) => requestAnimationFrame(() => {
+    draw();
+    resolve(0);
+    if (chart !== undefined) setTimeout(() => {
+      getElement(chart)?.chart?.setOption(JSON.parse(points));
+    }, 0);
+  }));
+};
+</script>"""
 DRAWN_TIMEOUT_S = 1.0
 
 
@@ -94,6 +115,7 @@ class DashboardPage:
 
     def _build(self, hand: HandGeometry) -> None:
         hub = self.hub
+        ui.add_head_html(LIVE_JS)
         with ui.row().classes("items-center w-full"):
             ui.label("UTRF-RoboHand").classes("text-h6")
             self.control_label = ui.label().classes("utrf-control text-bold")
@@ -102,7 +124,7 @@ class DashboardPage:
             self.board_time = ui.label("board time –").classes("utrf-board-time")
             # the newest sample's board time on the host's wall clock, and when the server
             # sent it (ms): the latency probe's
-            self.sample_wall = ui.label("").classes("utrf-sample-wall hidden")
+            self.sample_wall = ui.label("–").classes("utrf-sample-wall hidden")
         ui.label(
             f"If this server stops, the board latches HOST_TIMEOUT after "
             f"{hub.safety.heartbeat_timeout:g} s without the host and applies its safe action "
@@ -155,7 +177,8 @@ class DashboardPage:
                     with ui.row().classes("items-center"):
                         ui.label(name).classes("text-bold")
                         self.modes.append(ui.label("").classes(f"utrf-mode-{name} text-caption"))
-                    self.values.append(ui.label("").classes(f"utrf-value-{name} text-caption"))
+                    # written by the live update (LIVE_JS), not by NiceGUI
+                    self.values.append(ui.label("–").classes(f"utrf-value-{name} text-caption"))
                     with ui.row().classes("items-center"):
                         self.faults.append(ui.label("").classes(f"utrf-faults-{name}"))
                         b = ui.button(
@@ -293,36 +316,52 @@ class DashboardPage:
             element.text = text
 
     async def _update(self) -> None:
-        """One update of the page: the live view, then (when due) one chart; each waits until
-        the browser has drawn it, so a browser that draws slower than ``ui_hz`` gets fewer
-        updates, never a queue of stale ones (each drawn update is the newest sample)."""
+        """One update of the page, one message: the live view and (when due) one chart's new
+        points, drawn after it; it waits until the browser has drawn the live view, so a
+        browser that draws slower than ``ui_hz`` gets fewer updates, never a queue of stale
+        ones (each drawn update is the newest sample)."""
         now = time.monotonic()
         live = self._update_live()
-        self._hand_moved = self._hand_moved or bool(live)
+        texts: list[tuple[int, str]] = []
+        draw = False
         if live is not None:  # the numbers, and the 3D hand in the same frame if it moved
+            texts, moved = live
+            self._hand_moved = self._hand_moved or moved
             # (at most DRAW_HZ a second: a move not drawn yet is drawn at the next update)
             draw = self._hand_moved and now >= self._next_hand_draw
             if draw:
                 self._hand_moved = False
                 self._next_hand_draw = now + 1.0 / DRAW_HZ
                 self.hub.pushed["hand3d"] += 1
-            await self._drawn(DRAWN.format(draw=self.hand3d.draw_js() if draw else ""))
-        # then at most one chart (ECharts redraws a chart in milliseconds: not in the frame
-        # of the numbers, nor five at once), the one most overdue; drawn while the next
-        # sample is awaited
+        # at most one chart an update (ECharts redraws a chart in milliseconds: not five at
+        # once), the one most overdue
+        chart = ""
         i = int(np.argmin(self._next_plot))
         if now >= self._next_plot[i]:
             self._next_plot[i] = max(self._next_plot[i] + self.plot_period, now)
-            if self._update_plot(i) and live is None:
-                await self._drawn(DRAWN.format(draw=""))
+            points = self._plot_points(i)
+            if points is not None:
+                chart = f", {self.charts[i].id}, {json.dumps(points)}"
+        if live is not None or chart:
+            body = self.hand3d.draw_js() if draw else ""
+            await self._drawn(f"utrfLive({json.dumps(texts)}, () => {{ {body}; }}{chart})")
 
     async def _drawn(self, script: str) -> None:
         with contextlib.suppress(TimeoutError):  # a hidden tab draws nothing: go on
             await self.client.run_javascript(script, timeout=DRAWN_TIMEOUT_S)
 
-    def _update_live(self) -> bool | None:
-        """The newest sample's numbers, modes, faults and 3D hand; returns None when there
-        is no new sample, else whether the 3D hand moved."""
+    def _live_text(
+        self, texts: list[tuple[int, str]], key: str, element: ui.label, text: str
+    ) -> None:
+        """A live label's text, for :data:`LIVE_JS`, when it changed."""
+        if self._shown.get(key) != text:
+            self._shown[key] = text
+            texts.append((element.id, text))
+
+    def _update_live(self) -> tuple[list[tuple[int, str]], bool] | None:
+        """The newest sample's numbers (returned as (element id, text) for :data:`LIVE_JS`),
+        modes, faults and 3D hand; None when there is no new sample, else also whether the 3D
+        hand moved."""
         if (self.hub.controller == self.id) != self.in_control or (
             not self.in_control and self.hub.controller is None
         ):
@@ -331,9 +370,11 @@ class DashboardPage:
         if st is None or self._shown.get("t") == st.board_time:
             return None
         self._shown["t"] = st.board_time
+        texts: list[tuple[int, str]] = []
         for i, f in enumerate(st.fingers):
-            self._set(f"m{i}", self.modes[i], f.mode.name)
-            self._set(
+            self._set(f"m{i}", self.modes[i], f.mode.name)  # rare changes: NiceGUI's updates
+            self._live_text(
+                texts,
                 f"v{i}",
                 self.values[i],
                 f"{math.degrees(f.theta2):6.1f}° → {math.degrees(f.target):6.1f}°, "
@@ -345,23 +386,23 @@ class DashboardPage:
         moved = self.hand3d.show(
             [f.theta2 for f in st.fingers], [bool(f.faults) for f in st.fingers]
         )
-        self.board_time.text = f"board time {st.board_time:.3f} s"
+        texts.append((self.board_time.id, f"board time {st.board_time:.3f} s"))
         sampled = 1000 * self.hub.wall_time_of(st.board_time)
-        self.sample_wall.text = f"{sampled:.1f} {1000 * time.time():.1f}"
+        texts.append((self.sample_wall.id, f"{sampled:.1f} {1000 * time.time():.1f}"))
         self.hub.pushed["live"] += 1
-        return moved
+        return texts, moved
 
-    def _update_plot(self, i: int) -> bool:
-        """Finger ``i``'s chart: only its series' points, as plain lists (the chart's options,
-        observed dicts and lists on the server, are left alone; ECharts merges the data in)."""
+    def _plot_points(self, i: int) -> str | None:
+        """Finger ``i``'s chart's new points as ``setOption``'s JSON (only its series' data:
+        the chart's options, observed dicts and lists on the server, are left alone; ECharts
+        merges the data in), None when it has nothing new."""
         s = self.hub.ring.series(self.window_s, self.points_per_s)
         if len(s.board_time) < 2 or self._shown.get(f"plot{i}") == s.board_time[-1]:
-            return False
+            return None
         self._shown[f"plot{i}"] = s.board_time[-1]
         x = (s.board_time - s.board_time[-1]).round(3)
         duty = 100 * (s.duty_a[:, i] - s.duty_b[:, i])
         ys = (np.degrees(s.theta2[:, i]), np.degrees(s.target[:, i]), duty)
-        series = [{"data": np.column_stack((x, y.round(2))).tolist()} for y in ys]
-        _ = self.charts[i].run_chart_method("setOption", {"series": series})  # sent, not awaited
+        series = [{"data": np.column_stack((x, y.round(2)))} for y in ys]
         self.hub.pushed["plots"] += 1
-        return True
+        return nicegui_json.dumps({"series": series})  # orjson: numpy arrays as they are

@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import asyncio
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -18,6 +19,11 @@ from utrf.dashboard.page import DashboardPage
 #: browser on a loaded machine takes seconds to load three.js and ECharts), before dropping
 #: it; the page in control gives up control only then (the fingers held at once)
 RECONNECT_TIMEOUT_S = 15.0
+#: the interpreter's thread switch interval in the dashboard's process (s; Python's is 5 ms):
+#: the Hand's reader thread decodes the 1 kHz stream beside the event loop, and at each
+#: socket write or select the loop lets go of the interpreter, then waited up to 5 ms for it,
+#: several times an update (docs/dashboard.md)
+GIL_SWITCH_S = 0.001
 
 
 @dataclass(frozen=True)
@@ -44,6 +50,7 @@ def serve(hub: DashboardHub, options: ServerOptions, on_ready: Callable[[str], N
         )
     if options.token:
         app.add_middleware(TokenGuard, token=options.token)
+    sys.setswitchinterval(GIL_SWITCH_S)
 
     @ui.page("/")
     def index(client: Client) -> None:
