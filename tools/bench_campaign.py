@@ -192,8 +192,8 @@ def grasp_pairs(tmp: Path, runs: int, repeats: int) -> list[dict[str, Any]] | No
         d = tmp / f"grasp-pair{k}"
         d.mkdir()
         pairs.append((run_grasp(d, runs, 1), run_grasp(d, runs, 2)))
-    ratios = sorted(g2["runs_per_h"] / g1["runs_per_h"] for g1, g2 in pairs)
     pairs.sort(key=lambda p: p[1]["runs_per_h"] / p[0]["runs_per_h"])
+    ratios = [g2["runs_per_h"] / g1["runs_per_h"] for g1, g2 in pairs]
     g1, g2 = pairs[len(pairs) // 2]
     return [{**g1, "ratios": ratios}, g2]
 
