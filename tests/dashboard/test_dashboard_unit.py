@@ -15,9 +15,11 @@ import pytest
 
 from utrf.dashboard import settings
 from utrf.dashboard.access import COOKIE, TokenGuard, needs_token
-from utrf.dashboard.hub import DashboardHub, NotInControl, SampleRing
+from utrf.dashboard.hub import READ_LINGER_S, DashboardHub, NotInControl, SampleRing
 from utrf.hand.state import FingerState, HandState
 from utrf.protocol import messages as m
+from utrf.protocol.link import Link
+from utrf.protocol.transport import SerialTransport
 
 
 def test_settings_take_the_protocols_ranges_and_name_every_problem() -> None:
@@ -81,6 +83,7 @@ class FakeHand:
 
     fingers = ("index",)
     telemetry_hz = 1000
+    link: object = None  # no line (as a SimLink)
 
     def __init__(self) -> None:
         self.poses: dict[str, object] = {"fist": object()}
@@ -118,6 +121,18 @@ def test_the_boards_clock_is_followed_when_it_runs_at_another_pace() -> None:
     wall = hub.wall_time_of(2.999)
     assert abs(wall - (100.0 + 2 * 2.999 + 0.001)) < 0.003
     hub.close()
+
+
+def test_the_hands_reader_takes_the_stream_in_batches_for_the_dashboard() -> None:
+    hand = FakeHand()
+    hand.link = link = Link(SerialTransport("loop://"), heartbeat_period_s=None)
+    try:
+        assert link.read_linger_s == 0.0  # a Link reads each frame as it comes
+        hub = DashboardHub(hand)  # type: ignore[arg-type]
+        assert link.read_linger_s == READ_LINGER_S > 0.0
+        hub.close()
+    finally:
+        link.close()
 
 
 def test_the_ring_decimates_for_the_eye_and_keeps_the_newest() -> None:

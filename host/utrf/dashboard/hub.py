@@ -28,6 +28,7 @@ import numpy as np
 from utrf.dashboard import settings as settings_
 from utrf.hand import Hand, HandState
 from utrf.protocol import messages as m
+from utrf.protocol.link import Link
 from utrf.recording import schemas
 
 T = TypeVar("T")
@@ -38,6 +39,9 @@ LOST_GRACE_S = 1.0
 WINDOW_S = 10.0
 #: the board's clock is mapped to the host's over this many seconds of samples
 OFFSET_WINDOW_S = 2.0
+#: the Hand's reader waits this long after each read (s), so one read carries several frames
+#: of the 1 kHz stream (a command's reply is still read at once: ``Link.read_linger_s``)
+READ_LINGER_S = 0.004
 
 
 class NotInControl(RuntimeError):
@@ -146,6 +150,8 @@ class DashboardHub:
         self.safety = hand.safety()
         self.pose_names = list(hand.poses)
         self._unsubscribe = hand.on_state(self._on_state)
+        if isinstance(hand.link, Link):  # a line (a SimLink reads none)
+            hand.link.read_linger_s = READ_LINGER_S
 
     # --- the stream -----------------------------------------------------------------------------
 

@@ -36,9 +36,9 @@ CHART_STYLE = "height: 150px; width: 560px"
 #: node (the one Vue made: NiceGUI's element update would re-render every element of the
 #: page, sliders and buttons too, 30 times a second); a promise resolved once the next frame
 #: is drawn (first running ``draw`` in that frame's callback), which paces the page's
-#: updates; then, after that frame, a chart's new points (``setOption``: ECharts redraws the
-#: chart at once, in milliseconds, so not in the frame of the numbers), given as JSON text
-#: (parsed faster than the same as code)
+#: updates; then, in the frame after, a chart's new points (``setOption``: ECharts redraws the
+#: chart at once, in milliseconds: a frame of its own, so the numbers' frame is out before the
+#: chart's work starts), given as JSON text (parsed faster than the same as code)
 LIVE_JS = """<script>
 window.utrfLive = (texts, draw, chart, points) => {
   for (const [id, text] of texts) {
@@ -48,9 +48,9 @@ window.utrfLive = (texts, draw, chart, points) => {
   return new Promise((resolve) => requestAnimationFrame(() => {
     draw();
     resolve(0);
-    if (chart !== undefined) setTimeout(() => {
+    if (chart !== undefined) requestAnimationFrame(() => {
       getElement(chart)?.chart?.setOption(JSON.parse(points));
-    }, 0);
+    });
   }));
 };
 </script>"""

@@ -116,6 +116,19 @@ class Link(EngineDriver):
 
     # --- public API ----------------------------------------------------------------------
 
+    @property
+    def read_linger_s(self) -> float:
+        """How long the reader waits after each read so that one read carries many frames
+        (0, the default: every frame is read as it comes). A request's reply is read at once
+        whatever this is (:meth:`Transport.awaiting_reply`); stream frames, faults and
+        heartbeat acks may then wait this long. For consumers of a fast stream that take it
+        in batches (the dashboard)."""
+        return self._transport.linger_s
+
+    @read_linger_s.setter
+    def read_linger_s(self, value: float) -> None:
+        self._transport.linger_s = value
+
     def stats(self) -> LinkStats:
         with self._cond:
             return self._engine.stats()
@@ -208,26 +221,30 @@ class Link(EngineDriver):
     def _drive(self) -> Any:
         """Write what the engine asks and wait on the wall clock until its request ends."""
         engine, cond = self._engine, self._cond
-        sent: Transmit | None = None
         try:
-            while True:
-                with cond:
-                    now = time.monotonic()
-                    if sent is not None:
-                        engine.sent(sent, now)
-                    action = engine.poll(now)
-                    while isinstance(action, Wait):
-                        cond.wait(action.until - now)  # the reader notifies what arrives
-                        now = time.monotonic()
-                        action = engine.poll(now)
-                if isinstance(action, Done):
-                    return action.result()
-                self._write(action.data)
-                sent = action
+            with self._transport.awaiting_reply():
+                return self._drive_engine(engine, cond)
         except BaseException:
             with cond:
                 engine.abandon()
             raise
+
+    def _drive_engine(self, engine: Engine, cond: threading.Condition) -> Any:
+        sent: Transmit | None = None
+        while True:
+            with cond:
+                now = time.monotonic()
+                if sent is not None:
+                    engine.sent(sent, now)
+                action = engine.poll(now)
+                while isinstance(action, Wait):
+                    cond.wait(action.until - now)  # the reader notifies what arrives
+                    now = time.monotonic()
+                    action = engine.poll(now)
+            if isinstance(action, Done):
+                return action.result()
+            self._write(action.data)
+            sent = action
 
     def _write(self, data: bytes) -> None:
         try:

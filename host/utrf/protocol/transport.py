@@ -3,15 +3,22 @@
 ``/dev/ttyACM0`` (the MEGA's USB serial), ``socket://127.0.0.1:PORT`` (the emulated board),
 ``loop://`` (a loopback, for tests). The reader hands every chunk of bytes to a callback as
 soon as it arrives and reports once, through another callback, when the line goes away.
+
+A reader may *linger* (``linger_s``): after each read it waits that long before the next, so
+one read carries many frames of a fast stream (each read and wake-up costs the host more than
+decoding a frame: docs/dashboard.md); while a request waits for its reply
+(:meth:`SerialTransport.awaiting_reply`) it never lingers, so a reply is read as soon as it
+arrives, as without lingering.
 """
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import select
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Protocol
 
 import serial
@@ -26,6 +33,8 @@ CloseCallback = Callable[[BaseException | None], None]
 class Transport(Protocol):
     """What :class:`~utrf.protocol.link.Link` needs from a line to the board."""
 
+    linger_s: float  # the reader's wait after each read (see the module's text)
+
     def start(self, on_data: DataCallback, on_close: CloseCallback) -> None:
         """Start delivering received bytes to ``on_data``; ``on_close`` once at the end."""
 
@@ -35,6 +44,9 @@ class Transport(Protocol):
     def close(self) -> None:
         """Stop the reader and release the line (idempotent)."""
 
+    def awaiting_reply(self) -> contextlib.AbstractContextManager[None]:
+        """Within it a request waits for its reply: received bytes are handed on at once."""
+
 
 class SerialTransport:
     """:class:`Transport` over ``serial.serial_for_url``."""
@@ -42,7 +54,14 @@ class SerialTransport:
     #: how often the reader wakes to notice close() when nothing arrives
     POLL_S = 0.05
 
-    def __init__(self, url: str, baudrate: int = DEFAULT_BAUD, **serial_kwargs: object) -> None:
+    def __init__(
+        self,
+        url: str,
+        baudrate: int = DEFAULT_BAUD,
+        *,
+        linger_s: float = 0.0,
+        **serial_kwargs: object,
+    ) -> None:
         if "://" not in url and os.name == "posix":
             # One program at a time on a serial port (an advisory lock, as other tools take).
             serial_kwargs.setdefault("exclusive", True)
@@ -58,6 +77,10 @@ class SerialTransport:
         self._write_lock = threading.Lock()
         self._closing = threading.Event()
         self._thread: threading.Thread | None = None
+        self.linger_s = linger_s
+        self._awaited = 0  # requests waiting for a reply (no lingering while any does)
+        self._awaited_lock = threading.Lock()
+        self._hurry = threading.Event()  # ends a linger early (a request, or close)
         try:
             self._fd: int | None = self._serial.fileno()
         except (AttributeError, NotImplementedError, OSError, serial.SerialException):
@@ -97,11 +120,45 @@ class SerialTransport:
                 data = self._read()
                 if data:
                     on_data(data)
+                    self._linger()
         except (serial.SerialException, OSError, ValueError, TypeError) as exc:
             if not self._closing.is_set():
                 error = exc
         finally:
             on_close(error)
+
+    @property
+    def linger_s(self) -> float:
+        """Seconds the reader waits after a read before the next, unless a request awaits
+        its reply (0: it reads whatever arrives at once)."""
+        return self._linger_s
+
+    @linger_s.setter
+    def linger_s(self, value: float) -> None:
+        if not 0.0 <= value <= 0.1:
+            raise ValueError(f"linger_s must lie in 0..0.1 s, got {value}")
+        self._linger_s = float(value)
+
+    @contextlib.contextmanager
+    def awaiting_reply(self) -> Iterator[None]:
+        with self._awaited_lock:
+            self._awaited += 1
+        self._hurry.set()  # a linger under way ends now
+        try:
+            yield
+        finally:
+            with self._awaited_lock:
+                self._awaited -= 1
+
+    def _linger(self) -> None:
+        """Wait ``linger_s`` before the next read, unless a request awaits its reply (cleared
+        first: a request that starts after the check ends the wait at once)."""
+        linger = self._linger_s
+        if linger <= 0.0:
+            return
+        self._hurry.clear()
+        if not self._awaited and not self._closing.is_set():
+            self._hurry.wait(linger)
 
     def _read(self) -> bytes:
         """Everything that has arrived, at once (non-blocking)."""
@@ -131,6 +188,7 @@ class SerialTransport:
         if self._closing.is_set():
             return
         self._closing.set()
+        self._hurry.set()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=2.0)
         with self._write_lock:
