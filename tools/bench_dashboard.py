@@ -77,7 +77,7 @@ const frame = (t) => { window.utrfFrames.push(t); requestAnimationFrame(frame); 
 requestAnimationFrame(frame);
 """
 #: seconds of the frame-rate window
-FRAME_WINDOW_S = 3.0
+FRAME_WINDOW_S = 5.0
 
 
 def display_age(drawn: np.ndarray) -> np.ndarray:
