@@ -34,7 +34,7 @@ def test_a_lingering_reader_takes_what_came_meanwhile_in_one_read() -> None:
             time.sleep(0.001)
         for byte in (b"\x02", b"\x03", b"\x04"):  # while the reader lingers
             transport.write(byte)
-            time.sleep(0.005)
+            time.sleep(0.001)
         deadline = time.monotonic() + 1.0
         while b"".join(got) != b"\x01\x02\x03\x04" and time.monotonic() < deadline:
             time.sleep(0.005)
@@ -47,7 +47,7 @@ def test_a_reply_is_read_at_once_while_the_reader_lingers(board: FakeBoard) -> N
     with Link.open(board.url, heartbeat_period_s=None, telemetry_queue_size=64) as link:
         link.read_linger_s = 0.1
         waits = []
-        for k in range(3):
+        for k in range(5):
             board.emit(state_sample(1.0 + k))
             link.telemetry.get(timeout=1.0)  # read: the reader now lingers 0.1 s
             t0 = time.monotonic()
@@ -55,7 +55,7 @@ def test_a_reply_is_read_at_once_while_the_reader_lingers(board: FakeBoard) -> N
             waits.append(time.monotonic() - t0)
         # a reply left to the end of the linger would take at least 0.1 s less the time the
         # sample took from the reader to here
-        assert min(waits) < 0.05, waits
+        assert min(waits) < 0.06, waits
 
 
 def test_a_lingering_link_loses_no_frame(board: FakeBoard) -> None:
