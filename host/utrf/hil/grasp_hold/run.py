@@ -64,26 +64,25 @@ def run(
     period = 1.0 / config.sample_hz
     t0 = rig.now()
     next_report = 0.0
-    k = 0
     with (
         CsvLog(out / "samples.csv", sample_columns(names)) as samples,
         CsvLog(out / "hits.csv", HIT_COLUMNS) as hit_log,
     ):
-        while True:
-            k += 1
-            due = t0 + k * period
-            rig.sleep(due - rig.now())
-            t = rig.now() - t0
+
+        def take(t: float) -> tuple[float, Any, np.ndarray] | None:
+            """At the sample's time, the board stopped there: the hits due, the truth."""
             if t > config.duration_s:
-                break
+                return None
             while hits and hits[0][0] <= t:
                 _, f, imp = hits.pop(0)
                 rig.hit(f, imp, config.hit_duration_s)
                 hit_log.write([f"{rig.now() - t0:.6f}", f, imp[0], imp[1],
                                config.hit_duration_s])  # fmt: skip
-            s = rig.tracker.read()
+            return t, rig.tracker.read(), rig.currents()
+
+        # the board runs on to the next sample while this one is written
+        for t, s, cur in rig.each_period(t0, period, take):
             st = hand.latest
-            cur = rig.currents()
             row: list[object] = [
                 f"{t:.6f}",
                 "baseline" if t < config.baseline_s else "hold",
