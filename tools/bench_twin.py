@@ -207,8 +207,10 @@ def report(ref: str, runs: dict[str, list[dict]], alone: dict, seconds: float, r
         f"Measured with `make bench-twin` (`python -m tools.bench_twin`) on {cpu_name()}, "
         f"{os.cpu_count()} cores, {date.today().isoformat()}: `utrf hil grasp-hold --emulated "
         f"--duration-s {seconds:g}` (the plain hold: grasp-bottle, 100 Hz telemetry, hits), a "
-        f"fresh process each time, this checkout (its twin on {threads} threads, its own "
-        "choice: `utrf.emulator.twin_threads`) against "
+        f"fresh process each time (each tree's bytecode compiled beforehand, as an installed "
+        f"package's is), this checkout (its twin on {threads} threads, its own "
+        "choice: `utrf.emulator.twin_threads`; the board running ahead of the client on a "
+        "thread of its own) against "
         f"`{ref}` (a `git worktree` of it under "
         f"`build/`, built by its own make), alternately, {repeats} times each; medians. CPU "
         "time is the process's user + system time; the machine was shared (load average "
@@ -257,6 +259,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.repeats < 1 or not args.seconds > 0:
         p.error("--repeats must be >= 1 and --seconds > 0")
     trees = {"new": REPO_ROOT, "ref": reference_tree(args.reference)}
+    for tree in trees.values():  # as installed: bytecode compiled once, not at every start
+        subprocess.run([sys.executable, "-m", "compileall", "-q", str(tree / "host")], check=True)
     runs: dict[str, list[dict]] = {"new": [], "ref": [], "one": []}
     for i in range(args.repeats):
         for tag in ("new", "ref", "one") if i % 2 == 0 else ("one", "ref", "new"):

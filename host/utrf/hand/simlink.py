@@ -73,6 +73,8 @@ class SimLink(EngineDriver):
         self._callbacks: list[Callable[[Telemetry], None]] = []
         self._heartbeat: Transmit | None = None  # made for a run ahead, not yet gone
         self._at: float | None = None  # the time a message delivered late arrived at
+        self._arrived: list[tuple[bytes, float]] = []  # a run ahead's bytes, stamped
+        self._items: list[Telemetry] = []  # messages the engine took, not yet delivered
         if on_telemetry is not None:
             self._callbacks.append(on_telemetry)
 
@@ -140,30 +142,31 @@ class SimLink(EngineDriver):
         frames that came up to there have been delivered to the callbacks, each stamped with
         the end of the exchange that brought its last byte as :meth:`sleep` stamps it. The
         board already runs on to the next end on its own thread (``run_ahead``) while the
-        callbacks and the caller work. ``take()`` giving None ends it there. Ends further
-        apart than half a heartbeat period are slept plainly (a heartbeat's ack must be in
-        before the next one is planned)."""
+        engine, the callbacks and the caller work. ``take()`` giving None ends it there. Ends
+        further apart than half a heartbeat period are slept plainly."""
         it = iter(ends)
         end = next(it, None)
-        ahead = end is not None and self._ahead(end, [])
+        ahead = end is not None and self._ahead(end)
         try:
             while end is not None:
-                items = self._join_ahead(end) if ahead else []
+                if ahead:
+                    self._join_ahead(end)
                 ahead = False
                 value = take()
                 end = None if value is None else next(it, None)
                 if end is not None:
-                    ahead = self._ahead(end, items)
-                self._deliver(items)
+                    ahead = self._ahead(end)
+                self._deliver_arrived()
                 if value is not None:
                     yield value
         finally:
             if ahead:  # the caller stopped early: the frames that came still go to the engine
-                self._deliver(self._join_ahead(None))
+                self._join_ahead(None)
+            self._deliver_arrived()
 
-    def _ahead(self, end: float, before: list[Telemetry]) -> bool:
+    def _ahead(self, end: float) -> bool:
         """Start the board running to ``end`` as :meth:`sleep` would run it; False when it is
-        slept plainly (then ``before`` is delivered first) or no exchange is due."""
+        slept plainly (what arrived is delivered first) or no exchange is due."""
         period = self.board.exchange_period
         now = self.now()
         seconds = end - now
@@ -171,16 +174,22 @@ class SimLink(EngineDriver):
             return False
         hb_period = self._engine.heartbeat_period_s
         if hb_period is not None and seconds > min(hb_period / 2, self.pump_interval_s):
-            self._deliver(before)
+            self._deliver_arrived()
             self.sleep(seconds)
             return False
         # the end sleep() reaches: whole exchanges, the nearest to the end, at least one
         seconds = max(round(seconds / period), 1) * period
-        send = None
+        last = self.board.exchanges_end(seconds)
         due = self._engine.heartbeat_due()
+        if due is not None and due <= last and self._arrived:
+            # the frames not taken yet may move it (an ack, a reset): the engine takes them
+            # first; otherwise it can only be later, past this run, and they wait
+            self._take_arrived()
+            due = self._engine.heartbeat_due()
+        send = None
         # a heartbeat that falls due by the run's last exchange goes out within it, at the
         # first exchange's end at or past its time, where sleep() sends it
-        if due is not None and due <= self.board.exchanges_end(seconds):
+        if due is not None and due <= last:
             if self._heartbeat is None:
                 self._heartbeat = self._engine.heartbeat(max(due, now))
             if self._heartbeat is not None:
@@ -188,28 +197,42 @@ class SimLink(EngineDriver):
         self.board.run_ahead(seconds, send)
         return True
 
-    def _join_ahead(self, end: float | None) -> list[Telemetry]:
-        """Wait for the run ahead; the engine takes its frames (stamped where sleep() would
-        have looked) and its heartbeat; returns the messages for the callbacks. A run that
-        stopped short of ``end`` (a crash, its marks full) goes on plainly."""
-        board, engine = self.board, self._engine
+    def _join_ahead(self, end: float | None) -> None:
+        """Wait for the run ahead: its bytes wait for the engine, cut where sleep() would
+        have looked and stamped there, and its heartbeat is counted. A run that stopped
+        short of ``end`` (a crash, its marks full) goes on plainly."""
+        board = self.board
         run = board.run_ahead_join()
         data = board.read()
-        items: list[Telemetry] = []
         at = 0
         for n, t in run.marks:
-            if self._heartbeat is not None and run.sent_at is not None and t > run.sent_at:
-                self._sent_ahead(run.sent_at)
-            items += engine.receive(data[at:n], t)
+            self._arrived.append((data[at:n], t))
             at = n
+        self._arrived.append((data[at:], self.now()))
         if self._heartbeat is not None and run.sent_at is not None:
-            self._sent_ahead(run.sent_at)
-        items += engine.receive(data[at:], self.now())
+            self._engine.sent(self._heartbeat, run.sent_at)
+            self._heartbeat = None
         if not run.done and end is not None:
-            self._deliver(items)
+            self._deliver_arrived()
             self.sleep(end - self.now())
-            return []
-        return items
+
+    def _take_arrived(self) -> None:
+        """The engine takes the bytes a run ahead brought; its messages wait for delivery."""
+        for data, t in self._arrived:
+            self._items += self._engine.receive(data, t)
+        self._arrived = []
+
+    def _deliver_arrived(self) -> None:
+        """The callbacks, each message at its own time: the clock reads its arrival while
+        they run (the board may be ahead by then)."""
+        self._take_arrived()
+        items, self._items = self._items, []
+        try:
+            for item in items:
+                self._at = item.received_s
+                call_each(list(self._callbacks), item)
+        finally:
+            self._at = None
 
     def _heartbeat_at(self, now: float) -> Transmit | None:
         """The heartbeat to send at ``now`` if one is due: the one a run ahead made and could
@@ -221,21 +244,6 @@ class SimLink(EngineDriver):
             return None
         tx, self._heartbeat = self._heartbeat, None
         return tx
-
-    def _sent_ahead(self, at: float) -> None:
-        assert self._heartbeat is not None
-        self._engine.sent(self._heartbeat, at)
-        self._heartbeat = None
-
-    def _deliver(self, items: list[Telemetry]) -> None:
-        """The callbacks, each message at its own time: the clock reads its arrival while
-        they run (the board may be ahead by then)."""
-        try:
-            for item in items:
-                self._at = item.received_s
-                call_each(list(self._callbacks), item)
-        finally:
-            self._at = None
 
     # --- driving the engine ----------------------------------------------------------------
 
