@@ -7,12 +7,17 @@
 #include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "harness_internal.h"
 
 struct utrf_ahead {
     pthread_t thread;
-    int running;
+    pid_t pid; /* the process that started the thread: a fork's child has no such thread */
+    pthread_mutex_t mu;
+    pthread_cond_t cv;
+    int work, quit; /* under mu: a run to do; the thread to end */
+    int running;    /* the caller's: a run started, not joined */
     uint64_t target, period;
     int wake;
     int status;
@@ -38,33 +43,67 @@ void ahead_send_due(utrf_sim_t *s)
     s->send_len = 0;
 }
 
+/* One thread for the board's life, woken for each run: a thread a run (thousands of runs a
+ * hold) would cost its creation every time. */
 static void *ahead_main(void *arg)
 {
     utrf_sim_t *s = arg;
     struct utrf_ahead *a = s->ahead;
-    a->status = utrf_sim_run_plant_until(s, a->target, a->period, a->wake);
+    pthread_mutex_lock(&a->mu);
+    for (;;) {
+        while (a->work != 1 && !a->quit)
+            pthread_cond_wait(&a->cv, &a->mu);
+        if (a->quit)
+            break;
+        pthread_mutex_unlock(&a->mu);
+        int status = utrf_sim_run_plant_until(s, a->target, a->period, a->wake);
+        pthread_mutex_lock(&a->mu);
+        a->status = status;
+        a->work = 2; /* done */
+        pthread_cond_broadcast(&a->cv);
+    }
+    pthread_mutex_unlock(&a->mu);
     return NULL;
+}
+
+static int ahead_thread(utrf_sim_t *s)
+{
+    struct utrf_ahead *a = s->ahead;
+    if (a && a->pid == getpid())
+        return 0;
+    if (!a) {
+        a = calloc(1, sizeof *a);
+        if (!a)
+            return -1;
+        s->ahead = a;
+    }
+    /* new, or inherited by a forked child without its thread: start afresh */
+    memset(a, 0, sizeof *a);
+    pthread_mutex_init(&a->mu, NULL);
+    pthread_cond_init(&a->cv, NULL);
+    if (pthread_create(&a->thread, NULL, ahead_main, s)) {
+        free(a);
+        s->ahead = NULL;
+        return -1;
+    }
+    a->pid = getpid();
+    return 0;
 }
 
 int utrf_sim_ahead_start(utrf_sim_t *s, uint64_t target, uint64_t period, int wake)
 {
-    if (!s->ahead) {
-        s->ahead = calloc(1, sizeof *s->ahead);
-        if (!s->ahead)
-            return -1;
-    }
-    struct utrf_ahead *a = s->ahead;
-    if (a->running)
+    if (utrf_sim_ahead_running(s) || ahead_thread(s))
         return -1;
+    struct utrf_ahead *a = s->ahead;
+    s->marks = 0;
+    s->mark_on = 1;
+    pthread_mutex_lock(&a->mu);
     a->target = target;
     a->period = period;
     a->wake = wake;
-    s->marks = 0;
-    s->mark_on = 1;
-    if (pthread_create(&a->thread, NULL, ahead_main, s)) {
-        s->mark_on = 0;
-        return -1;
-    }
+    a->work = 1;
+    pthread_cond_broadcast(&a->cv);
+    pthread_mutex_unlock(&a->mu);
     a->running = 1;
     return 0;
 }
@@ -72,9 +111,13 @@ int utrf_sim_ahead_start(utrf_sim_t *s, uint64_t target, uint64_t period, int wa
 int utrf_sim_ahead_join(utrf_sim_t *s)
 {
     struct utrf_ahead *a = s->ahead;
-    if (!a || !a->running)
+    if (!utrf_sim_ahead_running(s))
         return utrf_sim_status(s);
-    pthread_join(a->thread, NULL);
+    pthread_mutex_lock(&a->mu);
+    while (a->work != 2)
+        pthread_cond_wait(&a->cv, &a->mu);
+    a->work = 0;
+    pthread_mutex_unlock(&a->mu);
     a->running = 0;
     s->mark_on = 0;
     return a->status;
@@ -82,7 +125,7 @@ int utrf_sim_ahead_join(utrf_sim_t *s)
 
 int utrf_sim_ahead_running(const utrf_sim_t *s)
 {
-    return s->ahead && s->ahead->running;
+    return s->ahead && s->ahead->running && s->ahead->pid == getpid();
 }
 
 size_t utrf_sim_ahead_marks(const utrf_sim_t *s, uint64_t *bytes, uint64_t *cycles, size_t n)
@@ -116,9 +159,19 @@ uint64_t utrf_sim_ahead_sent(const utrf_sim_t *s, size_t *taken)
 
 void ahead_close(utrf_sim_t *s)
 {
-    if (!s->ahead)
+    struct utrf_ahead *a = s->ahead;
+    if (!a)
         return;
-    utrf_sim_ahead_join(s);
-    free(s->ahead);
+    if (a->pid == getpid()) {
+        utrf_sim_ahead_join(s);
+        pthread_mutex_lock(&a->mu);
+        a->quit = 1;
+        pthread_cond_broadcast(&a->cv);
+        pthread_mutex_unlock(&a->mu);
+        pthread_join(a->thread, NULL);
+        pthread_mutex_destroy(&a->mu);
+        pthread_cond_destroy(&a->cv);
+    }
+    free(a);
     s->ahead = NULL;
 }
