@@ -18,7 +18,9 @@ Replies and stream frames are noticed at the end of the board's exchange period 
 default, the finest step a driven board takes) in which their last byte came; that bounds the
 resolution of latencies measured here. The board runs in C from one frame to the next
 (:meth:`EmulatedBoard.run_until_output`): Python looks at the output only when a frame has
-come, and for heartbeats.
+come, and for heartbeats. :meth:`SimLink.sleep_each` samples at given times with the board
+running on ahead to the next on a thread of its own while Python works (the same run and
+the same stamps to the cycle; the grasp hold's samples).
 """
 
 from __future__ import annotations
