@@ -137,15 +137,18 @@ def _hold(tmp: Path, ahead: bool) -> tuple[dict[str, bytes], dict[str, int], dic
 
 @pytest.mark.slow
 def test_the_board_running_ahead_takes_the_same_hold_to_the_bit(
-    firmware_elf: Path, tmp_path: Path
+    firmware_elf: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Rig.each_period's two ways: the board running on to the next sample on its own thread
     while the last is written (SimLink.sleep_each), and sleeping to each sample: the same
     samples, hits, telemetry (each frame stamped where it was noticed) and heartbeats (the
-    bytes the board took, at the same cycles), to the bit."""
-    ahead, stats_a, rx_a = _hold(tmp_path / "ahead", True)
+    bytes the board took, at the same cycles), to the bit; also with the plant on a thread
+    of its own beside the board's."""
     plain, stats_p, rx_p = _hold(tmp_path / "plain", False)
-    assert ahead["samples.csv"].count(b"\n") > 140 and ahead["hits.csv"].count(b"\n") == 2
-    assert ahead == plain
-    assert stats_a == stats_p and stats_a["rx_host_bytes"] > 0
-    assert rx_a == rx_p
+    for threads in ("1", "2"):
+        monkeypatch.setenv("UTRF_TWIN_THREADS", threads)
+        ahead, stats_a, rx_a = _hold(tmp_path / f"ahead{threads}", True)
+        assert ahead["samples.csv"].count(b"\n") > 140 and ahead["hits.csv"].count(b"\n") == 2
+        assert ahead == plain
+        assert stats_a == stats_p and stats_a["rx_host_bytes"] > 0
+        assert rx_a == rx_p
