@@ -25,7 +25,7 @@ the same stamps to the cycle; the grasp hold's samples).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from utrf.protocol import messages as m
@@ -137,7 +137,9 @@ class SimLink(EngineDriver):
             self.board.run_until_output(max(round(step / period), 1) * period, self._pump_on)
             self._pump()
 
-    def sleep_each(self, ends: Iterable[float], take: Callable[[], T | None]) -> Iterator[T]:
+    def sleep_each(
+        self, ends: Iterable[float], take: Callable[[], T | None]
+    ) -> Generator[T, None, None]:
         """Sleep to each of ``ends`` (simulated s, rising) as :meth:`sleep` would, to the cycle,
         with the board running ahead: at each end ``take()`` is called with the board stopped
         there (to read or hit the plant; not the link), and its value is yielded once the

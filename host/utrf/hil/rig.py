@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import itertools
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
@@ -142,7 +142,7 @@ class Rig:
 
     def each_period(
         self, t0: float, period: float, take: Callable[[float], T | None]
-    ) -> Iterator[T]:
+    ) -> Generator[T, None, None]:
         """``take(t)`` at ``t0 + k period`` (k = 1, 2, ...; ``t`` from ``t0``) until it gives
         None; yields what it gives. On the emulated rig (``ahead``) the board runs on to the
         next time on its own thread while the caller works on what was yielded
