@@ -195,7 +195,7 @@ def report(ref: str, runs: dict[str, list[dict]], alone: dict, seconds: float, r
 
     def engines(tag: str) -> str:  # this checkout's one-thread hold: no spinning counted
         e, j = alone[tag]["elf"], alone[tag]["mjcf"]
-        h = median(runs["one" if tag == "new" else tag], "cpu")
+        h = median(runs["one" if tag == "new" and threads == 2 else tag], "cpu")
         rest = h - e["cpu"] - j["cpu"]
         shares = " / ".join(f"{100 * x / h:.0f}" for x in (e["cpu"], j["cpu"], rest))
         return f"{e['cpu']:.1f} s / {j['cpu']:.1f} s / {rest:.1f} s ({shares} %)"
@@ -207,8 +207,11 @@ def report(ref: str, runs: dict[str, list[dict]], alone: dict, seconds: float, r
         f"Measured with `make bench-twin` (`python -m tools.bench_twin`) on {cpu_name()}, "
         f"{os.cpu_count()} cores, {date.today().isoformat()}: `utrf hil grasp-hold --emulated "
         f"--duration-s {seconds:g}` (the plain hold: grasp-bottle, 100 Hz telemetry, hits), a "
-        f"fresh process each time, this checkout (its twin on {threads} threads, its own "
-        "choice: `utrf.emulator.twin_threads`) against "
+        f"fresh process each time (each tree's bytecode compiled beforehand, as an installed "
+        f"package's is), this checkout (its twin on {threads} thread{'s' if threads > 1 else ''}"
+        ", its own "
+        "choice: `utrf.emulator.twin_threads`; the board running ahead of the client on a "
+        "thread of its own) against "
         f"`{ref}` (a `git worktree` of it under "
         f"`build/`, built by its own make), alternately, {repeats} times each; medians. CPU "
         "time is the process's user + system time; the machine was shared (load average "
@@ -223,7 +226,8 @@ def report(ref: str, runs: dict[str, list[dict]], alone: dict, seconds: float, r
         f"pairs: {paired('cpu')} |",
         f"| CPU / wall (cores kept busy) | {median(new, 'cpu') / median(new, 'wall'):.2f} | "
         f"{median(old, 'cpu') / median(old, 'wall'):.2f} | |",
-        f"| this checkout, the twin on one thread (`UTRF_TWIN_THREADS=1`): wall / CPU | "
+        f"| this checkout, the twin on {3 - threads} thread{'s' if threads == 1 else ''} "
+        f"(`UTRF_TWIN_THREADS={3 - threads}`): wall / CPU | "
         f"{cell(one, 'wall')} / {cell(one, 'cpu')} | | wall **"
         f"{median(one, 'wall') / median(old, 'wall'):.2f}**, CPU **"
         f"{median(one, 'cpu') / median(old, 'cpu'):.2f}** of `{ref}`'s |",
@@ -257,10 +261,15 @@ def main(argv: list[str] | None = None) -> int:
     if args.repeats < 1 or not args.seconds > 0:
         p.error("--repeats must be >= 1 and --seconds > 0")
     trees = {"new": REPO_ROOT, "ref": reference_tree(args.reference)}
+    for tree in trees.values():  # as installed: bytecode compiled once, not at every start
+        subprocess.run([sys.executable, "-m", "compileall", "-q", str(tree / "host")], check=True)
+    from utrf.emulator.twin_threads import plant_threads
+
+    other = 3 - plant_threads()  # the checkout's twin on the other thread count beside it
     runs: dict[str, list[dict]] = {"new": [], "ref": [], "one": []}
     for i in range(args.repeats):
         for tag in ("new", "ref", "one") if i % 2 == 0 else ("one", "ref", "new"):
-            tree, threads = (trees["new"], 1) if tag == "one" else (trees[tag], None)
+            tree, threads = (trees["new"], other) if tag == "one" else (trees[tag], None)
             runs[tag].append(hold(tree, args.seconds, threads))
             print(f"{tag} {runs[tag][-1]}", file=sys.stderr, flush=True)
     alone = {

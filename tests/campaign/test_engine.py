@@ -268,3 +268,22 @@ def test_a_grasp_campaign_on_the_twin_records_holds_and_a_broken_firmware(
     assert real["largest_contact_force_n"] > 0 and real["firmware_build_id"]
     assert real["largest_tracking_error_rad"] >= 0 and real["slip_mm"] >= 0
     assert broken["status"] == "failed" and broken["error"]
+
+
+def _twin_threads_env() -> str:
+    return os.environ.get(engine.TWIN_THREADS_ENV, "")
+
+
+@pytest.mark.slow
+def test_the_local_workers_twin_threads_the_engines_choice_or_the_drivers(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A lone worker on 2 cores or more gets two twin threads; a driver that sets
+    UTRF_TWIN_THREADS (the benchmark: the same work a run on 1 worker and on 2) gets its own."""
+    monkeypatch.delenv(engine.TWIN_THREADS_ENV, raising=False)
+    lone = "2" if (os.cpu_count() or 1) >= 2 else "1"
+    with engine.cluster(None, 1) as client:
+        assert set(client.run(_twin_threads_env).values()) == {lone}
+    monkeypatch.setenv(engine.TWIN_THREADS_ENV, "1")
+    with engine.cluster(None, 1) as client:
+        assert set(client.run(_twin_threads_env).values()) == {"1"}

@@ -118,3 +118,37 @@ def test_disturbance_detection_on_a_known_trace() -> None:
     assert ev[0]["start_s"] == pytest.approx(1.0) and ev[0]["recovery_s"] == pytest.approx(0.3)
     assert ev[0]["largest_deviation_rad"] == pytest.approx(-0.05)
     assert ev[1]["recovery_s"] is None
+
+
+def _hold(tmp: Path, ahead: bool) -> tuple[dict[str, bytes], dict[str, int], dict[str, int]]:
+    config = gh.GraspHoldConfig(duration_s=3.0, hits=1, seed=2, sample_hz=50.0)
+    rig = open_emulated(seed=2, tracked_finger=1, truth=EmulatedTruth(actuator=None))
+    rig.ahead = ahead
+    try:
+        run.run(rig, config, tmp, progress=lambda _s: None)
+        board = rig.board
+        stats, rx = dict(board.stats), board.rx_timing()  # every byte's arrival, to the cycle
+        stats["cycle"] = round(board.sim_time * 16e6)
+    finally:
+        rig.close()
+    files = {n: (tmp / n).read_bytes() for n in ("samples.csv", "hits.csv", "telemetry.csv")}
+    return files, stats, rx
+
+
+@pytest.mark.slow
+def test_the_board_running_ahead_takes_the_same_hold_to_the_bit(
+    firmware_elf: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Rig.each_period's two ways: the board running on to the next sample on its own thread
+    while the last is written (SimLink.sleep_each), and sleeping to each sample: the same
+    samples, hits, telemetry (each frame stamped where it was noticed) and heartbeats (the
+    bytes the board took, at the same cycles), to the bit; also with the plant on a thread
+    of its own beside the board's."""
+    plain, stats_p, rx_p = _hold(tmp_path / "plain", False)
+    for threads in ("1", "2"):
+        monkeypatch.setenv("UTRF_TWIN_THREADS", threads)
+        ahead, stats_a, rx_a = _hold(tmp_path / f"ahead{threads}", True)
+        assert ahead["samples.csv"].count(b"\n") > 140 and ahead["hits.csv"].count(b"\n") == 2
+        assert ahead == plain
+        assert stats_a == stats_p and stats_a["rx_host_bytes"] > 0
+        assert rx_a == rx_p

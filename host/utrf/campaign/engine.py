@@ -117,6 +117,8 @@ def cluster(address: str | None, workers: int | None) -> Iterator[Any]:
 
     n = workers or os.cpu_count() or 1
     shared = 2 * n > (os.cpu_count() or 1)  # two twin threads a worker would share cores
+    # the driver's own UTRF_TWIN_THREADS, when set, wins (the same work a run on any count)
+    threads = os.environ.get(TWIN_THREADS_ENV, "").strip() or ("1" if shared else "2")
     with (
         dask.config.set(LOCAL_CONFIG),
         LocalCluster(
@@ -126,7 +128,7 @@ def cluster(address: str | None, workers: int | None) -> Iterator[Any]:
             host="127.0.0.1",
             dashboard_address=None,
             silence_logs=logging.ERROR,
-            env={TWIN_THREADS_ENV: "1" if shared else "2"},
+            env={TWIN_THREADS_ENV: threads},
         ) as local,
         Client(local) as client,
     ):

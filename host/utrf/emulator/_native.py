@@ -19,6 +19,7 @@ from utrf.emulator.harness_abi import (
     F_CPU_HZ,
     FINGERS,
     FRAME_LOG,
+    MARKS,
     MJ_LOADS,
     MJ_STATE_FIELDS,
     MOTOR_REG_FIELDS,
@@ -143,6 +144,7 @@ class NativeBoard:
         )
         self._run_to = self._lib.utrf_sim_run_to
         self._u8buf = (ctypes.c_uint8 * 65536)()
+        self._marks = ((ctypes.c_uint64 * MARKS)(), (ctypes.c_uint64 * MARKS)())
 
     @property
     def handle(self) -> int:
@@ -169,6 +171,34 @@ class NativeBoard:
 
     def run_plant_until(self, cycle: int, period: int, wake: int) -> int:
         return self._lib.utrf_sim_run_plant_until(self._h, cycle, period, wake)
+
+    def ahead_start(self, cycle: int, period: int, wake: int) -> None:
+        """``run_plant_until`` on the harness's own thread, marking each period in which
+        ``wake`` came instead of stopping there; returns at once (``ahead_join`` waits)."""
+        if self._lib.utrf_sim_ahead_start(self.handle, cycle, period, wake):
+            raise HarnessError("the board's run-ahead thread could not start (or one runs)")
+
+    def ahead_join(self) -> int:
+        """Wait for the run ahead; its status."""
+        return int(self._lib.utrf_sim_ahead_join(self.handle))
+
+    def ahead_marks(self) -> tuple[list[int], list[int]]:
+        """After the join: the output's bytes not yet read up to each marked period, and the
+        MCU's cycle at that period's end."""
+        n = self._lib.utrf_sim_ahead_marks(self.handle, self._marks[0], self._marks[1], MARKS)
+        return list(self._marks[0][:n]), list(self._marks[1][:n])
+
+    def ahead_send(self, data: bytes, at_s: float) -> None:
+        """Write ``data`` to UART0 at the first period's end whose time reaches ``at_s``."""
+        buf = (ctypes.c_uint8 * len(data)).from_buffer_copy(data)
+        if self._lib.utrf_sim_ahead_send(self.handle, buf, len(data), at_s):
+            raise HarnessError(f"{len(data)} bytes cannot wait for their time (or a run is on)")
+
+    def ahead_sent(self) -> tuple[int, int]:
+        """The cycle the waiting bytes went at (0: not yet) and how many the UART took."""
+        taken = ctypes.c_size_t(0)
+        cycle = self._lib.utrf_sim_ahead_sent(self.handle, ctypes.byref(taken))
+        return int(cycle), int(taken.value)
 
     @property
     def plant_cycle(self) -> int:

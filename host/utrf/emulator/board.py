@@ -162,6 +162,7 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
         # MuJoCo cuts the exchange into its steps
         self.plant.set_timestep(round(exchange_period * F_CPU_HZ) / F_CPU_HZ)
         self._lock = threading.RLock()
+        self._ahead: int | None = None  # a run ahead's target while one is under way
         self._tick = threading.Condition()
         self._stop = threading.Event()
         self._holder: dict = {}
@@ -216,6 +217,8 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
         if not self._finalizer.alive:
             return
         self._stop.set()
+        if self._ahead is not None:
+            self.run_ahead_join()
         thread = self._holder.get("thread")
         if thread is not None:
             thread.join(timeout=5.0)
@@ -231,6 +234,8 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
     def _board(self) -> NativeBoard:
         if not self._finalizer.alive:
             raise EmulatorError("the emulated board is closed")
+        if self._ahead is not None:
+            raise EmulatorError("the board is running ahead on its thread: join it first")
         return self._native
 
     # -- where to connect -----------------------------------------------------------------------

@@ -8,6 +8,7 @@ import math
 import time
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from utrf.emulator._native import F_CPU_HZ
@@ -15,6 +16,19 @@ from utrf.emulator.board_types import EmulatorError
 
 if TYPE_CHECKING:
     from utrf.emulator._native import NativeBoard
+
+
+@dataclass(frozen=True)
+class AheadRun:
+    """What a run ahead (:meth:`BoardDriven.run_ahead`) did: ``marks``, each period's end in
+    which a frame ended (the output's bytes up to it, not yet read; simulated s there), where
+    a client stopping at every frame would have looked; ``sent_at``: when the bytes that
+    waited went (s; None: not yet); ``done``: whether it reached its end (a crash, or marks
+    full, end it early)."""
+
+    marks: list[tuple[int, float]]
+    sent_at: float | None
+    done: bool
 
 
 class BoardDriven:
@@ -29,6 +43,7 @@ class BoardDriven:
         _busy: float
         _driven_wall: float
         _capture: bool
+        _ahead: int | None
         realtime: bool
         crash_pc: int | None
 
@@ -107,3 +122,62 @@ class BoardDriven:
                     if self._cycle < target and (until is None or until()):
                         return True
                 return False
+
+    def exchanges_end(self, seconds: float) -> float:
+        """Where a driven run of ``seconds`` (:meth:`run_until_output`, :meth:`run_ahead`)
+        ends on the plant's clock, in s: whole exchange periods (the MCU ends a few cycles
+        past it)."""
+        return self._exchanges_end(seconds) / F_CPU_HZ
+
+    def _exchanges_end(self, seconds: float) -> int:
+        return self._exchanges_on(-(-round(seconds * F_CPU_HZ) // self._period_cycles))
+
+    def run_ahead(self, seconds: float, send: tuple[bytes, float] | None = None) -> None:
+        """Driven: start running ``seconds`` of simulated time in whole exchanges (the same
+        end as :meth:`run_until_output`'s) on the harness's own thread, and return at once:
+        the caller works meanwhile, on anything but this board, until :meth:`run_ahead_join`.
+        The run is :meth:`run_until_output`'s to the cycle; the exchanges in which a frame
+        ended are marked instead of stopped at. ``send``: (bytes, time): written to UART0 at
+        the first exchange's end at or past ``time`` (s) within the run (a heartbeat)."""
+        if self.realtime or not self._capture:
+            raise EmulatorError("run_ahead needs realtime=False and capture=True")
+        if not (isinstance(seconds, int | float) and math.isfinite(seconds) and seconds >= 0):
+            raise EmulatorError(f"seconds must be a finite number >= 0, got {seconds!r}")
+        self._lock.__enter__()  # held until the join: no other thread touches the board
+        try:
+            native = self._board()
+            target = self._exchanges_end(seconds)
+            if send is not None:
+                native.ahead_send(send[0], send[1])
+            native.ahead_start(target, self._period_cycles, 0)
+        except BaseException:
+            self._lock.__exit__(None, None, None)
+            raise
+        self._ahead = target
+        self._ahead_t0 = time.perf_counter()
+
+    def run_ahead_join(self) -> AheadRun:
+        """Wait for the run :meth:`run_ahead` started; what it did."""
+        target = self._ahead
+        if target is None:
+            raise EmulatorError("no run ahead to join")
+        native = self._native
+        try:
+            status = native.ahead_join()
+        finally:
+            self._ahead = None
+            dt = time.perf_counter() - self._ahead_t0
+            self._busy += dt
+            self._driven_wall += dt
+            self._lock.__exit__(None, None, None)
+        self._cycle = native.cycle
+        if status != self._status:
+            self._status = status
+            self.crash_pc = native.pc if status == 1 else None
+        offsets, cycles = native.ahead_marks()
+        sent, _taken = native.ahead_sent()
+        return AheadRun(
+            [(n, c / F_CPU_HZ) for n, c in zip(offsets, cycles, strict=True)],
+            sent / F_CPU_HZ if sent else None,
+            self._cycle >= target,
+        )

@@ -15,7 +15,7 @@ from typing import Any
 
 from utrf import artifacts
 
-ABI = 16
+ABI = 17
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -77,6 +77,7 @@ PROFILE_FIELDS = (
 )
 FUNCTION_PROFILES = 3  # function slots; profile(which): 0 the vector, 1 + k slot k
 FRAME_LOG = 4096
+MARKS = 256  # UTRF_SIM_MARKS: the periods a run ahead marks at most
 MOTOR_REG_FIELDS = ("com", "ocr", "icr", "wgm", "cs", "in1", "in2", "pwm_pin", "outputs")
 
 
@@ -341,6 +342,15 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_plant_cycle": (ctypes.c_uint64, [p]),
         "utrf_sim_set_plant_threads": (ctypes.c_int, [p, ctypes.c_int]),
         "utrf_sim_plant_threads": (ctypes.c_int, [p]),
+        "utrf_sim_ahead_start": (
+            ctypes.c_int,
+            [p, ctypes.c_uint64, ctypes.c_uint64, ctypes.c_int],
+        ),
+        "utrf_sim_ahead_join": (ctypes.c_int, [p]),
+        "utrf_sim_ahead_running": (ctypes.c_int, [p]),
+        "utrf_sim_ahead_marks": (ctypes.c_size_t, [p, u64p, u64p, ctypes.c_size_t]),
+        "utrf_sim_ahead_send": (ctypes.c_int, [p, u8p, ctypes.c_size_t, ctypes.c_double]),
+        "utrf_sim_ahead_sent": (ctypes.c_uint64, [p, ctypes.POINTER(ctypes.c_size_t)]),
     }
     for name, (restype, argtypes) in sigs.items():
         fn = getattr(lib, name)

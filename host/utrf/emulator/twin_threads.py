@@ -2,9 +2,12 @@
 
 With two, the MCU runs each exchange period on the caller's thread while the plant (MuJoCo)
 steps the same period on a thread of its own (``harness/plant_thread.c``); the results are the
-same to the bit as with one. Two pay when a second core is free for the plant: a single run
-on a machine of two cores or more. Where every core already has a run of its own (campaign
-workers, as many as the cores), one thread each is the better use of them: set
+same to the bit as with one. Two pay when a core is free for the plant beside the MCU's and
+the client's (a sampling client works beside the board: ``SimLink.sleep_each``): a single run
+on a machine of three cores or more. On two, the MCU, the plant and the client make three
+busy threads, and one twin thread measured faster side by side (0.75 against 0.98 of the
+reference's wall time, docs/benchmarks.md). Where every core already has a run of its own
+(campaign workers, as many as the cores), one thread each is the better use of them: set
 ``UTRF_TWIN_THREADS=1`` in the workers' environment, or pass ``plant_threads=1`` to
 ``EmulatedBoard``.
 """
@@ -28,8 +31,9 @@ def usable_cores() -> int:
 
 def plant_threads(requested: int | None = None, *, paced: bool = False) -> int:
     """1 or 2: ``requested`` if given, else ``UTRF_TWIN_THREADS`` if set, else 2 when the
-    process may use two cores or more and the board is not paced to the wall clock (a paced
-    board has time to spare: a second thread would only spin)."""
+    process may use three cores or more (the MCU's, the plant's, the client's) and the board
+    is not paced to the wall clock (a paced board has time to spare: a second thread would
+    only spin)."""
     source = "plant_threads"
     if requested is None:
         text = os.environ.get(ENV, "").strip()
@@ -40,7 +44,7 @@ def plant_threads(requested: int | None = None, *, paced: bool = False) -> int:
             except ValueError:
                 raise EmulatorError(f"{ENV} must be 1 or 2, got {text!r}") from None
     if requested is None:
-        return 2 if usable_cores() >= 2 and not paced else 1
+        return 2 if usable_cores() >= 3 and not paced else 1
     if requested not in (1, 2) or isinstance(requested, bool):
         raise EmulatorError(f"{source} must be 1 or 2, got {requested!r}")
     return int(requested)

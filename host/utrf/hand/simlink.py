@@ -18,12 +18,14 @@ Replies and stream frames are noticed at the end of the board's exchange period 
 default, the finest step a driven board takes) in which their last byte came; that bounds the
 resolution of latencies measured here. The board runs in C from one frame to the next
 (:meth:`EmulatedBoard.run_until_output`): Python looks at the output only when a frame has
-come, and for heartbeats.
+come, and for heartbeats. :meth:`SimLink.sleep_each` samples at given times with the board
+running on ahead to the next on a thread of its own while Python works (the same run and
+the same stamps to the cycle; the grasp hold's samples).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Generator, Iterable
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from utrf.protocol import messages as m
@@ -43,6 +45,7 @@ if TYPE_CHECKING:
     from utrf.emulator import EmulatedBoard
 
 R = TypeVar("R", bound=Message)
+T = TypeVar("T")
 #: longest stretch of simulated time run between two looks at the board's output while sleeping
 #: (each frame that comes is looked at when it has come, whatever this is)
 PUMP_INTERVAL_S = 0.1
@@ -70,6 +73,10 @@ class SimLink(EngineDriver):
         )
         self.board = board
         self._callbacks: list[Callable[[Telemetry], None]] = []
+        self._heartbeat: Transmit | None = None  # made for a run ahead, not yet gone
+        self._at: float | None = None  # the time a message delivered late arrived at
+        self._arrived: list[tuple[bytes, float]] = []  # a run ahead's bytes, stamped
+        self._items: list[Telemetry] = []  # messages the engine took, not yet delivered
         if on_telemetry is not None:
             self._callbacks.append(on_telemetry)
 
@@ -103,10 +110,10 @@ class SimLink(EngineDriver):
     # --- the Clock -----------------------------------------------------------------------
 
     def now(self) -> float:
-        return self.board.sim_time
+        return self.board.sim_time if self._at is None else self._at
 
     def timestamp(self) -> float:
-        return self.board.sim_time
+        return self.now()
 
     def sleep(self, seconds: float) -> None:
         """Run the board for ``seconds`` of simulated time, with heartbeats, delivering its
@@ -118,7 +125,7 @@ class SimLink(EngineDriver):
         while self.now() < end - period / 2:
             now = self.now()
             step = min(end - now, self.pump_interval_s)
-            heartbeat = self._engine.heartbeat(now)
+            heartbeat = self._heartbeat_at(now)
             if heartbeat is not None:
                 self._send(heartbeat)
             due = self._engine.heartbeat_due()
@@ -129,6 +136,118 @@ class SimLink(EngineDriver):
             # frames that come meanwhile go to the engine as each one ends.
             self.board.run_until_output(max(round(step / period), 1) * period, self._pump_on)
             self._pump()
+
+    def sleep_each(
+        self, ends: Iterable[float], take: Callable[[], T | None]
+    ) -> Generator[T, None, None]:
+        """Sleep to each of ``ends`` (simulated s, rising) as :meth:`sleep` would, to the cycle,
+        with the board running ahead: at each end ``take()`` is called with the board stopped
+        there (to read or hit the plant; not the link), and its value is yielded once the
+        frames that came up to there have been delivered to the callbacks, each stamped with
+        the end of the exchange that brought its last byte as :meth:`sleep` stamps it. The
+        board already runs on to the next end on its own thread (``run_ahead``) while the
+        engine, the callbacks and the caller work. ``take()`` giving None ends it there. Ends
+        further apart than half a heartbeat period are slept plainly."""
+        it = iter(ends)
+        end = next(it, None)
+        ahead = end is not None and self._ahead(end)
+        try:
+            while end is not None:
+                if ahead:
+                    self._join_ahead(end)
+                ahead = False
+                value = take()
+                end = None if value is None else next(it, None)
+                if end is not None:
+                    ahead = self._ahead(end)
+                self._deliver_arrived()
+                if value is not None:
+                    yield value
+        finally:
+            if ahead:  # the caller stopped early: the frames that came still go to the engine
+                self._join_ahead(None)
+            self._deliver_arrived()
+
+    def _ahead(self, end: float) -> bool:
+        """Start the board running to ``end`` as :meth:`sleep` would run it; False when it is
+        slept plainly (what arrived is delivered first) or no exchange is due."""
+        period = self.board.exchange_period
+        now = self.now()
+        seconds = end - now
+        if seconds < period / 2:  # sleep() would not move the board: its loop ends at once
+            return False
+        hb_period = self._engine.heartbeat_period_s
+        if hb_period is not None and seconds > min(hb_period / 2, self.pump_interval_s):
+            self._deliver_arrived()
+            self.sleep(seconds)
+            return False
+        # the end sleep() reaches: whole exchanges, the nearest to the end, at least one
+        seconds = max(round(seconds / period), 1) * period
+        last = self.board.exchanges_end(seconds)
+        due = self._engine.heartbeat_due()
+        if due is not None and due <= last and self._arrived:
+            # the frames not taken yet may move it (an ack, a reset): the engine takes them
+            # first; otherwise it can only be later, past this run, and they wait
+            self._take_arrived()
+            due = self._engine.heartbeat_due()
+        send = None
+        # a heartbeat that falls due by the run's last exchange goes out within it, at the
+        # first exchange's end at or past its time, where sleep() sends it
+        if due is not None and due <= last:
+            if self._heartbeat is None:
+                self._heartbeat = self._engine.heartbeat(max(due, now))
+            if self._heartbeat is not None:
+                send = (self._heartbeat.data, due)
+        self.board.run_ahead(seconds, send)
+        return True
+
+    def _join_ahead(self, end: float | None) -> None:
+        """Wait for the run ahead: its bytes wait for the engine, cut where sleep() would
+        have looked and stamped there, and its heartbeat is counted. A run that stopped
+        short of ``end`` (a crash, its marks full) goes on plainly."""
+        board = self.board
+        run = board.run_ahead_join()
+        data = board.read()
+        at = 0
+        for n, t in run.marks:
+            self._arrived.append((data[at:n], t))
+            at = n
+        self._arrived.append((data[at:], self.now()))
+        if self._heartbeat is not None and run.sent_at is not None:
+            self._engine.sent(self._heartbeat, run.sent_at)
+            self._heartbeat = None
+        if not run.done and end is not None:
+            self._deliver_arrived()
+            self.sleep(end - self.now())
+
+    def _take_arrived(self) -> None:
+        """The engine takes the bytes a run ahead brought; its messages wait for delivery."""
+        for data, t in self._arrived:
+            self._items += self._engine.receive(data, t)
+        self._arrived = []
+
+    def _deliver_arrived(self) -> None:
+        """The callbacks, each message at its own time: the clock reads its arrival while
+        they run (the board may be ahead by then)."""
+        self._take_arrived()
+        items, self._items = self._items, []
+        try:
+            for item in items:
+                self._at = item.received_s
+                call_each(list(self._callbacks), item)
+        finally:
+            self._at = None
+
+    def _heartbeat_at(self, now: float) -> Transmit | None:
+        """The heartbeat to send at ``now`` if one is due: the one a run ahead made and could
+        not send (it stopped short), else the engine's."""
+        if self._heartbeat is None:
+            return self._engine.heartbeat(now)
+        due = self._engine.heartbeat_due()
+        if due is None or due > now:
+            return None
+        tx, self._heartbeat = self._heartbeat, None
+        return tx
 
     # --- driving the engine ----------------------------------------------------------------
 
@@ -160,7 +279,7 @@ class SimLink(EngineDriver):
         """A heartbeat if one is due at ``now`` (a request waiting on its resends does not keep
         the board's watchdog fed); then ``until``, or the next heartbeat's time if sooner.
         ``now`` is the drive's clock, which may be a fraction of a cycle past the board's."""
-        heartbeat = self._engine.heartbeat(now)
+        heartbeat = self._heartbeat_at(now)
         if heartbeat is not None:
             self._send(heartbeat)
         due = self._engine.heartbeat_due()

@@ -25,9 +25,11 @@ raises the controller's integral gain for it (:data:`RIG_GAINS`).
 
 from __future__ import annotations
 
+import itertools
 import sys
+from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
@@ -36,6 +38,7 @@ from utrf.hil.tracker import Registration, SimulatedTracker, Tracker, rotation_f
 
 #: the emulated static-loading rig's actuator (a linear slide stage; ASSUMED values)
 RIG_ACTUATOR = MotorParams(stall_force_n=2500.0, moving_mass_kg=100.0)
+T = TypeVar("T")
 #: controller gains the emulated rig sets on the tested finger (the rest stay default)
 RIG_GAINS: dict[str, float] = {"ki": 20.0}
 
@@ -114,6 +117,7 @@ class Rig:
         operator: Operator | None = None,
         truth: EmulatedTruth | None = None,
         ramp_s: float = 0.5,
+        ahead: bool = True,
     ) -> None:
         if board is None and operator is None:
             raise ValueError("a real rig needs an operator to apply the loads")
@@ -123,6 +127,8 @@ class Rig:
         self.operator = operator
         self.truth = truth
         self.ramp_s = ramp_s
+        #: periodic samples with the board running ahead where it can (:meth:`each_period`)
+        self.ahead = ahead
 
     @property
     def emulated(self) -> bool:
@@ -133,6 +139,27 @@ class Rig:
 
     def now(self) -> float:
         return float(self.hand.clock.now())
+
+    def each_period(
+        self, t0: float, period: float, take: Callable[[float], T | None]
+    ) -> Generator[T, None, None]:
+        """``take(t)`` at ``t0 + k period`` (k = 1, 2, ...; ``t`` from ``t0``) until it gives
+        None; yields what it gives. On the emulated rig (``ahead``) the board runs on to the
+        next time on its own thread while the caller works on what was yielded
+        (``SimLink.sleep_each``): ``take`` sees the board stopped at its time (read the
+        plant, hit it), the caller sees the hand's telemetry up to that time. Otherwise each
+        time is slept to, then taken: the same samples (a test compares them)."""
+        ends = (t0 + k * period for k in itertools.count(1))
+        sleep_each = getattr(self.hand.clock, "sleep_each", None) if self.ahead else None
+        if sleep_each is not None:
+            yield from sleep_each(ends, lambda: take(self.now() - t0))
+            return
+        for due in ends:
+            self.sleep(due - self.now())
+            value = take(self.now() - t0)
+            if value is None:
+                return
+            yield value
 
     def set_payload(self, finger: int, mass_kg: float, previous_kg: float | None) -> None:
         """The payload hanging from the fingertip becomes ``mass_kg`` (total)."""

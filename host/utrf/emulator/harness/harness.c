@@ -529,6 +529,7 @@ void utrf_sim_close(utrf_sim_t *s)
 {
     if (!s)
         return;
+    ahead_close(s);
     plant_thread_stop(s);
     serve_close(s);
     if (s->avr) {

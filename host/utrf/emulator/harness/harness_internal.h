@@ -193,6 +193,20 @@ struct utrf_sim {
     void (*plant_step)(void *ctx, double dt, const double *pins);
     void (*plant_volts)(void *ctx, double *out5);
 
+    /* run_ahead.c: the lockstep on a thread of its own while the caller works; each period in
+     * which the wake byte was captured is marked (the capture's head, the MCU's cycle) rather
+     * than ending the run, and one host write may wait for its time */
+    int mark_on;
+    uint32_t marks;
+    uint32_t mark_cap[UTRF_SIM_MARKS];
+    uint64_t mark_cycle[UTRF_SIM_MARKS];
+    uint8_t send_buf[UTRF_SIM_SEND_MAX];
+    size_t send_len;  /* bytes waiting for send_at (0: none) */
+    double send_at;   /* written at the first period's end whose MCU time (s) reaches it */
+    uint64_t sent_cycle; /* where they went (0: not yet) */
+    size_t sent_n;       /* how many the UART queue took */
+    struct utrf_ahead *ahead;
+
     /* faults.c: a stalled interrupt vector (0: none) */
     int stall_vector;
     uint64_t stall_cycles;
@@ -227,6 +241,11 @@ void plant_thread_stop(utrf_sim_t *s);
 void plant_thread_step(utrf_sim_t *s, double dt);
 void plant_thread_wait(utrf_sim_t *s);
 void plant_thread_park(utrf_sim_t *s); /* the caller leaves the lockstep: the plant sleeps */
+
+/* run_ahead.c: the lockstep's marks and its waiting write; mark returns 0 when full */
+int ahead_mark(utrf_sim_t *s);
+void ahead_send_due(utrf_sim_t *s);
+void ahead_close(utrf_sim_t *s);
 
 /* uart_bridge.c */
 void bridge_init(utrf_sim_t *s);

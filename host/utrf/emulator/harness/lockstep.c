@@ -66,6 +66,8 @@ int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, in
     /* a forked child has no plant thread: it starts its own */
     int threaded = s->plant_step && s->plant_threads == 2 && plant_thread_start(s) == 0;
     while (s->avr->cycle < target && !s->woke) {
+        if (s->send_len)
+            ahead_send_due(s);
         uint64_t end = at + period < target ? at + period : target;
         double dt = (double)(end - at) / CPU_HZ;
         memcpy(s->hold, s->pins, sizeof s->hold);
@@ -84,7 +86,11 @@ int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, in
             status = now;
             break;
         }
+        if (s->woke && s->mark_on && !ahead_mark(s))
+            break; /* the marks are full: the caller reads them and runs on */
     }
+    if (s->send_len && status == utrf_sim_status(s))
+        ahead_send_due(s); /* at the run's last period's end too */
     if (threaded)
         plant_thread_park(s);
     s->wake_byte = -1;

@@ -15,7 +15,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 16
+#define UTRF_SIM_ABI 17
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -267,6 +267,28 @@ uint64_t utrf_sim_plant_cycle(utrf_sim_t *s);
  * the thread cannot start. */
 int utrf_sim_set_plant_threads(utrf_sim_t *s, int threads);
 int utrf_sim_plant_threads(const utrf_sim_t *s);
+
+/* ---- Running ahead of the caller (run_ahead.c) ---------------------------------------------
+ * utrf_sim_run_plant_until(s, target, period, wake) on a thread of its own: the call returns
+ * at once and the caller may work (on anything but `s`) until utrf_sim_ahead_join(s), which
+ * waits and returns the run's status. Each period in which the captured output got `wake` is
+ * marked instead of ending the run (up to UTRF_SIM_MARKS: then it ends there, short of
+ * `target`); utrf_sim_ahead_marks gives them after the join: the capture's bytes up to each
+ * (counted from what utrf_sim_uart_read has not read yet) and the MCU's cycle at that period's
+ * end, where a client stopping at every frame would have looked. With utrf_sim_ahead_send,
+ * `n` bytes are written to UART0 at the first period's end (or the run's start) whose MCU
+ * time in s ((double)cycle / 16e6) reaches `at`: a heartbeat at its time; its cycle is kept
+ * for utrf_sim_ahead_sent. Returns 0, or -1 when a run is under way or the thread cannot
+ * start (the run then does not happen). */
+#define UTRF_SIM_MARKS 256
+#define UTRF_SIM_SEND_MAX 64
+int utrf_sim_ahead_start(utrf_sim_t *s, uint64_t target, uint64_t period, int wake);
+int utrf_sim_ahead_join(utrf_sim_t *s);
+int utrf_sim_ahead_running(const utrf_sim_t *s);
+size_t utrf_sim_ahead_marks(const utrf_sim_t *s, uint64_t *bytes, uint64_t *cycles, size_t n);
+int utrf_sim_ahead_send(utrf_sim_t *s, const uint8_t *buf, size_t n, double at);
+/* the cycle the waiting bytes went at (0: not yet), and how many the UART's queue took */
+uint64_t utrf_sim_ahead_sent(const utrf_sim_t *s, size_t *taken);
 
 /* ---- The MuJoCo plant (mjplant.c) ----------------------------------------------------------
  * The MuJoCo hand (utrf.models.mjcf, drive "force") stepped here; its mjModel and mjData

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 from pathlib import Path
 from typing import Any
@@ -64,53 +65,54 @@ def run(
     period = 1.0 / config.sample_hz
     t0 = rig.now()
     next_report = 0.0
-    k = 0
     with (
         CsvLog(out / "samples.csv", sample_columns(names)) as samples,
         CsvLog(out / "hits.csv", HIT_COLUMNS) as hit_log,
     ):
-        while True:
-            k += 1
-            due = t0 + k * period
-            rig.sleep(due - rig.now())
-            t = rig.now() - t0
+
+        def take(t: float) -> tuple[float, Any, np.ndarray] | None:
+            """At the sample's time, the board stopped there: the hits due, the truth."""
             if t > config.duration_s:
-                break
+                return None
             while hits and hits[0][0] <= t:
                 _, f, imp = hits.pop(0)
                 rig.hit(f, imp, config.hit_duration_s)
                 hit_log.write([f"{rig.now() - t0:.6f}", f, imp[0], imp[1],
                                config.hit_duration_s])  # fmt: skip
-            s = rig.tracker.read()
-            st = hand.latest
-            cur = rig.currents()
-            row: list[object] = [
-                f"{t:.6f}",
-                "baseline" if t < config.baseline_s else "hold",
-                *(f"{v:.7f}" for v in s.position_m),
-                int(s.visible),
-                s.frame,
-            ]
-            for i in range(len(names)):
-                if st is None:
-                    row += ["nan"] * len(FINGER_FIELDS)
-                    continue
-                fs = st.fingers[i]
-                row += [f"{fs.theta2:.5f}", f"{fs.target:.5f}", f"{fs.duty_a:.3f}",
-                        f"{fs.duty_b:.3f}", fs.mode.name, int(fs.faults),
-                        f"{cur[i, 0]:.4f}"]  # fmt: skip
-            samples.write(row)
-            new = hand.faults_seen[seen:]
-            if new:
-                raise RunStopped(f"grasp hold at {t:.2f} s: {new[0]}")
-            if t >= next_report:
-                progress(
-                    f"hold {t:7.1f} / {config.duration_s:g} s  "
-                    + "  ".join(
-                        f"{n} {math.degrees(st.fingers[i].theta2):6.1f} deg"
-                        for i, n in enumerate(names)
+            return t, rig.tracker.read(), rig.currents()
+
+        # the board runs on to the next sample while this one is written; closed on the way
+        # out (a stop too), so the board has stopped before anything else uses it
+        with contextlib.closing(rig.each_period(t0, period, take)) as periods:
+            for t, s, cur in periods:
+                st = hand.latest
+                row: list[object] = [
+                    f"{t:.6f}",
+                    "baseline" if t < config.baseline_s else "hold",
+                    *(f"{v:.7f}" for v in s.position_m),
+                    int(s.visible),
+                    s.frame,
+                ]
+                for i in range(len(names)):
+                    if st is None:
+                        row += ["nan"] * len(FINGER_FIELDS)
+                        continue
+                    fs = st.fingers[i]
+                    row += [f"{fs.theta2:.5f}", f"{fs.target:.5f}", f"{fs.duty_a:.3f}",
+                            f"{fs.duty_b:.3f}", fs.mode.name, int(fs.faults),
+                            f"{cur[i, 0]:.4f}"]  # fmt: skip
+                samples.write(row)
+                new = hand.faults_seen[seen:]
+                if new:
+                    raise RunStopped(f"grasp hold at {t:.2f} s: {new[0]}")
+                if t >= next_report:
+                    progress(
+                        f"hold {t:7.1f} / {config.duration_s:g} s  "
+                        + "  ".join(
+                            f"{n} {math.degrees(st.fingers[i].theta2):6.1f} deg"
+                            for i, n in enumerate(names)
+                        )
+                        if st is not None
+                        else f"hold {t:.1f} s"
                     )
-                    if st is not None
-                    else f"hold {t:.1f} s"
-                )
-                next_report += max(config.duration_s / 20, 1.0)
+                    next_report += max(config.duration_s / 20, 1.0)

@@ -1,0 +1,177 @@
+/* The lockstep on a thread of its own, ahead of its caller (utrf_sim.h, "Running ahead"): a
+ * driven client works on the frames of one stretch of simulated time while the board runs
+ * the next. The run is utrf_sim_run_plant_until's, to the cycle: the periods in which a frame
+ * ended are marked (where a client stopping at every frame would have looked) instead of
+ * ending the run, and a heartbeat may be written at its time without stopping it.
+ */
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "harness_internal.h"
+
+struct utrf_ahead {
+    pthread_t thread;
+    pid_t pid; /* the process that started the thread: a fork's child has no such thread */
+    pthread_mutex_t mu;
+    pthread_cond_t cv;
+    int work, quit; /* under mu: a run to do; the thread to end */
+    int running;    /* the caller's: a run started, not joined */
+    uint64_t target, period;
+    int wake;
+    int status;
+};
+
+int ahead_mark(utrf_sim_t *s)
+{
+    s->woke = 0;
+    if (s->marks < UTRF_SIM_MARKS) {
+        s->mark_cap[s->marks] = s->cap_head;
+        s->mark_cycle[s->marks] = s->avr->cycle;
+        s->marks++;
+    }
+    return s->marks < UTRF_SIM_MARKS;
+}
+
+void ahead_send_due(utrf_sim_t *s)
+{
+    if (!s->send_len || (double)s->avr->cycle / 16e6 < s->send_at)
+        return;
+    s->sent_n = utrf_sim_uart_write(s, s->send_buf, s->send_len);
+    s->sent_cycle = s->avr->cycle;
+    s->send_len = 0;
+}
+
+/* One thread for the board's life, woken for each run: a thread a run (thousands of runs a
+ * hold) would cost its creation every time. */
+static void *ahead_main(void *arg)
+{
+    utrf_sim_t *s = arg;
+    struct utrf_ahead *a = s->ahead;
+    pthread_mutex_lock(&a->mu);
+    for (;;) {
+        while (a->work != 1 && !a->quit)
+            pthread_cond_wait(&a->cv, &a->mu);
+        if (a->quit)
+            break;
+        pthread_mutex_unlock(&a->mu);
+        int status = utrf_sim_run_plant_until(s, a->target, a->period, a->wake);
+        pthread_mutex_lock(&a->mu);
+        a->status = status;
+        a->work = 2; /* done */
+        pthread_cond_broadcast(&a->cv);
+    }
+    pthread_mutex_unlock(&a->mu);
+    return NULL;
+}
+
+static int ahead_thread(utrf_sim_t *s)
+{
+    struct utrf_ahead *a = s->ahead;
+    if (a && a->pid == getpid())
+        return 0;
+    if (!a) {
+        a = calloc(1, sizeof *a);
+        if (!a)
+            return -1;
+        s->ahead = a;
+    }
+    /* new, or inherited by a forked child without its thread: start afresh */
+    memset(a, 0, sizeof *a);
+    pthread_mutex_init(&a->mu, NULL);
+    pthread_cond_init(&a->cv, NULL);
+    if (pthread_create(&a->thread, NULL, ahead_main, s)) {
+        free(a);
+        s->ahead = NULL;
+        return -1;
+    }
+    a->pid = getpid();
+    return 0;
+}
+
+int utrf_sim_ahead_start(utrf_sim_t *s, uint64_t target, uint64_t period, int wake)
+{
+    if (utrf_sim_ahead_running(s) || ahead_thread(s))
+        return -1;
+    struct utrf_ahead *a = s->ahead;
+    s->marks = 0;
+    s->mark_on = 1;
+    pthread_mutex_lock(&a->mu);
+    a->target = target;
+    a->period = period;
+    a->wake = wake;
+    a->work = 1;
+    pthread_cond_broadcast(&a->cv);
+    pthread_mutex_unlock(&a->mu);
+    a->running = 1;
+    return 0;
+}
+
+int utrf_sim_ahead_join(utrf_sim_t *s)
+{
+    struct utrf_ahead *a = s->ahead;
+    if (!utrf_sim_ahead_running(s))
+        return utrf_sim_status(s);
+    pthread_mutex_lock(&a->mu);
+    while (a->work != 2)
+        pthread_cond_wait(&a->cv, &a->mu);
+    a->work = 0;
+    pthread_mutex_unlock(&a->mu);
+    a->running = 0;
+    s->mark_on = 0;
+    return a->status;
+}
+
+int utrf_sim_ahead_running(const utrf_sim_t *s)
+{
+    return s->ahead && s->ahead->running && s->ahead->pid == getpid();
+}
+
+size_t utrf_sim_ahead_marks(const utrf_sim_t *s, uint64_t *bytes, uint64_t *cycles, size_t n)
+{
+    size_t k = 0;
+    for (; k < n && k < s->marks; k++) {
+        bytes[k] = (uint32_t)(s->mark_cap[k] - s->cap_tail);
+        cycles[k] = s->mark_cycle[k];
+    }
+    return k;
+}
+
+int utrf_sim_ahead_send(utrf_sim_t *s, const uint8_t *buf, size_t n, double at)
+{
+    if (n > UTRF_SIM_SEND_MAX || utrf_sim_ahead_running(s))
+        return -1;
+    memcpy(s->send_buf, buf, n);
+    s->send_len = n;
+    s->send_at = at;
+    s->sent_cycle = 0;
+    s->sent_n = 0;
+    return 0;
+}
+
+uint64_t utrf_sim_ahead_sent(const utrf_sim_t *s, size_t *taken)
+{
+    if (taken)
+        *taken = s->sent_n;
+    return s->sent_cycle;
+}
+
+void ahead_close(utrf_sim_t *s)
+{
+    struct utrf_ahead *a = s->ahead;
+    if (!a)
+        return;
+    if (a->pid == getpid()) {
+        utrf_sim_ahead_join(s);
+        pthread_mutex_lock(&a->mu);
+        a->quit = 1;
+        pthread_cond_broadcast(&a->cv);
+        pthread_mutex_unlock(&a->mu);
+        pthread_join(a->thread, NULL);
+        pthread_mutex_destroy(&a->mu);
+        pthread_cond_destroy(&a->cv);
+    }
+    free(a);
+    s->ahead = NULL;
+}
