@@ -173,13 +173,14 @@ def median(rows: list[dict], key: str) -> float:
     return statistics.median(r[key] for r in rows)
 
 
-def report(ref: str, runs: dict[str, list[dict]], alone: dict, seconds: float, repeats: int) -> str:
+def report(
+    ref: str, runs: dict[str, list[dict]], alone: dict, seconds: float, repeats: int, threads: int
+) -> str:
+    """The section; ``threads``: the checkout's own twin thread count (``runs["new"]``), the
+    other count's runs being ``runs["other"]``."""
     from tools.doc_sections import cpu_name
-    from utrf.emulator.twin_threads import plant_threads
 
-    threads = plant_threads()
-
-    new, old, one = runs["new"], runs["ref"], runs["one"]
+    new, old, one = runs["new"], runs["ref"], runs["other"]
     ratio_wall = median(new, "wall") / median(old, "wall")
     ratio_cpu = median(new, "cpu") / median(old, "cpu")
 
@@ -195,7 +196,7 @@ def report(ref: str, runs: dict[str, list[dict]], alone: dict, seconds: float, r
 
     def engines(tag: str) -> str:  # this checkout's one-thread hold: no spinning counted
         e, j = alone[tag]["elf"], alone[tag]["mjcf"]
-        h = median(runs["one" if tag == "new" and threads == 2 else tag], "cpu")
+        h = median(runs["other" if tag == "new" and threads == 2 else tag], "cpu")
         rest = h - e["cpu"] - j["cpu"]
         shares = " / ".join(f"{100 * x / h:.0f}" for x in (e["cpu"], j["cpu"], rest))
         return f"{e['cpu']:.1f} s / {j['cpu']:.1f} s / {rest:.1f} s ({shares} %)"
@@ -265,11 +266,12 @@ def main(argv: list[str] | None = None) -> int:
         subprocess.run([sys.executable, "-m", "compileall", "-q", str(tree / "host")], check=True)
     from utrf.emulator.twin_threads import plant_threads
 
-    other = 3 - plant_threads()  # the checkout's twin on the other thread count beside it
-    runs: dict[str, list[dict]] = {"new": [], "ref": [], "one": []}
+    own = plant_threads()
+    other = 3 - own  # the checkout's twin on the other thread count beside it
+    runs: dict[str, list[dict]] = {"new": [], "ref": [], "other": []}
     for i in range(args.repeats):
-        for tag in ("new", "ref", "one") if i % 2 == 0 else ("one", "ref", "new"):
-            tree, threads = (trees["new"], other) if tag == "one" else (trees[tag], None)
+        for tag in ("new", "ref", "other") if i % 2 == 0 else ("other", "ref", "new"):
+            tree, threads = (trees["new"], other) if tag == "other" else (trees[tag], None)
             runs[tag].append(hold(tree, args.seconds, threads))
             print(f"{tag} {runs[tag][-1]}", file=sys.stderr, flush=True)
     alone = {
@@ -277,7 +279,7 @@ def main(argv: list[str] | None = None) -> int:
         for tag in ("new", "ref")
     }
     print(json.dumps(alone), file=sys.stderr)
-    section = report(args.reference, runs, alone, args.seconds, args.repeats)
+    section = report(args.reference, runs, alone, args.seconds, args.repeats, own)
     print(section)
     if not args.no_update:
         from tools.doc_sections import write_section

@@ -26,20 +26,25 @@ def test_the_mjcf_alone_steps_the_hand_for_the_simulated_time() -> None:
     assert r["cpu"] > 0
 
 
-def test_the_section_gives_the_ratio_of_the_medians_and_each_engine() -> None:
+@pytest.mark.parametrize("threads", [1, 2])
+def test_the_section_gives_the_ratio_of_the_medians_and_each_engine(threads: int) -> None:
     def runs(*values: float) -> list[dict]:
         return [{"wall": v, "cpu": v / 2, "load": 1.0} for v in values]
 
     alone = {tag: {"elf": {"cpu": 2.0}, "mjcf": {"cpu": 1.0}} for tag in ("new", "ref")}
     text = bench_twin.report(
         "f500c49",
-        {"new": runs(5.0, 6.0, 50.0), "ref": runs(12.0, 11.0, 10.0), "one": runs(9.0, 8.0, 10.0)},
+        {"new": runs(5.0, 6.0, 50.0), "ref": runs(12.0, 11.0, 10.0), "other": runs(9.0, 8.0, 10.0)},
         alone,
         120,
         3,
+        threads,
     )
     assert text.startswith(bench_twin.BEGIN) and text.endswith(bench_twin.END)
     assert "**0.55**" in text  # median 6 against median 11: one slow run does not move it
-    assert "wall **0.82**, CPU **0.82**" in text  # the one-thread twin: median 9 against 11
-    # the new tree's engines beside its one-thread hold (CPU median 4.5 = 2 + 1 + 1.5)
-    assert "2.0 s / 1.0 s / 1.5 s" in text
+    assert "wall **0.82**, CPU **0.82**" in text  # the other count's twin: median 9 against 11
+    assert f"its twin on {threads} thread" in text
+    assert f"`UTRF_TWIN_THREADS={3 - threads}`" in text
+    # the engines beside the one-thread hold: the other count's runs when the checkout's own
+    # choice is two (CPU median 4.5 = 2 + 1 + 1.5), else its own (3.0 = 2 + 1 + 0)
+    assert ("2.0 s / 1.0 s / 1.5 s" if threads == 2 else "2.0 s / 1.0 s / 0.0 s") in text
