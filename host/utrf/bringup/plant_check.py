@@ -23,6 +23,12 @@ WEAK_LAG = 3.5
 #: the strand the other); margins in docs/bringup.md
 ONE_WAY_LAG = 6.0
 PROMPT_LAG = 0.5
+#: ... or, when the reading's speed was uneven over the travel too, the late way this many
+#: times the other's: Joint 2 leaning on one strand (under gravity) follows that way with the
+#: strand's lag and waits for the other strand the other way, and switches strands as the load
+#: turns over the travel (``slack:1=0.0015``: 6.9 times apart, the speed 1.44 times uneven).
+#: A weak motor can be late one way too (seed 43's ring: 1.1 and 11.9) but runs evenly (1.03)
+ONE_WAY_SPREAD = 4.0
 
 
 def lag_ratios(p: Plant, ref: Plant) -> dict[str, float]:
@@ -32,14 +38,20 @@ def lag_ratios(p: Plant, ref: Plant) -> dict[str, float]:
     return {k: v / expected for k, v in p.lag_s.items()} if expected > 0 else {}
 
 
-def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> list[Finding]:
-    """The plant against the model's motors' (``ref``, ``model_plant``)."""
+def plant_findings(
+    name: str, p: Plant, ref: Plant, slack: float = math.nan, uneven: bool = False
+) -> list[Finding]:
+    """The plant against the model's motors' (``ref``, ``model_plant``); ``uneven``: the
+    reading's speed at one duty varied over the travel (``reading_curve``)."""
     out = []
     r = lag_ratios(p, ref)
     flex, ext = r.get("flex", math.nan), r.get("extend", math.nan)
     # a slow motor's lag is far under one count (v τ): neither is judged from it
     resolved = p.K >= SLOW * ref.K
-    one_way = max(flex, ext) > ONE_WAY_LAG and min(flex, ext) < PROMPT_LAG
+    slow_way, fast_way = max(flex, ext), min(flex, ext)
+    one_way = slow_way > ONE_WAY_LAG and (
+        fast_way < PROMPT_LAG or (uneven and slow_way > ONE_WAY_SPREAD * fast_way)
+    )
     loose = resolved and (slack > SLACK_RAD or one_way)
     late = math.sqrt(flex * ext)
     # a weaker motor takes more duty for the same friction as it comes up to speed later (both
@@ -56,7 +68,7 @@ def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> 
                     "beyond its own lag before Joint 2 moves"
                     if slack > SLACK_RAD
                     else f"from rest Joint 2 follows the motor at once one way and "
-                    f"{max(flex, ext):.0f} times the model's lag late the other"
+                    f"{slow_way:.0f} times the model's lag late the other"
                 )
                 + ": slack in the coupling tendon (Tendon 2, Joint 1 to Joint 2) lets Joint 2 "
                 "hang free between its strands",
@@ -121,6 +133,23 @@ def swing_finding(name: str, backward_rad: float) -> Finding:
         "gain holds it)",
         False,
         {"backward_rad": backward_rad},
+    )
+
+
+def pause_finding(name: str, at_rad: float) -> Finding:
+    """Slack seen as a pause mid-travel: the closing search stalled, and driven again at the
+    same duty the finger went on (a jam does not): Joint 2 waited while the motor took up
+    the strand's slack."""
+    return Finding(
+        name,
+        "slack",
+        f"closing at one duty, the finger stopped {math.degrees(at_rad):.0f}° from its open stop "
+        "and, driven again at the same duty, went on: Joint 2 waited while the motor took up "
+        "slack in the coupling tendon (Tendon 2, Joint 1 to Joint 2)",
+        "tighten Tendon 2 and run the bring-up again (Joint 2 is loose between its strands: no "
+        "gain holds it)",
+        False,
+        {"paused_rad": at_rad},
     )
 
 

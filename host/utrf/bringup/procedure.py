@@ -30,8 +30,8 @@ from utrf.bringup.diagnose import (
 )
 from utrf.bringup.findings import Finding, FingerConfig
 from utrf.bringup.identify import Check, Plant, check, identify, tune
-from utrf.bringup.plant_check import model_plant, plant_findings, swing_finding
-from utrf.bringup.pulses import Bounds, Recorder, brake, pulse, settle
+from utrf.bringup.plant_check import model_plant, pause_finding, plant_findings, swing_finding
+from utrf.bringup.pulses import Bounds, Recorder, Trace, brake, pulse, settle
 from utrf.hand import Hand
 
 #: the limits go this far inside the stops found
@@ -47,6 +47,9 @@ BACKWARD_RAD = 0.03
 #: a reading whose speed at one duty varies this much (fastest over slowest) across the travel:
 #: the magnet is off-centre
 SPEED_SPREAD = 1.2
+#: the opening leg after the closed stop runs to this fraction of the span from the open stop
+#: (past the reading's middle, where an off-centre magnet's error turns fastest)
+SWEEP_FRACTION = 0.4
 #: a span between the stops longer than the model's by this: the reading's scale is wrong
 SPAN_EXTRA_RAD = 0.1
 #: shorter than the model's by this: a narrow range
@@ -54,6 +57,9 @@ NARROW_RAD = 0.08
 #: a closing search that stops before this fraction of the model's span has stuck (no build's
 #: range is that short: narrow-range stops at most 12 % early)
 JAM_SPAN = 0.5
+#: a closing search's stall within this fraction of the model's span is driven once more (an
+#: off-centre magnet's span is at least 0.7 of it, a narrow range's 0.88): moving on, it paused
+PAUSE_WITHIN = 0.6
 #: the steps of a finger's bring-up, in order
 UPTO = ("wiring", "stops", "plant", "check")
 
@@ -191,7 +197,11 @@ def _bring_up_finger(
         return res
     begin("stops")
     open_ = find_stop(hand, rec, f, -1, w.encoder_invert, bounds)
-    closed = find_stop(hand, rec, f, 1, w.encoder_invert, bounds) if open_ else None
+    closed = (
+        find_stop(hand, rec, f, 1, w.encoder_invert, bounds, PAUSE_WITHIN * (hi - lo))
+        if open_
+        else None
+    )
     if open_ is None or closed is None:
         res.findings.append(
             Finding(
@@ -220,6 +230,11 @@ def _bring_up_finger(
         "take_up_s": take_up_s(closed.first, 1),
     }
     back = max(backward_rad(closed.first, 1), backward_rad(closed.trace, 1))
+    if closed.paused > 0:
+        # driven on at the same duty it went on: Joint 2 waited on its strand mid-travel
+        res.stops["paused_rad"] = closed.paused
+        res.findings.append(pause_finding(name, closed.paused))
+        return res
     if span < JAM_SPAN * (hi - lo) and back > BACKWARD_RAD:
         # it went back before it stopped: Joint 2 swinging loose paused it, not a jam
         res.findings.append(swing_finding(name, back))
@@ -296,25 +311,50 @@ def _bring_up_finger(
     mid = min(max(0.3, th_min + 0.6), th_max - 0.6)
     hand.clear_faults([f])
     here = hand.state().fingers[f].theta2
-    # from the closed stop (where Joint 2 leans flexed), opening: the slack shows as take-up
+    # from the closed stop (where Joint 2 leans flexed), opening: the slack shows as take-up.
+    # A short span may be an off-centre magnet's (the reading's span short by twice its
+    # error): on past the reading's middle, where that error turns fastest, then back, so that
+    # the curve compares the travel from the closed stop to past its middle
+    short = span < (hi - lo) - NARROW_RAD
+    sweep = min(mid, lo + SWEEP_FRACTION * span) if short else mid
     to_mid = pulse(
         hand,
         rec,
         f,
-        math.copysign(STOP_DUTY, mid - here),
+        math.copysign(STOP_DUTY, sweep - here),
         bounds,
-        seconds=3.0,
+        seconds=3.0 * max(1.0, (here - sweep) / max(here - mid, 0.3)),
         travel=3.5,
-        until=mid,
+        until=sweep,
     )
     res.stops["take_up_closed_s"] = take_up_s(to_mid, -1)
-    # the closing leg was read in the search's frame (its zero where the leg began): in the
-    # calibrated one, it ends at the closed stop
-    closing = closed.trace
-    if len(closing.t):
-        th = closing.theta2.copy()
-        th[:, f] += closed_at - closing.end
-        closing = replace(closing, theta2=th)
+    if sweep < mid - 0.05:
+        # back past the middle, then opening onto it: the plant's steps start as before,
+        # the finger arriving by opening
+        for target in (mid + 0.1, mid):
+            settle(hand, 0.0)
+            now = hand.state().fingers[f].theta2
+            pulse(
+                hand,
+                rec,
+                f,
+                math.copysign(STOP_DUTY, target - now),
+                bounds,
+                seconds=3.0,
+                travel=3.5,
+                until=target,
+            )
+    # the closing legs were read in the search's frame (each one's zero where it began): in
+    # the calibrated one, the last ends at the closed stop and each other where the next began
+    closing: list[Trace] = []
+    end_at = closed_at
+    for leg in reversed(closed.legs):
+        if not len(leg.t):
+            continue
+        th = leg.theta2.copy()
+        th[:, f] += end_at - leg.end
+        closing.insert(0, replace(leg, theta2=th))
+        end_at = float(th[0, f])
     curve = reading_curve(closing, to_mid)
     res.stops.update({f"curve_{k}": v for k, v in curve.items()})
     # every closing leg of the search (its first and last), not only the one read as a curve
@@ -333,7 +373,9 @@ def _bring_up_finger(
     plant, _ = identify(hand, rec, f, bounds, mid)
     res.plant = plant.to_dict()
     res.plant["slack_rad"] = slack_rad(plant, model_plant(hand, f), res.stops["take_up_s"])
-    res.findings += plant_findings(name, plant, model_plant(hand, f), res.plant["slack_rad"])
+    res.findings += plant_findings(
+        name, plant, model_plant(hand, f), res.plant["slack_rad"], uneven
+    )
     if uneven and not any(fd.kind == "slack" for fd in res.findings):
         # not Joint 2 hanging loose between its strands (slack, which runs the legs unevenly
         # too): the reading is not the joint's angle, and the zero and range from it are void
