@@ -295,6 +295,32 @@ def _speed_by_angle(trace: Trace, direction: int, edges: np.ndarray) -> np.ndarr
     return out
 
 
+def dwell_rad(trace: Trace, direction: int, counts_rad: float = 0.012) -> float:
+    """The longest the reading stood (moved under ``counts_rad``, about 1.5 counts) while a
+    leg drove it at one duty, as the travel it would have made at the leg's median speed, less
+    those counts (rad): Joint 2 waiting while the motor takes up a slack strand stands
+    still for the motor's travel across the slack; a reading scaled by an off-centre magnet
+    only slows. 0 for a leg too short to judge."""
+    if len(trace.t) < 50:
+        return 0.0
+    start = take_up_s(trace, direction)
+    if not math.isfinite(start):
+        return 0.0
+    t, y = trace.t, direction * trace.theta2[:, trace.finger]
+    end_cut = 0.03 if trace.stop == "reached" else 0.3
+    use = (t >= t[0] + start + 0.05) & (t <= t[-1] - end_cut)
+    t, y = t[use], np.maximum.accumulate(y[use])
+    if len(t) < 50 or y[-1] - y[0] < 0.1:
+        return 0.0
+    speed = (y[-1] - y[0]) / (t[-1] - t[0])
+    j = np.searchsorted(y, y + counts_rad)
+    ok = j < len(t)
+    if not ok.any():
+        return 0.0
+    longest = float(np.max(t[j[ok]] - t[ok]))
+    return max(0.0, longest * speed - counts_rad)
+
+
 def backward_rad(trace: Trace, direction: int) -> float:
     """The most the reading went back against a leg driven ``direction`` (rad), from when it
     first moved (0 for a leg too short to judge)."""
@@ -322,6 +348,7 @@ def reading_curve(
     legs = [c for c in (closing if isinstance(closing, list) else [closing]) if len(c.t) >= 50]
     out = {"spread": math.nan, "covered_rad": 0.0}
     out["backward_rad"] = max([backward_rad(c, 1) for c in legs] + [backward_rad(opening, -1)])
+    out["dwell_rad"] = max([dwell_rad(c, 1) for c in legs] + [dwell_rad(opening, -1)])
     if not legs or len(opening.t) < 50:
         return out
     back = opening.theta2[:, opening.finger]

@@ -153,6 +153,22 @@ def pause_finding(name: str, at_rad: float) -> Finding:
     )
 
 
+def dwell_finding(name: str, dwell_rad: float) -> Finding:
+    """Slack seen as the reading standing still mid-travel while driven at one duty (for the
+    travel the motor made meanwhile): Joint 2 waited on its strand."""
+    return Finding(
+        name,
+        "slack",
+        "driven at one duty across its travel, the finger's reading stood still for "
+        f"{math.degrees(dwell_rad):.1f}° of the motor's travel and went on: Joint 2 waited "
+        "while the motor took up slack in the coupling tendon (Tendon 2, Joint 1 to Joint 2)",
+        "tighten Tendon 2 and run the bring-up again (Joint 2 is loose between its strands: no "
+        "gain holds it)",
+        False,
+        {"dwell_rad": dwell_rad},
+    )
+
+
 def model_plant(hand: Hand, f: int) -> Plant:
     """The plant the hand's model motors make (``MotorParams`` defaults, the finger's guide
     radius): two motors resisting (one pulls, the antagonist is back-driven at its pretension),

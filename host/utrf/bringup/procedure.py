@@ -30,7 +30,13 @@ from utrf.bringup.diagnose import (
 )
 from utrf.bringup.findings import Finding, FingerConfig
 from utrf.bringup.identify import Check, Plant, check, identify, tune
-from utrf.bringup.plant_check import model_plant, pause_finding, plant_findings, swing_finding
+from utrf.bringup.plant_check import (
+    dwell_finding,
+    model_plant,
+    pause_finding,
+    plant_findings,
+    swing_finding,
+)
 from utrf.bringup.pulses import Bounds, Recorder, Trace, brake, pulse, settle
 from utrf.hand import Hand
 
@@ -44,6 +50,10 @@ DEFAULT_OFFSET = 3.14159265
 #: a reading that goes back this much (rad) against a steady drive: Joint 2 swings loose (slack;
 #: fault-free fingers 2-3 counts of 7.7 mrad, margins in docs/bringup.md)
 BACKWARD_RAD = 0.03
+#: a reading that stands still this long while driven at one duty, as the leg's travel (rad):
+#: Joint 2 waiting on a slack strand (slack 0.066-0.080; fault-free, off-centre, weak, slow
+#: and friction fingers at most 0.019, measured in docs/bringup.md)
+DWELL_RAD = 0.04
 #: a reading whose speed at one duty varies this much (fastest over slowest) across the travel:
 #: the magnet is off-centre
 SPEED_SPREAD = 1.2
@@ -360,6 +370,14 @@ def _bring_up_finger(
     # every closing leg of the search (its first and last), not only the one read as a curve
     back = max(curve["backward_rad"], backward_rad(closed.first, 1))
     res.stops["backward_rad"] = back
+    if curve["dwell_rad"] > DWELL_RAD and back <= BACKWARD_RAD:
+        # driven at a steady duty the reading stood still for a stretch of the motor's travel:
+        # Joint 2 waited on its strand (an off-centre magnet's reading only slows)
+        res.findings = [
+            fd for fd in res.findings if fd.kind in ("encoder-inverted", "leads-swapped")
+        ]
+        res.findings.append(dwell_finding(name, curve["dwell_rad"]))
+        return res
     if back > BACKWARD_RAD:
         # driven at a steady duty the reading went back: Joint 2 swings loose between its
         # strands; its plant would be the swing's, and the stops' findings are doubtful
