@@ -33,8 +33,9 @@ STOP_DUTY = 0.35
 STOP_LEG_S = 6.0
 #: legs a search may take while the finger still moves (a slow motor crosses the travel late)
 STOP_LEGS = 5
-#: a leg that, driven again after a stall, moves this much: the stall was a pause
-PAUSE_RAD = 0.05
+#: a leg that, driven again after a stall, moves this much: the stall was a pause (slack went
+#: on 1.4-1.9 rad; 14 N of friction sticks and slips on by 0.05-0.3: a jam)
+PAUSE_RAD = 0.3
 
 
 @dataclass
@@ -318,7 +319,7 @@ def dwell_rad(trace: Trace, direction: int, counts_rad: float = 0.012) -> float:
     if not ok.any():
         return 0.0
     longest = float(np.max(t[j[ok]] - t[ok]))
-    return max(0.0, longest * speed - counts_rad)
+    return float(max(0.0, longest * speed - counts_rad))
 
 
 def backward_rad(trace: Trace, direction: int) -> float:
@@ -381,6 +382,7 @@ def find_stop(
     invert: int,
     bounds: Bounds,
     confirm_within: float = 0.0,
+    duty: float = STOP_DUTY,
 ) -> Stop | None:
     """Drive toward the open (-1) or closed (+1) stop at low duty until the finger stops
     (the host's stall rule). The board's limits would stop it first if its reading passed
@@ -406,7 +408,7 @@ def find_stop(
             hand,
             rec,
             f,
-            direction * STOP_DUTY,
+            direction * duty,
             bounds,
             seconds=STOP_LEG_S,
             travel=4.0,

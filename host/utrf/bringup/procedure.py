@@ -207,8 +207,12 @@ def _bring_up_finger(
         return res
     begin("stops")
     open_ = find_stop(hand, rec, f, -1, w.encoder_invert, bounds)
+    # one duty for every search (a slow finger at the duty bound less the pretension, tried:
+    # 1.4 s less on a slow finger, but 14 N of friction then moved past its jam and was named
+    # a narrow range and a turned magnet)
+    duty = STOP_DUTY
     closed = (
-        find_stop(hand, rec, f, 1, w.encoder_invert, bounds, PAUSE_WITHIN * (hi - lo))
+        find_stop(hand, rec, f, 1, w.encoder_invert, bounds, PAUSE_WITHIN * (hi - lo), duty)
         if open_
         else None
     )
@@ -238,6 +242,7 @@ def _bring_up_finger(
         "offset_rad": offset,
         # from the open stop, how long the motor ran before Joint 2 moved (the slack)
         "take_up_s": take_up_s(closed.first, 1),
+        "search_duty": duty,
     }
     back = max(backward_rad(closed.first, 1), backward_rad(closed.trace, 1))
     if closed.paused > 0:
@@ -331,7 +336,7 @@ def _bring_up_finger(
         hand,
         rec,
         f,
-        math.copysign(STOP_DUTY, sweep - here),
+        math.copysign(duty, sweep - here),
         bounds,
         seconds=3.0 * max(1.0, (here - sweep) / max(here - mid, 0.3)),
         travel=3.5,
@@ -348,7 +353,7 @@ def _bring_up_finger(
                 hand,
                 rec,
                 f,
-                math.copysign(STOP_DUTY, target - now),
+                math.copysign(duty, target - now),
                 bounds,
                 seconds=3.0,
                 travel=3.5,
@@ -390,7 +395,7 @@ def _bring_up_finger(
     settle(hand, 0.1)
     plant, _ = identify(hand, rec, f, bounds, mid)
     res.plant = plant.to_dict()
-    res.plant["slack_rad"] = slack_rad(plant, model_plant(hand, f), res.stops["take_up_s"])
+    res.plant["slack_rad"] = slack_rad(plant, model_plant(hand, f), res.stops["take_up_s"], duty)
     res.findings += plant_findings(
         name, plant, model_plant(hand, f), res.plant["slack_rad"], uneven
     )
@@ -436,7 +441,7 @@ def _bring_up_finger(
     hand.set_gains(f, **{k: g[k] for k in tuned.gains})
     hand.set_motion(f, **{k: saved["motion"][k] for k in tuned.motion})
     hand.clear_faults([f])
-    res.checks.append(check(hand, rec, f, a, b, "before (saved gains)"))
+    res.checks.append(check(hand, rec, f, a, b, "before (saved gains)", brake_after=False))
     hand.set_gains(f, **tuned.gains)
     hand.set_motion(f, **tuned.motion)
     hand.clear_faults([f])
@@ -474,12 +479,12 @@ def _uneven_finding(name: str, curve: dict[str, float]) -> Finding:
     )
 
 
-def slack_rad(p: Plant, model: Plant, take_up: float) -> float:
+def slack_rad(p: Plant, model: Plant, take_up: float, duty: float = STOP_DUTY) -> float:
     """The slack as Joint-2 travel: how far the motor ran (at the stop search's duty, at the
     identified speed) before Joint 2 moved from the open stop, less what the motor's own lag
     (measured: a weak or spread motor's is not the model's) and the 0.01 rad of the take-up's
     threshold account for."""
-    v = p.K * max(0.0, STOP_DUTY - p.u_f)
+    v = p.K * max(0.0, duty - p.u_f)
     tau = p.tau if math.isfinite(p.tau) else model.tau * p.K / model.K
     return max(0.0, v * (take_up - tau) - 0.01) if math.isfinite(take_up) else math.nan
 
