@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+from utrf.bringup.diagnose import STOP_DUTY
 from utrf.bringup.findings import Finding
 from utrf.bringup.identify import Plant
 from utrf.hand import Hand
@@ -167,6 +168,33 @@ def dwell_finding(name: str, dwell_rad: float) -> Finding:
         False,
         {"dwell_rad": dwell_rad},
     )
+
+
+def uneven_finding(name: str, curve: dict[str, float]) -> Finding:
+    """The reading's speed at one duty uneven over the travel, Joint 2 not loose: the
+    magnet is off-centre (``reading_curve``)."""
+    how = f"ran {curve['spread']:.2f} times faster in places than in others"
+    return Finding(
+        name,
+        "not-monotonic",
+        f"driven at one duty across its travel, the finger's reading {how} where the model's "
+        "turns at a steady speed, and Joint 2 is not loose: the encoder's magnet is off-centre "
+        "on the shaft or loose (the reading is not the joint's angle, so the stops and the zero "
+        "from it are not trusted)",
+        "centre the magnet on Joint 2's shaft and glue it; then run the bring-up again",
+        False,
+        dict(curve),
+    )
+
+
+def slack_rad(p: Plant, model: Plant, take_up: float, duty: float = STOP_DUTY) -> float:
+    """The slack as Joint-2 travel: how far the motor ran (at the stop search's duty, at the
+    identified speed) before Joint 2 moved from the open stop, less what the motor's own lag
+    (measured: a weak or spread motor's is not the model's) and the 0.01 rad of the take-up's
+    threshold account for."""
+    v = p.K * max(0.0, duty - p.u_f)
+    tau = p.tau if math.isfinite(p.tau) else model.tau * p.K / model.K
+    return max(0.0, v * (take_up - tau) - 0.01) if math.isfinite(take_up) else math.nan
 
 
 def model_plant(hand: Hand, f: int) -> Plant:

@@ -28,23 +28,22 @@ from utrf.bringup.diagnose import (
     take_up_s,
     wiring,
 )
-from utrf.bringup.findings import Finding, FingerConfig
-from utrf.bringup.identify import Check, Plant, check, identify, tune
+from utrf.bringup.findings import Finding, FingerConfig, changes
+from utrf.bringup.identify import Check, check, identify, tune
 from utrf.bringup.plant_check import (
     dwell_finding,
     model_plant,
     pause_finding,
     plant_findings,
+    slack_rad,
     swing_finding,
+    uneven_finding,
 )
 from utrf.bringup.pulses import Bounds, Recorder, Trace, brake, pulse, settle
 from utrf.hand import Hand
 
 #: the limits go this far inside the stops found
 STOP_MARGIN_RAD = 0.05
-#: beyond these, a proposed value differs from the saved one
-SAME_ANGLE_RAD = 0.03
-SAME_GAIN = 0.3
 #: set_finger_config's default encoder_offset (protocol/spec.toml): the straight finger mid-turn
 DEFAULT_OFFSET = 3.14159265
 #: a reading that goes back this much (rad) against a steady drive: Joint 2 swings loose (slack;
@@ -405,7 +404,7 @@ def _bring_up_finger(
         res.findings = [
             fd for fd in res.findings if fd.kind in ("encoder-inverted", "leads-swapped")
         ]
-        res.findings.append(_uneven_finding(name, curve))
+        res.findings.append(uneven_finding(name, curve))
         return res
     if not (plant.K > 0 and math.isfinite(plant.tau)):
         res.findings.append(
@@ -462,58 +461,6 @@ def _durations(starts: dict[str, float], total: float) -> dict[str, float]:
     keys = list(starts)
     ends = [starts[k] for k in keys[1:]] + [total]
     return {k: round(e - starts[k], 3) for k, e in zip(keys, ends, strict=True)}
-
-
-def _uneven_finding(name: str, curve: dict[str, float]) -> Finding:
-    how = f"ran {curve['spread']:.2f} times faster in places than in others"
-    return Finding(
-        name,
-        "not-monotonic",
-        f"driven at one duty across its travel, the finger's reading {how} where the model's "
-        "turns at a steady speed, and Joint 2 is not loose: the encoder's magnet is off-centre "
-        "on the shaft or loose (the reading is not the joint's angle, so the stops and the zero "
-        "from it are not trusted)",
-        "centre the magnet on Joint 2's shaft and glue it; then run the bring-up again",
-        False,
-        dict(curve),
-    )
-
-
-def slack_rad(p: Plant, model: Plant, take_up: float, duty: float = STOP_DUTY) -> float:
-    """The slack as Joint-2 travel: how far the motor ran (at the stop search's duty, at the
-    identified speed) before Joint 2 moved from the open stop, less what the motor's own lag
-    (measured: a weak or spread motor's is not the model's) and the 0.01 rad of the take-up's
-    threshold account for."""
-    v = p.K * max(0.0, duty - p.u_f)
-    tau = p.tau if math.isfinite(p.tau) else model.tau * p.K / model.K
-    return max(0.0, v * (take_up - tau) - 0.01) if math.isfinite(take_up) else math.nan
-
-
-#: per field, how far a proposal may be from the saved value and still be the same (absolute
-#: for angles and duties; relative for the gains): the identification's spread between runs
-_ABS = {
-    "encoder_offset": SAME_ANGLE_RAD,
-    "theta2_min": SAME_ANGLE_RAD,
-    "theta2_max": SAME_ANGLE_RAD,
-    "deadband_duty": 0.02,
-}
-
-
-def changes(proposed: FingerConfig, saved: dict[str, dict[str, Any]]) -> list[str]:
-    """The fields a proposal changes, as ``group.field: saved -> proposed``."""
-    out = []
-    for group, values in asdict(proposed).items():
-        for k, v in values.items():
-            old = float(saved[group][k])
-            if k in _ABS:
-                diff = abs(math.remainder(old - float(v), 2 * math.pi)) > _ABS[k]
-            elif k in ("encoder_invert", "motor_invert"):
-                diff = int(old) != int(v)
-            else:
-                diff = abs(old - float(v)) > SAME_GAIN * max(abs(float(v)), 1e-3)
-            if diff:
-                out.append(f"{group}.{k}: {old:.4g} -> {float(v):.4g}")
-    return out
 
 
 def _apply(hand: Hand, f: int, c: FingerConfig) -> None:
