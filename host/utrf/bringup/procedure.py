@@ -50,8 +50,8 @@ DEFAULT_OFFSET = 3.14159265
 #: fault-free fingers 2-3 counts of 7.7 mrad, margins in docs/bringup.md)
 BACKWARD_RAD = 0.03
 #: a reading that stands still this long while driven at one duty, as the leg's travel (rad):
-#: Joint 2 waiting on a slack strand (slack 0.066-0.080; fault-free, off-centre, weak, slow
-#: and friction fingers at most 0.019, measured in docs/bringup.md)
+#: Joint 2 waiting on a slack strand (an off-centre magnet's reading only slows; margins in
+#: docs/bringup.md)
 DWELL_RAD = 0.04
 #: a reading whose speed at one duty varies this much (fastest over slowest) across the travel:
 #: the magnet is off-centre
