@@ -74,6 +74,19 @@ def test_slack_is_named_not_weakness_nor_friction() -> None:
     assert [f.kind for f in plant_findings("i", p, REF, 0.04)] == ["slack"]
 
 
+def test_slack_late_one_way_only_is_named() -> None:
+    """Joint 2 leaning on one strand under gravity follows that way at the strand's lag and
+    waits for the other strand the other way, and its speed is uneven over the travel
+    (measured, slack 1.5 mm on the index: 0.019 s flexing, 0.130 s extending, 1.44 uneven);
+    a weak motor can be late one way too but runs evenly (seed 43's ring)."""
+    p = _plant(2.64, 0.0188, 0.130)
+    got = plant_findings("index", p, REF, uneven=True)
+    assert [f.kind for f in got] == ["slack"] and not got[0].fixable
+    assert [f.kind for f in plant_findings("i", p, REF)] == ["weak-motor"]
+    # late both ways, one 3 times the other (7.5 times the model's lag): weak, not slack
+    assert [f.kind for f in plant_findings("i", _plant(2.64, 0.025, 0.075), REF)] == ["weak-motor"]
+
+
 @pytest.mark.parametrize(
     ("plant", "take_up"),
     [

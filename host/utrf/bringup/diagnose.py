@@ -33,6 +33,9 @@ STOP_DUTY = 0.35
 STOP_LEG_S = 6.0
 #: legs a search may take while the finger still moves (a slow motor crosses the travel late)
 STOP_LEGS = 5
+#: a leg that, driven again after a stall, moves this much: the stall was a pause (slack went
+#: on 1.4-1.9 rad; 14 N of friction sticks and slips on by 0.05-0.3: a jam)
+PAUSE_RAD = 0.3
 
 
 @dataclass
@@ -253,6 +256,8 @@ class Stop:
     raw: float  # the encoder's reading there (rad of turn, the configuration's frame undone)
     trace: Trace  # the leg that ended at the stop
     first: Trace  # the search's first leg (from rest: where the take-up shows)
+    legs: list[Trace] = field(default_factory=list)  # every leg of the search, in order
+    paused: float = 0.0  # the travel (rad) at which it paused and went on (0: it did not)
 
 
 def take_up_s(trace: Trace, direction: int, moved: float = 0.01) -> float:
@@ -274,7 +279,9 @@ def _speed_by_angle(trace: Trace, direction: int, edges: np.ndarray) -> np.ndarr
     if not math.isfinite(start):
         return out
     t, y = trace.t, direction * trace.theta2[:, trace.finger]
-    use = (t >= t[0] + start + 0.1) & (t <= t[-1] - 0.3)
+    # a leg that ended at its target was still running: only a stall's slowing is cut
+    end_cut = 0.03 if trace.stop == "reached" else 0.3
+    use = (t >= t[0] + start + 0.1) & (t <= t[-1] - end_cut)
     t, y = t[use], y[use]
     if len(t) < 50:
         return out
@@ -287,6 +294,32 @@ def _speed_by_angle(trace: Trace, direction: int, edges: np.ndarray) -> np.ndarr
         if dt > 0:
             out[i] = (b - a) / dt
     return out
+
+
+def dwell_rad(trace: Trace, direction: int, counts_rad: float = 0.012) -> float:
+    """The longest the reading stood (moved under ``counts_rad``, about 1.5 counts) while a
+    leg drove it at one duty, as the travel it would have made at the leg's median speed, less
+    those counts (rad): Joint 2 waiting while the motor takes up a slack strand stands
+    still for the motor's travel across the slack; a reading scaled by an off-centre magnet
+    only slows. 0 for a leg too short to judge."""
+    if len(trace.t) < 50:
+        return 0.0
+    start = take_up_s(trace, direction)
+    if not math.isfinite(start):
+        return 0.0
+    t, y = trace.t, direction * trace.theta2[:, trace.finger]
+    end_cut = 0.03 if trace.stop == "reached" else 0.3
+    use = (t >= t[0] + start + 0.05) & (t <= t[-1] - end_cut)
+    t, y = t[use], np.maximum.accumulate(y[use])
+    if len(t) < 50 or y[-1] - y[0] < 0.1:
+        return 0.0
+    speed = (y[-1] - y[0]) / (t[-1] - t[0])
+    j = np.searchsorted(y, y + counts_rad)
+    ok = j < len(t)
+    if not ok.any():
+        return 0.0
+    longest = float(np.max(t[j[ok]] - t[ok]))
+    return float(max(0.0, longest * speed - counts_rad))
 
 
 def backward_rad(trace: Trace, direction: int) -> float:
@@ -302,24 +335,33 @@ def backward_rad(trace: Trace, direction: int) -> float:
     return float(np.max(np.maximum.accumulate(y) - y))
 
 
-def reading_curve(closing: Trace, opening: Trace, bin_rad: float = 0.2) -> dict[str, float]:
+def reading_curve(
+    closing: Trace | list[Trace], opening: Trace, bin_rad: float = 0.2
+) -> dict[str, float]:
     """The reading against the model's curve over the travel two legs at one duty crossed,
     closing and opening: at a steady duty the joint turns at a steady speed, a load (gravity,
     a weaker motor) speeding one leg as much as it slows the other, so the two legs' speeds
     summed at each angle are the same all along; a magnet off-centre scales both by its
     once-per-turn error, and a loose one sends the reading back. ``spread``: the largest of
     those sums over the smallest; ``backward_rad``: the most the reading went back against the
-    drive; ``covered_rad``: the travel compared."""
+    drive; ``covered_rad``: the travel compared. ``closing`` may be the legs of a search, in
+    one frame (a slow finger crosses its travel in several)."""
+    legs = [c for c in (closing if isinstance(closing, list) else [closing]) if len(c.t) >= 50]
     out = {"spread": math.nan, "covered_rad": 0.0}
-    out["backward_rad"] = max(backward_rad(closing, 1), backward_rad(opening, -1))
-    if len(closing.t) < 50 or len(opening.t) < 50:
+    out["backward_rad"] = max([backward_rad(c, 1) for c in legs] + [backward_rad(opening, -1)])
+    out["dwell_rad"] = max([dwell_rad(c, 1) for c in legs] + [dwell_rad(opening, -1)])
+    if not legs or len(opening.t) < 50:
         return out
-    lo = max(closing.theta2[:, closing.finger].min(), opening.theta2[:, opening.finger].min())
-    hi = min(closing.theta2[:, closing.finger].max(), opening.theta2[:, opening.finger].max())
+    back = opening.theta2[:, opening.finger]
+    lo = max(min(c.theta2[:, c.finger].min() for c in legs), back.min())
+    hi = min(max(c.theta2[:, c.finger].max() for c in legs), back.max())
     if hi - lo < 3 * bin_rad:
         return out
     edges = np.arange(lo, hi, bin_rad)
-    total = _speed_by_angle(closing, 1, edges) + _speed_by_angle(opening, -1, edges)
+    closing_speed = np.full(len(edges) - 1, np.nan)
+    for c in legs:
+        closing_speed = np.fmax(closing_speed, _speed_by_angle(c, 1, edges))
+    total = closing_speed + _speed_by_angle(opening, -1, edges)
     ok = np.isfinite(total) & (total > 0)
     if ok.sum() >= 3:
         out["spread"] = float(total[ok].max() / total[ok].min())
@@ -333,39 +375,63 @@ def _raw(theta: float, offset: float, invert: int) -> float:
 
 
 def find_stop(
-    hand: Hand, rec: Recorder, f: int, direction: int, invert: int, bounds: Bounds
+    hand: Hand,
+    rec: Recorder,
+    f: int,
+    direction: int,
+    invert: int,
+    bounds: Bounds,
+    confirm_within: float = 0.0,
+    duty: float = STOP_DUTY,
 ) -> Stop | None:
     """Drive toward the open (-1) or closed (+1) stop at low duty until the finger stops
     (the host's stall rule). The board's limits would stop it first if its reading passed
     them: the encoder offset is moved so the reading starts mid-range, again each time a
-    limit (not a stop) ended the leg."""
+    limit (not a stop) ended the leg. A stall within ``confirm_within`` rad of the search's
+    start is driven once more: a finger that then moves on had paused (Joint 2 waiting on a
+    slack strand), not stopped (``Stop.paused``)."""
     lim = hand.limits(f)
     trace = first = None
-    for _ in range(STOP_LEGS):
+    legs: list[Trace] = []
+    travelled = 0.0
+    paused = 0.0
+    confirming = False
+    for _ in range(STOP_LEGS + 1):
         st = hand.state().fingers[f]
         cfg = hand.finger_config(f)
         here = _raw(st.theta2, cfg.encoder_offset, invert)
         hand.set_finger_config(f, encoder_offset=_wrap(here))  # the reading here is 0
         hand.clear_faults([f])
+        # samples streamed before the new offset took are in the old frame: not this leg's
+        since = hand.state().board_time
         trace = pulse(
             hand,
             rec,
             f,
-            direction * STOP_DUTY,
+            direction * duty,
             bounds,
             seconds=STOP_LEG_S,
             travel=4.0,
-        )
+        ).after(since)
         first = first or trace
+        legs.append(trace)
         settle(hand, 0.05)
         end = trace.end
+        moved = direction * float(trace.delta()[f]) if len(trace.t) else 0.0
+        travelled += moved
         at_limit = end >= lim.theta2_max - 0.03 if direction > 0 else end <= lim.theta2_min + 0.03
         stalled = trace.stop == "stall" or (
             trace.stop == "fault" and hand.state().fingers[f].faults == m.FaultBits.STALL
         )  # the host's stall rule, or the board's own behind it
         hand.clear_faults([f])
+        if confirming and moved > PAUSE_RAD:
+            paused = max(paused, travelled - moved)  # it went on: where it had paused
         if stalled and not at_limit:
-            return Stop(_raw(end, _wrap(here), invert), trace, first)
+            if travelled < confirm_within and not (confirming and moved <= PAUSE_RAD):
+                confirming = True
+                continue
+            at = trace if moved > PAUSE_RAD or len(legs) < 2 else legs[-2]
+            return Stop(_raw(end, _wrap(here), invert), at, first, legs, paused)
         if not stalled and trace.stop not in ("time", "travel"):
             return None
     return None

@@ -3,6 +3,7 @@ configuration it proposes for it."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -62,3 +63,34 @@ class FingerConfig:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FingerConfig:
         return cls(**d)
+
+
+#: beyond these, a proposed value differs from the saved one
+SAME_ANGLE_RAD = 0.03
+SAME_GAIN = 0.3
+
+#: per field, how far a proposal may be from the saved value and still be the same (absolute
+#: for angles and duties; relative for the gains): the identification's spread between runs
+_ABS = {
+    "encoder_offset": SAME_ANGLE_RAD,
+    "theta2_min": SAME_ANGLE_RAD,
+    "theta2_max": SAME_ANGLE_RAD,
+    "deadband_duty": 0.02,
+}
+
+
+def changes(proposed: FingerConfig, saved: dict[str, dict[str, Any]]) -> list[str]:
+    """The fields a proposal changes, as ``group.field: saved -> proposed``."""
+    out = []
+    for group, values in asdict(proposed).items():
+        for k, v in values.items():
+            old = float(saved[group][k])
+            if k in _ABS:
+                diff = abs(math.remainder(old - float(v), 2 * math.pi)) > _ABS[k]
+            elif k in ("encoder_invert", "motor_invert"):
+                diff = int(old) != int(v)
+            else:
+                diff = abs(old - float(v)) > SAME_GAIN * max(abs(float(v)), 1e-3)
+            if diff:
+                out.append(f"{group}.{k}: {old:.4g} -> {float(v):.4g}")
+    return out

@@ -36,6 +36,9 @@ from utrf.hand.errors import FingerFaultError, NotControlledError, NotSettledErr
 
 STEP_DUTIES = (0.15, 0.3, 0.4)  # the third only when one of the first does not move it
 STEP_S = 0.3
+#: a check waits this long (s) for the finger to settle after each move (a slow finger on the
+#: saved gains does not: 2 s was most of its check's 11.9 s)
+SETTLE_WAIT_S = 1.0
 MOVING_RAD_S = 0.05
 MAX_CROSSOVER = 30.0  # rad/s
 PHASE_BUDGET = math.pi / 6  # of the 90° margin a PD with a cancelled pole gives
@@ -273,9 +276,13 @@ class Check:
         return asdict(self)
 
 
-def check(hand: Hand, rec: Recorder, f: int, a: float, b: float, label: str) -> Check:
+def check(
+    hand: Hand, rec: Recorder, f: int, a: float, b: float, label: str, brake_after: bool = True
+) -> Check:
     """POSITION: hold ``a``, move to ``b`` in 0.8 s, settle, back to ``a``; the tracking error
-    against the board's own setpoint, the overshoot past ``b`` and the time to settle there."""
+    against the board's own setpoint, the overshoot past ``b`` and the time to settle there.
+    Then the motors off, or (``brake_after`` False, a check to follow) both at the
+    pretension, open loop: the tendons stay taut and the next move needs no take-up."""
     name = hand.fingers[f]
     mark = rec.mark()
     settle_s = math.nan
@@ -284,24 +291,27 @@ def check(hand: Hand, rec: Recorder, f: int, a: float, b: float, label: str) -> 
         if abs(hand.state().fingers[f].theta2 - a) > 0.02:  # not already there (a check before)
             hand.move({name: a}, duration=0.8, wait=False)
             hand.clock.sleep(0.8)
-            hand.wait_settled(timeout=2.0, fingers=[f])
+            hand.wait_settled(timeout=SETTLE_WAIT_S, fingers=[f])
         start = hand.state().board_time
         hand.move({name: b}, duration=0.8, wait=False)
         hand.clock.sleep(0.8)
         end = hand.state().board_time
         try:
-            hand.wait_settled(timeout=2.0, fingers=[f])
+            hand.wait_settled(timeout=SETTLE_WAIT_S, fingers=[f])
             settle_s = max(0.0, hand.state().board_time - end)
         except NotSettledError:
             settle_s = math.inf
         hand.clock.sleep(0.2)
         hand.move({name: a}, duration=0.8, wait=False)
         hand.clock.sleep(0.8)
-        hand.wait_settled(timeout=2.0, fingers=[f])
+        hand.wait_settled(timeout=SETTLE_WAIT_S, fingers=[f])
     except (FingerFaultError, NotSettledError, NotControlledError):
         pass
     finally:
-        brake(hand, [f])
+        if brake_after or hand.state().fingers[f].faults:
+            brake(hand, [f])
+        else:
+            hand.set_mode("duty", [f], duty=0.0)
     got = [s for s in rec.since(mark) if s.fingers[f].closed_loop]
     t = np.array([s.board_time for s in got])
     th = np.array([s.fingers[f].theta2 for s in got])

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+from utrf.bringup.diagnose import STOP_DUTY
 from utrf.bringup.findings import Finding
 from utrf.bringup.identify import Plant
 from utrf.hand import Hand
@@ -14,7 +15,7 @@ FRICTION_DUTY = 0.03
 SLOW = 0.5  # of the model motors' speed gain
 #: slack is a travel: the motor runs this far (Joint-2 rad, its own lag taken off) before
 #: Joint 2 leaves the open stop (``slack_rad``); margins in docs/bringup.md
-SLACK_RAD = 0.025
+SLACK_RAD = 0.035
 #: a weak motor is late both ways: the two steps' lag over the model motors' (at the speed
 #: measured), their geometric mean above this (margins in docs/bringup.md)
 WEAK_LAG = 3.5
@@ -23,6 +24,12 @@ WEAK_LAG = 3.5
 #: the strand the other); margins in docs/bringup.md
 ONE_WAY_LAG = 6.0
 PROMPT_LAG = 0.5
+#: ... or, when the reading's speed was uneven over the travel too, the late way this many
+#: times the other's: Joint 2 leaning on one strand (under gravity) follows that way with the
+#: strand's lag and waits for the other strand the other way, and switches strands as the load
+#: turns over the travel (``slack:1=0.0015``: 6.9 times apart, the speed 1.44 times uneven).
+#: A weak motor can be late one way too (seed 43's ring: 1.1 and 11.9) but runs evenly (1.03)
+ONE_WAY_SPREAD = 4.0
 
 
 def lag_ratios(p: Plant, ref: Plant) -> dict[str, float]:
@@ -32,14 +39,20 @@ def lag_ratios(p: Plant, ref: Plant) -> dict[str, float]:
     return {k: v / expected for k, v in p.lag_s.items()} if expected > 0 else {}
 
 
-def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> list[Finding]:
-    """The plant against the model's motors' (``ref``, ``model_plant``)."""
+def plant_findings(
+    name: str, p: Plant, ref: Plant, slack: float = math.nan, uneven: bool = False
+) -> list[Finding]:
+    """The plant against the model's motors' (``ref``, ``model_plant``); ``uneven``: the
+    reading's speed at one duty varied over the travel (``reading_curve``)."""
     out = []
     r = lag_ratios(p, ref)
     flex, ext = r.get("flex", math.nan), r.get("extend", math.nan)
     # a slow motor's lag is far under one count (v τ): neither is judged from it
     resolved = p.K >= SLOW * ref.K
-    one_way = max(flex, ext) > ONE_WAY_LAG and min(flex, ext) < PROMPT_LAG
+    slow_way, fast_way = max(flex, ext), min(flex, ext)
+    one_way = slow_way > ONE_WAY_LAG and (
+        fast_way < PROMPT_LAG or (uneven and slow_way > ONE_WAY_SPREAD * fast_way)
+    )
     loose = resolved and (slack > SLACK_RAD or one_way)
     late = math.sqrt(flex * ext)
     # a weaker motor takes more duty for the same friction as it comes up to speed later (both
@@ -56,7 +69,7 @@ def plant_findings(name: str, p: Plant, ref: Plant, slack: float = math.nan) -> 
                     "beyond its own lag before Joint 2 moves"
                     if slack > SLACK_RAD
                     else f"from rest Joint 2 follows the motor at once one way and "
-                    f"{max(flex, ext):.0f} times the model's lag late the other"
+                    f"{slow_way:.0f} times the model's lag late the other"
                 )
                 + ": slack in the coupling tendon (Tendon 2, Joint 1 to Joint 2) lets Joint 2 "
                 "hang free between its strands",
@@ -122,6 +135,66 @@ def swing_finding(name: str, backward_rad: float) -> Finding:
         False,
         {"backward_rad": backward_rad},
     )
+
+
+def pause_finding(name: str, at_rad: float) -> Finding:
+    """Slack seen as a pause mid-travel: the closing search stalled, and driven again at the
+    same duty the finger went on (a jam does not): Joint 2 waited while the motor took up
+    the strand's slack."""
+    return Finding(
+        name,
+        "slack",
+        f"closing at one duty, the finger stopped {math.degrees(at_rad):.0f}° from its open stop "
+        "and, driven again at the same duty, went on: Joint 2 waited while the motor took up "
+        "slack in the coupling tendon (Tendon 2, Joint 1 to Joint 2)",
+        "tighten Tendon 2 and run the bring-up again (Joint 2 is loose between its strands: no "
+        "gain holds it)",
+        False,
+        {"paused_rad": at_rad},
+    )
+
+
+def dwell_finding(name: str, dwell_rad: float) -> Finding:
+    """Slack seen as the reading standing still mid-travel while driven at one duty (for the
+    travel the motor made meanwhile): Joint 2 waited on its strand."""
+    return Finding(
+        name,
+        "slack",
+        "driven at one duty across its travel, the finger's reading stood still for "
+        f"{math.degrees(dwell_rad):.1f}° of the motor's travel and went on: Joint 2 waited "
+        "while the motor took up slack in the coupling tendon (Tendon 2, Joint 1 to Joint 2)",
+        "tighten Tendon 2 and run the bring-up again (Joint 2 is loose between its strands: no "
+        "gain holds it)",
+        False,
+        {"dwell_rad": dwell_rad},
+    )
+
+
+def uneven_finding(name: str, curve: dict[str, float]) -> Finding:
+    """The reading's speed at one duty uneven over the travel, Joint 2 not loose: the
+    magnet is off-centre (``reading_curve``)."""
+    how = f"ran {curve['spread']:.2f} times faster in places than in others"
+    return Finding(
+        name,
+        "not-monotonic",
+        f"driven at one duty across its travel, the finger's reading {how} where the model's "
+        "turns at a steady speed, and Joint 2 is not loose: the encoder's magnet is off-centre "
+        "on the shaft or loose (the reading is not the joint's angle, so the stops and the zero "
+        "from it are not trusted)",
+        "centre the magnet on Joint 2's shaft and glue it; then run the bring-up again",
+        False,
+        dict(curve),
+    )
+
+
+def slack_rad(p: Plant, model: Plant, take_up: float, duty: float = STOP_DUTY) -> float:
+    """The slack as Joint-2 travel: how far the motor ran (at the stop search's duty, at the
+    identified speed) before Joint 2 moved from the open stop, less what the motor's own lag
+    (measured: a weak or spread motor's is not the model's) and the 0.01 rad of the take-up's
+    threshold account for."""
+    v = p.K * max(0.0, duty - p.u_f)
+    tau = p.tau if math.isfinite(p.tau) else model.tau * p.K / model.K
+    return max(0.0, v * (take_up - tau) - 0.01) if math.isfinite(take_up) else math.nan
 
 
 def model_plant(hand: Hand, f: int) -> Plant:

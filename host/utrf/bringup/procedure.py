@@ -28,25 +28,37 @@ from utrf.bringup.diagnose import (
     take_up_s,
     wiring,
 )
-from utrf.bringup.findings import Finding, FingerConfig
-from utrf.bringup.identify import Check, Plant, check, identify, tune
-from utrf.bringup.plant_check import model_plant, plant_findings, swing_finding
-from utrf.bringup.pulses import Bounds, Recorder, brake, pulse, settle
+from utrf.bringup.findings import Finding, FingerConfig, changes
+from utrf.bringup.identify import Check, check, identify, tune
+from utrf.bringup.plant_check import (
+    dwell_finding,
+    model_plant,
+    pause_finding,
+    plant_findings,
+    slack_rad,
+    swing_finding,
+    uneven_finding,
+)
+from utrf.bringup.pulses import Bounds, Recorder, Trace, brake, pulse, settle
 from utrf.hand import Hand
 
 #: the limits go this far inside the stops found
 STOP_MARGIN_RAD = 0.05
-#: beyond these, a proposed value differs from the saved one
-SAME_ANGLE_RAD = 0.03
-SAME_GAIN = 0.3
 #: set_finger_config's default encoder_offset (protocol/spec.toml): the straight finger mid-turn
 DEFAULT_OFFSET = 3.14159265
 #: a reading that goes back this much (rad) against a steady drive: Joint 2 swings loose (slack;
 #: fault-free fingers 2-3 counts of 7.7 mrad, margins in docs/bringup.md)
 BACKWARD_RAD = 0.03
+#: a reading that stands still this long while driven at one duty, as the leg's travel (rad):
+#: Joint 2 waiting on a slack strand (an off-centre magnet's reading only slows; margins in
+#: docs/bringup.md)
+DWELL_RAD = 0.04
 #: a reading whose speed at one duty varies this much (fastest over slowest) across the travel:
 #: the magnet is off-centre
 SPEED_SPREAD = 1.2
+#: the opening leg after the closed stop runs to this fraction of the span from the open stop
+#: (past the reading's middle, where an off-centre magnet's error turns fastest)
+SWEEP_FRACTION = 0.4
 #: a span between the stops longer than the model's by this: the reading's scale is wrong
 SPAN_EXTRA_RAD = 0.1
 #: shorter than the model's by this: a narrow range
@@ -54,6 +66,9 @@ NARROW_RAD = 0.08
 #: a closing search that stops before this fraction of the model's span has stuck (no build's
 #: range is that short: narrow-range stops at most 12 % early)
 JAM_SPAN = 0.5
+#: a closing search's stall within this fraction of the model's span is driven once more (an
+#: off-centre magnet's span is at least 0.7 of it, a narrow range's 0.88): moving on, it paused
+PAUSE_WITHIN = 0.6
 #: the steps of a finger's bring-up, in order
 UPTO = ("wiring", "stops", "plant", "check")
 
@@ -191,7 +206,15 @@ def _bring_up_finger(
         return res
     begin("stops")
     open_ = find_stop(hand, rec, f, -1, w.encoder_invert, bounds)
-    closed = find_stop(hand, rec, f, 1, w.encoder_invert, bounds) if open_ else None
+    # one duty for every search (a slow finger at the duty bound less the pretension, tried:
+    # 1.4 s less on a slow finger, but 14 N of friction then moved past its jam and was named
+    # a narrow range and a turned magnet)
+    duty = STOP_DUTY
+    closed = (
+        find_stop(hand, rec, f, 1, w.encoder_invert, bounds, PAUSE_WITHIN * (hi - lo), duty)
+        if open_
+        else None
+    )
     if open_ is None or closed is None:
         res.findings.append(
             Finding(
@@ -218,8 +241,14 @@ def _bring_up_finger(
         "offset_rad": offset,
         # from the open stop, how long the motor ran before Joint 2 moved (the slack)
         "take_up_s": take_up_s(closed.first, 1),
+        "search_duty": duty,
     }
     back = max(backward_rad(closed.first, 1), backward_rad(closed.trace, 1))
+    if closed.paused > 0:
+        # driven on at the same duty it went on: Joint 2 waited on its strand mid-travel
+        res.stops["paused_rad"] = closed.paused
+        res.findings.append(pause_finding(name, closed.paused))
+        return res
     if span < JAM_SPAN * (hi - lo) and back > BACKWARD_RAD:
         # it went back before it stopped: Joint 2 swinging loose paused it, not a jam
         res.findings.append(swing_finding(name, back))
@@ -296,30 +325,63 @@ def _bring_up_finger(
     mid = min(max(0.3, th_min + 0.6), th_max - 0.6)
     hand.clear_faults([f])
     here = hand.state().fingers[f].theta2
-    # from the closed stop (where Joint 2 leans flexed), opening: the slack shows as take-up
+    # from the closed stop (where Joint 2 leans flexed), opening: the slack shows as take-up.
+    # A short span may be an off-centre magnet's (the reading's span short by twice its
+    # error): on past the reading's middle, where that error turns fastest, then back, so that
+    # the curve compares the travel from the closed stop to past its middle
+    short = span < (hi - lo) - NARROW_RAD
+    sweep = min(mid, lo + SWEEP_FRACTION * span) if short else mid
     to_mid = pulse(
         hand,
         rec,
         f,
-        math.copysign(STOP_DUTY, mid - here),
+        math.copysign(duty, sweep - here),
         bounds,
-        seconds=3.0,
+        seconds=3.0 * max(1.0, (here - sweep) / max(here - mid, 0.3)),
         travel=3.5,
-        until=mid,
+        until=sweep,
     )
     res.stops["take_up_closed_s"] = take_up_s(to_mid, -1)
-    # the closing leg was read in the search's frame (its zero where the leg began): in the
-    # calibrated one, it ends at the closed stop
-    closing = closed.trace
-    if len(closing.t):
-        th = closing.theta2.copy()
-        th[:, f] += closed_at - closing.end
-        closing = replace(closing, theta2=th)
+    if sweep < mid - 0.05:
+        # back past the middle, then opening onto it: the plant's steps start as before,
+        # the finger arriving by opening
+        for target in (mid + 0.1, mid):
+            settle(hand, 0.0)
+            now = hand.state().fingers[f].theta2
+            pulse(
+                hand,
+                rec,
+                f,
+                math.copysign(duty, target - now),
+                bounds,
+                seconds=3.0,
+                travel=3.5,
+                until=target,
+            )
+    # the closing legs were read in the search's frame (each one's zero where it began): in
+    # the calibrated one, the last ends at the closed stop and each other where the next began
+    closing: list[Trace] = []
+    end_at = closed_at
+    for leg in reversed(closed.legs):
+        if not len(leg.t):
+            continue
+        th = leg.theta2.copy()
+        th[:, f] += end_at - leg.end
+        closing.insert(0, replace(leg, theta2=th))
+        end_at = float(th[0, f])
     curve = reading_curve(closing, to_mid)
     res.stops.update({f"curve_{k}": v for k, v in curve.items()})
     # every closing leg of the search (its first and last), not only the one read as a curve
     back = max(curve["backward_rad"], backward_rad(closed.first, 1))
     res.stops["backward_rad"] = back
+    if curve["dwell_rad"] > DWELL_RAD and back <= BACKWARD_RAD:
+        # driven at a steady duty the reading stood still for a stretch of the motor's travel:
+        # Joint 2 waited on its strand (an off-centre magnet's reading only slows)
+        res.findings = [
+            fd for fd in res.findings if fd.kind in ("encoder-inverted", "leads-swapped")
+        ]
+        res.findings.append(dwell_finding(name, curve["dwell_rad"]))
+        return res
     if back > BACKWARD_RAD:
         # driven at a steady duty the reading went back: Joint 2 swings loose between its
         # strands; its plant would be the swing's, and the stops' findings are doubtful
@@ -332,17 +394,19 @@ def _bring_up_finger(
     settle(hand, 0.1)
     plant, _ = identify(hand, rec, f, bounds, mid)
     res.plant = plant.to_dict()
-    res.plant["slack_rad"] = slack_rad(plant, model_plant(hand, f), res.stops["take_up_s"])
-    res.findings += plant_findings(name, plant, model_plant(hand, f), res.plant["slack_rad"])
+    res.plant["slack_rad"] = slack_rad(plant, model_plant(hand, f), res.stops["take_up_s"], duty)
+    res.findings += plant_findings(
+        name, plant, model_plant(hand, f), res.plant["slack_rad"], uneven
+    )
     if uneven and not any(fd.kind == "slack" for fd in res.findings):
         # not Joint 2 hanging loose between its strands (slack, which runs the legs unevenly
         # too): the reading is not the joint's angle, and the zero and range from it are void
         res.findings = [
             fd for fd in res.findings if fd.kind in ("encoder-inverted", "leads-swapped")
         ]
-        res.findings.append(_uneven_finding(name, curve))
+        res.findings.append(uneven_finding(name, curve))
         return res
-    if not (plant.K > 0 and math.isfinite(plant.tau)):
+    if not plant.K > 0:  # a slow motor's lag may be unresolved both ways: tuned on the model's
         res.findings.append(
             Finding(
                 name,
@@ -376,7 +440,7 @@ def _bring_up_finger(
     hand.set_gains(f, **{k: g[k] for k in tuned.gains})
     hand.set_motion(f, **{k: saved["motion"][k] for k in tuned.motion})
     hand.clear_faults([f])
-    res.checks.append(check(hand, rec, f, a, b, "before (saved gains)"))
+    res.checks.append(check(hand, rec, f, a, b, "before (saved gains)", brake_after=False))
     hand.set_gains(f, **tuned.gains)
     hand.set_motion(f, **tuned.motion)
     hand.clear_faults([f])
@@ -397,58 +461,6 @@ def _durations(starts: dict[str, float], total: float) -> dict[str, float]:
     keys = list(starts)
     ends = [starts[k] for k in keys[1:]] + [total]
     return {k: round(e - starts[k], 3) for k, e in zip(keys, ends, strict=True)}
-
-
-def _uneven_finding(name: str, curve: dict[str, float]) -> Finding:
-    how = f"ran {curve['spread']:.2f} times faster in places than in others"
-    return Finding(
-        name,
-        "not-monotonic",
-        f"driven at one duty across its travel, the finger's reading {how} where the model's "
-        "turns at a steady speed, and Joint 2 is not loose: the encoder's magnet is off-centre "
-        "on the shaft or loose (the reading is not the joint's angle, so the stops and the zero "
-        "from it are not trusted)",
-        "centre the magnet on Joint 2's shaft and glue it; then run the bring-up again",
-        False,
-        dict(curve),
-    )
-
-
-def slack_rad(p: Plant, model: Plant, take_up: float) -> float:
-    """The slack as Joint-2 travel: how far the motor ran (at the stop search's duty, at the
-    identified speed) before Joint 2 moved from the open stop, less what the motor's own lag
-    (measured: a weak or spread motor's is not the model's) and the 0.01 rad of the take-up's
-    threshold account for."""
-    v = p.K * max(0.0, STOP_DUTY - p.u_f)
-    tau = p.tau if math.isfinite(p.tau) else model.tau * p.K / model.K
-    return max(0.0, v * (take_up - tau) - 0.01) if math.isfinite(take_up) else math.nan
-
-
-#: per field, how far a proposal may be from the saved value and still be the same (absolute
-#: for angles and duties; relative for the gains): the identification's spread between runs
-_ABS = {
-    "encoder_offset": SAME_ANGLE_RAD,
-    "theta2_min": SAME_ANGLE_RAD,
-    "theta2_max": SAME_ANGLE_RAD,
-    "deadband_duty": 0.02,
-}
-
-
-def changes(proposed: FingerConfig, saved: dict[str, dict[str, Any]]) -> list[str]:
-    """The fields a proposal changes, as ``group.field: saved -> proposed``."""
-    out = []
-    for group, values in asdict(proposed).items():
-        for k, v in values.items():
-            old = float(saved[group][k])
-            if k in _ABS:
-                diff = abs(math.remainder(old - float(v), 2 * math.pi)) > _ABS[k]
-            elif k in ("encoder_invert", "motor_invert"):
-                diff = int(old) != int(v)
-            else:
-                diff = abs(old - float(v)) > SAME_GAIN * max(abs(float(v)), 1e-3)
-            if diff:
-                out.append(f"{group}.{k}: {old:.4g} -> {float(v):.4g}")
-    return out
 
 
 def _apply(hand: Hand, f: int, c: FingerConfig) -> None:

@@ -8,7 +8,7 @@ it sees only the Hand's telemetry and waits on the Hand's clock.
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -88,6 +88,18 @@ class Trace:
             np.array([[f.duty_a for f in s.fingers] for s in samples]),
             np.array([[f.duty_b for f in s.fingers] for s in samples]),
             stop,
+        )
+
+    def after(self, t0: float) -> Trace:
+        """The samples from board time ``t0`` on (those streamed before a configuration
+        change that ``t0`` follows are in the old frame)."""
+        keep = self.t >= t0
+        return replace(
+            self,
+            t=self.t[keep],
+            theta2=self.theta2[keep],
+            duty_a=self.duty_a[keep],
+            duty_b=self.duty_b[keep],
         )
 
     def delta(self) -> np.ndarray:

@@ -269,11 +269,21 @@ class BuildFaults:
             st["build_encoder_eccentric"][f] = b.magnet_eccentric_rad
             name = plant.names[f]
             if b.slack_m:
-                t = m.tendon(f"{name}_t2").id
-                m.tendon_lengthspring[t, 1] = b.slack_m  # the spring engages past the slack
-                # a slack strand damps nothing (the coupling's damping acts on its speed)
-                for k in ("t2", "t5"):
-                    m.tendon_damping[m.tendon(f"{name}_{k}").id] = 0.0
+                # Tendon 2 longer by the slack: Joint 2 hangs free between its strands. A
+                # strand's spring and damping act only while it is taut, so both coupling
+                # strands become one-sided limits (MuJoCo's tendon limit: a constraint, stiff
+                # and critically damped at the timestep, solved implicitly), Tendon 2 taut
+                # past the slack and Tendon 5 past zero. Their two-sided damping (the model's,
+                # on the stretch's speed) would couple Joint 2 to Joint 1 through the slack,
+                # and undamped springs made the thumb's stiff strands blow up (MuJoCo's "Nan,
+                # Inf or huge value in QACC").
+                for k, taut in (("t2", b.slack_m), ("t5", 0.0)):
+                    t = m.tendon(f"{name}_{k}").id
+                    m.tendon_stiffness[t] = 0.0
+                    m.tendon_damping[t] = 0.0
+                    m.tendon_limited[t] = 1
+                    m.tendon_range[t] = (-10.0, taut)
+                    m.tendon_solref_lim[t] = (2.0 * m.opt.timestep, 1.0)
             if b.friction_n:
                 for side in ("xa", "xb"):
                     m.dof_frictionloss[m.jnt_dofadr[m.joint(f"{name}_{side}").id]] += b.friction_n

@@ -1,0 +1,84 @@
+"""The stop search's legs read as a curve, without a board: a reading that stands still while
+driven (Joint 2 waiting on a slack strand) against one that only slows (an off-centre
+magnet), the legs of a search read together, and a leg's samples from the old frame left out."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from utrf.bringup.diagnose import dwell_rad, reading_curve
+from utrf.bringup.pulses import Trace
+
+COUNT = 2 * math.pi / 1024
+F = 1
+
+
+def _leg(theta: np.ndarray, t: np.ndarray, duty: float, stop: str = "stall") -> Trace:
+    th = np.zeros((len(t), 5))
+    th[:, F] = np.round(theta / COUNT) * COUNT  # the encoder's counts
+    z = np.zeros((len(t), 5))
+    return Trace(F, duty, t, th, z, z, stop)
+
+
+def _drive(speed_at: object, start: float, end: float, direction: int = 1) -> Trace:
+    """A leg at one duty from ``start`` to ``end`` (rad), its speed ``speed_at(angle)``,
+    ended by the stall rule (0.2 s standing at the end)."""
+    t, th, now, x = [0.0], [start], 0.0, start
+    while direction * (end - x) > 0:
+        now += 0.001
+        x += direction * 0.001 * speed_at(x)  # type: ignore[operator]
+        t.append(now)
+        th.append(x)
+    for _ in range(200):
+        now += 0.001
+        t.append(now)
+        th.append(end)
+    return _leg(np.array(th), np.array(t), 0.35 * direction)
+
+
+def test_a_pause_is_a_dwell_and_a_slowing_is_not() -> None:
+    steady = _drive(lambda x: 1.0, -1.6, 1.6)
+    # off-centre by 0.4 rad: the reading's speed 1 - 0.4 cos(angle), never standing
+    scaled = _drive(lambda x: 1.0 - 0.4 * math.cos(x), -1.6, 1.6)
+    # slack: the reading stands 0.15 s at 0.3 rad while the motor crosses the strand's slack
+    state = {"wait": 0.15}
+
+    def pausing(x: float) -> float:
+        if x >= 0.3 and state["wait"] > 0:
+            state["wait"] -= 0.001
+            return 0.0
+        return 1.0
+
+    paused = _drive(pausing, -1.6, 1.6)
+    assert dwell_rad(steady, 1) < 0.02
+    assert dwell_rad(scaled, 1) < 0.02
+    assert dwell_rad(paused, 1) > 0.1
+
+
+def test_the_curve_reads_every_leg_of_a_search() -> None:
+    """A search of two legs (the board's limit ends the first mid-travel): the curve compares
+    the whole travel, and an off-centre magnet's uneven speed shows over it."""
+    speed = lambda x: 1.0 - 0.4 * math.cos(x)  # noqa: E731
+    legs = [_drive(speed, -1.6, 0.0), _drive(speed, 0.0, 1.6)]
+    opening = _drive(speed, 1.6, -1.0, -1)
+    one = reading_curve(legs[1], opening)
+    both = reading_curve(legs, opening)
+    assert both["covered_rad"] > one["covered_rad"]
+    assert both["spread"] > 1.2
+    even = reading_curve(
+        [_drive(lambda x: 1.0, -1.6, 0.0), _drive(lambda x: 1.0, 0.0, 1.6)],
+        _drive(lambda x: 1.0, 1.6, -1.0, -1),
+    )
+    assert even["spread"] < 1.1
+
+
+def test_a_leg_is_read_from_its_frame_on() -> None:
+    """Samples streamed before a new encoder offset took are in the old frame: ``after``
+    leaves them out, so the leg's change is the finger's."""
+    t = np.arange(0.0, 0.5, 0.001)
+    theta = np.where(t < 0.01, -1.6, 0.5 * np.clip(t - 0.02, 0.0, None))
+    leg = _leg(theta, t, 0.35)
+    assert abs(leg.delta()[F] - 0.24) > 1.0  # the old frame's first sample
+    assert abs(leg.after(0.01).delta()[F] - 0.24) < 0.01
