@@ -37,6 +37,7 @@ from selenium.webdriver.support.ui import WebDriverWait
 
 from tools.doc_sections import cpu_name, write_section
 from utrf.dashboard import hub as dashboard_hub
+from utrf.dashboard.server import ServerOptions
 
 REPO = Path(__file__).resolve().parents[1]
 BENCH_DOC = REPO / "docs" / "benchmarks.md"
@@ -170,6 +171,17 @@ def profile_summary(profile: dict, top: int = 25) -> list[tuple[float, str]]:
         name = f"{f['functionName'] or '(anon)'} {f['url'].rsplit('/', 1)[-1]}:{f['lineNumber']}"
         by_name[name] = by_name.get(name, 0.0) + us / 1000
     return sorted(((ms, n) for n, ms in by_name.items()), reverse=True)[:top]
+
+
+def _rate(extra: list[str] | None, flag: str, default: float) -> float:
+    """The rate ``flag`` given to the dashboard (``--flag=X``, ``--flag X``), else ``default``."""
+    args = list(extra or [])
+    for i, a in enumerate(args):
+        if a.startswith(flag + "="):
+            return float(a.split("=", 1)[1])
+        if a == flag and i + 1 < len(args):
+            return float(args[i + 1])
+    return default
 
 
 def measure(
@@ -317,6 +329,8 @@ def measure(
         "rate_hz": rate,
         # (0 in a commit before the reader lingered: the bench runs on either, side by side)
         "read_linger_s": getattr(dashboard_hub, "READ_LINGER_S", 0.0),
+        "ui_hz": _rate(extra, "--ui-hz", ServerOptions().ui_hz),
+        "plot_hz": _rate(extra, "--plot-hz", ServerOptions().plot_hz),
         "samples": status["samples"],
         "latency_ms": {
             "n": len(lat),
@@ -368,9 +382,10 @@ def section(r: dict) -> str:
             f"`make bench-dashboard` ({date.today().isoformat()}, {cpu_name()}, 2 cores shared "
             f"with other work: load average {r['load_average']:.1f} at the end). The board is "
             f"`utrf emulate` in its own process, streaming at {r['rate_hz']} Hz; the dashboard "
-            "(`utrf dashboard --port`, default rates: live view up to 30 Hz, paced by the "
-            "page's frames; each chart 5 Hz, one an update, drawn in the frame after the "
-            "numbers'; the 3D hand drawn when it moved; the Hand's reader waiting "
+            f"(`utrf dashboard --port`, rates: live view up to {r.get('ui_hz', 30):g} Hz, paced "
+            f"by the page's frames; each chart {r.get('plot_hz', 5):g} Hz, one an update, drawn "
+            "in the frame after the numbers'; the 3D hand drawn when it moved; the Hand's "
+            "reader waiting "
             f"{1000 * r['read_linger_s']:.0f} ms after each read) with one "
             f"page open in headless chromium, for {r['seconds']:.0f} s while the page moves the "
             f"hand through four poses ({r['samples']} samples reached the server).",

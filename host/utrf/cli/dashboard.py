@@ -56,8 +56,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="the page in control lost its connection for S seconds: every finger in closed "
         "loop holds where it is (default 1)",
     )
-    p.add_argument("--ui-hz", type=float, default=30.0, help="live view updates a second")
-    p.add_argument("--plot-hz", type=float, default=5.0, help="each chart's updates a second")
+    p.add_argument(
+        "--ui-hz", type=float, default=None, help="live view updates a second (default 30)"
+    )
+    p.add_argument(
+        "--plot-hz",
+        type=float,
+        default=None,
+        help="each chart's updates a second (default 2: livelier charts cost the page's "
+        "latency, docs/dashboard.md)",
+    )
     p.set_defaults(handler=run)
 
 
@@ -73,15 +81,15 @@ def run(args: argparse.Namespace) -> int:
     if not 0 <= args.hold_after <= 60:
         error("dashboard", f"--hold-after must lie in [0, 60] s, got {args.hold_after}")
         return EXIT_BAD_INPUT
-    if not (0 < args.ui_hz <= 60 and 0 < args.plot_hz <= 60):
+    rates = {k: v for k, v in (("ui_hz", args.ui_hz), ("plot_hz", args.plot_hz)) if v is not None}
+    if not all(0 < v <= 60 for v in rates.values()):
         error("dashboard", "--ui-hz and --plot-hz must lie in (0, 60]")
         return EXIT_BAD_INPUT
     token = args.token if needs_token(args.host) else None
     if needs_token(args.host) and not token:
         token = new_token()
-    options = ServerOptions(
-        host=args.host, port=args.http_port, token=token, ui_hz=args.ui_hz, plot_hz=args.plot_hz
-    )
+    # the rates' defaults have one home: ServerOptions
+    options = ServerOptions(host=args.host, port=args.http_port, token=token, **rates)
     # the hand keeps what it holds when the dashboard stops: the board's host-silence rule
     with open_hand(args, telemetry_hz=args.rate, on_close="hold" if args.port else "brake") as hand:
         hub = DashboardHub(hand, record_dir=args.record_dir, hold_after_s=args.hold_after)

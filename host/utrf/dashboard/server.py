@@ -32,7 +32,7 @@ class ServerOptions:
     port: int = 8080
     token: str | None = None  # required when host is not a loopback name
     ui_hz: float = 30.0  # the live view: 3D hand, numbers, modes, faults
-    plot_hz: float = 5.0  # each chart (one chart a frame at most)
+    plot_hz: float = 2.0  # each chart, one a frame at most (5 doubled the p99: docs/dashboard.md)
     window_s: float = 5.0  # the plots' span
     points_per_s: float = 25.0  # the plots' decimation for the eye
 
