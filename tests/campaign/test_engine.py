@@ -287,3 +287,9 @@ def test_the_local_workers_twin_threads_the_engines_choice_or_the_drivers(
     monkeypatch.setenv(engine.TWIN_THREADS_ENV, "1")
     with engine.cluster(None, 1) as client:
         assert set(client.run(_twin_threads_env).values()) == {"1"}
+    monkeypatch.setenv(engine.TWIN_THREADS_ENV, "3")  # refused before a worker starts
+    with (
+        pytest.raises(engine.CampaignError, match="UTRF_TWIN_THREADS must be 1 or 2"),
+        engine.cluster(None, 1),
+    ):
+        pass

@@ -31,6 +31,7 @@ from utrf.campaign.sampling import Columns
 from utrf.campaign.spec import Campaign, CampaignError
 from utrf.campaign.store import Store, columns_table
 from utrf.emulator import twin_threads
+from utrf.emulator.board_types import EmulatorError
 
 ProgressFn = Callable[[str], None]
 TICK_S = 1.0  # progress at most this often
@@ -117,8 +118,14 @@ def cluster(address: str | None, workers: int | None) -> Iterator[Any]:
 
     n = workers or os.cpu_count() or 1
     shared = 2 * n > (os.cpu_count() or 1)  # two twin threads a worker would share cores
-    # the driver's own UTRF_TWIN_THREADS, when set, wins (the same work a run on any count)
-    threads = os.environ.get(TWIN_THREADS_ENV, "").strip() or ("1" if shared else "2")
+    # the driver's own UTRF_TWIN_THREADS, when set, wins (the same work a run on any count);
+    # read and checked where the emulator reads it, so a bad value is refused before any run
+    threads = "1" if shared else "2"
+    if os.environ.get(TWIN_THREADS_ENV, "").strip():
+        try:
+            threads = str(twin_threads.plant_threads())
+        except EmulatorError as exc:
+            raise CampaignError(str(exc)) from None
     with (
         dask.config.set(LOCAL_CONFIG),
         LocalCluster(
