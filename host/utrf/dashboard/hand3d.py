@@ -17,10 +17,11 @@ from utrf.models import kinematics
 from utrf.models.geometry import HandGeometry
 from utrf.models.mjcf_layout import load_layout
 
-#: three.js's own render loop (NiceGUI's) at this rate, only to catch what the page does not
-#: ask for (a resize, the camera's first placement): the page draws it when the hand moved
-#: and while the view is dragged (software WebGL on a machine without a GPU is costly)
-SCENE_FPS = 1
+#: three.js's own render loop (NiceGUI's) at this rate (once a minute), only to catch what
+#: the page does not ask for: the page draws the scene when the hand moved, while the view is
+#: dragged and when the window is resized, each in a frame that does not show new numbers
+#: (NiceGUI's loop would draw in any frame: software WebGL without a GPU is costly)
+SCENE_FPS = 1 / 60
 #: at most this many draws a second while the hand moves (as NiceGUI's loop drew it before)
 DRAW_HZ = 15.0
 #: metres to the scene's units
@@ -40,9 +41,10 @@ class Hand3D:
         layout = load_layout()
         px, py, pz = layout.palm_size_m
         with (
-            ui.scene(width=width, height=height, grid=False, fps=SCENE_FPS) as self.scene,
+            ui.scene(width=width, height=height, grid=False) as self.scene,
             self.scene.group() as top,
         ):
+            self.scene.props["fps"] = SCENE_FPS  # (NiceGUI's argument is an int)
             top.scale(SCALE)  # decimetres on the page: the default camera's near plane
             self.scene.box(px, py, pz).move(0.0, 0.0, -pz / 2).material("#c8c8c8")
             self._joints: list[list[Group]] = []
@@ -88,8 +90,9 @@ class Hand3D:
 
     def draw_js(self) -> str:
         """JavaScript (an expression) that draws the scene now, as NiceGUI's render loop does
-        a frame, and the first time also draws it at each pointer move or wheel turn over it
-        (the view is dragged or zoomed). Run inside a ``requestAnimationFrame`` callback."""
+        a frame, and the first time also draws it in the frame after each pointer move or
+        wheel turn over it (the view is dragged or zoomed) and each resize of the window
+        (NiceGUI's resize clears the canvas). Run inside a ``requestAnimationFrame`` callback."""
         return (
             f"((s) => {{ if (!s || !s.renderer) return;"
             " if (!s.utrfDraw) { s.utrfDraw = () => { s.camera_tween?.update();"
@@ -97,7 +100,8 @@ class Hand3D:
             " let due = false; const later = () => { if (due) return; due = true;"
             " requestAnimationFrame(() => { due = false; s.utrfDraw(); }); };"
             " for (const e of ['pointermove', 'pointerup', 'wheel'])"
-            " s.$el.addEventListener(e, later, {passive: true}); }"
+            " s.$el.addEventListener(e, later, {passive: true});"
+            " window.addEventListener('resize', later); }"
             f" s.utrfDraw(); }})(getElement({self.scene.id}))"
         )
 

@@ -13,6 +13,7 @@ latches HOST_TIMEOUT and applies its safe action.
 
 from __future__ import annotations
 
+import asyncio
 import collections
 import concurrent.futures
 import math
@@ -42,6 +43,11 @@ OFFSET_WINDOW_S = 2.0
 #: the Hand's reader waits this long after each read (s), so one read carries several frames
 #: of the 1 kHz stream (a command's reply is still read at once: ``Link.read_linger_s``)
 READ_LINGER_S = 0.004
+
+
+def _wake(future: asyncio.Future[None]) -> None:
+    if not future.done():
+        future.set_result(None)
 
 
 class NotInControl(RuntimeError):
@@ -149,6 +155,10 @@ class DashboardHub:
         self.limits = [hand.limits(i) for i in range(len(self.fingers))]
         self.safety = hand.safety()
         self.pose_names = list(hand.poses)
+        # pages waiting for the next sample (their event loop, its future): woken by the
+        # reader thread, so an update sends a sample the moment it arrives
+        self._waiters: list[tuple[asyncio.AbstractEventLoop, asyncio.Future[None]]] = []
+        self._waiters_lock = threading.Lock()
         self._unsubscribe = hand.on_state(self._on_state)
         if isinstance(hand.link, Link):  # a line (a SimLink reads none)
             hand.link.read_linger_s = READ_LINGER_S
@@ -158,6 +168,28 @@ class DashboardHub:
     def _on_state(self, st: HandState) -> None:
         self.ring.add(st)
         self.latest = st
+        if self._waiters:
+            with self._waiters_lock:
+                waiters, self._waiters = self._waiters, []
+            for loop, future in waiters:
+                loop.call_soon_threadsafe(_wake, future)
+
+    async def next_sample(self, timeout_s: float) -> bool:
+        """Wait for the next sample to arrive (at most ``timeout_s``): an update that starts
+        here sends a sample as fresh as the reader gives, not one a timer's phase aged.
+        Returns whether one came."""
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[None] = loop.create_future()
+        with self._waiters_lock:
+            self._waiters.append((loop, future))
+        try:
+            await asyncio.wait_for(future, timeout_s)
+        except TimeoutError:
+            with self._waiters_lock:
+                if (loop, future) in self._waiters:
+                    self._waiters.remove((loop, future))
+            return False
+        return True
 
     def wall_time_of(self, board_time: float) -> float:
         """When the board took a sample, on the host's wall clock, from its board time: the

@@ -34,11 +34,12 @@ from utrf.models.geometry import HandGeometry
 CHART_STYLE = "height: 150px; width: 560px"
 #: one update in the browser (one message): each live label's text written into its text
 #: node (the one Vue made: NiceGUI's element update would re-render every element of the
-#: page, sliders and buttons too, 30 times a second); a promise resolved once the next frame
-#: is drawn (first running ``draw`` in that frame's callback), which paces the page's
-#: updates; then, in the frame after, a chart's new points (``setOption``: ECharts redraws the
-#: chart at once, in milliseconds: a frame of its own, so the numbers' frame is out before the
-#: chart's work starts), given as JSON text (parsed faster than the same as code)
+#: page, sliders and buttons too, 30 times a second), drawn in the next frame, which does
+#: nothing else; the 3D hand (``draw``) or a chart's new points (``setOption``, as JSON text:
+#: parsed faster than the same as code) in the frame after, never the numbers' frame (the
+#: 3D hand's read-back and ECharts' redraw took milliseconds there); the promise resolves
+#: once all of it is drawn, which paces the page's updates, so the next update's numbers
+#: find the page idle
 LIVE_JS = """<script>
 window.utrfLive = (texts, draw, chart, points) => {
   for (const [id, text] of texts) {
@@ -46,10 +47,11 @@ window.utrfLive = (texts, draw, chart, points) => {
     if (node) node.nodeValue = text;
   }
   return new Promise((resolve) => requestAnimationFrame(() => {
-    draw();
-    resolve(0);
-    if (chart !== undefined) requestAnimationFrame(() => {
-      getElement(chart)?.chart?.setOption(JSON.parse(points));
+    if (!draw && chart === undefined) return resolve(0);
+    requestAnimationFrame(() => {
+      if (draw) draw();
+      if (chart !== undefined) getElement(chart)?.chart?.setOption(JSON.parse(points));
+      setTimeout(() => resolve(0), 0);
     });
   }));
 };
@@ -108,7 +110,9 @@ class DashboardPage:
         self._next_plot = [0.0] * len(hub.fingers)  # when each finger's chart is next due
         self._hand_moved = False  # the 3D hand moved since it was last drawn
         self._next_hand_draw = 0.0  # when it may be drawn next
-        ui.timer(1.0 / ui_hz, self._update)
+        self._drew_hand_last = False  # the last update that drew something drew the 3D hand
+        self.period_s = 1.0 / ui_hz
+        ui.timer(self.period_s, self._update)
         self._show_control()
 
     # --- layout ---------------------------------------------------------------------------------
@@ -316,35 +320,44 @@ class DashboardPage:
             element.text = text
 
     async def _update(self) -> None:
-        """One update of the page, one message: the live view and (when due) one chart's new
-        points, drawn after it; it waits until the browser has drawn the live view, so a
-        browser that draws slower than ``ui_hz`` gets fewer updates, never a queue of stale
-        ones (each drawn update is the newest sample)."""
+        """One update of the page, one message: the newest sample's numbers, drawn in a frame
+        of their own, then either the 3D hand (if it moved) or one chart's new points (when
+        due) in the frame after; it waits until the browser has drawn all of it, so a browser
+        that draws slower than ``ui_hz`` gets fewer updates, never a queue of stale ones (each
+        drawn update is the newest sample), and each update's numbers find the page idle.
+        It starts when the next sample arrives (at most one period later), not at a timer's
+        phase: the sample is as fresh as the Hand's reader gives."""
+        await self.hub.next_sample(self.period_s)
         now = time.monotonic()
         live = self._update_live()
         texts: list[tuple[int, str]] = []
-        draw = False
-        if live is not None:  # the numbers, and the 3D hand in the same frame if it moved
+        if live is not None:
             texts, moved = live
             self._hand_moved = self._hand_moved or moved
-            # (at most DRAW_HZ a second: a move not drawn yet is drawn at the next update)
-            draw = self._hand_moved and now >= self._next_hand_draw
-            if draw:
-                self._hand_moved = False
-                self._next_hand_draw = now + 1.0 / DRAW_HZ
-                self.hub.pushed["hand3d"] += 1
-        # at most one chart an update (ECharts redraws a chart in milliseconds: not five at
-        # once), the one most overdue
+        # (at most DRAW_HZ a second: a move not drawn yet is drawn at a later update)
+        hand_due = self._hand_moved and now >= self._next_hand_draw
+        i = int(np.argmin(self._next_plot))  # the chart most overdue
+        chart_due = now >= self._next_plot[i]
+        # one of them an update (each takes milliseconds); when both are due, the one that
+        # waited last time, so neither starves the other
+        draw = hand_due and not (chart_due and self._drew_hand_last)
         chart = ""
-        i = int(np.argmin(self._next_plot))
-        if now >= self._next_plot[i]:
+        if chart_due and not draw:
             self._next_plot[i] = max(self._next_plot[i] + self.plot_period, now)
             points = self._plot_points(i)
             if points is not None:
                 chart = f", {self.charts[i].id}, {json.dumps(points)}"
-        if live is not None or chart:
-            body = self.hand3d.draw_js() if draw else ""
-            await self._drawn(f"utrfLive({json.dumps(texts)}, () => {{ {body}; }}{chart})")
+            elif hand_due:  # the chart had nothing new: the hand's turn after all
+                draw = True
+        if draw:
+            self._hand_moved = False
+            self._next_hand_draw = now + 1.0 / DRAW_HZ
+            self.hub.pushed["hand3d"] += 1
+        if draw or chart:
+            self._drew_hand_last = draw
+        if live is not None or chart or draw:
+            body = f"() => {{ {self.hand3d.draw_js()}; }}" if draw else "null"
+            await self._drawn(f"utrfLive({json.dumps(texts)}, {body}{chart})")
 
     async def _drawn(self, script: str) -> None:
         with contextlib.suppress(TimeoutError):  # a hidden tab draws nothing: go on
