@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import threading
 import time
 from types import SimpleNamespace
 from typing import Any
@@ -16,6 +17,7 @@ import pytest
 from utrf.dashboard import settings
 from utrf.dashboard.access import COOKIE, TokenGuard, needs_token
 from utrf.dashboard.hub import READ_LINGER_S, DashboardHub, NotInControl, SampleRing
+from utrf.dashboard.page import hand_turn
 from utrf.hand.state import FingerState, HandState
 from utrf.protocol import messages as m
 from utrf.protocol.link import Link
@@ -178,6 +180,37 @@ def test_the_ring_keeps_each_fingers_fields_apart() -> None:
     np.testing.assert_allclose(s.target, 10 * (k + i))
     np.testing.assert_allclose(s.duty_a, np.broadcast_to(0.1 * i, (10, 3)))
     np.testing.assert_allclose(s.duty_b, np.broadcast_to(0.01 * i, (10, 3)))
+
+
+def test_an_update_waits_for_the_next_sample_from_the_readers_thread() -> None:
+    hub = DashboardHub(FakeHand())  # type: ignore[arg-type]
+
+    async def run() -> tuple[bool, bool, float]:
+        quiet = await hub.next_sample(0.02)  # no sample: it gives up at its timeout
+        assert not hub._waiters  # and leaves no waiter behind
+        loop = asyncio.get_running_loop()
+        # a sample from another thread (the Hand's reader) wakes it at once
+        loop.call_later(
+            0.05, lambda: threading.Thread(target=hub._on_state, args=(state(1.0, 2.0),)).start()
+        )
+        t0 = time.monotonic()
+        woken = await hub.next_sample(10.0)
+        return quiet, woken, time.monotonic() - t0
+
+    quiet, woken, waited = asyncio.run(run())
+    assert not quiet and woken and waited < 5.0 and hub.latest is not None
+    assert hub.latest.board_time == 1.0 and not hub._waiters
+    hub.close()
+
+
+def test_the_3d_hand_and_the_charts_take_turns_after_the_numbers() -> None:
+    last, drawn = False, []
+    for _ in range(6):  # both due at every update: they alternate
+        draw = hand_turn(True, True, last)
+        drawn.append(draw)
+        last = draw
+    assert drawn == [True, False, True, False, True, False]
+    assert hand_turn(True, False, True) and not hand_turn(False, True, False)
 
 
 def test_one_page_controls_the_others_watch() -> None:

@@ -79,6 +79,13 @@ def _chart(lo_deg: float, hi_deg: float) -> dict[str, Any]:
     }
 
 
+def hand_turn(hand_due: bool, chart_due: bool, drew_hand_last: bool) -> bool:
+    """Whether an update draws the 3D hand (else a chart, if one is due): one of them an
+    update (each takes milliseconds in the frame after the numbers'); when both are due, the
+    one that waited last time, so neither starves the other."""
+    return hand_due and not (chart_due and drew_hand_last)
+
+
 class DashboardPage:
     """The elements of one page and their updates (one per browser tab)."""
 
@@ -338,9 +345,7 @@ class DashboardPage:
         hand_due = self._hand_moved and now >= self._next_hand_draw
         i = int(np.argmin(self._next_plot))  # the chart most overdue
         chart_due = now >= self._next_plot[i]
-        # one of them an update (each takes milliseconds); when both are due, the one that
-        # waited last time, so neither starves the other
-        draw = hand_due and not (chart_due and self._drew_hand_last)
+        draw = hand_turn(hand_due, chart_due, self._drew_hand_last)
         chart = ""
         if chart_due and not draw:
             self._next_plot[i] = max(self._next_plot[i] + self.plot_period, now)
