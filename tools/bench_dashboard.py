@@ -271,15 +271,14 @@ def measure(
         )
         if lat_ is None:
             raise SystemExit("bench-dashboard: the page reloaded during the run: the probe is gone")
+        # the counts of the window (samples received, updates pushed), not of the frame window
+        status = json.loads(driver.execute_script(STATUS))
         driver.execute_script(FRAME_PROBE)
         time.sleep(FRAME_WINDOW_S)
         frames_ = driver.execute_script("return window.utrfFrames")
         lat, frames = np.array(lat_, dtype=float), np.array(frames_, dtype=float)
         age = display_age(np.array(drawn_, dtype=float).reshape(-1, 2))
         parts = np.array(parts_, dtype=float).reshape(-1, 3)
-        status = json.loads(
-            driver.execute_script("return fetch('/api/status').then(r => r.text())")
-        )
     finally:
         if driver is not None:
             driver.quit()
@@ -383,9 +382,9 @@ def section(r: dict) -> str:
             f"with other work: load average {r['load_average']:.1f} at the end). The board is "
             f"`utrf emulate` in its own process, streaming at {r['rate_hz']} Hz; the dashboard "
             f"(`utrf dashboard --port`, rates: live view up to {r.get('ui_hz', 30):g} Hz, paced "
-            f"by the page's frames; each chart {r.get('plot_hz', 5):g} Hz, one an update, drawn "
-            "in the frame after the numbers'; the 3D hand drawn when it moved; the Hand's "
-            "reader waiting "
+            f"by the page's frames, each started by a sample's arrival; its numbers drawn in a "
+            "frame of their own, then in the frame after either the 3D hand (drawn when it "
+            f"moved) or one chart (each {r.get('plot_hz', 5):g} Hz); the Hand's reader waiting "
             f"{1000 * r['read_linger_s']:.0f} ms after each read) with one "
             f"page open in headless chromium, for {r['seconds']:.0f} s while the page moves the "
             f"hand through four poses ({r['samples']} samples reached the server).",
@@ -407,8 +406,8 @@ def section(r: dict) -> str:
             "(60 a second when it keeps up), so it says what the page can draw; during the "
             "latency window nothing asks for frames the page does not need (such a loop made "
             "chromium draw 60 frames a second for at most 30 updates, and took the CPU the "
-            "board, the server and the page share), and the page draws a frame for each update "
-            "(the numbers and the 3D hand) and one for each chart. "
+            "board, the server and the page share), and the page draws a frame for each update's "
+            "numbers and one for its 3D hand or chart. "
             f"What a person sees: over the window, the newest sample on the page was "
             f"{r['display_age_ms']['p50']:.0f} ms old (p50), {r['display_age_ms']['p99']:.0f} ms "
             "(p99), each millisecond: the figure above plus the wait for the next update. "
