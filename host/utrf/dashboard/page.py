@@ -38,8 +38,8 @@ CHART_STYLE = "height: 150px; width: 560px"
 #: nothing else; the 3D hand (``draw``) or a chart's new points (``setOption``, as JSON text:
 #: parsed faster than the same as code) in the frame after, never the numbers' frame (the
 #: 3D hand's read-back and ECharts' redraw took milliseconds there); the promise resolves
-#: once all of it is drawn, which paces the page's updates, so the next update's numbers
-#: find the page idle
+#: once that work is done (its frame is then drawn at once), which paces the page's updates,
+#: so the next update's numbers find the page idle
 LIVE_JS = """<script>
 window.utrfLive = (texts, draw, chart, points) => {
   for (const [id, text] of texts) {
@@ -51,7 +51,7 @@ window.utrfLive = (texts, draw, chart, points) => {
     requestAnimationFrame(() => {
       if (draw) draw();
       if (chart !== undefined) getElement(chart)?.chart?.setOption(JSON.parse(points));
-      setTimeout(() => resolve(0), 0);
+      resolve(0);
     });
   }));
 };
@@ -329,7 +329,7 @@ class DashboardPage:
     async def _update(self) -> None:
         """One update of the page, one message: the newest sample's numbers, drawn in a frame
         of their own, then either the 3D hand (if it moved) or one chart's new points (when
-        due) in the frame after; it waits until the browser has drawn all of it, so a browser
+        due) in the frame after; it waits until the browser has done all of it, so a browser
         that draws slower than ``ui_hz`` gets fewer updates, never a queue of stale ones (each
         drawn update is the newest sample), and each update's numbers find the page idle.
         It starts when the next sample arrives (at most one period later), not at a timer's
