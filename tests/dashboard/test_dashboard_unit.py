@@ -200,6 +200,13 @@ def test_an_update_waits_for_the_next_sample_from_the_readers_thread() -> None:
     quiet, woken, waited = asyncio.run(run())
     assert not quiet and woken and waited < 5.0 and hub.latest is not None
     assert hub.latest.board_time == 1.0 and not hub._waiters
+    # a page's wait left behind on a loop since closed (the server stopping) costs the
+    # reader's thread nothing
+    loop = asyncio.new_event_loop()
+    hub._waiters.append((loop, loop.create_future()))
+    loop.close()
+    hub._on_state(state(1.001, 2.001))
+    assert not hub._waiters and hub.latest.board_time == 1.001
     hub.close()
 
 

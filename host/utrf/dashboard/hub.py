@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import concurrent.futures
+import contextlib
 import math
 import threading
 import time
@@ -172,7 +173,8 @@ class DashboardHub:
             with self._waiters_lock:
                 waiters, self._waiters = self._waiters, []
             for loop, future in waiters:
-                loop.call_soon_threadsafe(_wake, future)
+                with contextlib.suppress(RuntimeError):  # its loop closed (the server stops)
+                    loop.call_soon_threadsafe(_wake, future)
 
     async def next_sample(self, timeout_s: float) -> bool:
         """Wait for the next sample to arrive (at most ``timeout_s``): an update that starts
