@@ -624,6 +624,8 @@ uint8_t serial_rx_peek(const uint8_t** data) {
 
 void serial_rx_take(uint8_t n) { GPIOR2 = (uint8_t)((GPIOR2 + n) & 0x7F); }
 
+bool serial_rx_waiting() { return GPIOR1 != GPIOR2; }
+
 uint16_t serial_tx_room() {
     return (uint16_t)((uint8_t)(g_tx_tail - g_tx_head - 1));  // 256-byte ring
 }
