@@ -35,7 +35,9 @@ Hand::Hand()
 }
 
 void Hand::stall_rules() {
-    const uint8_t now = (uint8_t)ticks();
+    // The tick count's low byte alone, read whole (one byte: no torn read, no retry).
+    static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the low byte comes first");
+    const uint8_t now = *reinterpret_cast<const volatile uint8_t*>(&ticks_);
     if (now == stall_seen_) return;
     stall_seen_ = now;
     for (uint8_t f = 0; f < kFingers; ++f) {

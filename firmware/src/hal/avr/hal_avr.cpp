@@ -185,6 +185,9 @@ const EncoderReading kNoData[UTRF_FINGER_COUNT] = {
 EncoderSetup g_setup[UTRF_FINGER_COUNT];
 volatile uint8_t g_adc_round;    // completed rounds (wraps)
 volatile uint8_t g_adc_at = 0xFF;  // channel being converted, 0xFF: idle
+// While a round runs: the slot of g_adc_fill and the setup of channel g_adc_at.
+EncoderReading* g_adc_slot;
+const EncoderSetup* g_adc_setup;
 encoder::Staleness g_staleness;
 
 void adc_select(uint8_t finger) {
@@ -380,20 +383,25 @@ ISR(TIMER2_COMPA_vect) { take_compare(); }
 // (g_adc_done), never the one filled here, and starts a round only when none runs
 // (encoders_sample()); the round's hand-over is one short stretch with interrupts off.
 ISR(ADC_vect, ISR_NOBLOCK) {
-    const uint16_t code = ADC;
     const uint8_t i = g_adc_at;
     // Judged here, between ticks (the round runs after each tick), not in the tick: the band,
-    // the angle and the joint limits (core/encoder.h, judge()).
-    EncoderReading* const fill = g_adc_fill;
-    fill[i] = encoder::judge(code, g_setup[i]);
+    // the angle and the joint limits (core/encoder.h, judge()). Through the two running
+    // pointers (no index arithmetic), each field stored as it is worked out: few registers,
+    // so few to save and restore around this handler, five times a tick.
+    EncoderReading* const r = g_adc_slot;
+    const EncoderSetup* const s = g_adc_setup;
+    *r = encoder::judge(ADC, *s);
     const uint8_t next = (uint8_t)(i + 1);
     cli();
     if (next < UTRF_FINGER_COUNT) {
         g_adc_at = next;
+        g_adc_slot = r + 1;
+        g_adc_setup = s + 1;
         adc_select(next);
         ADCSRA |= _BV(ADSC);
     } else {
         g_adc_at = 0xFF;
+        EncoderReading* const fill = g_adc_fill;
         g_adc_fill = const_cast<EncoderReading*>(g_adc_done);
         g_adc_done = fill;
         g_adc_round = (uint8_t)(g_adc_round + 1);
@@ -551,6 +559,8 @@ void encoders_sample() {
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
         if (g_adc_at == 0xFF) {  // a round still running (ADC slower than it should be) goes on
             g_adc_at = 0;
+            g_adc_slot = g_adc_fill;
+            g_adc_setup = g_setup;
             adc_select(0);
             ADCSRA |= _BV(ADSC);
         }
@@ -681,6 +691,9 @@ void sleep_until_interrupt(bool (*idle)(), void (*take_bytes)()) {
     const bool go = idle();
     cli();
     if (go && !(GPIOR0 & _BV(kWake)) && g_t0_overflows == ms) {
+        // SE stays set while this loop sleeps again after an interrupt that gave loop() no
+        // work (most wake-ups: the ADC's five a tick), and is cleared when it ends: nothing
+        // else executes SLEEP.
         for (;;) {
             sleep_enable();
             sei();  // SLEEP runs before any interrupt pending now, which then wakes it at once
