@@ -185,9 +185,10 @@ const EncoderReading kNoData[UTRF_FINGER_COUNT] = {
 EncoderSetup g_setup[UTRF_FINGER_COUNT];
 volatile uint8_t g_adc_round;    // completed rounds (wraps)
 volatile uint8_t g_adc_at = 0xFF;  // channel being converted, 0xFF: idle
-// While a round runs: the slot of g_adc_fill and the setup of channel g_adc_at.
-EncoderReading* g_adc_slot;
-const EncoderSetup* g_adc_setup;
+// The slot of g_adc_fill and the setup of channel g_adc_at (of channel 0 between rounds: the
+// round's end sets them for the next, so encoders_sample(), which runs in the tick, does not).
+EncoderReading* g_adc_slot = g_reading[0];
+const EncoderSetup* g_adc_setup = g_setup;
 encoder::Staleness g_staleness;
 
 void adc_select(uint8_t finger) {
@@ -402,8 +403,11 @@ ISR(ADC_vect, ISR_NOBLOCK) {
     } else {
         g_adc_at = 0xFF;
         EncoderReading* const fill = g_adc_fill;
-        g_adc_fill = const_cast<EncoderReading*>(g_adc_done);
+        EncoderReading* const next_fill = const_cast<EncoderReading*>(g_adc_done);
+        g_adc_fill = next_fill;
         g_adc_done = fill;
+        g_adc_slot = next_fill;  // the next round's first slot and setup
+        g_adc_setup = g_setup;
         g_adc_round = (uint8_t)(g_adc_round + 1);
     }
     sei();  // the register restores with the interrupts on
@@ -559,8 +563,6 @@ void encoders_sample() {
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
         if (g_adc_at == 0xFF) {  // a round still running (ADC slower than it should be) goes on
             g_adc_at = 0;
-            g_adc_slot = g_adc_fill;
-            g_adc_setup = g_setup;
             adc_select(0);
             ADCSRA |= _BV(ADSC);
         }
