@@ -17,12 +17,20 @@ import argparse
 import bisect
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 
 CPU_HZ = 16_000_000
+# The ATmega2560's vectors the firmware uses (avr-gcc names them __vector_<n>).
+VECTORS = {13: "TIMER2_COMPA", 23: "TIMER0_OVF", 25: "USART0_RX", 26: "USART0_UDRE", 29: "ADC"}
+
+
+def label(name: str) -> str:
+    """A symbol's name, an interrupt's with its vector's name."""
+    if name.startswith("__vector_") and name[9:].isdigit():
+        return f"{name} ({VECTORS.get(int(name[9:]), '?')} interrupt)"
+    return name
 
 
 def symbols(elf: Path) -> tuple[list[int], list[str]]:
@@ -56,16 +64,13 @@ def sleeps(elf: Path) -> set[int]:
 
 def run(elf: Path, seconds: float, rate_hz: int) -> tuple[np.ndarray, int, int]:
     """The histogram (cycles per program word), the cycles run and those slept."""
-    import os
-
-    os.environ["UTRF_FIRMWARE_ELF"] = str(elf.resolve())
     from utrf.emulator import EmulatedBoard
     from utrf.hand.simlink import SimLink
     from utrf.hil.rig import EmulatedTruth
     from utrf.protocol import messages as m
 
     params = EmulatedTruth(actuator=None).plant_params()
-    with EmulatedBoard(realtime=False, seed=0, plant_params=params) as board:
+    with EmulatedBoard(elf, realtime=False, seed=0, plant_params=params) as board:
         native = board._native
         native.attach_plant(None)
         latest: list = [None]
@@ -101,6 +106,34 @@ def run(elf: Path, seconds: float, rate_hz: int) -> tuple[np.ndarray, int, int]:
     return hist, cycles, slept
 
 
+def awake(elf: Path, seconds: float, rate_hz: int) -> dict:
+    """The awake cycles of ``seconds`` simulated under the twin's traffic: ``share`` (of every
+    cycle), ``per_s`` (awake cycles per simulated second), ``functions`` (name: cycles per
+    simulated second, largest first), ``hist`` (awake cycles per program word)."""
+    hist, cycles, slept = run(elf, seconds, rate_hz)
+    for a in sorted(sleeps(elf)):  # the slept cycles, off the sleep and the next
+        take = min(int(hist[a // 2]), slept)
+        hist[a // 2] -= take
+        slept -= take
+    if slept:
+        raise RuntimeError(f"{slept} slept cycles not found at a sleep instruction")
+    addrs, names = symbols(elf)
+    per_fn: dict[str, int] = {}
+    for word in np.nonzero(hist)[0]:
+        i = bisect.bisect_right(addrs, 2 * int(word)) - 1
+        name = names[i] if i >= 0 else "?"
+        per_fn[name] = per_fn.get(name, 0) + int(hist[word])
+    sim_s = cycles / CPU_HZ
+    total = int(hist.sum())
+    return {
+        "share": total / cycles,
+        "per_s": total / sim_s,
+        "functions": {k: v / sim_s for k, v in sorted(per_fn.items(), key=lambda kv: -kv[1])},
+        "hist": hist,
+        "sim_s": sim_s,
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--elf", type=Path, default=Path("build/firmware/utrf.elf"))
@@ -115,30 +148,19 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if not args.elf.exists():
         p.error(f"no ELF at {args.elf} (make firmware)")
-    hist, cycles, slept = run(args.elf, args.seconds, args.rate)
-    for a in sorted(sleeps(args.elf)):  # the slept cycles, off the sleep and the next
-        take = min(int(hist[a // 2]), slept)
-        hist[a // 2] -= take
-        slept -= take
-    if slept:
-        print(f"warning: {slept} slept cycles not found after a sleep", file=sys.stderr)
-    addrs, names = symbols(args.elf)
-    awake = int(hist.sum())
-    per_fn: dict[str, int] = {}
-    for word in np.nonzero(hist)[0]:
-        i = bisect.bisect_right(addrs, 2 * int(word)) - 1
-        name = names[i] if i >= 0 else "?"
-        per_fn[name] = per_fn.get(name, 0) + int(hist[word])
-    sim_s = cycles / CPU_HZ
-    print(f"{args.elf}: {sim_s:.2f} s simulated, telemetry {args.rate} Hz, awake "
-          f"{100 * awake / cycles:.2f} % of the cycles ({awake / sim_s:,.0f} cycles/s)")  # fmt: skip
+    if not args.seconds > 0 or args.rate not in (100, 1000):
+        p.error("--seconds must be > 0 and --rate 100 or 1000")
+    a = awake(args.elf, args.seconds, args.rate)
+    print(f"{args.elf}: {a['sim_s']:.2f} s simulated, telemetry {args.rate} Hz, awake "
+          f"{100 * a['share']:.2f} % of the cycles ({a['per_s']:,.0f} cycles/s)")  # fmt: skip
     print(f"{'cycles/s':>10} {'% awake':>8}  function")
-    for name, c in sorted(per_fn.items(), key=lambda kv: -kv[1])[: args.top]:
-        print(f"{c / sim_s:10,.0f} {100 * c / awake:8.2f}  {name}")
+    for name, c in list(a["functions"].items())[: args.top]:
+        print(f"{c:10,.0f} {100 * c / a['per_s']:8.2f}  {label(name)}")
     if args.function and args.lines:
-        lines(args.elf, hist, args.function, sim_s, addrs, names)
+        addrs, names = symbols(args.elf)
+        lines(args.elf, a["hist"], args.function, a["sim_s"], addrs, names)
     elif args.function:
-        hot(args.elf, hist, args.function, sim_s)
+        hot(args.elf, a["hist"], args.function, a["sim_s"])
     return 0
 
 
