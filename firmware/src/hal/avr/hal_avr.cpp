@@ -168,7 +168,9 @@ void drives_change_hw(FingerHw& h, uint8_t& last, uint8_t d) {
 }
 
 // ---- ADC: one round over the five encoder channels between two ticks ------------------------
-uint8_t g_adc_mux[UTRF_FINGER_COUNT];
+// Each finger's ADMUX value (AVCC reference: ratiometric with the sensor; its channel A0..A7,
+// MUX5 0), worked out once by avr_init().
+uint8_t g_admux[UTRF_FINGER_COUNT];
 // Two rounds of readings, judged in the ADC interrupt: it fills one while the tick reads the
 // other, the last complete one (a round starts only at the end of a tick, so the one the tick
 // reads is not written under it). g_adc_done points to it and g_adc_fill to the other; both
@@ -191,9 +193,11 @@ EncoderReading* g_adc_slot = g_reading[0];
 const EncoderSetup* g_adc_setup = g_setup;
 encoder::Staleness g_staleness;
 
-void adc_select(uint8_t finger) {
-    const uint8_t ch = g_adc_mux[finger];  // 0..7 (A0..A7): MUX5 stays 0
-    ADMUX = (uint8_t)(_BV(REFS0) | (ch & 0x07));  // AVCC reference: ratiometric with the sensor
+// The finger's channel, and a conversion started (ADSC set in ADCSRA as it stands: an ADC
+// that was stopped, ADEN cleared, stays stopped).
+void adc_start(uint8_t finger) {
+    ADMUX = g_admux[finger];
+    ADCSRA |= _BV(ADSC);
 }
 
 }  // namespace
@@ -398,8 +402,7 @@ ISR(ADC_vect, ISR_NOBLOCK) {
         g_adc_at = next;
         g_adc_slot = r + 1;
         g_adc_setup = s + 1;
-        adc_select(next);
-        ADCSRA |= _BV(ADSC);
+        adc_start(next);
     } else {
         g_adc_at = 0xFF;
         EncoderReading* const fill = g_adc_fill;
@@ -463,7 +466,7 @@ void avr_init() {
         g_hw[f].stby = output_pin(p.stby);
         g_hw[f].stby_last = 0;
         avr_motors::g_drives_last[f] = 0xFF;
-        g_adc_mux[f] = p.adc_channel;
+        g_admux[f] = (uint8_t)(_BV(REFS0) | (p.adc_channel & 0x07));
         if (p.adc_channel < 8) DIDR0 |= (uint8_t)(1u << p.adc_channel);  // analog only
     }
 
@@ -563,8 +566,7 @@ void encoders_sample() {
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
         if (g_adc_at == 0xFF) {  // a round still running (ADC slower than it should be) goes on
             g_adc_at = 0;
-            adc_select(0);
-            ADCSRA |= _BV(ADSC);
+            adc_start(0);
         }
     }
 }
