@@ -31,8 +31,8 @@ void send_board_message(Board& b, const Msg& m) {
     send_board_frame(b, frame, w.finish());
 }
 
-void flush_reply(Board& b) {
-    if (b.reply_len != 0 && hal::serial_tx_room() >= b.reply_len) {
+__attribute__((noinline)) void flush_reply_send(Board& b) {
+    if (hal::serial_tx_room() >= b.reply_len) {
         hal::serial_write(b.reply, b.reply_len);
         if (b.cache_reply) {
             // Kept for a resend of its request, once it is on its way (no request is read
@@ -44,6 +44,12 @@ void flush_reply(Board& b) {
         }
         b.reply_len = 0;
     }
+}
+
+// A reply waiting goes into the transmit buffer when it fits: the check inline (three times a
+// pass, rarely true), the copy out of line.
+__attribute__((always_inline)) inline void flush_reply(Board& b) {
+    if (b.reply_len != 0) flush_reply_send(b);
 }
 
 // One valid frame from the host: the seq rules and the reply cache, then dispatch.
