@@ -6,6 +6,8 @@
 #   make flash PORT=/dev/ttyACM0   avrdude over the MEGA's stk500v2 bootloader, 115200 baud
 #   make firmware-host         build/firmware/host/libutrf_fw.so: core + host HAL, for pytest
 #   make bench-firmware        tick load and memory, appended to docs/benchmarks.md
+#                              (FW_REF_ELF=other.elf: its awake cycles beside this build's)
+#   make profile-firmware      where the awake cycles go under the twin's traffic, per function
 #   UTRF_BAUD=...              serial baud rate (default 1000000, exact at 16 MHz with U2X)
 
 # FW_DIR: where this file lives (an installed utrf builds from its packaged copy into a cache).
@@ -68,7 +70,7 @@ ARDUINO_CORE_MAKE = $(MAKE) -s --no-print-directory -f $(FW_DIR)/arduino_core.mk
 FW_BUILD_ID := $(FW_BUILD)/build_id.h
 FW_GIT_ID   := $(shell git rev-parse --short=8 HEAD 2>/dev/null)
 
-.PHONY: firmware flash firmware-host bench-firmware firmware-size
+.PHONY: firmware flash firmware-host bench-firmware firmware-size profile-firmware
 
 firmware: $(FW_ELF) $(FW_HEX)
 	@$(MAKE) --no-print-directory SETUP_DONE=1 firmware-size
@@ -189,7 +191,15 @@ BENCH_TARGETS += bench-firmware
 # The tick under traffic runs on the emulator's harness (tools/tick_bench.py over
 # libutrf_sim.so; harness.mk's `emulator` builds it).
 bench-firmware: firmware firmware-host firmware-check emulator
-	$(PY) -m tools.bench_firmware --update docs/benchmarks.md
+	$(PY) -m tools.bench_firmware --update docs/benchmarks.md \
+	  $(if $(FW_REF_ELF),--reference-elf $(FW_REF_ELF))
+
+# The awake cycles (not asleep in loop()'s idle sleep) of the ELF alone under the grasp hold's
+# host traffic, per function, with the 100 Hz stream and the 1 kHz one (tools/fw_profile.py;
+# --function NAME [--lines] for one function's instructions or source lines).
+profile-firmware: firmware emulator
+	$(PY) -m tools.fw_profile --elf $(FW_ELF) --seconds 5 --rate 100 --top 30
+	$(PY) -m tools.fw_profile --elf $(FW_ELF) --seconds 5 --rate 1000 --top 30
 
 # ---- the PlatformIO build, reproduced with Debian's toolchain (make firmware-pio) -------------
 # `pio run` cannot fetch its platform here, so this builds what it would: PlatformIO's atmelavr

@@ -13,6 +13,10 @@ harness (build/emulator/libutrf_sim.so) first. Every figure is measured here:
   stream on, under seven kinds of host traffic; with each, the receive path (issue 19): the
   harness models the ATmega2560's two-byte receive FIFO and times each byte from its stop bit
   to the firmware's read of UDR0, and counts the bytes lost;
+- the awake cycles under the twin's traffic (tools.fw_profile: the grasp hold's host traffic,
+  the state stream at 100 Hz and at 1 kHz, no plant): the share of the cycles the CPU was not
+  asleep and where they go, per function; with ``--reference-elf`` (make bench-firmware
+  FW_REF_ELF=...), another build's beside it, from the same runs' traffic;
 - the step response of the default gains on the reference finger plant (tests/firmware/
   fwsim.py), through the host build of the firmware core.
 """
@@ -280,7 +284,63 @@ def pct(cycles: float) -> str:
     return f"{100 * cycles / TICK_CYCLES:.1f} %"
 
 
-def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: float) -> str:
+def short_name(name: str) -> str:
+    """A function's name without its namespaces, arguments and clone suffix; an interrupt's
+    vector named."""
+    from tools.fw_profile import label
+
+    base = label(name.split(" [clone")[0])
+    if base.startswith("__vector_"):
+        return base
+    base = base.split("(")[0] if not base.startswith("(") else base
+    return base.replace("utrf::", "").replace("(anonymous namespace)::", "")
+
+
+def twin_awake(seconds: float, reference: Path | None) -> list[str]:
+    """The awake share under the twin's traffic, and its largest parts (tools.fw_profile)."""
+    from tools import fw_profile
+
+    lines = [
+        "### Awake cycles under the twin's traffic (issue 20)",
+        "",
+        f"`tools.fw_profile` ({seconds:g} s simulated a row, `make profile-firmware` for the "
+        "whole list): the ELF on the emulated board with no plant, the grasp hold's host "
+        "traffic (heartbeats, five fingers in POSITION at their still encoders' angles), the "
+        "state stream at 100 Hz (the hold's) and at 1 kHz; every cycle counted at the "
+        "instruction that spent it (the harness's PC histogram), the slept ones left out. "
+        "simavr skips slept cycles in one step, so the awake ones are the twin's firmware cost "
+        "(and the board's headroom).",
+        "",
+    ]
+    header = "| state stream | awake (this build) | awake cycles a second |"
+    rule = "|---|---|---|"
+    if reference:
+        header += f" `{reference}` | ratio |"
+        rule += "---|---|"
+    lines += [header + " largest parts (cycles a second) |", rule + "---|"]
+    for rate in (100, 1000):
+        a = fw_profile.awake(ELF, seconds, rate)
+        parts = ", ".join(f"{short_name(k)} {v:,.0f}" for k, v in list(a["functions"].items())[:6])
+        row = f"| {rate} Hz | {100 * a['share']:.1f} % | {a['per_s']:,.0f} |"
+        if reference:
+            r = fw_profile.awake(reference, seconds, rate)
+            row += (
+                f" {100 * r['share']:.1f} %, {r['per_s']:,.0f} cycles/s | "
+                f"{a['per_s'] / r['per_s']:.2f} |"
+            )
+        lines.append(f"{row} {parts} |")
+    lines.append("")
+    return lines
+
+
+def render(
+    mem: dict,
+    tbl: list[str],
+    loads: list[dict],
+    steps: list,
+    seconds: float,
+    awake: list[str] | None = None,
+) -> str:
     now = datetime.date.today().isoformat()
     lines = [
         BEGIN,
@@ -358,6 +418,7 @@ def render(mem: dict, tbl: list[str], loads: list[dict], steps: list, seconds: f
         )
     lines += ["", *verdict(loads), *silent_verdict(loads), *round_trips(loads)]
     lines += [*receive_path(loads, what), ""]
+    lines += awake or []
     lines += [
         "### PID step response (default gains, reference plant, host build of the core)",
         "",
@@ -380,6 +441,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     parser.add_argument("--update", type=Path, help="write the section into this markdown file")
     parser.add_argument("--seconds", type=float, default=2.0, help="simulated seconds per load")
+    parser.add_argument(
+        "--reference-elf", type=Path, help="another build's ELF beside this one (awake cycles)"
+    )
     args = parser.parse_args(argv)
     mem = memory()
     tbl = table()
@@ -388,7 +452,8 @@ def main(argv: list[str] | None = None) -> int:
     loads.append(tick_load("latency", max(args.seconds, 5.0)))  # issue 11 goal 3
     loads.append(tick_load("heavy", args.seconds))  # issue 19 item 6: the receive path
     steps = step_figures()
-    section = render(mem, tbl, loads, steps, args.seconds)
+    awake = twin_awake(args.seconds, args.reference_elf)
+    section = render(mem, tbl, loads, steps, args.seconds, awake)
     print(section)
     if args.update:
         write_section(args.update, section, BEGIN, END)

@@ -123,6 +123,8 @@ uint8_t serial_rx_peek(const uint8_t** data) {
     return (uint8_t)(n > 255 ? 255 : n);
 }
 
+bool serial_rx_waiting() { return g_state.rx_head != g_state.rx_tail; }
+
 void serial_rx_take(uint8_t n) {
     g_state.rx_tail = (uint16_t)((g_state.rx_tail + n) % host::kRxBytes);
 }

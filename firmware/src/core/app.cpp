@@ -31,8 +31,8 @@ void send_board_message(Board& b, const Msg& m) {
     send_board_frame(b, frame, w.finish());
 }
 
-void flush_reply(Board& b) {
-    if (b.reply_len != 0 && hal::serial_tx_room() >= b.reply_len) {
+__attribute__((noinline)) void flush_reply_send(Board& b) {
+    if (hal::serial_tx_room() >= b.reply_len) {
         hal::serial_write(b.reply, b.reply_len);
         if (b.cache_reply) {
             // Kept for a resend of its request, once it is on its way (no request is read
@@ -44,6 +44,12 @@ void flush_reply(Board& b) {
         }
         b.reply_len = 0;
     }
+}
+
+// A reply waiting goes into the transmit buffer when it fits: the check inline (three times a
+// pass, rarely true), the copy out of line.
+__attribute__((always_inline)) inline void flush_reply(Board& b) {
+    if (b.reply_len != 0) flush_reply_send(b);
 }
 
 // One valid frame from the host: the seq rules and the reply cache, then dispatch.
@@ -112,12 +118,9 @@ void receive_byte(Board& b, uint8_t byte) {
 
 // The received bytes, read in place from the UART's buffer (no copy, no call a byte), up to
 // kRxBurst of them; a reply waiting for room stops the reading (the rest stays in the buffer).
-void receive(Board& b) {
-    const uint16_t lost = hal::serial_take_overruns();
-    b.link.rx_overruns += lost;
-    const hal::UartErrors e = hal::serial_take_uart_errors();
-    b.link.uart_overruns += e.overruns;
-    b.link.uart_frame_errors += e.frame_errors;
+// Out of line, called only when bytes wait: its locals and the decoder's registers are not
+// saved and set up by the passes that find none (most of them: a pass a tick).
+__attribute__((noinline)) void receive_bytes(Board& b) {
     uint8_t budget = kRxBurst;
     while (budget != 0 && b.reply_len == 0) {
         const uint8_t* data;
@@ -137,6 +140,19 @@ void receive(Board& b) {
     }
 }
 
+// The UART's lost-byte counts, then the bytes (above). The counts are added only when some
+// came (a 32-bit add each, every pass, otherwise).
+void receive(Board& b) {
+    const uint16_t lost = hal::serial_take_overruns();
+    if (UTRF_UNLIKELY(lost != 0)) b.link.rx_overruns += lost;
+    const hal::UartErrors e = hal::serial_take_uart_errors();
+    if (UTRF_UNLIKELY((e.overruns | e.frame_errors) != 0)) {
+        b.link.uart_overruns += e.overruns;
+        b.link.uart_frame_errors += e.frame_errors;
+    }
+    if (b.reply_len == 0 && hal::serial_rx_waiting()) receive_bytes(b);
+}
+
 }  // namespace
 
 void note_status(Board& b, const uint8_t* mode, const uint8_t* faults) {
@@ -153,15 +169,22 @@ void note_status(Board& b, const uint8_t* mode, const uint8_t* faults) {
     b.status_pending = true;
 }
 
-void poll_status(Board& b) {
-    // Usually nothing changed: a byte at a time needs no lock to tell (each byte is read
-    // whole); only a change is taken as one snapshot, under the lock.
-    bool same = true;
-    for (uint8_t f = 0; f < hand::kFingers; ++f) {
-        const finger::Finger& fg = b.hand.finger(f);
-        if (fg.mode() != b.status_mode[f] || fg.faults() != b.status_faults[f]) same = false;
-    }
-    if (same) return;
+namespace {
+// The status as last noted, compared a byte at a time (each byte is read whole, so no lock is
+// needed to tell): written out, each finger's bytes at a fixed address (the one Board), no
+// frame, no loop; every loop() pass asks it.
+__attribute__((always_inline)) inline bool status_unchanged(const Board& b) {
+    static_assert(hand::kFingers == 5, "five fingers written out");
+    const hand::Hand& h = b.hand;
+    return h.finger(0).mode() == b.status_mode[0] && h.finger(0).faults() == b.status_faults[0] &&
+           h.finger(1).mode() == b.status_mode[1] && h.finger(1).faults() == b.status_faults[1] &&
+           h.finger(2).mode() == b.status_mode[2] && h.finger(2).faults() == b.status_faults[2] &&
+           h.finger(3).mode() == b.status_mode[3] && h.finger(3).faults() == b.status_faults[3] &&
+           h.finger(4).mode() == b.status_mode[4] && h.finger(4).faults() == b.status_faults[4];
+}
+
+// A change: taken as one snapshot, under the lock. Out of line: rare.
+__attribute__((noinline)) void status_changed(Board& b) {
     uint8_t mode[hand::kFingers];
     uint8_t faults[hand::kFingers];
     {
@@ -173,8 +196,22 @@ void poll_status(Board& b) {
     }
     note_status(b, mode, faults);
 }
+}  // namespace
+
+void poll_status(Board& b) {
+    // Usually nothing changed; only a change is taken as one snapshot, under the lock.
+    if (!status_unchanged(b)) status_changed(b);
+}
 
 namespace {
+
+// Whether any finger latched a fault not reported yet (written out: fixed addresses).
+__attribute__((always_inline)) inline bool new_faults(const Board& b) {
+    const hand::Hand& h = b.hand;
+    return (h.finger(0).pending_new_faults() | h.finger(1).pending_new_faults() |
+            h.finger(2).pending_new_faults() | h.finger(3).pending_new_faults() |
+            h.finger(4).pending_new_faults()) != 0;
+}
 
 bool report_faults(Board& b) {
     for (uint8_t f = 0; f < hand::kFingers; ++f) {
@@ -197,9 +234,8 @@ bool report_faults(Board& b) {
 // with no 0x00 after it holds nothing longer), or bytes in the UART's buffer that loop() has
 // not read yet (a tick or this pass's work held it up while they came).
 bool request_coming(const Board& b) {
-    const uint8_t* waiting;
     return (b.decoder.in_frame() && b.hand.ticks() - b.rx_frame_tick < kRequestHoldTicks) ||
-           hal::serial_rx_peek(&waiting) != 0;
+           hal::serial_rx_waiting();
 }
 
 // The board's own frames, in priority order: faults, the status, the state stream's samples.
@@ -208,13 +244,13 @@ bool request_coming(const Board& b) {
 // line; they wait in the ring), and a sample encoded while one began to come is not sent. Once
 // kStreamBacklog samples wait (loop() or the line fell behind: a long request, a busy line),
 // they go out whatever comes in, back to back, as far as the buffer has room.
-void board_frames(Board& b) {
+__attribute__((noinline)) void board_frames_send(Board& b) {
     const bool idle = tx_idle(b);
     uint8_t pending = b.hand.stream_pending();
     // Nothing can start (the buffer busy, the stream not behind): the status is polled when a
     // frame can go, before it.
     if (!idle && pending < kStreamBacklog) return;
-    poll_status(b);
+    if (!status_unchanged(b)) status_changed(b);  // poll_status(), inline
     if (idle && report_faults(b)) return;
     if (idle && b.status_pending) {
         proto::Status m;
@@ -244,6 +280,17 @@ void board_frames(Board& b) {
     }
 }
 
+// Most passes have nothing to send: no sample waiting, the status as noted and reported, no
+// new fault. Then board_frames_send() would do nothing whatever the buffer holds; that is
+// told here without its frame (its locals, a dozen register saves).
+void board_frames(Board& b) {
+    if (b.hand.stream_pending() == 0 && !b.status_pending && status_unchanged(b) &&
+        !new_faults(b)) {
+        return;
+    }
+    board_frames_send(b);
+}
+
 }  // namespace
 
 void keep_stream() { board_frames(g_board); }
@@ -261,6 +308,15 @@ void save_progress(Board& b) {
     } else {
         dispatch::ack(b, seq, proto::SaveConfig::kId);
     }
+}
+
+// Before any reply: the host learns of the reset first. Out of line: once after a reset.
+__attribute__((noinline)) void send_boot(Board& b) {
+    if (hal::serial_tx_room() < framing::kMaxFrameBytes) return;
+    proto::Boot m;
+    dispatch::fill_boot(b, m);
+    send_board_message(b, m);
+    b.boot_sent = true;
 }
 
 void watchdog(Board& b) {
@@ -385,13 +441,7 @@ void setup() {
 void loop() {
     Board& b = g_board;
     watchdog(b);
-    if (!b.boot_sent && hal::serial_tx_room() >= framing::kMaxFrameBytes) {
-        // Before any reply: the host learns of the reset first.
-        proto::Boot m;
-        dispatch::fill_boot(b, m);
-        send_board_message(b, m);
-        b.boot_sent = true;
-    }
+    if (UTRF_UNLIKELY(!b.boot_sent)) send_boot(b);
     flush_reply(b);
     receive(b);
     flush_reply(b);
@@ -405,19 +455,16 @@ void loop() {
 }
 
 bool idle() {
+    // The cheap reads first (bytes, no call), the clocks' 32-bit compares last: each check
+    // that finds work returns false, and all of them run before the transmit buffer's test.
     const Board& b = g_board;
     if (!b.boot_sent || b.reply_len != 0 || b.writer.busy()) return false;
-    if (b.hand.ticks() != b.pass_ticks || hal::millis() != b.pass_ms) return false;
-    const uint8_t* waiting;
-    if (hal::serial_rx_peek(&waiting) != 0) return false;
     const uint8_t pending = b.hand.stream_pending();
     if (pending >= kStreamBacklog) return false;  // behind: they go as the buffer has room
+    if (hal::serial_rx_waiting()) return false;
+    if (b.hand.ticks() != b.pass_ticks || hal::millis() != b.pass_ms) return false;
     if (!tx_idle(b)) return true;    // a frame starts when the buffer empties: an interrupt
-    if (pending != 0 || b.status_pending) return false;
-    for (uint8_t f = 0; f < hand::kFingers; ++f) {
-        if (b.hand.finger(f).pending_new_faults() != 0) return false;
-    }
-    return true;
+    return pending == 0 && !b.status_pending && !new_faults(b);
 }
 
 void take_bytes() {

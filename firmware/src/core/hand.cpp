@@ -35,12 +35,26 @@ Hand::Hand()
 }
 
 void Hand::stall_rules() {
-    const uint8_t now = (uint8_t)ticks();
+    // The tick count's low byte alone, read whole (one byte: no torn read, no retry).
+    static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the low byte comes first");
+    const uint8_t now = *reinterpret_cast<const volatile uint8_t*>(&ticks_);
     if (now == stall_seen_) return;
     stall_seen_ = now;
-    for (uint8_t f = 0; f < kFingers; ++f) {
+    // Which fingers are due, with no call in the loop (its counters need no saving); then
+    // their checks (usually one finger's a tick).
+    uint8_t due = 0;
+    uint8_t bit = 1;
+    for (uint8_t f = 0; f < kFingers; ++f, bit = (uint8_t)(bit << 1)) {
+        if ((uint8_t)(now - stall_at_[f]) >= finger::kStallEvery) due |= bit;
+    }
+    if (due != 0) stall_checks(now, due);
+}
+
+void Hand::stall_checks(uint8_t now, uint8_t due) {
+    uint8_t bit = 1;
+    for (uint8_t f = 0; f < kFingers; ++f, bit = (uint8_t)(bit << 1)) {
+        if (!(due & bit)) continue;
         const uint8_t elapsed = (uint8_t)(now - stall_at_[f]);
-        if (elapsed < finger::kStallEvery) continue;
         stall_at_[f] = now;
         hal::tick_lock();
         if (fingers_[f].stall_rule(elapsed)) hal::motor_off(f);  // stopped now, not next tick

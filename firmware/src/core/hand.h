@@ -128,6 +128,10 @@ class Hand {
     void safe_action_tick(const hal::EncoderReading* enc);
 
    private:
+    // stall_rules()' checks of the fingers in `due` (bit f: finger f), in order, each under
+    // the tick lock. Out of line: the passes with none due do not set up its registers.
+    __attribute__((noinline)) void stall_checks(uint8_t now, uint8_t due);
+
     finger::Finger fingers_[kFingers];
     uint32_t ticks_;
     uint16_t silence_left_;  // ticks until the host-silence timeout; 0: timed out

@@ -136,6 +136,8 @@ uint32_t millis();
 // them (n at most that length).
 uint8_t serial_rx_peek(const uint8_t** data);
 void serial_rx_take(uint8_t n);
+// Whether any received byte waits (serial_rx_peek() would give a run): no pointer to fill.
+bool serial_rx_waiting();
 uint16_t serial_tx_room();
 void serial_write(const uint8_t* data, uint16_t len);
 // A frame written in place: the transmit ring (256 bytes: a uint8_t index wraps by itself)

@@ -168,7 +168,9 @@ void drives_change_hw(FingerHw& h, uint8_t& last, uint8_t d) {
 }
 
 // ---- ADC: one round over the five encoder channels between two ticks ------------------------
-uint8_t g_adc_mux[UTRF_FINGER_COUNT];
+// Each finger's ADMUX value (AVCC reference: ratiometric with the sensor; its channel A0..A7,
+// MUX5 0), worked out once by avr_init().
+uint8_t g_admux[UTRF_FINGER_COUNT];
 // Two rounds of readings, judged in the ADC interrupt: it fills one while the tick reads the
 // other, the last complete one (a round starts only at the end of a tick, so the one the tick
 // reads is not written under it). g_adc_done points to it and g_adc_fill to the other; both
@@ -185,11 +187,17 @@ const EncoderReading kNoData[UTRF_FINGER_COUNT] = {
 EncoderSetup g_setup[UTRF_FINGER_COUNT];
 volatile uint8_t g_adc_round;    // completed rounds (wraps)
 volatile uint8_t g_adc_at = 0xFF;  // channel being converted, 0xFF: idle
+// The slot of g_adc_fill and the setup of channel g_adc_at (of channel 0 between rounds: the
+// round's end sets them for the next, so encoders_sample(), which runs in the tick, does not).
+EncoderReading* g_adc_slot = g_reading[0];
+const EncoderSetup* g_adc_setup = g_setup;
 encoder::Staleness g_staleness;
 
-void adc_select(uint8_t finger) {
-    const uint8_t ch = g_adc_mux[finger];  // 0..7 (A0..A7): MUX5 stays 0
-    ADMUX = (uint8_t)(_BV(REFS0) | (ch & 0x07));  // AVCC reference: ratiometric with the sensor
+// The finger's channel, and a conversion started (ADSC set in ADCSRA as it stands: an ADC
+// that was stopped, ADEN cleared, stays stopped).
+void adc_start(uint8_t finger) {
+    ADMUX = g_admux[finger];
+    ADCSRA |= _BV(ADSC);
 }
 
 }  // namespace
@@ -380,22 +388,29 @@ ISR(TIMER2_COMPA_vect) { take_compare(); }
 // (g_adc_done), never the one filled here, and starts a round only when none runs
 // (encoders_sample()); the round's hand-over is one short stretch with interrupts off.
 ISR(ADC_vect, ISR_NOBLOCK) {
-    const uint16_t code = ADC;
     const uint8_t i = g_adc_at;
     // Judged here, between ticks (the round runs after each tick), not in the tick: the band,
-    // the angle and the joint limits (core/encoder.h, judge()).
-    EncoderReading* const fill = g_adc_fill;
-    fill[i] = encoder::judge(code, g_setup[i]);
+    // the angle and the joint limits (core/encoder.h, judge()). Through the two running
+    // pointers (no index arithmetic), each field stored as it is worked out: few registers,
+    // so few to save and restore around this handler, five times a tick.
+    EncoderReading* const r = g_adc_slot;
+    const EncoderSetup* const s = g_adc_setup;
+    *r = encoder::judge(ADC, *s);
     const uint8_t next = (uint8_t)(i + 1);
     cli();
     if (next < UTRF_FINGER_COUNT) {
         g_adc_at = next;
-        adc_select(next);
-        ADCSRA |= _BV(ADSC);
+        g_adc_slot = r + 1;
+        g_adc_setup = s + 1;
+        adc_start(next);
     } else {
         g_adc_at = 0xFF;
-        g_adc_fill = const_cast<EncoderReading*>(g_adc_done);
+        EncoderReading* const fill = g_adc_fill;
+        EncoderReading* const next_fill = const_cast<EncoderReading*>(g_adc_done);
+        g_adc_fill = next_fill;
         g_adc_done = fill;
+        g_adc_slot = next_fill;  // the next round's first slot and setup
+        g_adc_setup = g_setup;
         g_adc_round = (uint8_t)(g_adc_round + 1);
     }
     sei();  // the register restores with the interrupts on
@@ -451,7 +466,7 @@ void avr_init() {
         g_hw[f].stby = output_pin(p.stby);
         g_hw[f].stby_last = 0;
         avr_motors::g_drives_last[f] = 0xFF;
-        g_adc_mux[f] = p.adc_channel;
+        g_admux[f] = (uint8_t)(_BV(REFS0) | (p.adc_channel & 0x07));
         if (p.adc_channel < 8) DIDR0 |= (uint8_t)(1u << p.adc_channel);  // analog only
     }
 
@@ -551,8 +566,7 @@ void encoders_sample() {
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
         if (g_adc_at == 0xFF) {  // a round still running (ADC slower than it should be) goes on
             g_adc_at = 0;
-            adc_select(0);
-            ADCSRA |= _BV(ADSC);
+            adc_start(0);
         }
     }
 }
@@ -624,6 +638,8 @@ uint8_t serial_rx_peek(const uint8_t** data) {
 
 void serial_rx_take(uint8_t n) { GPIOR2 = (uint8_t)((GPIOR2 + n) & 0x7F); }
 
+bool serial_rx_waiting() { return GPIOR1 != GPIOR2; }
+
 uint16_t serial_tx_room() {
     return (uint16_t)((uint8_t)(g_tx_tail - g_tx_head - 1));  // 256-byte ring
 }
@@ -679,6 +695,9 @@ void sleep_until_interrupt(bool (*idle)(), void (*take_bytes)()) {
     const bool go = idle();
     cli();
     if (go && !(GPIOR0 & _BV(kWake)) && g_t0_overflows == ms) {
+        // SE stays set while this loop sleeps again after an interrupt that gave loop() no
+        // work (most wake-ups: the ADC's five a tick), and is cleared when it ends: nothing
+        // else executes SLEEP.
         for (;;) {
             sleep_enable();
             sei();  // SLEEP runs before any interrupt pending now, which then wakes it at once
