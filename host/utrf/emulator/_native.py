@@ -216,6 +216,10 @@ class NativeBoard:
         if rc:
             raise HarnessError("the plant's thread could not start")
 
+    def set_plant_spin(self, spin: bool) -> None:
+        """With two twin threads: whether the plant's thread spins before it sleeps."""
+        self._lib.utrf_sim_set_plant_spin(self._h, int(bool(spin)))
+
     @property
     def cycle(self) -> int:
         return self._lib.utrf_sim_cycle(self.handle)

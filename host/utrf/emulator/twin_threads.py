@@ -48,3 +48,11 @@ def plant_threads(requested: int | None = None, *, paced: bool = False) -> int:
     if requested not in (1, 2) or isinstance(requested, bool):
         raise EmulatorError(f"{source} must be 1 or 2, got {requested!r}")
     return int(requested)
+
+
+def plant_spins() -> bool:
+    """With two twin threads, whether the plant's thread spins for the MCU's next period
+    before it sleeps: only with a core for each of the MCU, the plant and the client (three or
+    more). On fewer it sleeps at once: it waits most of each period (the MCU's is the longer
+    work), and spinning there takes the core the client needs beside them."""
+    return usable_cores() >= 3

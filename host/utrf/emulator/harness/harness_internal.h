@@ -2,6 +2,7 @@
 #ifndef UTRF_HARNESS_INTERNAL_H
 #define UTRF_HARNESS_INTERNAL_H
 
+#include <stdatomic.h>
 #include <stdint.h>
 
 #include "avr_uart.h"
@@ -189,6 +190,8 @@ struct utrf_sim {
     double hold[UTRF_SIM_PIN_VALUES]; /* the pins the plant steps the period with */
     int plant_threads;       /* 2: the plant steps on its own thread (plant_thread.c) */
     struct utrf_plant_thread *plant_thread;
+    int plant_spin; /* 1: the plant's thread spins before it sleeps (utrf_sim_set_plant_spin) */
+    _Atomic int client_busy; /* run_ahead.c: a run ahead is under way, its caller not joining */
     void *plant_ctx;
     void (*plant_step)(void *ctx, double dt, const double *pins);
     void (*plant_volts)(void *ctx, double *out5);

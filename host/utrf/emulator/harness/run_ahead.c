@@ -105,6 +105,7 @@ int utrf_sim_ahead_start(utrf_sim_t *s, uint64_t target, uint64_t period, int wa
     pthread_cond_broadcast(&a->cv);
     pthread_mutex_unlock(&a->mu);
     a->running = 1;
+    atomic_store_explicit(&s->client_busy, 1, memory_order_relaxed);
     return 0;
 }
 
@@ -113,6 +114,7 @@ int utrf_sim_ahead_join(utrf_sim_t *s)
     struct utrf_ahead *a = s->ahead;
     if (!utrf_sim_ahead_running(s))
         return utrf_sim_status(s);
+    atomic_store_explicit(&s->client_busy, 0, memory_order_relaxed); /* the plant may spin */
     pthread_mutex_lock(&a->mu);
     while (a->work != 2)
         pthread_cond_wait(&a->cv, &a->mu);
