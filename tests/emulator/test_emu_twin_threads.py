@@ -51,6 +51,17 @@ def test_one_and_two_threads_give_the_same_run_to_the_bit(firmware_elf: Path) ->
             assert b.plant_threads == threads
             b._native.set_plant_spin(spin)
             runs.append(_moving_hold(b))
+    # two threads on one core: the hand-over costs the MCU's thread more than the step, so it
+    # steps the plant itself for stretches (lockstep.c), and the run is still the same
+    cores = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, {min(cores)})  # this thread, and the threads it starts
+    try:
+        with EmulatedBoard(firmware_elf, realtime=False, seed=5, plant_threads=2) as b:
+            runs.append(_moving_hold(b))
+            inline = b._native.plant_inline_periods
+    finally:
+        os.sched_setaffinity(0, cores)
+    assert 0 < inline < b.sim_time * 1000
     (f1, s1, t1) = runs[0]
     for f2, s2, t2 in runs[1:]:
         assert len(f1) > 50 and f1 == f2

@@ -45,6 +45,7 @@ struct utrf_plant_thread {
     _Atomic int parked;          /* the caller has left the lockstep: the plant need not spin */
     _Atomic int plant_sleeps;    /* the plant's side sleeps at once while the client is busy */
     _Atomic int no_spin;         /* always set: wait_change's stop for a side that never spins */
+    _Atomic long step_ns;        /* the last step's time on this thread */
     long plant_spin, caller_spin; /* each side's spin budget (ns) */
 };
 
@@ -125,8 +126,10 @@ static void *plant_main(void *arg)
         if (t->quit)
             return NULL;
         utrf_sim_t *s = t->s;
+        long t0 = now_ns();
         if (s->plant_step)
             s->plant_step(s->plant_ctx, t->dt, s->hold);
+        atomic_store_explicit(&t->step_ns, now_ns() - t0, memory_order_relaxed);
         post(&t->done, seen, &t->caller_asleep);
     }
 }
@@ -192,6 +195,11 @@ void plant_thread_wait(utrf_sim_t *s)
     uint32_t done = atomic_load_explicit(&t->done, memory_order_acquire);
     while (done != go)
         done = wait_change(&t->done, done, &t->caller_asleep, &t->caller_spin, NULL);
+}
+
+long plant_thread_step_ns(utrf_sim_t *s)
+{
+    return atomic_load_explicit(&s->plant_thread->step_ns, memory_order_relaxed);
 }
 
 int utrf_sim_set_plant_spin(utrf_sim_t *s, int spin)

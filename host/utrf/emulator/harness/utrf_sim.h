@@ -271,6 +271,9 @@ int utrf_sim_plant_threads(const utrf_sim_t *s);
  * before it sleeps; 0 makes it sleep at once (cores too few for it to spin beside the MCU
  * and a client: utrf.emulator.twin_threads chooses). The results are the same either way. */
 int utrf_sim_set_plant_spin(utrf_sim_t *s, int spin);
+/* With two: the periods the MCU's thread stepped the plant itself, the hand-over costing it
+ * more than the step (lockstep.c) */
+uint64_t utrf_sim_plant_inline_periods(const utrf_sim_t *s);
 
 /* ---- Running ahead of the caller (run_ahead.c) ---------------------------------------------
  * utrf_sim_run_plant_until(s, target, period, wake) on a thread of its own: the call returns
