@@ -20,7 +20,7 @@
 
 #define CPU_HZ 16e6
 /* periods stepped on the MCU's thread before the plant's is tried again */
-#define INLINE_STRETCH 256
+#define INLINE_STRETCH 32
 
 static long lock_now_ns(void)
 {
