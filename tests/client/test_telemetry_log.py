@@ -55,7 +55,9 @@ def test_the_formatted_line_is_the_csv_writers_row(
 
 
 def test_a_logged_sample_reads_back(tmp_path: Path) -> None:
-    state = _state(12.5, 0.25, 7, [(0.5, 0.6, 0.25, -0.5, m.ControlMode.POSITION, 4, 0.1, 0.02)] * 5)
+    state = _state(
+        12.5, 0.25, 7, [(0.5, 0.6, 0.25, -0.5, m.ControlMode.POSITION, 4, 0.1, 0.02)] * 5
+    )
     with TelemetryLog(tmp_path / "t.csv", NAMES) as log:
         log.write(state)
         log.write(_state(math.nan, 0.26, None, [(0.5, 0.6, 0.25, -0.5, m.ControlMode.GRASP,
