@@ -162,6 +162,7 @@ int plant_thread_start(utrf_sim_t *s)
         free(t);
         return -1;
     }
+    pthread_setname_np(t->thread, "utrf-plant"); /* named for a profile's per-thread clocks */
     s->plant_thread = t;
     return 0;
 }

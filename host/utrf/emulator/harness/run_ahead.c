@@ -4,6 +4,7 @@
  * ended are marked (where a client stopping at every frame would have looked) instead of
  * ending the run, and a heartbeat may be written at its time without stopping it.
  */
+#define _GNU_SOURCE
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdlib.h>
@@ -127,6 +128,7 @@ static int ahead_thread(utrf_sim_t *s)
         s->ahead = NULL;
         return -1;
     }
+    pthread_setname_np(a->thread, "utrf-board"); /* named for a profile's per-thread clocks */
     a->pid = getpid();
     return 0;
 }
