@@ -123,8 +123,8 @@ def test_the_choice_argument_environment_cores(monkeypatch: pytest.MonkeyPatch) 
     assert twin_threads.plant_threads() == 2
     assert twin_threads.plant_threads(paced=True) == 1  # paced to the wall clock: time to spare
     assert twin_threads.plant_threads(1) == 1
-    monkeypatch.setattr(twin_threads, "usable_cores", lambda: 2)  # handed over where it pays
-    assert twin_threads.plant_threads() == 2
+    monkeypatch.setattr(twin_threads, "usable_cores", lambda: 2)  # the client needs the other
+    assert twin_threads.plant_threads() == 1
     monkeypatch.setattr(twin_threads, "usable_cores", lambda: 1)
     assert twin_threads.plant_threads() == 1
     assert twin_threads.plant_threads(2) == 2  # asked for: given
