@@ -31,6 +31,7 @@ import tempfile
 import time
 from datetime import date
 from pathlib import Path
+from typing import Any
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 BENCH_DOC = REPO_ROOT / "docs" / "benchmarks.md"
@@ -99,6 +100,55 @@ def engine_mjcf(seconds: float) -> dict:
     mujoco.mj_step(plant.model, plant.data, nstep=steps)
     cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
     return {"sim": steps * plant.model.opt.timestep, "cpu": cpu, "wall": wall}
+
+
+def _thread_clocks() -> dict[str, float]:
+    """CPU seconds of this process's threads now, by name (the harness names its own:
+    ``utrf-board``, the run ahead; ``utrf-plant``, the plant's), the main thread as ``client``."""
+    tick = os.sysconf("SC_CLK_TCK")
+    out: dict[str, float] = {}
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            stat = Path(f"/proc/self/task/{tid}/stat").read_text()
+            name = Path(f"/proc/self/task/{tid}/comm").read_text().strip()
+        except OSError:  # ended meanwhile
+            continue
+        fields = stat[stat.rindex(")") + 2 :].split()
+        name = "client" if int(tid) == os.getpid() else name
+        out[name] = out.get(name, 0.0) + (int(fields[11]) + int(fields[12])) / tick
+    return out
+
+
+def engine_threads(seconds: float) -> dict:
+    """The hold in this process: each thread's CPU taken as the board closes, and how many
+    periods the MCU's thread stepped the plant itself (two twin threads; this checkout's)."""
+    from utrf.cli import main as cli
+    from utrf.emulator import board as emulated
+
+    seen: dict = {}
+    close = emulated.EmulatedBoard.close
+
+    def taking(self: Any, *args: Any, **kwargs: Any) -> Any:
+        if not seen:
+            seen["threads"] = _thread_clocks()
+            seen["wall"] = time.perf_counter() - wall0
+            seen["inline"] = getattr(self._native, "plant_inline_periods", None)
+            seen["periods"] = round(self.sim_time / self.exchange_period)
+            seen["twin_threads"] = self.plant_threads
+        return close(self, *args, **kwargs)
+
+    emulated.EmulatedBoard.close = taking  # type: ignore[method-assign]
+    out = Path(tempfile.mkdtemp(prefix="bench-twin-"))
+    wall0 = time.perf_counter()
+    try:
+        rc = cli(["hil", "grasp-hold", "--emulated", "--duration-s", f"{seconds:g}",
+                  "--out", str(out / "run"), "--quiet"])  # fmt: skip
+    finally:
+        emulated.EmulatedBoard.close = close  # type: ignore[method-assign]
+        shutil.rmtree(out, ignore_errors=True)
+    if not seen or rc not in (0, 1):  # 1: the hold ran and reported
+        raise RuntimeError(f"the hold by thread did not run (exit {rc})")
+    return seen
 
 
 # --- the benchmark (drives both trees) -------------------------------------------------------
@@ -201,6 +251,14 @@ def report(
         shares = " / ".join(f"{100 * x / h:.0f}" for x in (e["cpu"], j["cpu"], rest))
         return f"{e['cpu']:.1f} s / {j['cpu']:.1f} s / {rest:.1f} s ({shares} %)"
 
+    th = alone["threads"]
+    clocks = dict(th["threads"])
+    parts = [clocks.pop(k, 0.0) for k in ("client", "utrf-board", "utrf-plant")]
+    by_thread = " / ".join(f"{x:.1f} s" for x in (*parts, sum(clocks.values())))
+    if th.get("inline") is not None and th["twin_threads"] == 2:
+        share = 100 * th["inline"] / max(th["periods"], 1)
+        by_thread += f"; the MCU's thread stepped the plant itself in {share:.0f} % of the periods"
+
     lines = [
         BEGIN,
         "## Twin throughput (issue 20)",
@@ -236,6 +294,11 @@ def report(
         f"the rest of the hold (Python, start-up, the figure, the crossings; this checkout's: "
         f"of its one-thread hold) | {engines('new')} "
         f"| {engines('ref')} | |",
+        f"| this checkout's hold by thread, CPU (one more run, in-process: each thread's clock "
+        f"as the board closes, {th['wall']:.1f} s in; the twin on {th['twin_threads']} "
+        f"thread{'s' if th['twin_threads'] > 1 else ''}): the client (Python) / the board's "
+        f"(the MCU, and the plant where stepped there) / the plant's / the rest | "
+        f"{by_thread} | | |",
         "",
         f"The ELF alone: the firmware for {seconds:g} s simulated with no plant attached, the "
         "hold's host traffic (telemetry at 100 Hz, heartbeats), five fingers in POSITION at the "
@@ -249,14 +312,18 @@ def report(
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--engine", choices=("elf", "mjcf"), help="run one engine alone; JSON out")
+    p.add_argument(
+        "--engine",
+        choices=("elf", "mjcf", "threads"),
+        help="run one engine alone (threads: the hold, each thread's CPU); JSON out",
+    )
     p.add_argument("--seconds", type=float, default=120.0, help="simulated seconds")
     p.add_argument("--repeats", type=int, default=3, help="holds per tree, alternating")
     p.add_argument("--reference", default=REFERENCE, help="the commit to compare with")
     p.add_argument("--no-update", action="store_true", help="print only")
     args = p.parse_args(argv)
     if args.engine:
-        fn = engine_elf if args.engine == "elf" else engine_mjcf
+        fn = {"elf": engine_elf, "mjcf": engine_mjcf, "threads": engine_threads}[args.engine]
         print(json.dumps(fn(args.seconds)))
         return 0
     if args.repeats < 1 or not args.seconds > 0:
@@ -278,6 +345,7 @@ def main(argv: list[str] | None = None) -> int:
         tag: {which: engine(trees[tag], which, args.seconds) for which in ("elf", "mjcf")}
         for tag in ("new", "ref")
     }
+    alone["threads"] = engine(trees["new"], "threads", args.seconds)
     print(json.dumps(alone), file=sys.stderr)
     section = report(args.reference, runs, alone, args.seconds, args.repeats, own)
     print(section)

@@ -36,19 +36,36 @@ def _moving_hold(board: EmulatedBoard) -> tuple[list[bytes], np.ndarray, float]:
     link.sleep(0.25)
     board.run_for(0.0123)  # ends between two exchanges
     link.sleep(0.05)
+    t0 = link.now()  # the board running ahead of a client working beside it
+    tips = list(link.sleep_each((t0 + 0.01 * k for k in range(1, 11)), lambda: board.tip[1]))
+    frames += [np.asarray(tips).tobytes()]
     d = board.plant.data
     return frames, np.concatenate([d.qpos, d.qvel, board.motor_current.ravel()]), board.sim_time
 
 
 def test_one_and_two_threads_give_the_same_run_to_the_bit(firmware_elf: Path) -> None:
     runs = []
-    for threads in (1, 2):
+    # two threads with the plant's thread spinning, and sleeping at once while a client works
+    for threads, spin in ((1, True), (2, True), (2, False)):
         with EmulatedBoard(firmware_elf, realtime=False, seed=5, plant_threads=threads) as b:
             assert b.plant_threads == threads
+            b._native.set_plant_spin(spin)
             runs.append(_moving_hold(b))
-    (f1, s1, t1), (f2, s2, t2) = runs
-    assert len(f1) > 50 and f1 == f2
-    assert t1 == t2 and np.array_equal(s1, s2)
+    # two threads on one core: the hand-over costs the MCU's thread more than the step, so it
+    # steps the plant itself for stretches (lockstep.c), and the run is still the same
+    cores = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, {min(cores)})  # this thread, and the threads it starts
+    try:
+        with EmulatedBoard(firmware_elf, realtime=False, seed=5, plant_threads=2) as b:
+            runs.append(_moving_hold(b))
+            inline = b._native.plant_inline_periods
+    finally:
+        os.sched_setaffinity(0, cores)
+    assert 0 < inline < b.sim_time * 1000
+    (f1, s1, t1) = runs[0]
+    for f2, s2, t2 in runs[1:]:
+        assert len(f1) > 50 and f1 == f2
+        assert t1 == t2 and np.array_equal(s1, s2)
     assert np.ptp(s1[:10]) > 0.1  # the fingers moved: the comparison compared something
 
 
@@ -122,3 +139,10 @@ def test_the_choice_argument_environment_cores(monkeypatch: pytest.MonkeyPatch) 
         twin_threads.plant_threads()
     with pytest.raises(EmulatorError, match="plant_threads must be 1 or 2, got 0"):
         twin_threads.plant_threads(0)
+
+
+def test_the_plant_thread_spins_only_with_a_core_for_each(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(twin_threads, "usable_cores", lambda: 3)
+    assert twin_threads.plant_spins()
+    monkeypatch.setattr(twin_threads, "usable_cores", lambda: 2)  # MCU, plant, client on two
+    assert not twin_threads.plant_spins()

@@ -102,6 +102,25 @@ def test_simulated_tracker_is_seeded_and_in_its_own_frame() -> None:
         lossy.read()
 
 
+def test_a_reading_taken_now_and_finished_later_is_the_one_read_gives() -> None:
+    frame = Registration(tr.rotation_from_euler(0.3, 0.1, -0.2), np.array([0.05, 0.2, -0.1]))
+    tip = np.array([0.17, 0.001])
+    now = [0.0]
+
+    def make() -> SimulatedTracker:
+        return SimulatedTracker(lambda: tip, lambda: now[0], frame=frame, noise_m=1e-4, seed=4)
+
+    plain, later = make(), make()
+    for k in range(5):
+        now[0], tip[:] = 0.02 * k, (0.17 + 0.001 * k, 0.001)
+        expected = plain.read()
+        finish = later.read_later()  # taken now ...
+        now[0], tip[:] = 9.0, (0.0, 0.0)  # ... the rig moves on before it is finished
+        got = finish()
+        assert got.time_s == expected.time_s and got.frame == expected.frame
+        assert np.array_equal(got.position_m, expected.position_m)
+
+
 def test_ndi_tracker_without_its_package_says_how_to_install(monkeypatch) -> None:
     real_import = builtins.__import__
 

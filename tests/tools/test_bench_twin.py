@@ -20,6 +20,18 @@ def test_the_elf_alone_runs_the_firmware_with_no_plant(
     assert r["cpu"] > 0
 
 
+@pytest.mark.slow
+def test_the_hold_by_thread_names_the_harness_threads(
+    firmware_elf: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(bench_twin.REPO_ROOT)
+    monkeypatch.setenv("UTRF_TWIN_THREADS", "2")
+    r = bench_twin.engine_threads(4.0)
+    assert r["twin_threads"] == 2 and 0 <= r["inline"] <= r["periods"]
+    assert {"client", "utrf-board", "utrf-plant"} <= set(r["threads"])
+    assert r["threads"]["client"] > 0 and r["threads"]["utrf-board"] > 0
+
+
 def test_the_mjcf_alone_steps_the_hand_for_the_simulated_time() -> None:
     r = bench_twin.engine_mjcf(0.05)
     assert r["sim"] == pytest.approx(0.05)
@@ -31,7 +43,10 @@ def test_the_section_gives_the_ratio_of_the_medians_and_each_engine(threads: int
     def runs(*values: float) -> list[dict]:
         return [{"wall": v, "cpu": v / 2, "load": 1.0} for v in values]
 
-    alone = {tag: {"elf": {"cpu": 2.0}, "mjcf": {"cpu": 1.0}} for tag in ("new", "ref")}
+    alone: dict = {tag: {"elf": {"cpu": 2.0}, "mjcf": {"cpu": 1.0}} for tag in ("new", "ref")}
+    alone["threads"] = {"threads": {"client": 3.0, "utrf-board": 9.0, "utrf-plant": 4.0,
+                                    "python": 0.5}, "wall": 12.0, "inline": 300,
+                        "periods": 1200, "twin_threads": threads}  # fmt: skip
     text = bench_twin.report(
         "f500c49",
         {"new": runs(5.0, 6.0, 50.0), "ref": runs(12.0, 11.0, 10.0), "other": runs(9.0, 8.0, 10.0)},
@@ -48,3 +63,6 @@ def test_the_section_gives_the_ratio_of_the_medians_and_each_engine(threads: int
     # the engines beside the one-thread hold: the other count's runs when the checkout's own
     # choice is two (CPU median 4.5 = 2 + 1 + 1.5), else its own (3.0 = 2 + 1 + 0)
     assert ("2.0 s / 1.0 s / 1.5 s" if threads == 2 else "2.0 s / 1.0 s / 0.0 s") in text
+    # by thread: the client, the board's, the plant's, the rest; the inline share with two
+    assert "3.0 s / 9.0 s / 4.0 s / 0.5 s" in text
+    assert ("plant itself in 25 % of the periods" in text) == (threads == 2)

@@ -217,6 +217,15 @@ class NativeBoard:
             raise HarnessError("the plant's thread could not start")
 
     @property
+    def plant_inline_periods(self) -> int:
+        """With two twin threads: the periods the MCU's thread stepped the plant itself."""
+        return int(self._lib.utrf_sim_plant_inline_periods(self._h))
+
+    def set_plant_spin(self, spin: bool) -> None:
+        """With two twin threads: whether the plant's thread spins before it sleeps."""
+        self._lib.utrf_sim_set_plant_spin(self._h, int(bool(spin)))
+
+    @property
     def cycle(self) -> int:
         return self._lib.utrf_sim_cycle(self.handle)
 

@@ -171,6 +171,7 @@ class EmulatedBoard(BoardDriven, BoardFaults, BoardPlant, BoardProbes):
         self._holder["native"] = self._native
         self._native.attach_plant(self.plant.native)
         self._native.set_plant_threads(threads)
+        self._native.set_plant_spin(twin_threads.plant_spins())
         self._finalizer = weakref.finalize(self, _shutdown, self._stop, self._holder)
         try:
             if self.eeprom_path is not None and self.eeprom_path.exists():

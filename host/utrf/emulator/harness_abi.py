@@ -15,7 +15,7 @@ from typing import Any
 
 from utrf import artifacts
 
-ABI = 17
+ABI = 18
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -342,6 +342,8 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_plant_cycle": (ctypes.c_uint64, [p]),
         "utrf_sim_set_plant_threads": (ctypes.c_int, [p, ctypes.c_int]),
         "utrf_sim_plant_threads": (ctypes.c_int, [p]),
+        "utrf_sim_set_plant_spin": (ctypes.c_int, [p, ctypes.c_int]),
+        "utrf_sim_plant_inline_periods": (ctypes.c_uint64, [p]),
         "utrf_sim_ahead_start": (
             ctypes.c_int,
             [p, ctypes.c_uint64, ctypes.c_uint64, ctypes.c_int],

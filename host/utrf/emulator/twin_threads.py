@@ -4,12 +4,15 @@ With two, the MCU runs each exchange period on the caller's thread while the pla
 steps the same period on a thread of its own (``harness/plant_thread.c``); the results are the
 same to the bit as with one. Two pay when a core is free for the plant beside the MCU's and
 the client's (a sampling client works beside the board: ``SimLink.sleep_each``): a single run
-on a machine of three cores or more. On two, the MCU, the plant and the client make three
-busy threads, and one twin thread measured faster side by side (0.75 against 0.98 of the
-reference's wall time, docs/benchmarks.md). Where every core already has a run of its own
-(campaign workers, as many as the cores), one thread each is the better use of them: set
-``UTRF_TWIN_THREADS=1`` in the workers' environment, or pass ``plant_threads=1`` to
-``EmulatedBoard``.
+on a machine of three cores or more. With two, the MCU's thread checks that at every period
+(``harness/lockstep.c``): where handing the period over costs it more than stepping the plant
+itself would (no core free), it steps the plant itself for a stretch of periods; and on fewer
+than three cores the plant's thread sleeps at once while a client works beside the board
+(:func:`plant_spins`). On two cores one thread still measured faster on the shared machine
+(docs/benchmarks.md, the twin's section), so two are the default only on three or more.
+Where every core already has a run of its own (campaign workers, as many as the cores), one
+thread each is the better use of them: set ``UTRF_TWIN_THREADS=1`` in the workers'
+environment, or pass ``plant_threads=1`` to ``EmulatedBoard``.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ def plant_threads(requested: int | None = None, *, paced: bool = False) -> int:
     """1 or 2: ``requested`` if given, else ``UTRF_TWIN_THREADS`` if set, else 2 when the
     process may use three cores or more (the MCU's, the plant's, the client's) and the board
     is not paced to the wall clock (a paced board has time to spare: a second thread would
-    only spin)."""
+    only wait)."""
     source = "plant_threads"
     if requested is None:
         text = os.environ.get(ENV, "").strip()
@@ -48,3 +51,11 @@ def plant_threads(requested: int | None = None, *, paced: bool = False) -> int:
     if requested not in (1, 2) or isinstance(requested, bool):
         raise EmulatorError(f"{source} must be 1 or 2, got {requested!r}")
     return int(requested)
+
+
+def plant_spins() -> bool:
+    """With two twin threads, whether the plant's thread spins for the MCU's next period
+    before it sleeps: only with a core for each of the MCU, the plant and the client (three or
+    more). On fewer it sleeps at once: it waits most of each period (the MCU's is the longer
+    work), and spinning there takes the core the client needs beside them."""
+    return usable_cores() >= 3

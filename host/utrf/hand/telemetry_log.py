@@ -36,6 +36,13 @@ def log_columns(finger_names: Sequence[str]) -> list[str]:
     return cols
 
 
+def _line_format(fingers: int) -> str:
+    """The ``%`` format of a row of ``fingers`` fingers, the fields as :meth:`TelemetryLog.row`
+    formats them."""
+    finger = "%.4f,%.4f,%.2f,%.2f,%s,%d,%.5f,%.5f"
+    return ",".join(["%.6f", "%.6f", "%s", *[finger] * fingers]) + "\n"
+
+
 class TelemetryLog:
     """Writes :class:`HandState` samples to ``path`` (appending when the columns match)."""
 
@@ -43,12 +50,33 @@ class TelemetryLog:
         self.columns = log_columns(finger_names)
         self._log = CsvLog(path, self.columns)
         self.path = self._log.path
+        self._formats: dict[int, str] = {}
 
     @property
     def rows_written(self) -> int:
         return self._log.rows_written
 
     def write(self, state: HandState) -> None:
+        self._log.write_line(self.line(state))
+
+    def line(self, state: HandState) -> str:
+        """``state``'s row as the log's text, formatted at once (every sample is logged):
+        the CSV writer's text of :meth:`row` (a test compares them)."""
+        values: list[object] = [
+            state.host_time,
+            state.board_time,
+            "" if state.seq is None else state.seq,
+        ]
+        for f in state.fingers:
+            values += [f.theta2, f.target, f.duty_a, f.duty_b, f.mode.name, int(f.faults),
+                       f.tip_x, f.tip_y]  # fmt: skip
+        fmt = self._formats.get(len(state.fingers))
+        if fmt is None:
+            fmt = self._formats[len(state.fingers)] = _line_format(len(state.fingers))
+        return fmt % tuple(values)
+
+    def row(self, state: HandState) -> list[object]:
+        """``state``'s row, field by field (the general form :meth:`line` formats at once)."""
         row: list[object] = [
             f"{state.host_time:.6f}",
             f"{state.board_time:.6f}",
@@ -65,7 +93,7 @@ class TelemetryLog:
                 f"{f.tip_x:.5f}",
                 f"{f.tip_y:.5f}",
             ]
-        self._log.write(row)
+        return row
 
     def close(self) -> None:
         self._log.close()

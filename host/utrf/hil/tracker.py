@@ -76,6 +76,12 @@ class Tracker(Protocol):
 
     def read(self) -> TrackerSample: ...
 
+    def read_later(self) -> Callable[[], TrackerSample]:
+        """What :meth:`read` gives, measured now and finished when called (call each before
+        the next ``read``/``read_later``): a run that reads with its rig stopped keeps the
+        stop short (the grasp hold's samples, the board waiting)."""
+        ...
+
     def close(self) -> None: ...
 
 
@@ -227,24 +233,35 @@ class SimulatedTracker:
         self.closed = False
 
     def read(self) -> TrackerSample:
+        return self.read_later()()
+
+    def read_later(self) -> Callable[[], TrackerSample]:
+        """The time and the true tip taken now; the noise, the tracker's frame and the sample
+        made when called (the same sample :meth:`read` makes, the noise drawn in call order)."""
         if self.closed:
             raise TrackerError("the simulated tracker is closed")
         t = float(self._clock())
         if self.rate_hz is not None:
             frame = math.floor(t * self.rate_hz + 1e-9)
             if self._last is not None and self._last.frame == frame:
-                return self._last
+                last = self._last
+                return lambda: last
         else:
             frame = self._frames
             self._frames += 1
-        noise = self._rng.normal(0.0, self.noise_m, 3)
-        if self.dropout and self._rng.random() < self.dropout:
-            sample = TrackerSample(t, np.full(3, np.nan), False, frame=frame)
-        else:
-            p = self.frame.to_tracker(np.asarray(self._tip(), dtype=float))[0] + noise
-            sample = TrackerSample(t, p, True, float(np.linalg.norm(noise)), frame)
-        self._last = sample
-        return sample
+        tip = np.array(self._tip(), dtype=float)  # a copy: the plant moves on
+
+        def finish() -> TrackerSample:
+            noise = self._rng.normal(0.0, self.noise_m, 3)
+            if self.dropout and self._rng.random() < self.dropout:
+                sample = TrackerSample(t, np.full(3, np.nan), False, frame=frame)
+            else:
+                p = self.frame.to_tracker(tip)[0] + noise
+                sample = TrackerSample(t, p, True, float(np.linalg.norm(noise)), frame)
+            self._last = sample
+            return sample
+
+        return finish
 
     def close(self) -> None:
         self.closed = True
@@ -321,6 +338,10 @@ class NDIAuroraTracker:
         except (IndexError, TypeError, ValueError):
             frame = -1
         return TrackerSample(t, pos if visible else np.full(3, np.nan), visible, q, frame)
+
+    def read_later(self) -> Callable[[], TrackerSample]:
+        sample = self.read()  # a real tracker's frame is read at once
+        return lambda: sample
 
     def close(self) -> None:
         if not self.closed:

@@ -503,6 +503,7 @@ utrf_sim_t *utrf_sim_open(const char *elf_path, uint64_t seed, char *err, size_t
     }
     s->pending_cause = -1;
     s->plant_threads = 1;
+    s->plant_spin = 1;
     s->eempe_cycle = -1;
     s->wake_byte = -1;
     s->rng = seed;

@@ -2,6 +2,7 @@
 #ifndef UTRF_HARNESS_INTERNAL_H
 #define UTRF_HARNESS_INTERNAL_H
 
+#include <stdatomic.h>
 #include <stdint.h>
 
 #include "avr_uart.h"
@@ -189,6 +190,14 @@ struct utrf_sim {
     double hold[UTRF_SIM_PIN_VALUES]; /* the pins the plant steps the period with */
     int plant_threads;       /* 2: the plant steps on its own thread (plant_thread.c) */
     struct utrf_plant_thread *plant_thread;
+    int plant_spin; /* 1: the plant's thread spins before it sleeps (utrf_sim_set_plant_spin) */
+    _Atomic int client_busy; /* run_ahead.c: a run ahead is under way, its caller not joining */
+    /* lockstep.c, two threads: what a period's hand-over costs the MCU's thread (posting and
+     * waiting) against what stepping the plant itself would (ns, running means x16), and how
+     * many periods are left to step it here before the thread is tried again */
+    long lock_handover_ns16, lock_step_ns16;
+    int lock_inline_left;
+    uint64_t lock_inline_periods; /* periods two threads stepped on one, for a test to read */
     void *plant_ctx;
     void (*plant_step)(void *ctx, double dt, const double *pins);
     void (*plant_volts)(void *ctx, double *out5);
@@ -241,6 +250,7 @@ void plant_thread_stop(utrf_sim_t *s);
 void plant_thread_step(utrf_sim_t *s, double dt);
 void plant_thread_wait(utrf_sim_t *s);
 void plant_thread_park(utrf_sim_t *s); /* the caller leaves the lockstep: the plant sleeps */
+long plant_thread_step_ns(utrf_sim_t *s); /* the plant thread's last step, ns (0: none yet) */
 
 /* run_ahead.c: the lockstep's marks and its waiting write; mark returns 0 when full */
 int ahead_mark(utrf_sim_t *s);

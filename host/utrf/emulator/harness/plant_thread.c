@@ -5,8 +5,11 @@
  *
  * The hand-over, twice a period (a few hundred thousand times in a long run), is two
  * sequence numbers: each side spins on the other's for a while (a period is tens of µs of
- * work; a futex wake-up costs about as much), then sleeps on a futex. Linux only, as the
- * rest of the harness (ptys).
+ * work; a futex wake-up costs about as much), then sleeps on a futex. Where cores are scarce
+ * (utrf_sim_set_plant_spin(s, 0)) the plant's side sleeps at once while a client works beside
+ * the board (a run ahead, not being joined): the plant waits most of each period for the MCU,
+ * and spinning there takes the core the client needs; it spins while the client waits.
+ * Linux only, as the rest of the harness (ptys).
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -40,6 +43,9 @@ struct utrf_plant_thread {
     _Atomic uint32_t done; /* plant -> caller: periods stepped */
     _Atomic int plant_asleep, caller_asleep;
     _Atomic int parked;          /* the caller has left the lockstep: the plant need not spin */
+    _Atomic int plant_sleeps;    /* the plant's side sleeps at once while the client is busy */
+    _Atomic int no_spin;         /* always set: wait_change's stop for a side that never spins */
+    _Atomic long step_ns;        /* the last step's time on this thread */
     long plant_spin, caller_spin; /* each side's spin budget (ns) */
 };
 
@@ -71,7 +77,7 @@ static long now_ns(void)
  * wakes a sleeper it sees flagged; the flag is set before the last look, so no wake-up is
  * lost). */
 static uint32_t wait_change(_Atomic uint32_t *word, uint32_t from, _Atomic int *asleep,
-                            long *budget, _Atomic int *parked)
+                            long *budget, const _Atomic int *parked)
 {
     uint32_t v;
     long deadline = 0;
@@ -112,12 +118,18 @@ static void *plant_main(void *arg)
     utrf_plant_thread_t *t = arg;
     uint32_t seen = 0;
     for (;;) {
-        seen = wait_change(&t->go, seen, &t->plant_asleep, &t->plant_spin, &t->parked);
+        /* sleeping at once: a stop that reads as set, so the wait skips its spin */
+        int sleep_now = atomic_load_explicit(&t->plant_sleeps, memory_order_relaxed) &&
+                        atomic_load_explicit(&t->s->client_busy, memory_order_relaxed);
+        seen = wait_change(&t->go, seen, &t->plant_asleep, &t->plant_spin,
+                           sleep_now ? &t->no_spin : &t->parked);
         if (t->quit)
             return NULL;
         utrf_sim_t *s = t->s;
+        long t0 = now_ns();
         if (s->plant_step)
             s->plant_step(s->plant_ctx, t->dt, s->hold);
+        atomic_store_explicit(&t->step_ns, now_ns() - t0, memory_order_relaxed);
         post(&t->done, seen, &t->caller_asleep);
     }
 }
@@ -138,6 +150,8 @@ int plant_thread_start(utrf_sim_t *s)
     t->pid = getpid();
     t->plant_spin = t->caller_spin = SPIN_START_NS;
     t->parked = 1;
+    t->plant_sleeps = !s->plant_spin;
+    t->no_spin = 1;
     /* signals stay with the caller's threads (Python handles them there) */
     sigset_t all, old;
     sigfillset(&all);
@@ -148,6 +162,7 @@ int plant_thread_start(utrf_sim_t *s)
         free(t);
         return -1;
     }
+    pthread_setname_np(t->thread, "utrf-plant"); /* named for a profile's per-thread clocks */
     s->plant_thread = t;
     return 0;
 }
@@ -181,6 +196,19 @@ void plant_thread_wait(utrf_sim_t *s)
     uint32_t done = atomic_load_explicit(&t->done, memory_order_acquire);
     while (done != go)
         done = wait_change(&t->done, done, &t->caller_asleep, &t->caller_spin, NULL);
+}
+
+long plant_thread_step_ns(utrf_sim_t *s)
+{
+    return atomic_load_explicit(&s->plant_thread->step_ns, memory_order_relaxed);
+}
+
+int utrf_sim_set_plant_spin(utrf_sim_t *s, int spin)
+{
+    s->plant_spin = spin ? 1 : 0;
+    if (s->plant_thread)
+        atomic_store(&s->plant_thread->plant_sleeps, !s->plant_spin);
+    return 0;
 }
 
 void plant_thread_park(utrf_sim_t *s)

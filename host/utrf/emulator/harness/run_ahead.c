@@ -4,19 +4,28 @@
  * ended are marked (where a client stopping at every frame would have looked) instead of
  * ending the run, and a heartbeat may be written at its time without stopping it.
  */
+#define _GNU_SOURCE
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "harness_internal.h"
+
+#define AHEAD_SPIN_START_NS 100000L
+#define AHEAD_SPIN_MAX_NS 500000L
+#define AHEAD_SPIN_MIN_NS 5000L
 
 struct utrf_ahead {
     pthread_t thread;
     pid_t pid; /* the process that started the thread: a fork's child has no such thread */
     pthread_mutex_t mu;
     pthread_cond_t cv;
-    int work, quit; /* under mu: a run to do; the thread to end */
+    _Atomic int work; /* under mu (read outside it while spinning): 1 a run to do, 2 done */
+    int quit;         /* under mu: the thread to end */
+    long spin_ns;     /* how long the thread spins for the next run before it sleeps */
     int running;    /* the caller's: a run started, not joined */
     uint64_t target, period;
     int wake;
@@ -43,6 +52,33 @@ void ahead_send_due(utrf_sim_t *s)
     s->send_len = 0;
 }
 
+static long ahead_now_ns(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return t.tv_sec * 1000000000L + t.tv_nsec;
+}
+
+/* After a run, the caller's stop (the sample's truth, the next run's start) is short: the
+ * thread spins for the next run a while before it sleeps, sparing the caller a wake-up on the
+ * critical path (tens of µs on a virtual machine). The spin grows while the next run comes
+ * within it and halves when it does not (a caller that works longer, a core that is busy). */
+static void ahead_spin(struct utrf_ahead *a)
+{
+    long deadline = ahead_now_ns() + a->spin_ns;
+    for (unsigned i = 1; atomic_load_explicit(&a->work, memory_order_acquire) != 1; i++) {
+        if ((i & 63) == 0 && ahead_now_ns() > deadline) {
+            a->spin_ns = a->spin_ns / 2 > AHEAD_SPIN_MIN_NS ? a->spin_ns / 2 : AHEAD_SPIN_MIN_NS;
+            return;
+        }
+#if defined(__x86_64__) || defined(__i386__)
+        __builtin_ia32_pause();
+#endif
+    }
+    a->spin_ns = a->spin_ns + a->spin_ns / 4 < AHEAD_SPIN_MAX_NS ? a->spin_ns + a->spin_ns / 4
+                                                                  : AHEAD_SPIN_MAX_NS;
+}
+
 /* One thread for the board's life, woken for each run: a thread a run (thousands of runs a
  * hold) would cost its creation every time. */
 static void *ahead_main(void *arg)
@@ -51,6 +87,11 @@ static void *ahead_main(void *arg)
     struct utrf_ahead *a = s->ahead;
     pthread_mutex_lock(&a->mu);
     for (;;) {
+        if (a->work == 2 && !a->quit) { /* a run just done: spin a while for the next */
+            pthread_mutex_unlock(&a->mu);
+            ahead_spin(a);
+            pthread_mutex_lock(&a->mu);
+        }
         while (a->work != 1 && !a->quit)
             pthread_cond_wait(&a->cv, &a->mu);
         if (a->quit)
@@ -79,6 +120,7 @@ static int ahead_thread(utrf_sim_t *s)
     }
     /* new, or inherited by a forked child without its thread: start afresh */
     memset(a, 0, sizeof *a);
+    a->spin_ns = AHEAD_SPIN_START_NS;
     pthread_mutex_init(&a->mu, NULL);
     pthread_cond_init(&a->cv, NULL);
     if (pthread_create(&a->thread, NULL, ahead_main, s)) {
@@ -86,6 +128,7 @@ static int ahead_thread(utrf_sim_t *s)
         s->ahead = NULL;
         return -1;
     }
+    pthread_setname_np(a->thread, "utrf-board"); /* named for a profile's per-thread clocks */
     a->pid = getpid();
     return 0;
 }
@@ -105,6 +148,7 @@ int utrf_sim_ahead_start(utrf_sim_t *s, uint64_t target, uint64_t period, int wa
     pthread_cond_broadcast(&a->cv);
     pthread_mutex_unlock(&a->mu);
     a->running = 1;
+    atomic_store_explicit(&s->client_busy, 1, memory_order_relaxed);
     return 0;
 }
 
@@ -113,6 +157,7 @@ int utrf_sim_ahead_join(utrf_sim_t *s)
     struct utrf_ahead *a = s->ahead;
     if (!utrf_sim_ahead_running(s))
         return utrf_sim_status(s);
+    atomic_store_explicit(&s->client_busy, 0, memory_order_relaxed); /* the plant may spin */
     pthread_mutex_lock(&a->mu);
     while (a->work != 2)
         pthread_cond_wait(&a->cv, &a->mu);

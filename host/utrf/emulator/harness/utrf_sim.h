@@ -15,7 +15,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 17
+#define UTRF_SIM_ABI 18
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -267,6 +267,13 @@ uint64_t utrf_sim_plant_cycle(utrf_sim_t *s);
  * the thread cannot start. */
 int utrf_sim_set_plant_threads(utrf_sim_t *s, int threads);
 int utrf_sim_plant_threads(const utrf_sim_t *s);
+/* With two: 1 (the default) lets the plant's thread spin a while for the MCU's next period
+ * before it sleeps; 0 makes it sleep at once (cores too few for it to spin beside the MCU
+ * and a client: utrf.emulator.twin_threads chooses). The results are the same either way. */
+int utrf_sim_set_plant_spin(utrf_sim_t *s, int spin);
+/* With two: the periods the MCU's thread stepped the plant itself, the hand-over costing it
+ * more than the step (lockstep.c) */
+uint64_t utrf_sim_plant_inline_periods(const utrf_sim_t *s);
 
 /* ---- Running ahead of the caller (run_ahead.c) ---------------------------------------------
  * utrf_sim_run_plant_until(s, target, period, wake) on a thread of its own: the call returns

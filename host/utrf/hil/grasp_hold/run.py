@@ -71,7 +71,8 @@ def run(
     ):
 
         def take(t: float) -> tuple[float, Any, np.ndarray] | None:
-            """At the sample's time, the board stopped there: the hits due, the truth."""
+            """At the sample's time, the board stopped there: the hits due, the truth (the
+            tracker's reading finished after the board has started again)."""
             if t > config.duration_s:
                 return None
             while hits and hits[0][0] <= t:
@@ -79,12 +80,13 @@ def run(
                 rig.hit(f, imp, config.hit_duration_s)
                 hit_log.write([f"{rig.now() - t0:.6f}", f, imp[0], imp[1],
                                config.hit_duration_s])  # fmt: skip
-            return t, rig.tracker.read(), rig.currents()
+            return t, rig.tracker.read_later(), rig.currents()
 
         # the board runs on to the next sample while this one is written; closed on the way
         # out (a stop too), so the board has stopped before anything else uses it
         with contextlib.closing(rig.each_period(t0, period, take)) as periods:
-            for t, s, cur in periods:
+            for t, reading, cur in periods:
+                s = reading()
                 st = hand.latest
                 row: list[object] = [
                     f"{t:.6f}",
