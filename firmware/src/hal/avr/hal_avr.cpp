@@ -695,9 +695,6 @@ void sleep_until_interrupt(bool (*idle)(), void (*take_bytes)()) {
     const bool go = idle();
     cli();
     if (go && !(GPIOR0 & _BV(kWake)) && g_t0_overflows == ms) {
-        // SE stays set while this loop sleeps again after an interrupt that gave loop() no
-        // work (most wake-ups: the ADC's five a tick), and is cleared when it ends: nothing
-        // else executes SLEEP.
         for (;;) {
             sleep_enable();
             sei();  // SLEEP runs before any interrupt pending now, which then wakes it at once
