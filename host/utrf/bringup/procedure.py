@@ -21,6 +21,7 @@ from typing import Any
 
 from utrf.bringup.diagnose import (
     STOP_DUTY,
+    Wiring,
     backward_rad,
     encoder_check,
     find_stop,
@@ -30,6 +31,7 @@ from utrf.bringup.diagnose import (
 )
 from utrf.bringup.findings import Finding, FingerConfig, changes
 from utrf.bringup.identify import Check, check, identify, tune
+from utrf.bringup.overlap import apart_fingers, run_overlapped
 from utrf.bringup.plant_check import (
     dwell_finding,
     model_plant,
@@ -71,6 +73,9 @@ JAM_SPAN = 0.5
 PAUSE_WITHIN = 0.6
 #: the steps of a finger's bring-up, in order
 UPTO = ("wiring", "stops", "plant", "check")
+#: fingers whose steps after the wiring run at once (each finger's own channel; the hand's
+#: board time for five fingers, measured in docs/bringup.md)
+OVERLAP = 2
 
 
 @dataclass
@@ -156,26 +161,43 @@ def _saved_config(hand: Hand, f: int) -> dict[str, dict[str, Any]]:
     }
 
 
-def _bring_up_finger(
+class _Steps:
+    """Each step's board time of one finger (the stream's time: no request), its steps begun
+    and ended in two stretches (the wiring, then the rest, which may overlap another finger's)."""
+
+    def __init__(self, hand: Hand, name: str, step: Callable[[str], None]) -> None:
+        self.hand, self.name, self.step = hand, name, step
+        self.spans: dict[str, float] = {}
+        self._open: tuple[str, float] | None = None
+
+    def begin(self, label: str) -> None:
+        self.end()
+        self._open = (label, _now(self.hand))
+        self.step(f"{self.name}: {label}")
+
+    def end(self) -> None:
+        if self._open is not None:
+            label, t0 = self._open
+            self.spans[label] = round(self.spans.get(label, 0.0) + _now(self.hand) - t0, 3)
+            self._open = None
+
+
+def _wire_finger(
     hand: Hand,
     rec: Recorder,
     f: int,
     saved: dict[str, dict[str, Any]],
     bounds: Bounds,
-    step: Callable[[str], None],
-    upto: str = "check",
-) -> FingerResult:
+    steps: _Steps,
+) -> tuple[FingerResult, Wiring | None]:
+    """The finger's encoder and wiring (every other finger braked: the cable check reads every
+    channel); its wiring when it may go on to its stops."""
     names = list(hand.fingers)
     name = names[f]
     res = FingerResult(name, f)
-    t0 = hand.state().board_time
     geo = hand.geometry.fingers[f].geometry
     lo, hi = geo.theta2_range_rad
-
-    def begin(label: str) -> None:  # each step's start (the stream's time: no request)
-        res.steps_s[label] = _now(hand) - t0
-        step(f"{name}: {label}")
-
+    begin = steps.begin
     begin("encoder")
     brake(hand, [f])
     # the saved pretension: both motors pull, the finger is held against gravity between pulses
@@ -187,7 +209,7 @@ def _bring_up_finger(
     found = encoder_check(hand, rec, f, name)
     if found is not None:
         res.findings.append(found)
-        return res
+        return res, None
     begin("wiring")
     w = wiring(hand, rec, f, name, names, bounds)
     res.findings += w.findings
@@ -198,13 +220,33 @@ def _bring_up_finger(
         "pulsed_rad": {f"{k[0]},{k[1]}": v for k, v in w.pulsed.items()},
     }
     if not w.ok:
-        return res
+        return res, None
     hand.set_finger_config(f, motor_invert=w.motor_invert, encoder_invert=w.encoder_invert)
     hand.set_gains(f, pretension_duty=saved["gains"]["pretension_duty"])
     res.config.finger_config = {"encoder_invert": w.encoder_invert, "motor_invert": w.motor_invert}
-    if upto == "wiring":
-        return res
+    return res, w
+
+
+def _finish_finger(
+    hand: Hand,
+    rec: Recorder,
+    res: FingerResult,
+    w: Wiring,
+    saved: dict[str, dict[str, Any]],
+    bounds: Bounds,
+    steps: _Steps,
+    upto: str = "check",
+) -> FingerResult:
+    """The finger's stops, plant, tuning and closed-loop checks, after its wiring (``upto``:
+    the last of them); its own channel only, so another finger's may run meanwhile."""
+    f, name = res.index, res.name
+    lo, hi = hand.geometry.fingers[f].geometry.theta2_range_rad
+    begin = steps.begin
     begin("stops")
+    # braked since its wiring while the others' were done, it sagged and its tendons went
+    # slack: taut again at the pretension first, as its wiring's last pulse left them
+    hand.take_up([f])
+    brake(hand, [f])
     open_ = find_stop(hand, rec, f, -1, w.encoder_invert, bounds)
     # one duty for every search (a slow finger at the duty bound less the pretension, tried:
     # 1.4 s less on a slow finger, but 14 N of friction then moved past its jam and was named
@@ -456,13 +498,6 @@ def _now(hand: Hand) -> float:
     return st.board_time if st is not None else hand.state().board_time
 
 
-def _durations(starts: dict[str, float], total: float) -> dict[str, float]:
-    """Each step's board time (s) from the steps' starts and the finger's whole time."""
-    keys = list(starts)
-    ends = [starts[k] for k in keys[1:]] + [total]
-    return {k: round(e - starts[k], 3) for k, e in zip(keys, ends, strict=True)}
-
-
 def _apply(hand: Hand, f: int, c: FingerConfig) -> None:
     if c.finger_config:
         hand.set_finger_config(f, **c.finger_config)
@@ -499,12 +534,14 @@ def bringup(
     on_step: Callable[[str], None] | None = None,
     resume: bool = False,
     upto: str = "check",
+    overlap: int = OVERLAP,
 ) -> BringupResult:
     """Bring up ``fingers`` (default all) of a connected hand; see the module's text.
     ``confirm(summary)`` is asked before anything is saved (the CLI asks the person;
     ``--yes`` answers yes). ``on_step(text)`` is told each step as it starts. ``upto``: the
     last step to take on each finger (``"wiring"``, ``"stops"``, ``"plant"`` or ``"check"``,
-    the default: all of them)."""
+    the default: all of them). ``overlap``: how many fingers' steps after the wiring run at
+    once (``utrf.bringup.overlap``; 1: one finger after another)."""
     if upto not in UPTO:
         raise ValueError(f"upto must be one of {UPTO}, got {upto!r}")
     bounds = bounds or Bounds()
@@ -530,20 +567,50 @@ def bringup(
         # host-silence rule); load_config puts the saved safe action back
         hand.set_safety(safe_action="coast")
         saved = {f: _saved_config(hand, f) for f in range(len(hand.fingers))}
+        by_finger: dict[int, FingerResult] = {}
+
+        def finished(r: FingerResult, steps: _Steps) -> FingerResult:
+            brake(hand, [r.index])
+            steps.end()
+            r.steps_s = dict(steps.spans)
+            r.board_time_s = round(sum(r.steps_s.values()), 3)
+            by_finger[r.index] = r
+            if progress_path is not None:
+                progress = replace(result, fingers=[by_finger[i] for i in idx if i in by_finger])
+                progress_path.parent.mkdir(parents=True, exist_ok=True)
+                progress_path.write_text(json.dumps(progress.to_dict(), indent=1))
+            return r
+
+        # first every finger's wiring, one at a time (the cable check reads every channel),
+        # then the rest of the fingers wired right, ``overlap`` at a time (each its own channel)
+        later: list[tuple[int, Callable[[], FingerResult]]] = []
         for f in idx:
             if f in done:
                 step(f"{hand.fingers[f]}: done before (resumed)")
-                result.fingers.append(done[f])
+                by_finger[f] = done[f]
                 continue
-            t_f = _now(hand)
-            r = _bring_up_finger(hand, rec, f, saved[f], bounds, step, upto)
+            steps = _Steps(hand, hand.fingers[f], step)
+            r, w = _wire_finger(hand, rec, f, saved[f], bounds, steps)
             brake(hand, [f])
-            r.board_time_s = _now(hand) - t_f
-            r.steps_s = _durations(r.steps_s, r.board_time_s)
-            result.fingers.append(r)
-            if progress_path is not None:
-                progress_path.parent.mkdir(parents=True, exist_ok=True)
-                progress_path.write_text(json.dumps(result.to_dict(), indent=1))
+            if w is None or upto == "wiring":
+                finished(r, steps)
+                continue
+            steps.end()
+
+            def rest(r: FingerResult = r, w: Wiring = w, steps: _Steps = steps) -> FingerResult:
+                return finished(
+                    _finish_finger(hand, rec, r, w, saved[r.index], bounds, steps, upto), steps
+                )
+
+            later.append((f, rest))
+        apart = apart_fingers(hand) if overlap > 1 and len(later) > 1 else None
+        run_overlapped(
+            hand,
+            [job for _, job in later],
+            overlap,
+            (lambda i, j: apart(later[i][0], later[j][0])) if apart else lambda i, j: True,
+        )
+        result.fingers = [by_finger[i] for i in idx]
         # every finger's temporary settings back to the saved ones, then the proposal on top
         hand.load_config("eeprom")
         bad = [fd for fd in result.findings if not fd.fixable]
