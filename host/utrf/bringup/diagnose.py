@@ -398,13 +398,15 @@ def find_stop(
     bounds: Bounds,
     confirm_within: float = 0.0,
     duty: float = STOP_DUTY,
+    rest_first: float = 0.0,
 ) -> Stop | None:
     """Drive toward the open (-1) or closed (+1) stop at low duty until the finger stops
     (the host's stall rule). The board's limits would stop it first if its reading passed
     them: the encoder offset is moved so the reading starts mid-range, again each time a
     limit (not a stop) ended the leg. A stall within ``confirm_within`` rad of the search's
     start is driven once more: a finger that then moves on had paused (Joint 2 waiting on a
-    slack strand), not stopped (``Stop.paused``)."""
+    slack strand), not stopped (``Stop.paused``). ``rest_first``: the first leg starts after
+    that long at the pretension (``pulse``)."""
     lim = hand.limits(f)
     trace = first = None
     legs: list[Trace] = []
@@ -427,6 +429,7 @@ def find_stop(
             bounds,
             seconds=STOP_LEG_S,
             travel=4.0,
+            rest_first=0.0 if legs else rest_first,
         ).after(since)
         first = first or trace
         legs.append(trace)

@@ -96,8 +96,8 @@ def apart_fingers(hand: Hand) -> Callable[[int, int], bool]:
     """Whether two fingers can never touch, whatever their angles: they flex in parallel
     planes further apart than their links are thick (``utrf.models.mjcf.never_touching``, the
     model's layout of the hand). The thumb, which closes across the palm, may touch the
-    others: measured, campaign seed 29's weak thumb stalled mid-travel closing while the
-    index stood flexed for its plant steps."""
+    others: campaign seed 29's weak thumb, run beside the index, stalled mid-travel closing
+    while the index stood flexed for its plant steps."""
     from utrf.models.mjcf import FINGER_CONTYPE, never_touching  # MuJoCo: only when asked
     from utrf.models.mjcf_layout import load_layout
 
@@ -109,32 +109,23 @@ def run_overlapped(
     hand: Hand,
     jobs: Sequence[Callable[[], T]],
     width: int = 2,
-    together: Callable[[int, int], bool] = lambda i, j: True,
 ) -> list[T]:
     """Run ``jobs`` (each one finger's steps) ``width`` at a time, taking turns at the hand;
-    their results in order. A job starts only beside running jobs it may run ``together``
-    with (by index), the first such in order. The first failure (or Ctrl-C here) stops the
-    others at their next wait and is raised once they have ended."""
+    their results in order. The first failure (or Ctrl-C here) stops the others at their next
+    wait and is raised once they have ended."""
     if width <= 1 or len(jobs) <= 1:
         return [job() for job in jobs]
     turns = Turns()
     results: dict[int, Any] = {}
     errors: list[BaseException] = []
-    pending = list(range(len(jobs)))
-    running: set[int] = set()
+    pending = deque(range(len(jobs)))
 
     def worker() -> None:
         turns.take()
         try:
             while pending and not turns.stopped:
-                i = next((i for i in pending if all(together(i, j) for j in running)), None)
-                if i is None:  # none may start beside those running: wait for one to end
-                    turns.hand_on()
-                    continue
-                pending.remove(i)
-                running.add(i)
+                i = pending.popleft()
                 results[i] = jobs[i]()
-                running.discard(i)
         except BaseException as exc:  # handed to the caller's thread
             if not isinstance(exc, Stopped):
                 errors.append(exc)

@@ -19,6 +19,9 @@ SLACK_RAD = 0.035
 #: a weak motor is late both ways: the two steps' lag over the model motors' (at the speed
 #: measured), their geometric mean above this (margins in docs/bringup.md)
 WEAK_LAG = 3.5
+#: ... and each way at least this (a weak motor is late both ways; heavy friction late one way:
+#: campaign seed 47's middle finger, friction 10 N, 8.8 and 2.1 times the model's lag)
+WEAK_BOTH = 2.3
 #: slack seen from the steps from rest: one way this many times the model motors' lag while the
 #: other way's is under ``PROMPT_LAG`` (Joint 2 loose: it starts at once one way and waits for
 #: the strand the other); margins in docs/bringup.md
@@ -28,8 +31,11 @@ PROMPT_LAG = 0.5
 #: times the other's: Joint 2 leaning on one strand (under gravity) follows that way with the
 #: strand's lag and waits for the other strand the other way, and switches strands as the load
 #: turns over the travel (``slack:1=0.0015``: 6.9 times apart, the speed 1.44 times uneven).
-#: A weak motor can be late one way too (seed 43's ring: 1.1 and 11.9) but runs evenly (1.03)
+#: A weak motor can be late one way too (seed 43's ring: 1.1 and 11.9, from one step each way)
+#: but runs evenly (1.03). Evenly, the late way this many times the other's (the medians of
+#: three steps each way; seed 47's slack thumb: 33 and 2.6, weak thumbs within 3 of even)
 ONE_WAY_SPREAD = 4.0
+ONE_WAY_EVEN = 6.0
 
 
 def lag_ratios(p: Plant, ref: Plant) -> dict[str, float]:
@@ -51,14 +57,20 @@ def plant_findings(
     resolved = p.K >= SLOW * ref.K
     slow_way, fast_way = max(flex, ext), min(flex, ext)
     one_way = slow_way > ONE_WAY_LAG and (
-        fast_way < PROMPT_LAG or (uneven and slow_way > ONE_WAY_SPREAD * fast_way)
+        fast_way < PROMPT_LAG or slow_way > (ONE_WAY_SPREAD if uneven else ONE_WAY_EVEN) * fast_way
     )
     loose = resolved and (slack > SLACK_RAD or one_way)
     late = math.sqrt(flex * ext)
     # a weaker motor takes more duty for the same friction as it comes up to speed later (both
     # ∝ 1 / F_stall): a friction duty beyond what its lag explains is friction, not weakness
     explained = ref.u_f * late + FRICTION_DUTY
-    weak = resolved and not loose and late > WEAK_LAG and not p.u_f > explained
+    weak = (
+        resolved
+        and not loose
+        and late > WEAK_LAG
+        and fast_way > WEAK_BOTH
+        and not p.u_f > explained
+    )
     if loose:
         out.append(
             Finding(

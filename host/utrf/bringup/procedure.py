@@ -73,6 +73,10 @@ JAM_SPAN = 0.5
 PAUSE_WITHIN = 0.6
 #: the steps of a finger's bring-up, in order
 UPTO = ("wiring", "stops", "plant", "check")
+#: before the stop search, the finger at the pretension this long (s)
+TAKE_UP_S = 0.5
+#: an open search's stall within this (rad) of its start is driven once more
+OPEN_CONFIRM_RAD = 0.05
 #: fingers whose steps after the wiring run at once (each finger's own channel; the hand's
 #: board time for five fingers, measured in docs/bringup.md)
 OVERLAP = 2
@@ -243,11 +247,13 @@ def _finish_finger(
     lo, hi = hand.geometry.fingers[f].geometry.theta2_range_rad
     begin = steps.begin
     begin("stops")
-    # braked since its wiring while the others' were done, it sagged and its tendons went
-    # slack: taut again at the pretension first, as its wiring's last pulse left them
-    hand.take_up([f])
-    brake(hand, [f])
-    open_ = find_stop(hand, rec, f, -1, w.encoder_invert, bounds)
+    # braked since its wiring while another's was done, it sagged and its tendons went slack
+    # (a weak finger's open search then stalled at once, taken for the stop): taut again at
+    # the pretension, and from there, not braked, into the search; a first leg that stalls
+    # before OPEN_CONFIRM_RAD is driven once more (at the stop it stalls again)
+    open_ = find_stop(
+        hand, rec, f, -1, w.encoder_invert, bounds, OPEN_CONFIRM_RAD, rest_first=TAKE_UP_S
+    )
     # one duty for every search (a slow finger at the duty bound less the pretension, tried:
     # 1.4 s less on a slow finger, but 14 N of friction then moved past its jam and was named
     # a narrow range and a turned magnet)
@@ -581,10 +587,16 @@ def bringup(
                 progress_path.write_text(json.dumps(progress.to_dict(), indent=1))
             return r
 
-        # first every finger's wiring, one at a time (the cable check reads every channel),
-        # then the rest of the fingers wired right, ``overlap`` at a time (each its own channel)
-        later: list[tuple[int, Callable[[], FingerResult]]] = []
+        # the fingers in turns of up to ``overlap`` that can never touch: each one's wiring, one
+        # at a time (the cable check reads every channel), then the rest of theirs at once
+        # (each its own channel). Soon after its wiring: a finger braked long sags and a weak
+        # or stiff one then stuck in its open search (campaign seeds 30 and 47, all wired first)
+        apart = apart_fingers(hand) if overlap > 1 else (lambda i, j: False)
+        batch: list[tuple[int, Callable[[], FingerResult]]] = []
         for f in idx:
+            if batch and (len(batch) >= overlap or not all(apart(f, g) for g, _ in batch)):
+                run_overlapped(hand, [job for _, job in batch], overlap)
+                batch = []
             if f in done:
                 step(f"{hand.fingers[f]}: done before (resumed)")
                 by_finger[f] = done[f]
@@ -602,14 +614,8 @@ def bringup(
                     _finish_finger(hand, rec, r, w, saved[r.index], bounds, steps, upto), steps
                 )
 
-            later.append((f, rest))
-        apart = apart_fingers(hand) if overlap > 1 and len(later) > 1 else None
-        run_overlapped(
-            hand,
-            [job for _, job in later],
-            overlap,
-            (lambda i, j: apart(later[i][0], later[j][0])) if apart else lambda i, j: True,
-        )
+            batch.append((f, rest))
+        run_overlapped(hand, [job for _, job in batch], overlap)
         result.fingers = [by_finger[i] for i in idx]
         # every finger's temporary settings back to the saved ones, then the proposal on top
         hand.load_config("eeprom")
