@@ -151,3 +151,16 @@ def test_slack_shows_as_a_lag_one_way_only(flex: float, ext: float, slack: bool)
     p = _plant(REF.K, flex * tau, ext * tau, 0.03 if ext < 5 else 0.05)
     kinds = [f.kind for f in plant_findings("i", p, REF, 0.01)]
     assert ("slack" in kinds) is slack, kinds
+
+
+def test_a_late_finger_slow_to_reverse_is_slack() -> None:
+    """Late both ways as a weak motor is, but each reversal waits longer still beyond its lag:
+    Joint 2 waits for a slack strand (measured, campaign seed 47's slack thumb: 2.7 and 6.1
+    times the model's lag, reversal 0.105 s; seed 29's weak thumb 0.078 s, lag 0.027)."""
+    slack = _plant(2.25, 0.0230, 0.0522)
+    slack.reversal_s = {"0.3": 0.105}
+    got = plant_findings("thumb", slack, REF)
+    assert [f.kind for f in got] == ["slack"] and not got[0].fixable
+    weak = _plant(1.92, 0.0294, 0.0265, 0.068)
+    weak.reversal_s = {"0.3": 0.078}
+    assert [f.kind for f in plant_findings("thumb", weak, REF)] == ["weak-motor"]

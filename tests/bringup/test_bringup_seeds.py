@@ -44,3 +44,13 @@ def test_a_weak_thumb_is_named_weak_from_three_steps_each_way(
     """Seed 30's thumb (``weak-motor`` 0.29): one step from rest each way read 0.8 and 1.4
     times the model's lag (named friction); the medians of three read it late both ways."""
     assert named(30, 0, "plant") == ["weak-motor"]
+
+
+@pytest.mark.slow
+def test_a_slack_thumb_late_like_a_weak_motor_is_slack(
+    named: Callable[[int, int, str], list[str]],
+) -> None:
+    """Seed 47's thumb (``slack``): late both ways from rest as a weak motor is (2.6 and 9.1
+    times the model's lag), named weak-motor and saved as brought up; its reversals wait
+    for the strand beyond its lag (0.108 s, alone)."""
+    assert named(47, 0, "plant") == ["slack"]

@@ -96,8 +96,7 @@ def apart_fingers(hand: Hand) -> Callable[[int, int], bool]:
     """Whether two fingers can never touch, whatever their angles: they flex in parallel
     planes further apart than their links are thick (``utrf.models.mjcf.never_touching``, the
     model's layout of the hand). The thumb, which closes across the palm, may touch the
-    others: campaign seed 29's weak thumb, run beside the index, stalled mid-travel closing
-    while the index stood flexed for its plant steps."""
+    others."""
     from utrf.models.mjcf import FINGER_CONTYPE, never_touching  # MuJoCo: only when asked
     from utrf.models.mjcf_layout import load_layout
 

@@ -22,6 +22,12 @@ WEAK_LAG = 3.5
 #: ... and each way at least this (a weak motor is late both ways; heavy friction late one way:
 #: campaign seed 47's middle finger, friction 10 N, 8.8 and 2.1 times the model's lag)
 WEAK_BOTH = 2.3
+#: a finger whose reversals at ``REVERSAL_DUTY`` take this long (s) beyond its lag to move it
+#: back (0.01 rad) waits for a slack strand: campaign seed 47's slack thumb 0.065-0.108 over
+#: five runs; weak motors at most 0.052 over fifteen (seeds 15, 23, 29, 30, 43; up to 0.066
+#: with one step's lag), fault-free fingers at most 0.050 over 118
+REVERSAL_DUTY = 0.3
+REVERSAL_SLACK_S = 0.058
 #: slack seen from the steps from rest: one way this many times the model motors' lag while the
 #: other way's is under ``PROMPT_LAG`` (Joint 2 loose: it starts at once one way and waits for
 #: the strand the other); margins in docs/bringup.md
@@ -71,6 +77,10 @@ def plant_findings(
         and fast_way > WEAK_BOTH
         and not p.u_f > explained
     )
+    # late on a reversal beyond its own lag: Joint 2 waits for its strand
+    reversal = p.reversal_s.get(f"{REVERSAL_DUTY:g}", math.nan) - p.tau
+    if resolved and reversal > REVERSAL_SLACK_S:
+        weak, loose = False, True
     if loose:
         out.append(
             Finding(
@@ -82,13 +92,16 @@ def plant_findings(
                     if slack > SLACK_RAD
                     else f"from rest Joint 2 follows the motor at once one way and "
                     f"{slow_way:.0f} times the model's lag late the other"
+                    if one_way
+                    else f"on a reversal Joint 2 follows the motor {reversal:.3f} s later than "
+                    "the motor's own lag"
                 )
                 + ": slack in the coupling tendon (Tendon 2, Joint 1 to Joint 2) lets Joint 2 "
                 "hang free between its strands",
                 "tighten Tendon 2 and run the bring-up again (Joint 2 is loose between its "
                 "strands: no gain holds it)",
                 False,
-                {"lag_ratio": r, "slack_rad": slack},
+                {"lag_ratio": r, "slack_rad": slack, "reversal_s": reversal},
             )
         )
     if weak:

@@ -201,6 +201,9 @@ def _wire_finger(
     res = FingerResult(name, f)
     geo = hand.geometry.fingers[f].geometry
     lo, hi = geo.theta2_range_rad
+    # a round trip first, as each finger's start always had: the stick-slip of
+    # `friction:1=14` moves 0.046 rad under its wiring pulse without it, 0.05 (moved) with it
+    hand.state()
     begin = steps.begin
     begin("encoder")
     brake(hand, [f])
