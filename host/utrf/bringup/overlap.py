@@ -53,6 +53,13 @@ class Turns:
             self._holder = None
             self._cond.notify_all()
 
+    def wait_queued(self, n: int) -> None:
+        """Until ``n`` threads wait for a turn (each finger's thread is in line before the
+        first one runs, so the turns alternate from the start)."""
+        with self._cond:
+            while len(self._queue) < n:
+                self._cond.wait(0.01)
+
     def hand_on(self) -> None:
         """Let a waiting thread take a turn, then take one again."""
         self.give()
@@ -134,14 +141,22 @@ def run_overlapped(
 
     threads = [threading.Thread(target=worker, daemon=True) for _ in range(min(width, len(jobs)))]
     with taking_turns(hand, turns):
+        held = False
         try:
+            turns.take()  # held here until every finger's thread is in line
+            held = True
             for th in threads:
                 th.start()
+            turns.wait_queued(len(threads))
+            held = False
+            turns.give()
             for th in threads:
                 while th.is_alive():
                     th.join(0.05)
         except BaseException:  # Ctrl-C lands here: stop the fingers, then let it go on
             turns.stopped = True
+            if held:
+                turns.give()
             for th in threads:
                 th.join()
             raise
