@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from utrf.bringup.identify import LAG_DUTY, Plant, _fit_from_rest
-from utrf.bringup.plant_check import SLACK_RAD, plant_findings
-from utrf.bringup.procedure import slack_rad
+from utrf.bringup.plant_check import SLACK_RAD, plant_findings, slack_rad
 from utrf.bringup.pulses import Trace
 
 REF = Plant(K=2.63, tau=0.010, u_f=0.03, backlash_rad=0.0, steps=0)

@@ -89,14 +89,14 @@ def taking_turns(hand: Hand, turns: Turns) -> Iterator[None]:
                 break  # less than the board's step is left: the clock will not move for it
 
     own = vars(clock).get("sleep")  # a sleep already put on the instance (a test's), kept
-    clock.sleep = sliced  # type: ignore[method-assign]
+    clock.sleep = sliced  # type: ignore[method-assign]  # on this hand's clock alone, undone below
     try:
         yield
     finally:
         if own is None:
             del clock.sleep  # the class's method again
         else:
-            clock.sleep = own  # type: ignore[method-assign]
+            clock.sleep = own  # type: ignore[method-assign]  # the test's own, put back
 
 
 def apart_fingers(hand: Hand) -> Callable[[int, int], bool]:
