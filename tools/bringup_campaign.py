@@ -52,9 +52,12 @@ BEGIN_FIX = "<!-- BEGIN bringup-campaign-fixable -->"
 END_FIX = "<!-- END bringup-campaign-fixable -->"
 
 
-def run_build(seed: int, faults: int, demo: bool = True, fixable: bool = False) -> dict[str, Any]:
+def run_build(
+    seed: int, faults: int, demo: bool = True, fixable: bool = False, overlap: int | None = None
+) -> dict[str, Any]:
     """One seeded build brought up (and its demo run when fixable); a row of the table.
-    ``fixable``: its faults drawn only from the kinds the configuration can fix."""
+    ``fixable``: its faults drawn only from the kinds the configuration can fix; ``overlap``:
+    the bring-up's (default its own)."""
     from utrf.bringup import bringup
     from utrf.bringup.demo_goal import demo_goal
     from utrf.emulator import BuildFaults, EmulatedBoard
@@ -67,7 +70,8 @@ def run_build(seed: int, faults: int, demo: bool = True, fixable: bool = False) 
     goal: dict[str, Any] | None = None
     with EmulatedBoard(realtime=False, seed=seed, build=build) as board:
         with Hand.emulated(board) as hand:
-            result = bringup(hand, confirm=lambda text: True)
+            more = {} if overlap is None else {"overlap": overlap}
+            result = bringup(hand, confirm=lambda text: True, **more)
             found = {(fd.kind, hand.finger_index(fd.finger)) for fd in result.findings}
             detail = [_measured(r) for r in result.fingers]
         bringup_wall = time.monotonic() - t0
@@ -182,6 +186,9 @@ def main() -> None:
     ap.add_argument("--address", default=None, help="a running Dask scheduler instead")
     ap.add_argument("--no-demo", action="store_true", help="skip the demo after bring-up")
     ap.add_argument("--fixable", action="store_true", help="only faults the configuration can fix")
+    ap.add_argument(
+        "--overlap", type=int, default=None, help="fingers brought up at once (1: one by one)"
+    )
     ap.add_argument("--update", type=Path, help="write the table into this Markdown file")
     ap.add_argument("--json", type=Path, help="results as JSON lines (resumed from)")
     ap.add_argument(
@@ -212,6 +219,7 @@ def main() -> None:
                     args.faults,
                     not args.no_demo,
                     args.fixable,
+                    args.overlap,
                     key=f"bringup-{s}-{int(args.fixable)}",
                 )
                 for s in todo

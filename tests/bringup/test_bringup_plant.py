@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from utrf.bringup.identify import LAG_DUTY, Plant, _fit_from_rest
-from utrf.bringup.plant_check import SLACK_RAD, plant_findings
-from utrf.bringup.procedure import slack_rad
+from utrf.bringup.plant_check import SLACK_RAD, plant_findings, slack_rad
 from utrf.bringup.pulses import Trace
 
 REF = Plant(K=2.63, tau=0.010, u_f=0.03, backlash_rad=0.0, steps=0)
@@ -78,13 +77,22 @@ def test_slack_late_one_way_only_is_named() -> None:
     """Joint 2 leaning on one strand under gravity follows that way at the strand's lag and
     waits for the other strand the other way, and its speed is uneven over the travel
     (measured, slack 1.5 mm on the index: 0.019 s flexing, 0.130 s extending, 1.44 uneven);
-    a weak motor can be late one way too but runs evenly (seed 43's ring)."""
+    evenly too, the lags being medians of three steps each way (one step's scattered: seed
+    43's weak ring read 1.1 and 11.9 from one each)."""
     p = _plant(2.64, 0.0188, 0.130)
     got = plant_findings("index", p, REF, uneven=True)
     assert [f.kind for f in got] == ["slack"] and not got[0].fixable
-    assert [f.kind for f in plant_findings("i", p, REF)] == ["weak-motor"]
+    assert [f.kind for f in plant_findings("i", p, REF)] == ["slack"]
     # late both ways, one 3 times the other (7.5 times the model's lag): weak, not slack
     assert [f.kind for f in plant_findings("i", _plant(2.64, 0.025, 0.075), REF)] == ["weak-motor"]
+
+
+def test_friction_late_one_way_is_not_weakness() -> None:
+    """A weak motor is late both ways; heavy friction may be late one way (measured, campaign
+    seed 47's middle finger, friction 10 N: 8.8 and 2.1 times the model's lag, u_f 0.145,
+    which a motor that late would explain)."""
+    got = plant_findings("i", _plant(1.76, 0.0585, 0.0142, 0.145), REF)
+    assert [f.kind for f in got] == ["friction"]
 
 
 @pytest.mark.parametrize(
@@ -142,3 +150,16 @@ def test_slack_shows_as_a_lag_one_way_only(flex: float, ext: float, slack: bool)
     p = _plant(REF.K, flex * tau, ext * tau, 0.03 if ext < 5 else 0.05)
     kinds = [f.kind for f in plant_findings("i", p, REF, 0.01)]
     assert ("slack" in kinds) is slack, kinds
+
+
+def test_a_late_finger_slow_to_reverse_is_slack() -> None:
+    """Late both ways as a weak motor is, but each reversal waits longer still beyond its lag:
+    Joint 2 waits for a slack strand (measured, campaign seed 47's slack thumb: 2.7 and 6.1
+    times the model's lag, reversal 0.105 s; seed 29's weak thumb 0.078 s, lag 0.027)."""
+    slack = _plant(2.25, 0.0230, 0.0522)
+    slack.reversal_s = {"0.3": 0.105}
+    got = plant_findings("thumb", slack, REF)
+    assert [f.kind for f in got] == ["slack"] and not got[0].fixable
+    weak = _plant(1.92, 0.0294, 0.0265, 0.068)
+    weak.reversal_s = {"0.3": 0.078}
+    assert [f.kind for f in plant_findings("thumb", weak, REF)] == ["weak-motor"]

@@ -28,6 +28,10 @@ TAKE_UP_S = (1.2, 3.0)
 STILL_RAD = 0.01
 #: a rest (both motors at the pretension) that moves the reading more: the finger is not held
 HELD_RAD = 0.1
+#: a take-up that runs a finger otherwise wired right this far open (its frame): motor A may
+#: push (fault-free fingers -0.015 to +0.41 rad; seed 15's index, lead A swapped, -0.73), so
+#: the other way is tried too (margins in docs/bringup.md)
+PUSHED_RAD = 0.15
 #: a stop is searched for at this duty, for at most this long per leg
 STOP_DUTY = 0.35
 STOP_LEG_S = 6.0
@@ -136,8 +140,8 @@ def wiring(
                     break
         w.held[invert] = held
         both = all((w.moved[(0, d)] or (-1, 0))[0] == f for d in (1, -1))
-        if invert == 0 and held and both:  # both ways: known; one way: a lead swapped
-            break
+        if invert == 0 and held and both and not _pushed_open(w):
+            break  # both ways: known; one way: a lead swapped
         if (
             invert == 0
             and all(w.moved[(0, d)] for d in (1, -1))
@@ -146,6 +150,15 @@ def wiring(
             break  # another channel moves both ways, its own never: a cable swap
     _interpret(w, f, name, names)
     return w
+
+
+def _pushed_open(w: Wiring) -> bool:
+    """As built, the take-up ran the finger open (in the frame its pulses show) further than a
+    finger wired right runs: motor A may push while B pulls (the pulses still move it both
+    ways when the pretension holds it)."""
+    a = w.moved.get((0, 1))
+    sa = a[1] if a is not None else 1
+    return sa * w.drift.get(0, 0.0) < -PUSHED_RAD
 
 
 def _interpret(w: Wiring, f: int, name: str, names: list[str]) -> None:
@@ -183,7 +196,10 @@ def _interpret(w: Wiring, f: int, name: str, names: list[str]) -> None:
         ),
         0,
     )
-    if w.held.get(0) and a0 and b0 and a0[1] != b0[1]:
+    # taking up, one motor pulls and the other pushes: the finger runs to the puller's side,
+    # and to the other side once both are driven the other way
+    pushes = abs(d0) > HELD_RAD and abs(d1) > HELD_RAD and d0 * d1 < 0
+    if w.held.get(0) and a0 and b0 and a0[1] != b0[1] and not (pushes and _pushed_open(w)):
         w.motor_invert, sa = 0, a0[1]
     elif w.held.get(1) and a1 and b1 and a1[1] != b1[1]:
         w.motor_invert, sa = 1, a1[1]
@@ -198,10 +214,9 @@ def _interpret(w: Wiring, f: int, name: str, names: list[str]) -> None:
                 True,
             )
         )
-    elif (abs(d0) > HELD_RAD and abs(d1) > HELD_RAD and d0 * d1 < 0) or one_way:
-        # taking up, one motor pulls and the other pushes: the finger runs to the puller's
-        # side, and to the other side once both are driven the other way; or pulsing either
-        # motor harder runs it the same way (the pusher's harder push lets the puller pull)
+    elif pushes or one_way:
+        # or pulsing either motor harder runs it the same way (the pusher's harder push lets
+        # the puller pull)
         bad = "A" if (one_way or d0) < 0 else "B"
         how = (
             f"pulsing either motor harder runs the finger {'open' if bad == 'A' else 'closed'}"
@@ -383,13 +398,15 @@ def find_stop(
     bounds: Bounds,
     confirm_within: float = 0.0,
     duty: float = STOP_DUTY,
+    rest_first: float = 0.0,
 ) -> Stop | None:
     """Drive toward the open (-1) or closed (+1) stop at low duty until the finger stops
     (the host's stall rule). The board's limits would stop it first if its reading passed
     them: the encoder offset is moved so the reading starts mid-range, again each time a
     limit (not a stop) ended the leg. A stall within ``confirm_within`` rad of the search's
     start is driven once more: a finger that then moves on had paused (Joint 2 waiting on a
-    slack strand), not stopped (``Stop.paused``)."""
+    slack strand), not stopped (``Stop.paused``). ``rest_first``: the first leg starts after
+    that long at the pretension (``pulse``)."""
     lim = hand.limits(f)
     trace = first = None
     legs: list[Trace] = []
@@ -412,6 +429,7 @@ def find_stop(
             bounds,
             seconds=STOP_LEG_S,
             travel=4.0,
+            rest_first=0.0 if legs else rest_first,
         ).after(since)
         first = first or trace
         legs.append(trace)

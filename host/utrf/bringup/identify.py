@@ -79,9 +79,12 @@ def _fit_step(t: np.ndarray, th: np.ndarray, u: float) -> tuple[float, float] | 
     return float(r.x[0]), float(r.x[1])
 
 
-#: the steps from rest that time the motor's lag: their duty and length (s)
+#: the steps from rest that time the motor's lag: their duty and length (s), and how many
+#: each way (the lag is 1-3 counts of the reading: one step's fit scatters 3-10 times over,
+#: measured in docs/bringup.md; the median of three)
 LAG_DUTY = 0.3
 LAG_S = 0.25
+LAG_REPEATS = 3
 
 
 def _fit_from_rest(tr: Trace, sign: int) -> tuple[float, float] | None:
@@ -110,11 +113,12 @@ def _fit_from_rest(tr: Trace, sign: int) -> tuple[float, float] | None:
 
 
 def lag(hand: Hand, rec: Recorder, f: int, bounds: Bounds) -> tuple[dict[str, float], list[Trace]]:
-    """The finger's time constant from two steps from rest (held by the pretension), one each
-    way: {"flex": τ, "extend": τ}, NaN where a step did not fit."""
-    taus: dict[str, float] = {}
+    """The finger's time constant from steps from rest (held by the pretension), ``LAG_REPEATS``
+    each way, in turn: {"flex": τ, "extend": τ}, each the median of the steps that fitted (NaN
+    where none did)."""
+    fits: dict[str, list[float]] = {"flex": [], "extend": []}
     traces: list[Trace] = []
-    for sign in (1, -1):
+    for sign in (1, -1) * LAG_REPEATS:
         rest = pulse(hand, rec, f, 0.0, bounds, seconds=0.3)
         tr = pulse(hand, rec, f, sign * LAG_DUTY, bounds, seconds=LAG_S, travel=0.5)
         traces += [rest, tr]
@@ -122,8 +126,9 @@ def lag(hand: Hand, rec: Recorder, f: int, bounds: Bounds) -> tuple[dict[str, fl
         got = _fit_from_rest(tr, sign)
         # a time constant at the fit's lower bound is unresolved (the fit failed), not a
         # prompt start (at the upper one it did not come up to speed: late, kept)
-        ok = got is not None and got[0] > MOVING_RAD_S and got[1] > 1.01e-3
-        taus["flex" if sign > 0 else "extend"] = got[1] if got is not None and ok else math.nan
+        if got is not None and got[0] > MOVING_RAD_S and got[1] > 1.01e-3:
+            fits["flex" if sign > 0 else "extend"].append(got[1])
+    taus = {k: float(np.median(v)) if v else math.nan for k, v in fits.items()}
     return taus, traces
 
 

@@ -19,6 +19,16 @@ SLACK_RAD = 0.035
 #: a weak motor is late both ways: the two steps' lag over the model motors' (at the speed
 #: measured), their geometric mean above this (margins in docs/bringup.md)
 WEAK_LAG = 3.5
+#: ... and each way at least this (a weak motor is late both ways; heavy friction late one way:
+#: campaign seed 47's middle finger, friction 10 N, 8.8 and 2.1 times the model's lag)
+WEAK_BOTH = 2.3
+#: a finger whose reversals at ``REVERSAL_DUTY`` take this long (s) beyond its lag to move it
+#: back (0.01 rad) waits for a slack strand: campaign seed 47's slack thumb 0.065-0.108 over
+#: five runs; weak motors at most 0.052 over fifteen (seeds 15, 23, 29, 30, 43; up to 0.066
+#: with one step's lag), fault-free fingers at most 0.050 over 118; but seed 29's weak thumb
+#: 0.072 once (docs/bringup.md: the margin does not hold)
+REVERSAL_DUTY = 0.3
+REVERSAL_SLACK_S = 0.058
 #: slack seen from the steps from rest: one way this many times the model motors' lag while the
 #: other way's is under ``PROMPT_LAG`` (Joint 2 loose: it starts at once one way and waits for
 #: the strand the other); margins in docs/bringup.md
@@ -28,8 +38,11 @@ PROMPT_LAG = 0.5
 #: times the other's: Joint 2 leaning on one strand (under gravity) follows that way with the
 #: strand's lag and waits for the other strand the other way, and switches strands as the load
 #: turns over the travel (``slack:1=0.0015``: 6.9 times apart, the speed 1.44 times uneven).
-#: A weak motor can be late one way too (seed 43's ring: 1.1 and 11.9) but runs evenly (1.03)
+#: A weak motor can be late one way too (seed 43's ring: 1.1 and 11.9, from one step each way)
+#: but runs evenly (1.03). Evenly, the late way this many times the other's (the medians of
+#: three steps each way; seed 47's slack thumb: 33 and 2.6, weak thumbs within 3 of even)
 ONE_WAY_SPREAD = 4.0
+ONE_WAY_EVEN = 6.0
 
 
 def lag_ratios(p: Plant, ref: Plant) -> dict[str, float]:
@@ -51,14 +64,24 @@ def plant_findings(
     resolved = p.K >= SLOW * ref.K
     slow_way, fast_way = max(flex, ext), min(flex, ext)
     one_way = slow_way > ONE_WAY_LAG and (
-        fast_way < PROMPT_LAG or (uneven and slow_way > ONE_WAY_SPREAD * fast_way)
+        fast_way < PROMPT_LAG or slow_way > (ONE_WAY_SPREAD if uneven else ONE_WAY_EVEN) * fast_way
     )
     loose = resolved and (slack > SLACK_RAD or one_way)
     late = math.sqrt(flex * ext)
     # a weaker motor takes more duty for the same friction as it comes up to speed later (both
     # ∝ 1 / F_stall): a friction duty beyond what its lag explains is friction, not weakness
     explained = ref.u_f * late + FRICTION_DUTY
-    weak = resolved and not loose and late > WEAK_LAG and not p.u_f > explained
+    weak = (
+        resolved
+        and not loose
+        and late > WEAK_LAG
+        and fast_way > WEAK_BOTH
+        and not p.u_f > explained
+    )
+    # late on a reversal beyond its own lag: Joint 2 waits for its strand
+    reversal = p.reversal_s.get(f"{REVERSAL_DUTY:g}", math.nan) - p.tau
+    if resolved and reversal > REVERSAL_SLACK_S:
+        weak, loose = False, True
     if loose:
         out.append(
             Finding(
@@ -70,13 +93,16 @@ def plant_findings(
                     if slack > SLACK_RAD
                     else f"from rest Joint 2 follows the motor at once one way and "
                     f"{slow_way:.0f} times the model's lag late the other"
+                    if one_way
+                    else f"on a reversal Joint 2 follows the motor {reversal:.3f} s later than "
+                    "the motor's own lag"
                 )
                 + ": slack in the coupling tendon (Tendon 2, Joint 1 to Joint 2) lets Joint 2 "
                 "hang free between its strands",
                 "tighten Tendon 2 and run the bring-up again (Joint 2 is loose between its "
                 "strands: no gain holds it)",
                 False,
-                {"lag_ratio": r, "slack_rad": slack},
+                {"lag_ratio": r, "slack_rad": slack, "reversal_s": reversal},
             )
         )
     if weak:

@@ -152,19 +152,24 @@ def pulse(
     travel: float | None = None,
     stop_on_stall: bool = True,
     until: float | None = None,
+    rest_first: float = 0.0,
 ) -> Trace:
     """Drive ``finger`` at ``duty`` (DUTY mode: positive pulls Tendon 1) for at most ``seconds``
     (default ``bounds.pulse_s``) and ``travel`` rad (default ``bounds.travel_rad``), or until
     its reading passes ``until`` in the direction it is driven; then brake it. ``duty`` 0:
-    a rest (both motors idle, DUTY mode, no stall rule)."""
+    a rest (both motors idle, DUTY mode, no stall rule). ``rest_first``: that long at the
+    pretension (DUTY 0, the tendons taken up) just before, not braked between (not traced)."""
     if abs(duty) > bounds.duty:
         raise ValueError(f"a bring-up pulse of {duty:+.2f} passes the duty bound {bounds.duty}")
     seconds = bounds.pulse_s if seconds is None else seconds
     travel = bounds.travel_rad if travel is None else travel
-    mark = rec.mark()
-    start = hand.state().board_time
     stop = "time"
     try:
+        if rest_first > 0:
+            hand.set_mode("duty", [finger], duty=0.0)
+            hand.clock.sleep(rest_first)
+        mark = rec.mark()
+        start = hand.state().board_time
         hand.set_mode("duty", [finger], duty=duty)
         while True:
             hand.clock.sleep(POLL_S)
