@@ -28,6 +28,10 @@ TAKE_UP_S = (1.2, 3.0)
 STILL_RAD = 0.01
 #: a rest (both motors at the pretension) that moves the reading more: the finger is not held
 HELD_RAD = 0.1
+#: the longest pulse, when it moved the finger's own reading more than ``STILL_RAD`` but less
+#: than ``MOVED_RAD`` (a stiff finger creeping: 14 N of friction moved it 0.046 rad), is
+#: repeated this many times more, each one bounded and braked after, and the moves summed
+CREEP_REPEATS = 2
 #: a take-up that runs a finger otherwise wired right this far open (its frame): motor A may
 #: push (fault-free fingers -0.015 to +0.41 rad; seed 15's index, lead A swapped, -0.73), so
 #: the other way is tried too (margins in docs/bringup.md)
@@ -129,6 +133,8 @@ def wiring(
                     held = False  # the pretension does not hold it: a motor pushes, or none pulls
                 got = _moved(rest, drive)
                 extra = float(abs(drive.delta()[f] - rest.delta()[f]))
+                if got is None and held and i == len(TRY_PULSES) - 1 and extra > STILL_RAD:
+                    got, extra = _creep(hand, rec, f, sign * duty, seconds, bounds, rest, drive, w)
                 w.pulsed[(invert, sign)] = max(w.pulsed.get((invert, sign), 0.0), extra)
                 if got is not None and got[0] != f:
                     w.moved[(invert, sign)] = got
@@ -150,6 +156,40 @@ def wiring(
             break  # another channel moves both ways, its own never: a cable swap
     _interpret(w, f, name, names)
     return w
+
+
+def _creep(
+    hand: Hand,
+    rec: Recorder,
+    f: int,
+    duty: float,
+    seconds: float,
+    bounds: Bounds,
+    rest: Trace,
+    drive: Trace,
+    w: Wiring,
+) -> tuple[tuple[int, int] | None, float]:
+    """The longest pulse moved the finger's own reading a little, not ``MOVED_RAD``: repeat it
+    (each against a rest just before) up to ``CREEP_REPEATS`` times; moved if its moves, summed
+    and none the other way by more than ``STILL_RAD``, reach ``MOVED_RAD``. Returns the
+    channel and sign (or None) and the summed move (rad)."""
+    moves = [float(drive.delta()[f] - rest.delta()[f])]
+    for _ in range(CREEP_REPEATS):
+        rest = pulse(hand, rec, f, 0.0, bounds, seconds=seconds)
+        settle(hand, 0.05)
+        drive = pulse(hand, rec, f, duty, bounds, seconds=seconds)
+        w.traces += [rest, drive]
+        settle(hand, 0.05)
+        hand.clear_faults([f])
+        moves.append(float(drive.delta()[f] - rest.delta()[f]))
+        total = sum(moves)
+        if abs(total) >= MOVED_RAD:
+            break
+    total = sum(moves)
+    way = int(np.sign(total))
+    if abs(total) < MOVED_RAD or any(mv * way < -STILL_RAD for mv in moves):
+        return None, abs(total)
+    return (f, way), abs(total)
 
 
 def _pushed_open(w: Wiring) -> bool:
