@@ -189,33 +189,43 @@ class TipModel:
                 tip = np.asarray(kinematics.forward(finger.geometry, q).tip, dtype=float)
                 tables[key] = (theta2, tip[:, 0].copy(), tip[:, 1].copy())
             self._tables.append(tables[key])
-        self._lists = [tuple(a.tolist() for a in t) for t in self._tables]  # for _interp
+        self._lists = [tuple(a.tolist() for a in t) for t in self._tables]  # for _interp_xy
 
     def tip(self, finger: int, theta2: float) -> tuple[float, float]:
         """The tip of ``finger`` (0..4) at Joint-2 angle ``theta2`` (rad), in m."""
         grid, x, y = self._lists[finger]
-        return _interp(theta2, grid, x), _interp(theta2, grid, y)
+        return _interp_xy(theta2, grid, x, y)
 
     def tips(self, theta2: Sequence[float]) -> tuple[list[float], list[float]]:
         xs, ys = [], []
+        lists = self._lists
         for i, th in enumerate(theta2):
-            x, y = self.tip(i, th)
+            grid, fx, fy = lists[i]
+            x, y = _interp_xy(th, grid, fx, fy)
             xs.append(x)
             ys.append(y)
         return xs, ys
 
 
-def _interp(v: float, grid: list[float], f: list[float]) -> float:
-    """``np.interp(v, grid, f)`` for one value, in plain floats: numpy's own steps (the same
-    result to the bit), without its per-call cost, for every telemetry sample's five tips."""
+def _interp_xy(
+    v: float, grid: list[float], fx: list[float], fy: list[float]
+) -> tuple[float, float]:
+    """``np.interp(v, grid, fx)`` and ``np.interp(v, grid, fy)`` for one value, in plain floats:
+    numpy's own steps (the same result to the bit), one search for both, without numpy's
+    per-call cost, for every telemetry sample's five tips."""
     v = float(v)
     if v != v:  # NaN
-        return v
+        return v, v
     j = bisect.bisect_right(grid, v) - 1
     if j < 0:
-        return f[0]
+        return fx[0], fy[0]
     if j >= len(grid) - 1 or grid[j] == v:
-        return f[j]
+        return fx[j], fy[j]
+    return _between(v, grid, fx, j), _between(v, grid, fy, j)
+
+
+def _between(v: float, grid: list[float], f: list[float], j: int) -> float:
+    """numpy's interpolation of ``f`` at ``v`` strictly inside ``grid[j]..grid[j + 1]``."""
     slope = (f[j + 1] - f[j]) / (grid[j + 1] - grid[j])
     out = slope * (v - grid[j]) + f[j]
     if out != out:  # NaN one way: numpy tries the other
