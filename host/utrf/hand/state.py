@@ -14,7 +14,8 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 
@@ -60,6 +61,45 @@ class FingerState:
     @property
     def closed_loop(self) -> bool:
         return self.mode in CLOSED_LOOP
+
+
+def _slot_setters(cls: type) -> tuple[Any, ...]:
+    """Each field's slot setter of a slotted dataclass, in field order."""
+    return tuple(cls.__dict__[f.name].__set__ for f in fields(cls))
+
+
+(_NAME, _INDEX, _THETA2, _TARGET, _DUTY_A, _DUTY_B, _MODE, _FAULTS, _TIP_X, _TIP_Y) = _slot_setters(
+    FingerState
+)
+
+
+def _finger_state(
+    name: str,
+    index: int,
+    theta2: float,
+    target: float,
+    duty_a: float,
+    duty_b: float,
+    mode: m.ControlMode,
+    faults: m.FaultBits,
+    tip_x: float,
+    tip_y: float,
+) -> FingerState:
+    """``FingerState(...)`` with its slots set directly: the frozen dataclass's ``__init__``
+    goes through ``object.__setattr__`` per field, twice the cost, for five a sample at 1 kHz
+    (equal objects: test_finger_state_fast_path_equals_the_dataclass)."""
+    st = object.__new__(FingerState)
+    _NAME(st, name)
+    _INDEX(st, index)
+    _THETA2(st, theta2)
+    _TARGET(st, target)
+    _DUTY_A(st, duty_a)
+    _DUTY_B(st, duty_b)
+    _MODE(st, mode)
+    _FAULTS(st, faults)
+    _TIP_X(st, tip_x)
+    _TIP_Y(st, tip_y)
+    return st
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,7 +168,7 @@ class HandState:
         # positional and in a list: each telemetry sample (1 kHz) builds five
         fingers = tuple(
             [
-                FingerState(
+                _finger_state(
                     names[i],
                     i,
                     theta2[i],
