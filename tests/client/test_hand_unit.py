@@ -384,6 +384,22 @@ def test_tip_model_interpolates_as_numpy_does_to_the_bit() -> None:
     )
 
 
+def test_finger_state_fast_path_equals_the_dataclass() -> None:
+    """Each sample's fingers are built with their slots set directly (the fast path); the
+    frozen dataclass's own constructor is the general twin: equal, frozen, every field set."""
+    import dataclasses
+
+    from utrf.hand.state import FingerState, _finger_state
+
+    args = ("ring", 3, 0.1, 0.2, -0.3, 0.4, M.ControlMode.GRASP, M.FaultBits.STALL, 0.05, -0.01)
+    fast, general = _finger_state(*args), FingerState(*args)
+    assert fast == general
+    assert dataclasses.astuple(fast) == args
+    assert fast.error == general.error and fast.closed_loop
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        fast.theta2 = 0.0  # type: ignore[misc]
+
+
 def test_each_sample_takes_the_modes_and_faults_of_the_status_it_is_given() -> None:
     """from_message keeps the last status's modes and faults as enums (samples come at
     1 kHz, a status rarely): a new status, or none, must still be the one a sample shows."""

@@ -14,7 +14,8 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 
@@ -60,6 +61,45 @@ class FingerState:
     @property
     def closed_loop(self) -> bool:
         return self.mode in CLOSED_LOOP
+
+
+def _slot_setters(cls: type) -> tuple[Any, ...]:
+    """Each field's slot setter of a slotted dataclass, in field order."""
+    return tuple(cls.__dict__[f.name].__set__ for f in fields(cls))
+
+
+(_NAME, _INDEX, _THETA2, _TARGET, _DUTY_A, _DUTY_B, _MODE, _FAULTS, _TIP_X, _TIP_Y) = _slot_setters(
+    FingerState
+)
+
+
+def _finger_state(
+    name: str,
+    index: int,
+    theta2: float,
+    target: float,
+    duty_a: float,
+    duty_b: float,
+    mode: m.ControlMode,
+    faults: m.FaultBits,
+    tip_x: float,
+    tip_y: float,
+) -> FingerState:
+    """``FingerState(...)`` with its slots set directly: the frozen dataclass's ``__init__``
+    goes through ``object.__setattr__`` per field, twice the cost, for five a sample at 1 kHz
+    (equal objects: test_finger_state_fast_path_equals_the_dataclass)."""
+    st = object.__new__(FingerState)
+    _NAME(st, name)
+    _INDEX(st, index)
+    _THETA2(st, theta2)
+    _TARGET(st, target)
+    _DUTY_A(st, duty_a)
+    _DUTY_B(st, duty_b)
+    _MODE(st, mode)
+    _FAULTS(st, faults)
+    _TIP_X(st, tip_x)
+    _TIP_Y(st, tip_y)
+    return st
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,7 +168,7 @@ class HandState:
         # positional and in a list: each telemetry sample (1 kHz) builds five
         fingers = tuple(
             [
-                FingerState(
+                _finger_state(
                     names[i],
                     i,
                     theta2[i],
@@ -189,33 +229,43 @@ class TipModel:
                 tip = np.asarray(kinematics.forward(finger.geometry, q).tip, dtype=float)
                 tables[key] = (theta2, tip[:, 0].copy(), tip[:, 1].copy())
             self._tables.append(tables[key])
-        self._lists = [tuple(a.tolist() for a in t) for t in self._tables]  # for _interp
+        self._lists = [tuple(a.tolist() for a in t) for t in self._tables]  # for _interp_xy
 
     def tip(self, finger: int, theta2: float) -> tuple[float, float]:
         """The tip of ``finger`` (0..4) at Joint-2 angle ``theta2`` (rad), in m."""
         grid, x, y = self._lists[finger]
-        return _interp(theta2, grid, x), _interp(theta2, grid, y)
+        return _interp_xy(theta2, grid, x, y)
 
     def tips(self, theta2: Sequence[float]) -> tuple[list[float], list[float]]:
         xs, ys = [], []
+        lists = self._lists
         for i, th in enumerate(theta2):
-            x, y = self.tip(i, th)
+            grid, fx, fy = lists[i]
+            x, y = _interp_xy(th, grid, fx, fy)
             xs.append(x)
             ys.append(y)
         return xs, ys
 
 
-def _interp(v: float, grid: list[float], f: list[float]) -> float:
-    """``np.interp(v, grid, f)`` for one value, in plain floats: numpy's own steps (the same
-    result to the bit), without its per-call cost, for every telemetry sample's five tips."""
+def _interp_xy(
+    v: float, grid: list[float], fx: list[float], fy: list[float]
+) -> tuple[float, float]:
+    """``np.interp(v, grid, fx)`` and ``np.interp(v, grid, fy)`` for one value, in plain floats:
+    numpy's own steps (the same result to the bit), one search for both, without numpy's
+    per-call cost, for every telemetry sample's five tips."""
     v = float(v)
     if v != v:  # NaN
-        return v
+        return v, v
     j = bisect.bisect_right(grid, v) - 1
     if j < 0:
-        return f[0]
+        return fx[0], fy[0]
     if j >= len(grid) - 1 or grid[j] == v:
-        return f[j]
+        return fx[j], fy[j]
+    return _between(v, grid, fx, j), _between(v, grid, fy, j)
+
+
+def _between(v: float, grid: list[float], f: list[float], j: int) -> float:
+    """numpy's interpolation of ``f`` at ``v`` strictly inside ``grid[j]..grid[j + 1]``."""
     slope = (f[j + 1] - f[j]) / (grid[j + 1] - grid[j])
     out = slope * (v - grid[j]) + f[j]
     if out != out:  # NaN one way: numpy tries the other
