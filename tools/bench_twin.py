@@ -29,6 +29,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from datetime import date
 from pathlib import Path
 from typing import Any
@@ -43,16 +45,18 @@ REFERENCE = "f500c49"
 # --- one engine alone (runs inside either tree) ----------------------------------------------
 
 
-def engine_elf(seconds: float) -> dict:
-    """The firmware on simavr with no plant: telemetry at 100 Hz and heartbeats (the hold's
-    host traffic), five fingers in POSITION at the angles their encoders read, held still."""
+@contextmanager
+def elf_alone(elf: str | Path | None = None) -> Iterator[tuple[Any, Any]]:
+    """The firmware on simavr with no plant, under the hold's host traffic (telemetry at 100 Hz,
+    heartbeats), five fingers in POSITION at the angles their still encoders read: the board
+    and its ``SimLink``. ``elf`` None: the tree's own build. Also tools/fw_profile.py's."""
     from utrf.emulator import EmulatedBoard
     from utrf.hand.simlink import SimLink
     from utrf.hil.rig import EmulatedTruth
     from utrf.protocol import messages as m
 
     params = EmulatedTruth(actuator=None).plant_params()
-    with EmulatedBoard(realtime=False, seed=0, plant_params=params) as board:
+    with EmulatedBoard(elf, realtime=False, seed=0, plant_params=params) as board:
         board._native.attach_plant(None)  # no plant: the encoder voltages stay as they are
         latest: list = [None]
 
@@ -75,6 +79,14 @@ def engine_elf(seconds: float) -> dict:
                 effort=(0.0,) * 5,
             )
         )
+        yield board, link
+
+
+def engine_elf(seconds: float) -> dict:
+    """The firmware on simavr with no plant, the hold's host traffic held still (elf_alone)."""
+    from utrf.protocol import messages as m
+
+    with elf_alone() as (board, link):
         cpu0, wall0, sim0 = time.process_time(), time.perf_counter(), board.sim_time
         link.sleep(seconds)
         cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0

@@ -64,36 +64,11 @@ def sleeps(elf: Path) -> set[int]:
 
 def run(elf: Path, seconds: float, rate_hz: int) -> tuple[np.ndarray, int, int]:
     """The histogram (cycles per program word), the cycles run and those slept."""
-    from utrf.emulator import EmulatedBoard
-    from utrf.hand.simlink import SimLink
-    from utrf.hil.rig import EmulatedTruth
+    from tools.bench_twin import elf_alone
     from utrf.protocol import messages as m
 
-    params = EmulatedTruth(actuator=None).plant_params()
-    with EmulatedBoard(elf, realtime=False, seed=0, plant_params=params) as board:
+    with elf_alone(elf) as (board, link):
         native = board._native
-        native.attach_plant(None)
-        latest: list = [None]
-
-        def keep(t) -> None:
-            if isinstance(t.message, m.State):
-                latest[0] = t.message
-
-        link = SimLink(board, on_telemetry=keep)
-        link.handshake()
-        link.request(m.SetTelemetry(rate_hz=100))
-        link.sleep(0.1)
-        theta = tuple(latest[0].theta2)
-        link.request(m.ClearFaults(mask=0b11111))
-        link.request(m.SetTargets(kind=m.TargetKind.JOINT2_ANGLE, mask=0b11111, value=theta))
-        link.request(
-            m.SetMode(
-                mask=0b11111,
-                mode=(m.ControlMode.POSITION,) * 5,
-                duty=(0.0,) * 5,
-                effort=(0.0,) * 5,
-            )
-        )
         if rate_hz != 100:
             link.request(m.SetTelemetry(rate_hz=rate_hz))
         link.sleep(0.05)
