@@ -47,11 +47,9 @@ def test_the_formatted_line_is_the_csv_writers_row(
     host: float, board: float, seq: int | None, fs: list[tuple]
 ) -> None:
     state = _state(host, board, seq, fs)
-    log = TelemetryLog.__new__(TelemetryLog)  # the formatting alone, no file
-    log._formats = {}
-    text = io.StringIO()
-    csv.writer(text, lineterminator="\n").writerow(log.row(state))
-    assert log.line(state) == text.getvalue()
+    text = io.StringIO()  # the formatting alone, no file
+    csv.writer(text, lineterminator="\n").writerow(TelemetryLog.row(state))
+    assert TelemetryLog.line(state) == text.getvalue()
 
 
 def test_a_logged_sample_reads_back(tmp_path: Path) -> None:

@@ -11,6 +11,7 @@ The bench runs read these files back with :func:`utrf.datalog.read_log`.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -36,6 +37,7 @@ def log_columns(finger_names: Sequence[str]) -> list[str]:
     return cols
 
 
+@functools.cache
 def _line_format(fingers: int) -> str:
     """The ``%`` format of a row of ``fingers`` fingers, the fields as :meth:`TelemetryLog.row`
     formats them."""
@@ -50,7 +52,6 @@ class TelemetryLog:
         self.columns = log_columns(finger_names)
         self._log = CsvLog(path, self.columns)
         self.path = self._log.path
-        self._formats: dict[int, str] = {}
 
     @property
     def rows_written(self) -> int:
@@ -59,7 +60,8 @@ class TelemetryLog:
     def write(self, state: HandState) -> None:
         self._log.write_line(self.line(state))
 
-    def line(self, state: HandState) -> str:
+    @staticmethod
+    def line(state: HandState) -> str:
         """``state``'s row as the log's text, formatted at once (every sample is logged):
         the CSV writer's text of :meth:`row` (a test compares them)."""
         values: list[object] = [
@@ -70,12 +72,10 @@ class TelemetryLog:
         for f in state.fingers:
             values += [f.theta2, f.target, f.duty_a, f.duty_b, f.mode.name, int(f.faults),
                        f.tip_x, f.tip_y]  # fmt: skip
-        fmt = self._formats.get(len(state.fingers))
-        if fmt is None:
-            fmt = self._formats[len(state.fingers)] = _line_format(len(state.fingers))
-        return fmt % tuple(values)
+        return _line_format(len(state.fingers)) % tuple(values)
 
-    def row(self, state: HandState) -> list[object]:
+    @staticmethod
+    def row(state: HandState) -> list[object]:
         """``state``'s row, field by field (the general form :meth:`line` formats at once)."""
         row: list[object] = [
             f"{state.host_time:.6f}",
