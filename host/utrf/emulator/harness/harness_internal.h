@@ -4,6 +4,7 @@
 
 #include <stdatomic.h>
 #include <stdint.h>
+#include <time.h>
 
 #include "avr_uart.h"
 #include "avr_watchdog.h"
@@ -14,6 +15,14 @@
 #define RX_QUEUE_SIZE 65536u   /* host bytes waiting for the wire (power of two) */
 #define TX_QUEUE_SIZE 8192u    /* bytes on the wire toward the host (power of two) */
 #define CAPTURE_SIZE 1048576u  /* in-process output buffer (power of two) */
+
+/* The monotonic clock in ns: the threads' spins and the hand-over's timing. */
+static inline long harness_now_ns(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return t.tv_sec * 1000000000L + t.tv_nsec;
+}
 #define LOG_SIZE 4096u
 #define UTRF_RX_ARRIVALS 4u    /* arrival times of the receive FIFO's bytes (power of two, > 2) */
 

@@ -14,20 +14,12 @@
  * for a stretch of periods, then tries the thread again.
  */
 #include <string.h>
-#include <time.h>
 
 #include "harness_internal.h"
 
 #define CPU_HZ 16e6
 /* periods stepped on the MCU's thread before the plant's is tried again */
 #define INLINE_STRETCH 32
-
-static long lock_now_ns(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return t.tv_sec * 1000000000L + t.tv_nsec;
-}
 
 /* A running mean (x16) moved 1/8 of the way to x. */
 static void mean16(long *m16, long x)
@@ -102,15 +94,15 @@ int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, in
         int handover = threaded && s->lock_inline_left == 0;
         long t0 = 0, posted = 0;
         if (handover) {
-            t0 = lock_now_ns();
+            t0 = harness_now_ns();
             plant_thread_step(s, dt);
-            posted = lock_now_ns() - t0;
+            posted = harness_now_ns() - t0;
         }
         int now = utrf_sim_run_to(s, end);
         if (handover) {
-            t0 = lock_now_ns();
+            t0 = harness_now_ns();
             plant_thread_wait(s);
-            mean16(&s->lock_handover_ns16, posted + lock_now_ns() - t0);
+            mean16(&s->lock_handover_ns16, posted + harness_now_ns() - t0);
             mean16(&s->lock_step_ns16, plant_thread_step_ns(s));
             if (s->lock_handover_ns16 > s->lock_step_ns16) { /* cheaper here: a stretch */
                 s->lock_inline_left = INLINE_STRETCH;

@@ -20,7 +20,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/syscall.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "harness_internal.h"
@@ -66,13 +65,6 @@ static inline void cpu_relax(void)
 #endif
 }
 
-static long now_ns(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return t.tv_sec * 1000000000L + t.tv_nsec;
-}
-
 /* Wait until *word differs from `from`: spin (while *parked is 0), then sleep (the other side
  * wakes a sleeper it sees flagged; the flag is set before the last look, so no wake-up is
  * lost). */
@@ -90,7 +82,7 @@ static uint32_t wait_change(_Atomic uint32_t *word, uint32_t from, _Atomic int *
             break;
         cpu_relax();
         if ((i & 63) == 0) {
-            long t = now_ns();
+            long t = harness_now_ns();
             if (!deadline)
                 deadline = t + *budget;
             else if (t > deadline) {
@@ -126,10 +118,10 @@ static void *plant_main(void *arg)
         if (t->quit)
             return NULL;
         utrf_sim_t *s = t->s;
-        long t0 = now_ns();
+        long t0 = harness_now_ns();
         if (s->plant_step)
             s->plant_step(s->plant_ctx, t->dt, s->hold);
-        atomic_store_explicit(&t->step_ns, now_ns() - t0, memory_order_relaxed);
+        atomic_store_explicit(&t->step_ns, harness_now_ns() - t0, memory_order_relaxed);
         post(&t->done, seen, &t->caller_asleep);
     }
 }

@@ -9,7 +9,6 @@
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "harness_internal.h"
@@ -52,22 +51,15 @@ void ahead_send_due(utrf_sim_t *s)
     s->send_len = 0;
 }
 
-static long ahead_now_ns(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return t.tv_sec * 1000000000L + t.tv_nsec;
-}
-
 /* After a run, the caller's stop (the sample's truth, the next run's start) is short: the
  * thread spins for the next run a while before it sleeps, sparing the caller a wake-up on the
  * critical path (tens of µs on a virtual machine). The spin grows while the next run comes
  * within it and halves when it does not (a caller that works longer, a core that is busy). */
 static void ahead_spin(struct utrf_ahead *a)
 {
-    long deadline = ahead_now_ns() + a->spin_ns;
+    long deadline = harness_now_ns() + a->spin_ns;
     for (unsigned i = 1; atomic_load_explicit(&a->work, memory_order_acquire) != 1; i++) {
-        if ((i & 63) == 0 && ahead_now_ns() > deadline) {
+        if ((i & 63) == 0 && harness_now_ns() > deadline) {
             a->spin_ns = a->spin_ns / 2 > AHEAD_SPIN_MIN_NS ? a->spin_ns / 2 : AHEAD_SPIN_MIN_NS;
             return;
         }
