@@ -19,6 +19,7 @@ from utrf.dashboard.access import COOKIE, TokenGuard, needs_token
 from utrf.dashboard.hub import READ_LINGER_S, DashboardHub, NotInControl, SampleRing
 from utrf.dashboard.page import hand_turn
 from utrf.hand.state import FingerState, HandState
+from utrf.hand.state_block import StateBlock
 from utrf.protocol import messages as m
 from utrf.protocol.link import Link
 from utrf.protocol.transport import SerialTransport
@@ -80,6 +81,11 @@ def state(board: float, host: float, theta: float = 0.0) -> HandState:
     return HandState(board_time=board, host_time=host, seq=0, fingers=(f,))
 
 
+def block(board: float, host: float, theta: float = 0.0) -> StateBlock:
+    """One sample as the Hand's reader hands it on (``Hand.on_states``)."""
+    return StateBlock.of_states([state(board, host, theta)])
+
+
 class FakeHand:
     """What the hub asks of a Hand before any command."""
 
@@ -98,7 +104,7 @@ class FakeHand:
     def safety(self) -> m.Safety:
         return m.Safety(heartbeat_timeout=0.5, safe_action=m.SafeAction.HOLD)
 
-    def on_state(self, cb: Any) -> Any:
+    def on_states(self, cb: Any) -> Any:
         self.callbacks.append(cb)
         return lambda: self.callbacks.remove(cb)
 
@@ -119,7 +125,7 @@ def test_the_boards_clock_is_followed_when_it_runs_at_another_pace() -> None:
     # an emulated board at half speed: 1 s of board time takes 2 s; delays of 1-20 ms
     for k in range(3000):
         board = k * 1e-3
-        hub._on_state(state(board, 100.0 + 2 * board + 0.001 + rng.exponential(0.004)))
+        hub._on_states(block(board, 100.0 + 2 * board + 0.001 + rng.exponential(0.004)))
     wall = hub.wall_time_of(2.999)
     assert abs(wall - (100.0 + 2 * 2.999 + 0.001)) < 0.003
     hub.close()
@@ -140,7 +146,7 @@ def test_the_hands_reader_takes_the_stream_in_batches_for_the_dashboard() -> Non
 def test_the_ring_decimates_for_the_eye_and_keeps_the_newest() -> None:
     ring = SampleRing(1, 5000)
     for k in range(3000):
-        ring.add(state(k * 1e-3, 0.0, theta=k * 1e-3))
+        ring.add(block(k * 1e-3, 0.0, theta=k * 1e-3))
     s = ring.series(2.0, points_per_s=25)
     assert s.board_time[-1] == pytest.approx(2.999)
     assert 49 <= len(s.board_time) <= 51  # 2 s at 25 a second
@@ -155,12 +161,42 @@ def test_the_rings_window_from_its_newest_samples_is_the_whole_rings() -> None:
         ring, whole = SampleRing(1, 5000, rate_hz=rate), SampleRing(1, 5000, rate_hz=1e9)
         for k in range(7000):  # wraps
             for r in (ring, whole):
-                r.add(state(k * 1e-3, 0.0, theta=k * 1e-3))
+                r.add(block(k * 1e-3, 0.0, theta=k * 1e-3))
         for seconds in (0.0, 0.05, 1.0, 2.0, 4.999, 10.0):
             np.testing.assert_array_equal(ring.clock(seconds)[0], whole.clock(seconds)[0])
             np.testing.assert_array_equal(
                 ring.series(seconds, 25).theta2, whole.series(seconds, 25).theta2
             )
+
+
+def test_a_reads_block_fills_the_ring_as_its_samples_one_by_one() -> None:
+    # blocks of any size, across the ring's end, and one larger than the ring
+    rng = np.random.default_rng(2)
+    one, many = SampleRing(1, 100), SampleRing(1, 100)
+    k = 0
+    for size in [*rng.integers(1, 40, 20), 250, 3]:
+        states = [state(j * 1e-3, 5.0 + j, theta=j * 1e-3) for j in range(k, k + size)]
+        for st in states:
+            one.add(StateBlock.of_states([st]))
+        many.add(StateBlock.of_states(states))
+        k += size
+        assert one.count == many.count == k
+        for a, b in zip(one.clock(1.0), many.clock(1.0), strict=True):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(one.series(1.0, 1000).theta2, many.series(1.0, 1000).theta2)
+
+
+def test_an_update_asks_the_reader_for_the_newest_at_once() -> None:
+    hand = FakeHand()
+    hand.link = link = Link(SerialTransport("loop://"), heartbeat_period_s=None)
+    asked: list[bool] = []
+    link.read_soon = lambda: asked.append(True)  # type: ignore[method-assign]
+    try:
+        hub = DashboardHub(hand)  # type: ignore[arg-type]
+        assert not asyncio.run(hub.next_sample(0.01)) and asked == [True]
+        hub.close()
+    finally:
+        link.close()
 
 
 def test_the_ring_keeps_each_fingers_fields_apart() -> None:
@@ -171,7 +207,7 @@ def test_the_ring_keeps_each_fingers_fields_apart() -> None:
             FingerState("f", i, k + i, 10 * (k + i), 0.1 * i, 0.01 * i, mode, m.FaultBits(0), 0, 0)
             for i in range(3)
         )
-        ring.add(HandState(board_time=k * 1e-3, host_time=0.0, seq=k, fingers=fingers))
+        ring.add(StateBlock.of_states([HandState(k * 1e-3, 0.0, k, fingers)]))
     s = ring.series(1.0, points_per_s=1000)
     assert s.theta2.shape == (10, 3)
     k = np.arange(10)[:, None]
@@ -191,7 +227,7 @@ def test_an_update_waits_for_the_next_sample_from_the_readers_thread() -> None:
         loop = asyncio.get_running_loop()
         # a sample from another thread (the Hand's reader) wakes it at once
         loop.call_later(
-            0.05, lambda: threading.Thread(target=hub._on_state, args=(state(1.0, 2.0),)).start()
+            0.05, lambda: threading.Thread(target=hub._on_states, args=(block(1.0, 2.0),)).start()
         )
         t0 = time.monotonic()
         woken = await hub.next_sample(10.0)
@@ -205,7 +241,7 @@ def test_an_update_waits_for_the_next_sample_from_the_readers_thread() -> None:
     loop = asyncio.new_event_loop()
     hub._waiters.append((loop, loop.create_future()))
     loop.close()
-    hub._on_state(state(1.001, 2.001))
+    hub._on_states(block(1.001, 2.001))
     assert not hub._waiters and hub.latest.board_time == 1.001
     hub.close()
 
@@ -255,7 +291,7 @@ def test_the_status_and_the_recording_name_a_fingers_fields_alike(tmp_path: Any)
     from utrf.recording.mcap_recorder import McapRecorder
 
     hub = DashboardHub(FakeHand())  # type: ignore[arg-type]
-    hub._on_state(state(1.0, 2.0, theta=0.25))
+    hub._on_states(block(1.0, 2.0, theta=0.25))
     finger = hub.status()["fingers"]["index"]
     hub.close()
     assert tuple(finger) == tuple(schemas.FIELD_UNITS) and finger["theta2_rad"] == 0.25
@@ -276,7 +312,7 @@ def test_the_status_and_the_recording_name_a_fingers_fields_alike(tmp_path: Any)
 def test_the_ring_keeps_the_host_times_for_the_clock() -> None:
     ring = SampleRing(1, 100)
     for k in range(250):  # wraps twice
-        ring.add(state(k * 1e-3, 10.0 + k * 1e-3))
+        ring.add(block(k * 1e-3, 10.0 + k * 1e-3))
     board, host = ring.clock(0.0495)
     np.testing.assert_allclose(board, np.arange(200, 250) * 1e-3)
     np.testing.assert_allclose(host - board, 10.0)

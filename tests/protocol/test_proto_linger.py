@@ -88,3 +88,27 @@ def test_a_linger_out_of_range_is_refused(bad: float) -> None:
         assert transport.linger_s == 0.0
     finally:
         transport.close()
+
+
+def test_read_soon_ends_the_linger_and_skips_the_next() -> None:
+    got: list[tuple[float, bytes]] = []
+    transport = SerialTransport("loop://", linger_s=0.1)
+    transport.start(lambda data: got.append((time.monotonic(), data)), lambda exc: None)
+    try:
+        transport.write(b"\x01")
+        deadline = time.monotonic() + 1.0
+        while not got and time.monotonic() < deadline:
+            time.sleep(0.001)
+        time.sleep(0.01)  # the reader now lingers 0.1 s
+        t0 = time.monotonic()
+        transport.read_soon()  # nothing came yet: what comes next is handed on at once
+        time.sleep(0.01)
+        transport.write(b"\x02")
+        while len(got) < 2 and time.monotonic() < deadline:
+            time.sleep(0.001)
+        assert got[1][1] == b"\x02" and got[1][0] - t0 < 0.06
+        transport.write(b"\x03")  # the wish was answered: the reader lingers again
+        time.sleep(0.03)
+        assert len(got) == 2
+    finally:
+        transport.close()

@@ -2,13 +2,13 @@
 controls, the commands and the recording. No web code here (the pages are
 :mod:`utrf.dashboard.page`): this is the part the tests and the benchmarks drive directly too.
 
-The Hand's reader thread only copies each sample into a ring (``on_state``); the pages read
-it decimated for the eye. Every command runs on one worker thread, one at a time, through the
-Hand's public API, and only for the page in control: a page that is not gets
-:class:`NotInControl` and nothing is sent. When the page in control goes, the fingers under
-closed-loop control hold where they are (no finger is left moving), and the next page to ask
-takes control. If the server itself stops, the board's host-silence rule (``Hand.safety``)
-latches HOST_TIMEOUT and applies its safe action.
+The Hand's reader thread only copies each read's samples into a ring (``Hand.on_states``: as
+arrays, no HandState per sample); the pages read it decimated for the eye. Every command runs
+on one worker thread, one at a time, through the Hand's public API, and only for the page in
+control: a page that is not gets :class:`NotInControl` and nothing is sent. When the page in
+control goes, the fingers under closed-loop control hold where they are (no finger is left
+moving), and the next page to ask takes control. If the server itself stops, the board's
+host-silence rule (``Hand.safety``) latches HOST_TIMEOUT and applies its safe action.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ import numpy as np
 
 from utrf.dashboard import settings as settings_
 from utrf.hand import Hand, HandState
+from utrf.hand.state_block import StateBlock
 from utrf.protocol import messages as m
 from utrf.protocol.link import Link
 from utrf.recording import schemas
@@ -41,9 +42,11 @@ LOST_GRACE_S = 1.0
 WINDOW_S = 10.0
 #: the board's clock is mapped to the host's over this many seconds of samples
 OFFSET_WINDOW_S = 2.0
-#: the Hand's reader waits this long after each read (s), so one read carries several frames
-#: of the 1 kHz stream (a command's reply is still read at once: ``Link.read_linger_s``)
-READ_LINGER_S = 0.004
+#: the Hand's reader waits this long after each read (s), so one read carries many frames of
+#: the 1 kHz stream; a page about to update ends the wait (``Link.read_soon``: the sample it
+#: sends is as fresh as without it), and a command's reply is read at once
+#: (``Link.read_linger_s``)
+READ_LINGER_S = 0.02
 
 
 def _wake(future: asyncio.Future[None]) -> None:
@@ -78,22 +81,26 @@ class SampleRing:
         self._t = np.zeros(capacity)  # board time
         self._host = np.zeros(capacity)  # host receive time
         self.fingers = fingers
-        # per finger: theta2, target, duty_a, duty_b (one flat row: the cheapest to fill, on
-        # the Hand's reader thread for every sample)
-        self._v = np.zeros((capacity, fingers * 4))
+        # theta2, target, duty_a, duty_b, each per finger (StateBlock.values)
+        self._v = np.zeros((capacity, 4, fingers))
         self._n = 0  # samples ever written
         self._lock = threading.Lock()
 
-    def add(self, st: HandState) -> None:
-        row: list[float] = []
-        for f in st.fingers:
-            row += (f.theta2, f.target, f.duty_a, f.duty_b)
+    def add(self, block: StateBlock) -> None:
+        """A read's samples (on the Hand's reader thread), all at once."""
+        total = len(block)
+        skip = max(total - self.capacity, 0)  # only the newest fit
+        t, host, v = block.board_time[skip:], block.host_time[skip:], block.values[skip:]
+        k = total - skip
         with self._lock:
-            i = self._n % self.capacity
-            self._t[i] = st.board_time
-            self._host[i] = st.host_time
-            self._v[i] = row
-            self._n += 1
+            i = (self._n + skip) % self.capacity
+            j = min(i + k, self.capacity)  # to the ring's end, the rest from its start
+            self._t[i:j], self._host[i:j], self._v[i:j] = t[: j - i], host[: j - i], v[: j - i]
+            rest = k - (j - i)
+            if rest:
+                self._t[:rest], self._host[:rest] = t[-rest:], host[-rest:]
+                self._v[:rest] = v[-rest:]
+            self._n += total
 
     @property
     def count(self) -> int:
@@ -127,8 +134,8 @@ class SampleRing:
                 step = max(1, round(1.0 / (points_per_s * dt))) if dt > 0 else 1
                 idx = idx[len(idx) - 1 :: -step][::-1]
             t = self._t[idx]
-            v = self._v[idx].reshape(len(idx), self.fingers, 4)
-        return Series(t, v[:, :, 0], v[:, :, 1], v[:, :, 2], v[:, :, 3])
+            v = self._v[idx]
+        return Series(t, v[:, 0], v[:, 1], v[:, 2], v[:, 3])
 
 
 class DashboardHub:
@@ -160,15 +167,15 @@ class DashboardHub:
         # reader thread, so an update sends a sample the moment it arrives
         self._waiters: list[tuple[asyncio.AbstractEventLoop, asyncio.Future[None]]] = []
         self._waiters_lock = threading.Lock()
-        self._unsubscribe = hand.on_state(self._on_state)
+        self._unsubscribe = hand.on_states(self._on_states)
         if isinstance(hand.link, Link):  # a line (a SimLink reads none)
             hand.link.read_linger_s = READ_LINGER_S
 
     # --- the stream -----------------------------------------------------------------------------
 
-    def _on_state(self, st: HandState) -> None:
-        self.ring.add(st)
-        self.latest = st
+    def _on_states(self, block: StateBlock) -> None:
+        self.ring.add(block)
+        self.latest = block.last
         if self._waiters:
             with self._waiters_lock:
                 waiters, self._waiters = self._waiters, []
@@ -184,6 +191,9 @@ class DashboardHub:
         future: asyncio.Future[None] = loop.create_future()
         with self._waiters_lock:
             self._waiters.append((loop, future))
+        link = self.hand.link
+        if isinstance(link, Link):  # the reader's linger ends: the newest is read now
+            link.read_soon()
         try:
             await asyncio.wait_for(future, timeout_s)
         except TimeoutError:

@@ -147,7 +147,7 @@ class Hand:
         if forward is None:
             forward = TelemetryForward()
             link.add_telemetry_callback(forward)
-        forward.attach(self._telemetry.on_frame)
+        forward.attach(self._telemetry.on_frames)
 
     # --- building one ---------------------------------------------------------------------------
 
@@ -327,6 +327,7 @@ class Hand:
     state = Via("_telemetry", HandTelemetry.state)
     set_telemetry = Via("_telemetry", HandTelemetry.set_telemetry)
     on_state = Via("_telemetry", HandTelemetry.on_state)
+    on_states = Via("_telemetry", HandTelemetry.on_states)
     on_fault = Via("_telemetry", HandTelemetry.on_fault)
     forget_faults = Via("_telemetry", HandTelemetry.forget_faults)
     start_log = Via("_telemetry", HandTelemetry.start_log)

@@ -164,4 +164,4 @@ class HandLifecycle:
                     raise DisconnectedError(f"could not reopen {url}: {last}") from exc
                 session.clock.sleep(0.2)
         session.replace_link(link)
-        forward.attach(self._telemetry.on_frame)
+        forward.attach(self._telemetry.on_frames)

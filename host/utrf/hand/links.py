@@ -4,7 +4,7 @@ frames a link reads before its Hand exists."""
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Protocol, TypeVar
 
 from utrf.protocol import messages as m
@@ -39,27 +39,31 @@ class LinkLike(Protocol):
 
 class TelemetryForward:
     """A telemetry callback that exists before its Hand does: the link is built (and starts
-    reading) first, so frames that arrive meanwhile (a ``boot``) are kept and handed over."""
+    reading) first, so frames that arrive meanwhile (a ``boot``) are kept and handed over.
+    A Link gives it each read's frames together (:meth:`batch`); a SimLink one at a time."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._target: Callable[[Telemetry], None] | None = None
+        self._target: Callable[[Sequence[Telemetry]], None] | None = None
         self._early: list[Telemetry] = []
 
     def __call__(self, item: Telemetry) -> None:
+        self.batch((item,))
+
+    def batch(self, items: Sequence[Telemetry]) -> None:
         with self._lock:
             target = self._target
             if target is None:
-                self._early.append(item)
+                self._early.extend(items)
                 return
-        target(item)
+        target(items)
 
-    def attach(self, target: Callable[[Telemetry], None]) -> None:
+    def attach(self, target: Callable[[Sequence[Telemetry]], None]) -> None:
         with self._lock:
             early, self._early = self._early, []
             self._target = target
-        for item in early:
-            target(item)
+        if early:
+            target(early)
 
 
 def open_link(url: str, baudrate: int, forward: TelemetryForward, reset: bool) -> Link:
@@ -70,6 +74,8 @@ def open_link(url: str, baudrate: int, forward: TelemetryForward, reset: bool) -
     def opener() -> Link:
         # No queue: the Hand takes every frame through its callback (a queue nobody read
         # counted each frame as "dropped"); real loss is stream_lost.
-        return Link(SerialTransport(url, baudrate), on_telemetry=forward, telemetry_queue_size=0)
+        return Link(
+            SerialTransport(url, baudrate), on_telemetry_batch=forward.batch, telemetry_queue_size=0
+        )
 
     return open_line(url, reset, opener)

@@ -24,6 +24,7 @@ condition variable for its reply or its deadline, and a thread of its own sends 
 from __future__ import annotations
 
 import contextlib
+import logging
 import queue
 import threading
 import time
@@ -55,6 +56,7 @@ from utrf.protocol.transport import SerialTransport, Transport
 __all__ = ["Link", "LinkStats", "StreamMessage", "Telemetry"]
 
 R = TypeVar("R", bound=Message)
+log = logging.getLogger(__name__)
 
 
 class Link(EngineDriver):
@@ -66,6 +68,9 @@ class Link(EngineDriver):
     ``telemetry_queue_size``: when :attr:`telemetry` is full the oldest items are dropped
     (counted as ``telemetry_dropped``); 0: no queue, the callbacks only (what a Hand uses).
     Callbacks (``on_telemetry``) run on the reader thread: keep them short.
+    ``on_telemetry_batch`` gets the items of each read together, after they were queued and
+    given to the per-item callbacks (a consumer of a fast stream takes a read's samples at
+    once: the Hand).
     """
 
     def __init__(
@@ -76,6 +81,7 @@ class Link(EngineDriver):
         heartbeat_period_s: float | None = m.HEARTBEAT_PERIOD_S,
         telemetry_queue_size: int = 1024,
         on_telemetry: Callable[[Telemetry], None] | None = None,
+        on_telemetry_batch: Callable[[list[Telemetry]], None] | None = None,
     ) -> None:
         self._engine = Engine(
             retries=retries, heartbeat_period_s=heartbeat_period_s, now=time.monotonic()
@@ -85,6 +91,7 @@ class Link(EngineDriver):
         self._callbacks: list[Callable[[Telemetry], None]] = []
         if on_telemetry is not None:
             self._callbacks.append(on_telemetry)
+        self._batch_callback = on_telemetry_batch
         self._transport = transport
         self._cond = threading.Condition(threading.Lock())  # guards the engine and callbacks
         self._request_lock = threading.Lock()  # one request in flight
@@ -128,6 +135,11 @@ class Link(EngineDriver):
     @read_linger_s.setter
     def read_linger_s(self, value: float) -> None:
         self._transport.linger_s = value
+
+    def read_soon(self) -> None:
+        """End the reader's linger: what has arrived is read now, and if nothing has, what
+        arrives next (a consumer that wants the stream's newest sample at once)."""
+        self._transport.read_soon()
 
     def stats(self) -> LinkStats:
         with self._cond:
@@ -295,6 +307,7 @@ class Link(EngineDriver):
                     engine.fail(PortBusyError("turned away"))
                     cond.notify_all()
             events = engine.frames(data)
+        items: list[Telemetry] = []
         for event in events:
             with cond:
                 item = engine.handle(event, now)
@@ -302,6 +315,13 @@ class Link(EngineDriver):
                     cond.notify_all()
             if item is not None:
                 self._deliver(item)
+                items.append(item)
+        batch = self._batch_callback
+        if items and batch is not None:
+            try:
+                batch(items)
+            except Exception:
+                log.exception("utrf link: telemetry callback %r failed", batch)
 
     def _deliver(self, item: Telemetry) -> None:
         while self._queue_telemetry:

@@ -8,7 +8,9 @@ A reader may *linger* (``linger_s``): after each read it waits that long before 
 one read carries many frames of a fast stream (each read and wake-up costs the host more than
 decoding a frame: docs/dashboard.md); while a request waits for its reply
 (:meth:`SerialTransport.awaiting_reply`) it never lingers, so a reply is read as soon as it
-arrives, as without lingering.
+arrives, as without lingering. A consumer that wants the stream's newest now (a page about to
+draw) asks with :meth:`SerialTransport.read_soon`: the linger under way ends, and the next read
+is not lingered for, so the reader may linger long between such asks and read seldom.
 """
 
 from __future__ import annotations
@@ -47,6 +49,9 @@ class Transport(Protocol):
     def awaiting_reply(self) -> contextlib.AbstractContextManager[None]:
         """Within it a request waits for its reply: received bytes are handed on at once."""
 
+    def read_soon(self) -> None:
+        """What has arrived and what arrives next is handed on at once (ends a linger)."""
+
 
 class SerialTransport:
     """:class:`Transport` over ``serial.serial_for_url``."""
@@ -80,7 +85,8 @@ class SerialTransport:
         self.linger_s = linger_s
         self._awaited = 0  # requests waiting for a reply (no lingering while any does)
         self._awaited_lock = threading.Lock()
-        self._hurry = threading.Event()  # ends a linger early (a request, or close)
+        self._hurry = threading.Event()  # ends a linger early (a request, read_soon, close)
+        self._soon = False  # read_soon: the next read is not lingered for
         try:
             self._fd: int | None = self._serial.fileno()
         except (AttributeError, NotImplementedError, OSError, serial.SerialException):
@@ -119,6 +125,7 @@ class SerialTransport:
                     break
                 data = self._read()
                 if data:
+                    self._soon = False  # this read answers it (one asked during on_data stays)
                     on_data(data)
                     self._linger()
         except (serial.SerialException, OSError, ValueError, TypeError) as exc:
@@ -150,14 +157,21 @@ class SerialTransport:
             with self._awaited_lock:
                 self._awaited -= 1
 
+    def read_soon(self) -> None:
+        """Hand on what has arrived now and, if nothing has, what arrives next, without
+        lingering: for a consumer that wants the stream's newest sample at once."""
+        self._soon = True
+        self._hurry.set()
+
     def _linger(self) -> None:
-        """Wait ``linger_s`` before the next read, unless a request awaits its reply (cleared
-        first: a request that starts after the check ends the wait at once)."""
+        """Wait ``linger_s`` before the next read, unless a request awaits its reply or
+        :meth:`read_soon` asked (cleared first: one that comes after the check ends the wait
+        at once)."""
         linger = self._linger_s
         if linger <= 0.0:
             return
         self._hurry.clear()
-        if not self._awaited and not self._closing.is_set():
+        if not self._awaited and not self._soon and not self._closing.is_set():
             self._hurry.wait(linger)
 
     def _read(self) -> bytes:
