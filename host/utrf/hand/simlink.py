@@ -43,6 +43,7 @@ from utrf.protocol.errors import DisconnectedError
 
 if TYPE_CHECKING:
     from utrf.emulator import EmulatedBoard
+    from utrf.hand.simlink_stops import Stops
 
 R = TypeVar("R", bound=Message)
 T = TypeVar("T")
@@ -167,6 +168,16 @@ class SimLink(EngineDriver):
             if ahead:  # the caller stopped early: the frames that came still go to the engine
                 self._join_ahead(None)
             self._deliver_arrived()
+
+    def stops_each(
+        self, ends: Iterable[float], take: Callable[[], T | None], stops: Stops
+    ) -> Generator[T, None, None]:
+        """:meth:`sleep_each` with what ``take()`` does to the plant done by the harness at
+        each end (``stops``), the board running through many ends a batch: the same samples,
+        fewer stops (:mod:`utrf.hand.simlink_stops`)."""
+        from utrf.hand.simlink_stops import stops_each
+
+        return stops_each(self, ends, take, stops)
 
     def _ahead(self, end: float) -> bool:
         """Start the board running to ``end`` as :meth:`sleep` would run it; False when it is

@@ -78,13 +78,30 @@ def run(
             while hits and hits[0][0] <= t:
                 _, f, imp = hits.pop(0)
                 rig.hit(f, imp, config.hit_duration_s)
-                hit_log.write([f"{rig.now() - t0:.6f}", f, imp[0], imp[1],
-                               config.hit_duration_s])  # fmt: skip
+                log_hit(rig.now() - t0, f, imp)
             return t, rig.tracker.read_later(), rig.currents()
+
+        def log_hit(t: float, f: int, imp: tuple[float, float]) -> None:
+            hit_log.write([f"{t:.6f}", f, imp[0], imp[1], config.hit_duration_s])
+            if stops is not None:
+                stops.applied += 1  # by take(): the harness's list moves on with it
+
+        def made(t: float, reading: Any, cur: np.ndarray, applied: int) -> Any:
+            """take()'s value from what the harness did and recorded at the sample's time."""
+            if t > config.duration_s:
+                return None
+            for _ in range(applied):
+                _, f, imp = hits.pop(0)
+                hit_log.write([f"{t:.6f}", f, imp[0], imp[1], config.hit_duration_s])
+            return t, reading, cur
+
+        # the fast path: the harness hits and takes the truth at each sample time itself, the
+        # board running through many samples a run (Rig.batch_stops; None: take() each time)
+        stops = rig.batch_stops(t0, config.duration_s, list(hits), config.hit_duration_s, made)
 
         # the board runs on to the next sample while this one is written; closed on the way
         # out (a stop too), so the board has stopped before anything else uses it
-        with contextlib.closing(rig.each_period(t0, period, take)) as periods:
+        with contextlib.closing(rig.each_period(t0, period, take, stops)) as periods:
             for t, reading, cur in periods:
                 s = reading()
                 st = hand.latest

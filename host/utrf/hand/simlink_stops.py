@@ -1,0 +1,180 @@
+""":meth:`SimLink.sleep_each <utrf.hand.simlink.SimLink.sleep_each>` with the stops in C, in
+batches (:meth:`SimLink.stops_each`): the fast path beside the general one, the same samples.
+
+``sleep_each`` stops the board at every end for ``take()`` (Python reads the plant, hits it)
+and starts it again: thousands of stops a hold, the board standing still at each. Here the
+caller says beforehand what ``take()`` does to the plant (:class:`Stops`: the hits, each with
+its time) and what it reads (the plant's truth: the tips, the motors' currents), and the
+harness does it at each end (``EmulatedBoard.run_ahead_stops``), so the board runs through
+several ends in one run ahead while the caller works on the last batch's. A batch ends
+where the general path could decide otherwise: before the next heartbeat could fall due (its
+time hangs on the ack of the one before), at the end that may be the caller's last, and
+at :data:`~utrf.emulator.harness_abi.STOPS` ends. Every end is one a run ahead to it would
+reach, to the cycle (a test compares the two paths' holds byte for byte); where the general
+path would not run ahead (a plain sleep) or a run ends short (a crash, its marks full), that
+end is taken the general way.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable, Generator, Iterable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, TypeVar
+
+import numpy as np
+
+from utrf.emulator.board_types import EmulatorError
+from utrf.emulator.harness_abi import F_CPU_HZ, HITS, STOPS
+
+if TYPE_CHECKING:
+    from utrf.hand.simlink import SimLink
+
+T = TypeVar("T")
+#: how far past an exchange's end the MCU may stop (cycles): it ends at the first instruction
+#: boundary there, a few cycles on (an interrupt's entry at most); a stop past it is an error
+OVERSHOOT_BOUND = 1_000
+
+
+@dataclass
+class Stops:
+    """What ``take()`` does at each end, for the harness to do: ``hits`` (time from ``t0``,
+    body, site, world impulse N s, duration s; rising time) each applied at the first end
+    whose ``now - t0`` reaches its time; ``made(now, truth, hits)`` gives what ``take()``
+    would have (None: the end is the last), from the time, the truth the end recorded and
+    how many hits were applied there; an end whose ``now - t0`` passes ``last_s`` must be
+    its last."""
+
+    t0: float
+    hits: list[tuple[float, int, int, Any, float]]
+    last_s: float
+    made: Callable[[float, np.ndarray, int], Any]
+    applied: int = 0  # hits applied so far
+
+
+def stops_each(
+    link: SimLink, ends: Iterable[float], take: Callable[[], T | None], stops: Stops
+) -> Generator[T, None, None]:
+    """The batches; see the module."""
+    upcoming: deque[float] = deque()
+    it = iter(ends)
+
+    def peek(k: int) -> float | None:
+        while len(upcoming) <= k:
+            nxt = next(it, None)
+            if nxt is None:
+                return None
+            upcoming.append(nxt)
+        return upcoming[k]
+
+    board = link.board
+    while peek(0) is not None:
+        plan = _plan(link, peek, stops)
+        if plan is None:  # the general way, for this end
+            end = upcoming.popleft()
+            link._deliver_arrived()
+            link.sleep(end - link.now())
+            value = take()
+            if value is None:
+                return
+            yield value
+            continue
+        targets, send = plan
+        hits = stops.hits[stops.applied : stops.applied + HITS]
+        board.run_ahead_stops(targets, stops.t0, hits, send)
+        run = board.run_ahead_join()
+        cycles, truths, hit_stop = board.run_ahead_stops_done()
+        for cycle, target in zip(cycles, targets, strict=False):
+            if not 0 <= cycle - target <= OVERSHOOT_BOUND:  # the plan assumed it: say so
+                raise EmulatorError(
+                    f"a stop ended {cycle - target} cycles past its exchange's end (planned "
+                    f"within {OVERSHOOT_BOUND}): the batched samples may differ from sleep_each's"
+                )
+        data = board.read()
+        if link._heartbeat is not None and run.sent_at is not None:
+            link._engine.sent(link._heartbeat, run.sent_at)
+            link._heartbeat = None
+        # the bytes cut at the marks, each stop's share up to its cycle
+        chunks, at = [], 0
+        for n, t in run.marks:
+            chunks.append((data[at:n], t))
+            at = n
+        tail = (data[at:], link.now())
+        mark_cycles = [round(t * F_CPU_HZ) for _, t in run.marks]
+        j = 0
+        try:
+            for k, cycle in enumerate(cycles):
+                upcoming.popleft()
+                while j < len(chunks) and mark_cycles[j] <= cycle:
+                    link._arrived.append(chunks[j])
+                    j += 1
+                applied = sum(1 for s in hit_stop if s == k)
+                stops.applied += applied
+                value = stops.made(cycle / F_CPU_HZ, truths[k], applied)
+                if value is None:
+                    return
+                link._deliver_arrived()
+                yield value
+        finally:  # everything the run brought reaches the engine, a caller stopping early too
+            link._arrived += chunks[j:]
+            link._arrived.append(tail)
+            link._deliver_arrived()
+        if not run.done:  # short (a crash, the marks full): the next end the general way
+            end = upcoming.popleft()
+            link.sleep(end - link.now())
+            value = take()
+            if value is None:
+                return
+            yield value
+
+
+def _plan(
+    link: SimLink, peek: Callable[[int], float | None], stops: Stops
+) -> tuple[list[int], tuple[bytes, float] | None] | None:
+    """The next batch's stops (cycles) and its heartbeat, or None where the general path would
+    not run ahead to the next end."""
+    board, engine = link.board, link._engine
+    period = board.exchange_period
+    link._take_arrived()  # the heartbeat's due time counts every ack that came
+    due = engine.heartbeat_due()
+    hb = engine.heartbeat_period_s
+    plain = min(hb / 2, link.pump_interval_s) if hb is not None else None
+    bound = due + hb if due is not None and hb is not None else None
+    now = link.now()
+    lo = hi = now  # where the MCU stands at the stop before (known exactly at the first)
+    plant = board.plant_cycle
+    targets: list[int] = []
+    k = 0
+    while len(targets) < STOPS:
+        end = peek(k)
+        if end is None:
+            break
+        counts = set()
+        for at in (lo, hi):
+            seconds = end - at
+            if seconds < period / 2 or (plain is not None and seconds > plain):
+                counts.add(None)  # sleep_each would not run ahead here
+            else:
+                counts.add(max(round(seconds / period), 1))
+        if len(counts) != 1 or None in counts:
+            break
+        (n,) = counts
+        target = board.exchanges_after(plant, n * period)
+        if bound is not None and not target / F_CPU_HZ < bound:
+            break  # the next heartbeat may fall due here: its time is not known yet
+        targets.append(target)
+        k += 1
+        if (target + OVERSHOOT_BOUND) / F_CPU_HZ - stops.t0 > stops.last_s:
+            break  # this end may be the last: nothing runs past it
+        plant = target
+        lo, hi = target / F_CPU_HZ, (target + OVERSHOOT_BOUND) / F_CPU_HZ
+    if not targets:
+        return None
+    send = None
+    last = targets[-1] / F_CPU_HZ
+    if due is not None and due <= last:  # goes out within the batch, where sleep_each sends it
+        if link._heartbeat is None:
+            link._heartbeat = engine.heartbeat(max(due, now))
+        if link._heartbeat is not None:
+            send = (link._heartbeat.data, due)
+    return targets, send
