@@ -143,6 +143,8 @@ def _plan(
     now = link.now()
     lo = hi = now  # where the MCU stands at the stop before (known exactly at the first)
     plant = board.plant_cycle
+    # the first hit the harness is not given: the batch ends before it could fall due
+    unheld = stops.hits[stops.applied + HITS][0] if len(stops.hits) > stops.applied + HITS else None
     targets: list[int] = []
     k = 0
     while len(targets) < STOPS:
@@ -162,6 +164,8 @@ def _plan(
         target = board.exchanges_after(plant, n * period)
         if bound is not None and not target / F_CPU_HZ < bound:
             break  # the next heartbeat may fall due here: its time is not known yet
+        if unheld is not None and (target + OVERSHOOT_BOUND) / F_CPU_HZ - stops.t0 >= unheld:
+            break  # a hit beyond the harness's list may fall due here
         targets.append(target)
         k += 1
         if (target + OVERSHOOT_BOUND) / F_CPU_HZ - stops.t0 > stops.last_s:
