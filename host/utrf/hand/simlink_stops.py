@@ -128,6 +128,13 @@ def stops_each(
             yield value
 
 
+def _exchanges(seconds: float, period: float, plain: float | None) -> int | None:
+    """The exchanges ``sleep_each`` runs ahead for ``seconds`` (None: it sleeps plainly)."""
+    if seconds < period / 2 or (plain is not None and seconds > plain):
+        return None
+    return max(round(seconds / period), 1)
+
+
 def _plan(
     link: SimLink, peek: Callable[[int], float | None], stops: Stops
 ) -> tuple[list[int], tuple[bytes, float] | None] | None:
@@ -151,16 +158,10 @@ def _plan(
         end = peek(k)
         if end is None:
             break
-        counts = set()
-        for at in (lo, hi):
-            seconds = end - at
-            if seconds < period / 2 or (plain is not None and seconds > plain):
-                counts.add(None)  # sleep_each would not run ahead here
-            else:
-                counts.add(max(round(seconds / period), 1))
-        if len(counts) != 1 or None in counts:
-            break
-        (n,) = counts
+        counts = {_exchanges(end - at, period, plain) for at in (lo, hi)}
+        n = counts.pop()
+        if counts or n is None:  # the MCU's few cycles past the stop could change it, or
+            break  # sleep_each would not run ahead here
         target = board.exchanges_after(plant, n * period)
         if bound is not None and not target / F_CPU_HZ < bound:
             break  # the next heartbeat may fall due here: its time is not known yet
