@@ -237,11 +237,15 @@ class SimLink(EngineDriver):
             self._items += self._engine.receive(data, t)
         self._arrived = []
 
-    def _deliver_arrived(self) -> None:
+    def _deliver_arrived(self, until: float | None = None) -> None:
         """The callbacks, each message at its own time: the clock reads its arrival while
-        they run (the board may be ahead by then)."""
+        they run (the board may be ahead by then). ``until``: only those that arrived by then
+        (s); the rest wait."""
         self._take_arrived()
         items, self._items = self._items, []
+        if until is not None:
+            n = next((i for i, item in enumerate(items) if item.received_s > until), len(items))
+            items, self._items = items[:n], items[n:]
         try:
             for item in items:
                 self._at = item.received_s

@@ -52,10 +52,20 @@ class Stops:
     applied: int = 0  # hits applied so far
 
 
+@dataclass
+class _Batch:
+    """A run ahead under way through ``ends`` (their ``targets``)."""
+
+    ends: list[float]
+    targets: list[int]
+
+
 def stops_each(
     link: SimLink, ends: Iterable[float], take: Callable[[], T | None], stops: Stops
 ) -> Generator[T, None, None]:
-    """The batches; see the module."""
+    """The batches; see the module. Each batch's samples are made and yielded while the next
+    batch runs (the engine takes a batch's frames first: the next one's heartbeat hangs on
+    them), as ``sleep_each`` works on a sample while the board runs to the next."""
     upcoming: deque[float] = deque()
     it = iter(ends)
 
@@ -67,65 +77,88 @@ def stops_each(
             upcoming.append(nxt)
         return upcoming[k]
 
-    board = link.board
-    while peek(0) is not None:
-        plan = _plan(link, peek, stops)
-        if plan is None:  # the general way, for this end
-            end = upcoming.popleft()
-            link._deliver_arrived()
-            link.sleep(end - link.now())
-            value = take()
-            if value is None:
-                return
-            yield value
-            continue
-        targets, send = plan
-        hits = stops.hits[stops.applied : stops.applied + HITS]
-        board.run_ahead_stops(targets, stops.t0, hits, send)
-        run = board.run_ahead_join()
-        cycles, truths, hit_stop = board.run_ahead_stops_done()
-        for cycle, target in zip(cycles, targets, strict=False):
-            if not 0 <= cycle - target <= OVERSHOOT_BOUND:  # the plan assumed it: say so
-                raise EmulatorError(
-                    f"a stop ended {cycle - target} cycles past its exchange's end (planned "
-                    f"within {OVERSHOOT_BOUND}): the batched samples may differ from sleep_each's"
-                )
-        data = board.read()
-        if link._heartbeat is not None and run.sent_at is not None:
-            link._engine.sent(link._heartbeat, run.sent_at)
-            link._heartbeat = None
-        # the bytes cut at the marks, each stop's share up to its cycle
-        chunks, at = [], 0
-        for n, t in run.marks:
-            chunks.append((data[at:n], t))
-            at = n
-        tail = (data[at:], link.now())
-        mark_cycles = [round(t * F_CPU_HZ) for _, t in run.marks]
-        j = 0
-        try:
-            for k, cycle in enumerate(cycles):
-                upcoming.popleft()
-                while j < len(chunks) and mark_cycles[j] <= cycle:
-                    link._arrived.append(chunks[j])
-                    j += 1
-                applied = sum(1 for s in hit_stop if s == k)
-                stops.applied += applied
-                value = stops.made(cycle / F_CPU_HZ, truths[k], applied)
+    batch = _start(link, peek, upcoming, stops)
+    try:
+        while batch is not None or peek(0) is not None:
+            if batch is None:  # the general way, for this end
+                end = upcoming.popleft()
+                link._deliver_arrived()
+                link.sleep(end - link.now())
+                value = take()
                 if value is None:
                     return
-                link._deliver_arrived()
                 yield value
-        finally:  # everything the run brought reaches the engine, a caller stopping early too
-            link._arrived += chunks[j:]
-            link._arrived.append(tail)
+                batch = _start(link, peek, upcoming, stops)
+                continue
+            cycles, truths, applied, done = _join(link, batch, stops)
+            for end in reversed(batch.ends[len(cycles) :]):  # not reached: taken again
+                upcoming.appendleft(end)
+            last = bool(cycles) and cycles[-1] / F_CPU_HZ - stops.t0 > stops.last_s
+            batch = _start(link, peek, upcoming, stops) if done and not last else None
+            for k, cycle in enumerate(cycles):
+                now = cycle / F_CPU_HZ
+                link._deliver_arrived(now)
+                value = stops.made(now, truths[k], applied[k])
+                if value is None:
+                    return
+                yield value
             link._deliver_arrived()
-        if not run.done:  # short (a crash, the marks full): the next end the general way
-            end = upcoming.popleft()
-            link.sleep(end - link.now())
-            value = take()
-            if value is None:
-                return
-            yield value
+            if not done:  # short (a crash, the marks full): the next end the general way
+                end = upcoming.popleft()
+                link.sleep(end - link.now())
+                value = take()
+                if value is None:
+                    return
+                yield value
+                batch = _start(link, peek, upcoming, stops)
+    finally:  # what the board ran reaches the engine and the callbacks, a caller stopping too
+        if batch is not None:
+            _join(link, batch, stops)
+        link._deliver_arrived()
+
+
+def _start(
+    link: SimLink, peek: Callable[[int], float | None], upcoming: deque[float], stops: Stops
+) -> _Batch | None:
+    """The next batch started on the board (its ends taken off ``upcoming``), or None where
+    the general path would not run ahead to the next end."""
+    plan = _plan(link, peek, stops)
+    if plan is None:
+        return None
+    targets, send = plan
+    hits = stops.hits[stops.applied : stops.applied + HITS]
+    link.board.run_ahead_stops(targets, stops.t0, hits, send)
+    return _Batch([upcoming.popleft() for _ in targets], targets)
+
+
+def _join(
+    link: SimLink, batch: _Batch, stops: Stops
+) -> tuple[list[int], np.ndarray, list[int], bool]:
+    """Wait for a batch: its stops' cycles, truths and hits applied at each (counted in
+    ``stops``), whether it reached its end. Its frames are taken by the engine, cut at the
+    marks and stamped there, and its heartbeat counted."""
+    board = link.board
+    run = board.run_ahead_join()
+    cycles, truths, hit_stop = board.run_ahead_stops_done()
+    data = board.read()
+    for cycle, target in zip(cycles, batch.targets, strict=False):
+        if not 0 <= cycle - target <= OVERSHOOT_BOUND:  # the plan assumed it: say so
+            raise EmulatorError(
+                f"a stop ended {cycle - target} cycles past its exchange's end (planned "
+                f"within {OVERSHOOT_BOUND}): the batched samples may differ from sleep_each's"
+            )
+    if link._heartbeat is not None and run.sent_at is not None:
+        link._engine.sent(link._heartbeat, run.sent_at)
+        link._heartbeat = None
+    at = 0
+    for n, t in run.marks:
+        link._arrived.append((data[at:n], t))
+        at = n
+    link._arrived.append((data[at:], link.now()))
+    link._take_arrived()
+    applied = [sum(1 for s in hit_stop if s == k) for k in range(len(cycles))]
+    stops.applied += sum(applied)
+    return cycles, truths, applied, run.done
 
 
 def _exchanges(seconds: float, period: float, plain: float | None) -> int | None:
