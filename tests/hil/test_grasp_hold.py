@@ -121,9 +121,10 @@ def test_disturbance_detection_on_a_known_trace() -> None:
 
 
 def _hold(
-    tmp: Path, ahead: bool, batched: bool = False
+    tmp: Path, ahead: bool, batched: bool = False, **config_kw: float
 ) -> tuple[dict[str, bytes], dict[str, int], dict[str, int]]:
-    config = gh.GraspHoldConfig(duration_s=3.0, hits=1, seed=2, sample_hz=50.0)
+    kw: dict = {"duration_s": 3.0, "hits": 1, "seed": 2, "sample_hz": 50.0, **config_kw}
+    config = gh.GraspHoldConfig(**kw)
     rig = open_emulated(seed=2, tracked_finger=1, truth=EmulatedTruth(actuator=None))
     rig.ahead, rig.batched = ahead, batched
     board = rig.board
@@ -171,3 +172,22 @@ def test_the_board_running_ahead_takes_the_same_hold_to_the_bit(
         assert stats_a == stats_p and stats_a["rx_host_bytes"] > 0
         stats_p["sleep_cycles"] = slept_p
         assert rx_a == rx_p
+
+
+@pytest.mark.slow
+def test_more_hits_a_batch_than_the_harness_takes_come_out_the_same(
+    firmware_elf: Path, tmp_path: Path
+) -> None:
+    """400 light hits in 3 s (all within 0.4 s of it, one a millisecond): a batch ends before
+    the first hit beyond the 16 the harness takes a run could fall due, so there the samples
+    are taken the general way, and the hold is sleep_each's to the bit (samples, every hit,
+    telemetry)."""
+    light = {"hits": 400, "hit_impulse_n_s": 0.002}
+    plain, stats_p, _ = _hold(tmp_path / "ahead", True, False, **light)
+    batched, stats_b, _ = _hold(tmp_path / "batched", True, True, **light)
+    assert batched["hits.csv"].count(b"\n") == 401 and batched == plain
+    # batches before and after the hits, the general way among them
+    assert stats_b["batched_runs"] > 10 and 100 < stats_b["batched_stops"] < 140
+    for st in (stats_p, stats_b):
+        st.pop("batched_runs"), st.pop("batched_stops"), st.pop("sleep_cycles")
+    assert stats_b == stats_p
