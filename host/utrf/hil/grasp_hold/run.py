@@ -11,7 +11,12 @@ from typing import Any
 import numpy as np
 
 from utrf.datalog import CsvLog
-from utrf.hil.grasp_hold.config import FINGER_FIELDS, HIT_COLUMNS, GraspHoldConfig, sample_columns
+from utrf.hil.grasp_hold.config import (
+    HIT_COLUMNS,
+    GraspHoldConfig,
+    sample_columns,
+    sample_line,
+)
 from utrf.hil.rig import Rig
 from utrf.hil.runs import ProgressFn, RunError, RunStopped, write_json
 from utrf.models import kinematics
@@ -105,22 +110,8 @@ def run(
             for t, reading, cur in periods:
                 s = reading()
                 st = hand.latest
-                row: list[object] = [
-                    f"{t:.6f}",
-                    "baseline" if t < config.baseline_s else "hold",
-                    *(f"{v:.7f}" for v in s.position_m),
-                    int(s.visible),
-                    s.frame,
-                ]
-                for i in range(len(names)):
-                    if st is None:
-                        row += ["nan"] * len(FINGER_FIELDS)
-                        continue
-                    fs = st.fingers[i]
-                    row += [f"{fs.theta2:.5f}", f"{fs.target:.5f}", f"{fs.duty_a:.3f}",
-                            f"{fs.duty_b:.3f}", fs.mode.name, int(fs.faults),
-                            f"{cur[i, 0]:.4f}"]  # fmt: skip
-                samples.write(row)
+                phase = "baseline" if t < config.baseline_s else "hold"
+                samples.write_line(sample_line(t, phase, s, st, cur[: len(names)]))
                 new = hand.faults_seen[seen:]
                 if new:
                     raise RunStopped(f"grasp hold at {t:.2f} s: {new[0]}")
