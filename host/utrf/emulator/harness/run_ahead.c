@@ -97,7 +97,14 @@ static int ahead_run(utrf_sim_t *s, struct utrf_ahead *a)
         return utrf_sim_run_plant_until(s, a->target, a->period, a->wake);
     int status = utrf_sim_status(s);
     for (uint32_t k = 0; k < s->stops_n; k++) {
+        /* between two stops the plant's thread may keep spinning: the next stretch follows */
+        s->lock_keep_plant = k + 1 < s->stops_n;
         int now = utrf_sim_run_plant_until(s, s->stop_target[k], a->period, a->wake);
+        s->lock_keep_plant = 0;
+        if (now != status || s->avr->cycle < s->stop_target[k]) {
+            if (s->plant_thread && s->plant_threads == 2)
+                plant_thread_park(s); /* the run ends here, short */
+        }
         if (s->avr->cycle < s->stop_target[k])
             return now;
         ahead_stop(s, k);
