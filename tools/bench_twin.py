@@ -149,7 +149,22 @@ def engine_threads(seconds: float) -> dict:
             seen["twin_threads"] = self.plant_threads
         return close(self, *args, **kwargs)
 
+    runs = {"ahead": 0, "stops": 0}  # the board's runs ahead of the client, the stops in them
+    ahead, batch = emulated.EmulatedBoard.run_ahead, emulated.EmulatedBoard.run_ahead_stops
+
+    def counted_ahead(self: Any, *args: Any, **kwargs: Any) -> Any:
+        runs["ahead"] += 1
+        runs["stops"] += 1
+        return ahead(self, *args, **kwargs)
+
+    def counted_batch(self: Any, targets: Any, *args: Any, **kwargs: Any) -> Any:
+        runs["ahead"] += 1
+        runs["stops"] += len(targets)
+        return batch(self, targets, *args, **kwargs)
+
     emulated.EmulatedBoard.close = taking  # type: ignore[method-assign]
+    emulated.EmulatedBoard.run_ahead = counted_ahead  # type: ignore[method-assign]
+    emulated.EmulatedBoard.run_ahead_stops = counted_batch  # type: ignore[method-assign]
     out = Path(tempfile.mkdtemp(prefix="bench-twin-"))
     wall0 = time.perf_counter()
     try:
@@ -157,7 +172,10 @@ def engine_threads(seconds: float) -> dict:
                   "--out", str(out / "run"), "--quiet"])  # fmt: skip
     finally:
         emulated.EmulatedBoard.close = close  # type: ignore[method-assign]
+        emulated.EmulatedBoard.run_ahead = ahead  # type: ignore[method-assign]
+        emulated.EmulatedBoard.run_ahead_stops = batch  # type: ignore[method-assign]
         shutil.rmtree(out, ignore_errors=True)
+    seen["runs_ahead"], seen["samples"] = runs["ahead"], runs["stops"]
     if not seen or rc not in (0, 1):  # 1: the hold ran and reported
         raise RuntimeError(f"the hold by thread did not run (exit {rc})")
     return seen
@@ -270,6 +288,11 @@ def report(
     if th.get("inline") is not None and th["twin_threads"] == 2:
         share = 100 * th["inline"] / max(th["periods"], 1)
         by_thread += f"; the MCU's thread stepped the plant itself in {share:.0f} % of the periods"
+    if th.get("runs_ahead"):
+        by_thread += (
+            f"; the board ran ahead of the client {th['runs_ahead']} times through its "
+            f"{th['samples']} samples ({th['samples'] / th['runs_ahead']:.1f} a run)"
+        )
 
     lines = [
         BEGIN,

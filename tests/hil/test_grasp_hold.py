@@ -120,14 +120,21 @@ def test_disturbance_detection_on_a_known_trace() -> None:
     assert ev[1]["recovery_s"] is None
 
 
-def _hold(tmp: Path, ahead: bool) -> tuple[dict[str, bytes], dict[str, int], dict[str, int]]:
-    config = gh.GraspHoldConfig(duration_s=3.0, hits=1, seed=2, sample_hz=50.0)
+def _hold(
+    tmp: Path, ahead: bool, batched: bool = False, **config_kw: float
+) -> tuple[dict[str, bytes], dict[str, int], dict[str, int]]:
+    kw: dict = {"duration_s": 3.0, "hits": 1, "seed": 2, "sample_hz": 50.0, **config_kw}
+    config = gh.GraspHoldConfig(**kw)
     rig = open_emulated(seed=2, tracked_finger=1, truth=EmulatedTruth(actuator=None))
-    rig.ahead = ahead
+    rig.ahead, rig.batched = ahead, batched
+    board = rig.board
+    runs: list[int] = []
+    batch = board.run_ahead_stops
+    board.run_ahead_stops = lambda targets, *a: (runs.append(len(targets)), batch(targets, *a))
     try:
         run.run(rig, config, tmp, progress=lambda _s: None)
-        board = rig.board
         stats, rx = dict(board.stats), board.rx_timing()  # every byte's arrival, to the cycle
+        stats["batched_runs"], stats["batched_stops"] = len(runs), sum(runs)
         stats["cycle"] = round(board.sim_time * 16e6)
     finally:
         rig.close()
@@ -143,13 +150,21 @@ def test_the_board_running_ahead_takes_the_same_hold_to_the_bit(
     while the last is written (SimLink.sleep_each), and sleeping to each sample: the same
     samples, hits, telemetry (each frame stamped where it was noticed) and heartbeats (the
     bytes the board took, at the same cycles), to the bit; also with the plant on a thread
-    of its own beside the board's."""
+    of its own beside the board's, and the fast path: the harness hitting and taking the
+    truth at each sample itself, the board running through several a run
+    (SimLink.stops_each)."""
     plain, stats_p, rx_p = _hold(tmp_path / "plain", False)
-    for threads in ("1", "2"):
+    assert stats_p.pop("batched_runs") == 0 and stats_p.pop("batched_stops") == 0
+    for threads, batched in (("1", False), ("2", False), ("1", True), ("2", True)):
         monkeypatch.setenv("UTRF_TWIN_THREADS", threads)
-        ahead, stats_a, rx_a = _hold(tmp_path / f"ahead{threads}", True)
+        ahead, stats_a, rx_a = _hold(tmp_path / f"ahead{threads}{batched}", True, batched)
         assert ahead["samples.csv"].count(b"\n") > 140 and ahead["hits.csv"].count(b"\n") == 2
         assert ahead == plain
+        runs, stops = stats_a.pop("batched_runs"), stats_a.pop("batched_stops")
+        if batched:  # the board ran through about 5 samples a run (a heartbeat's 0.1 s)
+            assert stops >= 145 and runs < stops / 3
+        else:
+            assert runs == 0
         # the sleep counter adds a cycle at each SLEEP entry: a run ahead entered 9-14 fewer of
         # 57.7 M cycles in 2 of about 20 runs, everything else the same (open: docs/mujoco.md)
         slept_a, slept_p = stats_a.pop("sleep_cycles"), stats_p.pop("sleep_cycles")
@@ -157,3 +172,22 @@ def test_the_board_running_ahead_takes_the_same_hold_to_the_bit(
         assert stats_a == stats_p and stats_a["rx_host_bytes"] > 0
         stats_p["sleep_cycles"] = slept_p
         assert rx_a == rx_p
+
+
+@pytest.mark.slow
+def test_more_hits_a_batch_than_the_harness_takes_come_out_the_same(
+    firmware_elf: Path, tmp_path: Path
+) -> None:
+    """400 light hits in 3 s (all within 0.4 s of it, one a millisecond): a batch ends before
+    the first hit beyond the 16 the harness takes a run could fall due, so there the samples
+    are taken the general way, and the hold is sleep_each's to the bit (samples, every hit,
+    telemetry)."""
+    light = {"hits": 400, "hit_impulse_n_s": 0.002}
+    plain, stats_p, _ = _hold(tmp_path / "ahead", True, False, **light)
+    batched, stats_b, _ = _hold(tmp_path / "batched", True, True, **light)
+    assert batched["hits.csv"].count(b"\n") == 401 and batched == plain
+    # batches before and after the hits, the general way among them
+    assert stats_b["batched_runs"] > 10 and 100 < stats_b["batched_stops"] < 140
+    for st in (stats_p, stats_b):
+        st.pop("batched_runs"), st.pop("batched_stops"), st.pop("sleep_cycles")
+    assert stats_b == stats_p

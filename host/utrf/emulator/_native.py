@@ -10,6 +10,7 @@ from __future__ import annotations
 import ctypes
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -19,6 +20,7 @@ from utrf.emulator.harness_abi import (
     F_CPU_HZ,
     FINGERS,
     FRAME_LOG,
+    HITS,
     MARKS,
     MJ_LOADS,
     MJ_STATE_FIELDS,
@@ -30,8 +32,10 @@ from utrf.emulator.harness_abi import (
     RX_TIMING_FIELDS,
     STAT_FIELDS,
     STATUS_NAMES,
+    STOPS,
     TO_BOARD,
     TO_HOST,
+    TRUTH,
     FingerRegsC,
     HarnessError,
     LineFaultsC,
@@ -39,6 +43,7 @@ from utrf.emulator.harness_abi import (
     MjPlantStateC,
     ProfileC,
     RxTimingC,
+    SimHitC,
     StatsC,
     library_path,
     load_library,
@@ -126,6 +131,12 @@ class NativeMjPlant(_NativeStepper):
         rc = self._lib.utrf_mjplant_hit(self.handle, body, site, *map(float, impulse), duration)
         self._check_hit(rc, f"body {body}, duration {duration}")
 
+    def truth_sites(self, sites: list[int]) -> None:
+        """The sites whose world positions a run ahead's stops record (at most 5)."""
+        arr = (ctypes.c_int32 * max(len(sites), 1))(*sites)
+        if self._lib.utrf_mjplant_truth_sites(self.handle, arr, len(sites)):
+            raise HarnessError(f"at most {FINGERS} truth sites, got {len(sites)}")
+
 
 class NativeBoard:
     """One simavr board. ``pins`` and ``adc_volts`` are numpy views of the harness's memory."""
@@ -187,6 +198,35 @@ class NativeBoard:
         MCU's cycle at that period's end."""
         n = self._lib.utrf_sim_ahead_marks(self.handle, self._marks[0], self._marks[1], MARKS)
         return list(self._marks[0][:n]), list(self._marks[1][:n])
+
+    def ahead_stops(
+        self, targets: list[int], t0: float, hits: list[tuple[float, int, int, Any, float]]
+    ) -> None:
+        """Stops for the next run ahead (its last target the run's): at each, the hits due
+        ((at, body, site, world impulse, duration); due at ``cycle / F_CPU_HZ - t0 >= at``)
+        are applied and the plant's truth recorded (``ahead_stops_done``)."""
+        if len(targets) > STOPS or len(hits) > HITS:
+            raise HarnessError(f"at most {STOPS} stops and {HITS} hits a run, got "
+                               f"{len(targets)} and {len(hits)}")  # fmt: skip
+        cycles = (ctypes.c_uint64 * max(len(targets), 1))(*targets)
+        chits = (SimHitC * max(len(hits), 1))()
+        for c, (at, body, site, imp, duration) in zip(chits, hits, strict=False):
+            c.at, c.body, c.site, c.duration = at, body, site, duration
+            c.impulse[:] = [float(x) for x in imp]
+        if self._lib.utrf_sim_ahead_stops(self.handle, cycles, len(targets), t0, chits, len(hits)):
+            raise HarnessError("stops not rising, or a run ahead is under way")
+        self._stop_hits = len(hits)
+
+    def ahead_stops_done(self) -> tuple[list[int], np.ndarray, list[int]]:
+        """After the join: the stops' MCU cycles, their truths (n, TRUTH) and each hit's stop
+        (-1: not applied)."""
+        cycles = (ctypes.c_uint64 * STOPS)()
+        truth = np.zeros((STOPS, TRUTH))
+        at = (ctypes.c_int32 * HITS)()
+        n = self._lib.utrf_sim_ahead_stops_done(
+            self.handle, cycles, truth.ctypes.data_as(_DP), at, STOPS
+        )
+        return list(cycles[:n]), truth[:n], list(at[: getattr(self, "_stop_hits", 0)])
 
     def ahead_send(self, data: bytes, at_s: float) -> None:
         """Write ``data`` to UART0 at the first period's end whose time reaches ``at_s``."""

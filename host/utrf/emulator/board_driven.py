@@ -132,6 +132,52 @@ class BoardDriven:
     def _exchanges_end(self, seconds: float) -> int:
         return self._exchanges_on(-(-round(seconds * F_CPU_HZ) // self._period_cycles))
 
+    def exchanges_after(self, plant_cycle: int, seconds: float) -> int:
+        """The cycle a run of ``seconds`` from a stop at ``plant_cycle`` (the plant's clock)
+        ends at, as :meth:`exchanges_end` computes it from there: a run ahead's later stops."""
+        return plant_cycle + -(-round(seconds * F_CPU_HZ) // self._period_cycles) * (
+            self._period_cycles
+        )
+
+    @property
+    def plant_cycle(self) -> int:
+        """The plant's clock (cycles): where the next exchange starts."""
+        return int(self._native.plant_cycle)
+
+    def run_ahead_stops(
+        self,
+        targets: list[int],
+        t0: float,
+        hits: list[tuple[float, int, int, Any, float]],
+        send: tuple[bytes, float] | None = None,
+    ) -> None:
+        """:meth:`run_ahead` through stops at ``targets`` (cycles, rising; each where a run
+        ahead to it would end, the last the run's end): at each the hits due are applied
+        (``(at, body, site, world impulse, duration)``, due once ``cycle / F_CPU_HZ - t0``
+        reaches ``at``) and the plant's truth recorded (:meth:`run_ahead_stops_done`)."""
+        if self.realtime or not self._capture:
+            raise EmulatorError("run_ahead needs realtime=False and capture=True")
+        if not targets:
+            raise EmulatorError("a run ahead with stops needs at least one")
+        self._lock.__enter__()  # held until the join: no other thread touches the board
+        try:
+            native = self._board()
+            native.ahead_stops(targets, t0, hits)
+            if send is not None:
+                native.ahead_send(send[0], send[1])
+            native.ahead_start(targets[-1], self._period_cycles, 0)
+        except BaseException:
+            self._lock.__exit__(None, None, None)
+            raise
+        self._ahead = targets[-1]
+        self._ahead_t0 = time.perf_counter()
+
+    def run_ahead_stops_done(self) -> tuple[list[int], Any, list[int]]:
+        """After the join: the stops reached (the MCU's cycles), their truths (n, 32: the tip
+        sites' world positions (15), the motors' currents (10)) and each hit's stop (-1: not
+        applied)."""
+        return self._native.ahead_stops_done()
+
     def run_ahead(self, seconds: float, send: tuple[bytes, float] | None = None) -> None:
         """Driven: start running ``seconds`` of simulated time in whole exchanges (the same
         end as :meth:`run_until_output`'s) on the harness's own thread, and return at once:

@@ -15,7 +15,7 @@ from typing import Any
 
 from utrf import artifacts
 
-ABI = 18
+ABI = 19
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -78,6 +78,9 @@ PROFILE_FIELDS = (
 FUNCTION_PROFILES = 3  # function slots; profile(which): 0 the vector, 1 + k slot k
 FRAME_LOG = 4096
 MARKS = 256  # UTRF_SIM_MARKS: the periods a run ahead marks at most
+STOPS = 64  # UTRF_SIM_STOPS: the stops one run ahead passes through at most
+HITS = 16  # UTRF_SIM_HITS: the hits one run ahead's stops apply at most
+TRUTH = 32  # UTRF_SIM_TRUTH: the doubles a stop records of the plant
 MOTOR_REG_FIELDS = ("com", "ocr", "icr", "wgm", "cs", "in1", "in2", "pwm_pin", "outputs")
 
 
@@ -95,6 +98,18 @@ class RxTimingC(ctypes.Structure):
     """``utrf_sim_rx_timing_t``: the receive path's waits, one per ``RX_TIMING_FIELDS``."""
 
     _fields_ = [(name, ctypes.c_uint64) for name in RX_TIMING_FIELDS]
+
+
+class SimHitC(ctypes.Structure):
+    """``utrf_sim_hit_t``: a hit a run ahead's stops apply at its time."""
+
+    _fields_ = [
+        ("at", ctypes.c_double),
+        ("body", ctypes.c_int32),
+        ("site", ctypes.c_int32),
+        ("impulse", ctypes.c_double * 3),
+        ("duration", ctypes.c_double),
+    ]
 
 
 class LineFaultsC(ctypes.Structure):
@@ -257,6 +272,7 @@ def load_library() -> ctypes.CDLL:
         )
     p, u8p = ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint8)
     u64p = ctypes.POINTER(ctypes.c_uint64)
+    _dp = ctypes.POINTER(ctypes.c_double)
     sigs: dict[str, tuple[Any, list[Any]]] = {
         "utrf_sim_open": (p, [ctypes.c_char_p, ctypes.c_uint64, ctypes.c_char_p, ctypes.c_size_t]),
         "utrf_sim_close": (None, [p]),
@@ -353,6 +369,18 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_ahead_marks": (ctypes.c_size_t, [p, u64p, u64p, ctypes.c_size_t]),
         "utrf_sim_ahead_send": (ctypes.c_int, [p, u8p, ctypes.c_size_t, ctypes.c_double]),
         "utrf_sim_ahead_sent": (ctypes.c_uint64, [p, ctypes.POINTER(ctypes.c_size_t)]),
+        "utrf_sim_ahead_stops": (
+            ctypes.c_int,
+            [p, u64p, ctypes.c_size_t, ctypes.c_double, ctypes.POINTER(SimHitC), ctypes.c_size_t],
+        ),
+        "utrf_sim_ahead_stops_done": (
+            ctypes.c_size_t,
+            [p, u64p, _dp, ctypes.POINTER(ctypes.c_int32), ctypes.c_size_t],
+        ),
+        "utrf_mjplant_truth_sites": (
+            ctypes.c_int,
+            [p, ctypes.POINTER(ctypes.c_int32), ctypes.c_int],
+        ),
     }
     for name, (restype, argtypes) in sigs.items():
         fn = getattr(lib, name)

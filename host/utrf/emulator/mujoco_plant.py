@@ -243,6 +243,7 @@ class MujocoPlant(_FingerPlant):
         self._native = NativeMjPlant(
             libmujoco_path(), m._address, self.data._address, self._c_params(), seed
         )
+        self._native.truth_sites(self._tip_site)  # what a run ahead's stops record: the tips
         st = self._native.state
         self.current, self.drive_duty = st["current"], st["drive_duty"]
         self.encoder_shift = st["encoder_shift"]
@@ -322,7 +323,11 @@ class MujocoPlant(_FingerPlant):
     @property
     def tip(self) -> np.ndarray:
         """Fingertips in each finger's frame (m), (5, 2)."""
-        rel = self.data.site_xpos[self._tip_site] - self._origins
+        return self.tip_from(self.data.site_xpos[self._tip_site])
+
+    def tip_from(self, tip_xpos: np.ndarray) -> np.ndarray:
+        """:attr:`tip` from the tip sites' world positions (5, 3) (a run ahead's stop's truth)."""
+        rel = tip_xpos - self._origins
         return np.einsum("fji,fj->fi", self._rots[:, :, :2], rel)
 
     @property
@@ -433,13 +438,19 @@ class MujocoPlant(_FingerPlant):
 
     def hit(self, finger: int, impulse_ns: tuple[float, float], duration_s: float = 5e-3) -> None:
         """A hammer hit at the fingertip: (Jx, Jy) N s in the finger frame over ``duration_s``."""
+        self._native.hit(*self.hit_args(finger, impulse_ns, duration_s))
+
+    def hit_args(
+        self, finger: int, impulse_ns: tuple[float, float], duration_s: float = 5e-3
+    ) -> tuple[int, int, np.ndarray, float]:
+        """A tip hit as the C plant takes it: body, site, world impulse (N s), duration (s)."""
         f = _finger_index(finger)
         jv = _force_vector(impulse_ns, "impulse")
         if not (
             isinstance(duration_s, int | float) and math.isfinite(duration_s) and duration_s > 0
         ):
             raise PlantError(f"a hit's duration must be > 0 s, got {duration_s!r}")
-        self._native.hit(self._link3[f], self._tip_site[f], self._world(f, jv), float(duration_s))
+        return self._link3[f], self._tip_site[f], self._world(f, jv), float(duration_s)
 
     # -- the object -------------------------------------------------------------------------------
     def _object_body(self) -> int:

@@ -43,6 +43,7 @@ from utrf.protocol.errors import DisconnectedError
 
 if TYPE_CHECKING:
     from utrf.emulator import EmulatedBoard
+    from utrf.hand.simlink_stops import Stops
 
 R = TypeVar("R", bound=Message)
 T = TypeVar("T")
@@ -168,6 +169,16 @@ class SimLink(EngineDriver):
                 self._join_ahead(None)
             self._deliver_arrived()
 
+    def stops_each(
+        self, ends: Iterable[float], take: Callable[[], T | None], stops: Stops
+    ) -> Generator[T, None, None]:
+        """:meth:`sleep_each` with what ``take()`` does to the plant done by the harness at
+        each end (``stops``), the board running through many ends a batch: the same samples,
+        fewer stops (:mod:`utrf.hand.simlink_stops`)."""
+        from utrf.hand.simlink_stops import stops_each
+
+        return stops_each(self, ends, take, stops)
+
     def _ahead(self, end: float) -> bool:
         """Start the board running to ``end`` as :meth:`sleep` would run it; False when it is
         slept plainly (what arrived is delivered first) or no exchange is due."""
@@ -226,11 +237,15 @@ class SimLink(EngineDriver):
             self._items += self._engine.receive(data, t)
         self._arrived = []
 
-    def _deliver_arrived(self) -> None:
+    def _deliver_arrived(self, until: float | None = None) -> None:
         """The callbacks, each message at its own time: the clock reads its arrival while
-        they run (the board may be ahead by then)."""
+        they run (the board may be ahead by then). ``until``: only those that arrived by then
+        (s); the rest wait."""
         self._take_arrived()
         items, self._items = self._items, []
+        if until is not None:
+            n = next((i for i, item in enumerate(items) if item.received_s > until), len(items))
+            items, self._items = items[:n], items[n:]
         try:
             for item in items:
                 self._at = item.received_s

@@ -29,12 +29,21 @@ import itertools
 import sys
 from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
-from typing import Any, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import numpy as np
 
 from utrf.emulator.plant_params import EncoderParams, MotorParams, PlantParams
-from utrf.hil.tracker import Registration, SimulatedTracker, Tracker, rotation_from_euler
+from utrf.hil.tracker import (
+    Registration,
+    SimulatedTracker,
+    Tracker,
+    TrackerSample,
+    rotation_from_euler,
+)
+
+if TYPE_CHECKING:
+    from utrf.hand.simlink_stops import Stops
 
 #: the emulated static-loading rig's actuator (a linear slide stage; ASSUMED values)
 RIG_ACTUATOR = MotorParams(stall_force_n=2500.0, moving_mass_kg=100.0)
@@ -118,6 +127,7 @@ class Rig:
         truth: EmulatedTruth | None = None,
         ramp_s: float = 0.5,
         ahead: bool = True,
+        tracked_finger: int | None = None,
     ) -> None:
         if board is None and operator is None:
             raise ValueError("a real rig needs an operator to apply the loads")
@@ -129,6 +139,10 @@ class Rig:
         self.ramp_s = ramp_s
         #: periodic samples with the board running ahead where it can (:meth:`each_period`)
         self.ahead = ahead
+        #: and through many samples a run, the harness taking each one's truth (the fast path)
+        self.batched = ahead
+        #: the finger the simulated tracker's sensor is on (emulated)
+        self.tracked_finger = tracked_finger
 
     @property
     def emulated(self) -> bool:
@@ -141,15 +155,25 @@ class Rig:
         return float(self.hand.clock.now())
 
     def each_period(
-        self, t0: float, period: float, take: Callable[[float], T | None]
+        self,
+        t0: float,
+        period: float,
+        take: Callable[[float], T | None],
+        stops: Stops | None = None,
     ) -> Generator[T, None, None]:
         """``take(t)`` at ``t0 + k period`` (k = 1, 2, ...; ``t`` from ``t0``) until it gives
         None; yields what it gives. On the emulated rig (``ahead``) the board runs on to the
         next time on its own thread while the caller works on what was yielded
         (``SimLink.sleep_each``): ``take`` sees the board stopped at its time (read the
         plant, hit it), the caller sees the hand's telemetry up to that time. Otherwise each
-        time is slept to, then taken: the same samples (a test compares them)."""
+        time is slept to, then taken: the same samples (a test compares them). ``stops``
+        (:meth:`batch_stops`): what ``take`` does to the plant, for the harness to do at each
+        time, the board running through many (``SimLink.stops_each``; :attr:`batched`)."""
         ends = (t0 + k * period for k in itertools.count(1))
+        stops_each = getattr(self.hand.clock, "stops_each", None)
+        if stops is not None and self.batched and stops_each is not None:
+            yield from stops_each(ends, lambda: take(self.now() - t0), stops)
+            return
         sleep_each = getattr(self.hand.clock, "sleep_each", None) if self.ahead else None
         if sleep_each is not None:
             yield from sleep_each(ends, lambda: take(self.now() - t0))
@@ -160,6 +184,36 @@ class Rig:
             if value is None:
                 return
             yield value
+
+    def batch_stops(
+        self,
+        t0: float,
+        last_s: float,
+        hits: list[tuple[float, int, tuple[float, float]]],
+        duration_s: float,
+        made: Callable[[float, Callable[[], TrackerSample], np.ndarray, int], Any],
+    ) -> Stops | None:
+        """What :meth:`each_period`'s ``take`` does, for the harness (None: not emulated):
+        ``hits`` (time from ``t0``, finger, impulse) as :meth:`hit` applies them, and at each
+        time ``made(t, reading, currents, hits applied)`` with the tracker's reading
+        (:meth:`SimulatedTracker.read_later_at`) and the currents as the truth had them."""
+        tracker = self.tracker
+        if self.board is None or self.tracked_finger is None:
+            return None
+        if not isinstance(tracker, SimulatedTracker):
+            return None
+        plant = self.board.plant
+        f = self.tracked_finger
+        c_hits = [(at, *plant.hit_args(finger, imp, duration_s)) for at, finger, imp in hits]
+
+        def made_at(now: float, truth: np.ndarray, applied: int) -> Any:
+            tip = plant.tip_from(truth[:15].reshape(5, 3))[f]
+            reading = tracker.read_later_at(now, tip)
+            return made(now - t0, reading, truth[15:25].reshape(5, 2).copy(), applied)
+
+        from utrf.hand.simlink_stops import Stops
+
+        return Stops(t0, c_hits, last_s, made_at)
 
     def set_payload(self, finger: int, mass_kg: float, previous_kg: float | None) -> None:
         """The payload hanging from the fingertip becomes ``mass_kg`` (total)."""
@@ -230,7 +284,9 @@ def open_emulated(
         noise_m=truth.tracker_noise_m,
         seed=seed + 7919,
     )
-    return Rig(hand, tracker, board=board, truth=truth, ramp_s=ramp_s)
+    return Rig(
+        hand, tracker, board=board, truth=truth, ramp_s=ramp_s, tracked_finger=tracked_finger
+    )
 
 
 def open_real(

@@ -240,7 +240,14 @@ class SimulatedTracker:
         made when called (the same sample :meth:`read` makes, the noise drawn in call order)."""
         if self.closed:
             raise TrackerError("the simulated tracker is closed")
-        t = float(self._clock())
+        return self.read_later_at(self._clock(), self._tip())
+
+    def read_later_at(self, t: float, tip: np.ndarray) -> Callable[[], TrackerSample]:
+        """:meth:`read_later` with the time and the true tip given (a stop's truth, taken by
+        the harness as the board ran on)."""
+        if self.closed:
+            raise TrackerError("the simulated tracker is closed")
+        t = float(t)
         if self.rate_hz is not None:
             frame = math.floor(t * self.rate_hz + 1e-9)
             if self._last is not None and self._last.frame == frame:
@@ -249,7 +256,7 @@ class SimulatedTracker:
         else:
             frame = self._frames
             self._frames += 1
-        tip = np.array(self._tip(), dtype=float)  # a copy: the plant moves on
+        tip = np.array(tip, dtype=float)  # a copy: the plant moves on
 
         def finish() -> TrackerSample:
             noise = self._rng.normal(0.0, self.noise_m, 3)

@@ -207,9 +207,12 @@ struct utrf_sim {
     long lock_handover_ns16, lock_step_ns16;
     int lock_inline_left;
     uint64_t lock_inline_periods; /* periods two threads stepped on one, for a test to read */
+    int lock_keep_plant; /* a run ahead's stops: the run goes on at once, the plant not parked */
     void *plant_ctx;
     void (*plant_step)(void *ctx, double dt, const double *pins);
     void (*plant_volts)(void *ctx, double *out5);
+    void (*plant_truth)(void *ctx, double *out); /* UTRF_SIM_TRUTH doubles */
+    int (*plant_hit)(void *ctx, const utrf_sim_hit_t *hit);
 
     /* run_ahead.c: the lockstep on a thread of its own while the caller works; each period in
      * which the wake byte was captured is marked (the capture's head, the MCU's cycle) rather
@@ -224,6 +227,14 @@ struct utrf_sim {
     uint64_t sent_cycle; /* where they went (0: not yet) */
     size_t sent_n;       /* how many the UART queue took */
     struct utrf_ahead *ahead;
+    /* run_ahead.c: the stops within the next run ahead (utrf_sim_ahead_stops) */
+    uint32_t stops_n, stops_done;
+    uint64_t stop_target[UTRF_SIM_STOPS], stop_cycle[UTRF_SIM_STOPS];
+    double stop_truth[UTRF_SIM_STOPS][UTRF_SIM_TRUTH];
+    double stop_t0;
+    utrf_sim_hit_t stop_hit[UTRF_SIM_HITS];
+    int32_t stop_hit_at[UTRF_SIM_HITS];
+    uint32_t stop_hits_n, stop_hits_done;
 
     /* faults.c: a stalled interrupt vector (0: none) */
     int stall_vector;
@@ -244,11 +255,15 @@ struct utrf_sim {
  * (ctx NULL). */
 static inline void utrf_sim_attach_ops(utrf_sim_t *s, void *ctx,
                                        void (*step)(void *ctx, double dt, const double *pins),
-                                       void (*volts)(void *ctx, double *out5))
+                                       void (*volts)(void *ctx, double *out5),
+                                       void (*truth)(void *ctx, double *out),
+                                       int (*hit)(void *ctx, const utrf_sim_hit_t *h))
 {
     s->plant_ctx = ctx;
     s->plant_step = ctx ? step : NULL;
     s->plant_volts = ctx ? volts : NULL;
+    s->plant_truth = ctx ? truth : NULL;
+    s->plant_hit = ctx ? hit : NULL;
 }
 
 /* plant_thread.c: the plant's thread, started (again in a forked child) or stopped; one

@@ -126,7 +126,7 @@ int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, in
     }
     if (s->send_len && status == utrf_sim_status(s))
         ahead_send_due(s); /* at the run's last period's end too */
-    if (threaded)
+    if (threaded && !s->lock_keep_plant)
         plant_thread_park(s);
     s->wake_byte = -1;
     return status;

@@ -56,6 +56,7 @@ struct utrf_mjplant {
     int n_written;
     utrf_rng_t rng;
     utrf_as5600_t enc;
+    int truth_site[F]; /* the sites whose positions a stop records (-1: none) */
 };
 
 utrf_mjplant_t *utrf_mjplant_new(const char *libmujoco, void *model, void *data,
@@ -105,6 +106,8 @@ utrf_mjplant_t *utrf_mjplant_new(const char *libmujoco, void *model, void *data,
             mp->st.build_k_scale[f][c] = mp->st.build_r_scale[f][c] = 1.0;
         }
     }
+    for (int f = 0; f < F; f++)
+        mp->truth_site[f] = -1;
     utrf_rng_init(&mp->rng, seed);
     mp->enc = (utrf_as5600_t){params->enc_supply, params->enc_offset,
                               {params->enc_band[0], params->enc_band[1]}, params->enc_noise_v,
@@ -300,6 +303,33 @@ void utrf_mjplant_encoder_volts(utrf_mjplant_t *mp, double *out)
 #endif
 }
 
+int utrf_mjplant_truth_sites(utrf_mjplant_t *mp, const int32_t *sites, int n)
+{
+    if (n < 0 || n > F)
+        return -1;
+    for (int f = 0; f < F; f++)
+        mp->truth_site[f] = f < n ? sites[f] : -1;
+    return 0;
+}
+
+static void mj_ops_truth(void *ctx, double *out)
+{
+    utrf_mjplant_t *mp = ctx;
+    memset(out, 0, UTRF_SIM_TRUTH * sizeof(double));
+#ifdef UTRF_WITH_MUJOCO
+    for (int f = 0; f < F; f++)
+        if (mp->truth_site[f] >= 0)
+            memcpy(out + 3 * f, mp->d->site_xpos + 3 * mp->truth_site[f], 3 * sizeof(double));
+#endif
+    memcpy(out + 3 * F, mp->st.current, sizeof mp->st.current);
+}
+
+static int mj_ops_hit(void *ctx, const utrf_sim_hit_t *h)
+{
+    return utrf_mjplant_hit(ctx, h->body, h->site, h->impulse[0], h->impulse[1], h->impulse[2],
+                            h->duration);
+}
+
 static void mj_ops_step(void *ctx, double dt, const double *pins)
 {
     utrf_mjplant_step(ctx, dt, pins);
@@ -312,5 +342,5 @@ static void mj_ops_volts(void *ctx, double *out)
 
 void utrf_sim_attach_mjplant(utrf_sim_t *s, utrf_mjplant_t *mp)
 {
-    utrf_sim_attach_ops(s, mp, mj_ops_step, mj_ops_volts);
+    utrf_sim_attach_ops(s, mp, mj_ops_step, mj_ops_volts, mj_ops_truth, mj_ops_hit);
 }

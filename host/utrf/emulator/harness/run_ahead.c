@@ -71,6 +71,49 @@ static void ahead_spin(struct utrf_ahead *a)
                                                                   : AHEAD_SPIN_MAX_NS;
 }
 
+/* At a stop: the MCU's cycle, the hits due applied, the plant's truth (utrf_sim_ahead_stops). */
+static void ahead_stop(utrf_sim_t *s, uint32_t k)
+{
+    uint64_t cycle = s->avr->cycle;
+    double t = (double)cycle / 16e6 - s->stop_t0; /* as the client's clock reads it */
+    s->stop_cycle[k] = cycle;
+    while (s->stop_hits_done < s->stop_hits_n && t >= s->stop_hit[s->stop_hits_done].at) {
+        if (s->plant_hit)
+            s->plant_hit(s->plant_ctx, &s->stop_hit[s->stop_hits_done]);
+        s->stop_hit_at[s->stop_hits_done++] = (int32_t)k;
+    }
+    if (s->plant_truth)
+        s->plant_truth(s->plant_ctx, s->stop_truth[k]);
+    else
+        memset(s->stop_truth[k], 0, sizeof s->stop_truth[k]);
+    s->stops_done = k + 1;
+}
+
+/* The run, through its stops when it has any: each stretch is the run ahead to that stop,
+ * and a stretch that ends short (a crash, the marks full) or changes the status ends it. */
+static int ahead_run(utrf_sim_t *s, struct utrf_ahead *a)
+{
+    if (!s->stops_n)
+        return utrf_sim_run_plant_until(s, a->target, a->period, a->wake);
+    int status = utrf_sim_status(s);
+    for (uint32_t k = 0; k < s->stops_n; k++) {
+        /* between two stops the plant's thread may keep spinning: the next stretch follows */
+        s->lock_keep_plant = k + 1 < s->stops_n;
+        int now = utrf_sim_run_plant_until(s, s->stop_target[k], a->period, a->wake);
+        s->lock_keep_plant = 0;
+        if (now != status || s->avr->cycle < s->stop_target[k]) {
+            if (s->plant_thread && s->plant_threads == 2)
+                plant_thread_park(s); /* the run ends here, short */
+        }
+        if (s->avr->cycle < s->stop_target[k])
+            return now;
+        ahead_stop(s, k);
+        if (now != status)
+            return now;
+    }
+    return status;
+}
+
 /* One thread for the board's life, woken for each run: a thread a run (thousands of runs a
  * hold) would cost its creation every time. */
 static void *ahead_main(void *arg)
@@ -89,7 +132,7 @@ static void *ahead_main(void *arg)
         if (a->quit)
             break;
         pthread_mutex_unlock(&a->mu);
-        int status = utrf_sim_run_plant_until(s, a->target, a->period, a->wake);
+        int status = ahead_run(s, a);
         pthread_mutex_lock(&a->mu);
         a->status = status;
         a->work = 2; /* done */
@@ -132,6 +175,10 @@ int utrf_sim_ahead_start(utrf_sim_t *s, uint64_t target, uint64_t period, int wa
     struct utrf_ahead *a = s->ahead;
     s->marks = 0;
     s->mark_on = 1;
+    s->stops_done = 0;
+    s->stop_hits_done = 0;
+    if (s->stops_n && s->stop_target[s->stops_n - 1] != target)
+        s->stops_n = 0; /* stops for another run: none */
     pthread_mutex_lock(&a->mu);
     a->target = target;
     a->period = period;
@@ -157,7 +204,39 @@ int utrf_sim_ahead_join(utrf_sim_t *s)
     pthread_mutex_unlock(&a->mu);
     a->running = 0;
     s->mark_on = 0;
+    s->stops_n = 0; /* what they recorded stays for utrf_sim_ahead_stops_done */
     return a->status;
+}
+
+int utrf_sim_ahead_stops(utrf_sim_t *s, const uint64_t *targets, size_t n, double t0,
+                         const utrf_sim_hit_t *hits, size_t nhits)
+{
+    if (n > UTRF_SIM_STOPS || nhits > UTRF_SIM_HITS || utrf_sim_ahead_running(s))
+        return -1;
+    for (size_t k = 1; k < n; k++)
+        if (targets[k] <= targets[k - 1])
+            return -1;
+    memcpy(s->stop_target, targets, n * sizeof *targets);
+    memcpy(s->stop_hit, hits, nhits * sizeof *hits);
+    for (size_t j = 0; j < nhits; j++)
+        s->stop_hit_at[j] = -1;
+    s->stops_n = (uint32_t)n;
+    s->stop_hits_n = (uint32_t)nhits;
+    s->stop_t0 = t0;
+    return 0;
+}
+
+size_t utrf_sim_ahead_stops_done(const utrf_sim_t *s, uint64_t *cycles, double *truth,
+                                 int32_t *hit_stop, size_t n)
+{
+    size_t k = 0;
+    for (; k < n && k < s->stops_done; k++) {
+        cycles[k] = s->stop_cycle[k];
+        memcpy(truth + k * UTRF_SIM_TRUTH, s->stop_truth[k], sizeof s->stop_truth[k]);
+    }
+    for (size_t j = 0; j < s->stop_hits_n; j++)
+        hit_stop[j] = s->stop_hit_at[j];
+    return k;
 }
 
 int utrf_sim_ahead_running(const utrf_sim_t *s)

@@ -15,7 +15,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 18
+#define UTRF_SIM_ABI 19
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -297,6 +297,31 @@ int utrf_sim_ahead_send(utrf_sim_t *s, const uint8_t *buf, size_t n, double at);
 /* the cycle the waiting bytes went at (0: not yet), and how many the UART's queue took */
 uint64_t utrf_sim_ahead_sent(const utrf_sim_t *s, size_t *taken);
 
+/* Stops within the next run ahead (a client's samples taken in batches): the run passes
+ * through each of `n` targets (rising plant cycles, the last the run's own target), each as
+ * a run ahead to it would end there, and at each it applies the hits due and records the
+ * MCU's cycle and the plant's truth, then runs on: the same run, to the cycle, as one run
+ * ahead per stop with the caller reading the truth and hitting the plant between them. A hit
+ * is due at the first stop whose MCU time from t0, (double)cycle / 16e6 - t0, reaches its
+ * `at` (the hits in rising `at`). The stops hold until the next utrf_sim_ahead_start; -1
+ * when too many or a run is under way. */
+#define UTRF_SIM_STOPS 64
+#define UTRF_SIM_HITS 16
+#define UTRF_SIM_TRUTH 32 /* doubles a stop records: the plant's (utrf_mjplant_truth_sites) */
+typedef struct {
+    double at;
+    int32_t body, site; /* the plant's (MuJoCo's ids; site -1: the body's centre of mass) */
+    double impulse[3];  /* N s, world frame */
+    double duration;    /* s */
+} utrf_sim_hit_t;
+int utrf_sim_ahead_stops(utrf_sim_t *s, const uint64_t *targets, size_t n, double t0,
+                         const utrf_sim_hit_t *hits, size_t nhits);
+/* After the join: how many stops the run reached (a crash or the marks full end it short),
+ * their MCU cycles and truths (n x UTRF_SIM_TRUTH), and per hit the stop it was applied at
+ * (-1: not yet). */
+size_t utrf_sim_ahead_stops_done(const utrf_sim_t *s, uint64_t *cycles, double *truth,
+                                 int32_t *hit_stop, size_t n);
+
 /* ---- The MuJoCo plant (mjplant.c) ----------------------------------------------------------
  * The MuJoCo hand (utrf.models.mjcf, drive "force") stepped here; its mjModel and mjData
  * belong to the caller (the mujoco package) and stay live there. Indices are MuJoCo's. */
@@ -353,6 +378,10 @@ void utrf_mjplant_encoder_volts(utrf_mjplant_t *mp, double *out5);
 int utrf_mjplant_hit(utrf_mjplant_t *mp, int body, int site, double jx, double jy, double jz,
                      double duration);
 int utrf_mjplant_pulses(const utrf_mjplant_t *mp);
+/* What a stop of a run ahead records of the plant (UTRF_SIM_TRUTH doubles): the world
+ * positions of up to 5 sites (these, -1: none; 15 doubles, zeros for none), then the motors'
+ * currents (10, A). */
+int utrf_mjplant_truth_sites(utrf_mjplant_t *mp, const int32_t *sites, int n);
 /* The board's plant (NULL: none; the ADC inputs and pins are then the caller's). The board
  * does not own it: free it after the board. */
 void utrf_sim_attach_mjplant(utrf_sim_t *s, utrf_mjplant_t *mp);

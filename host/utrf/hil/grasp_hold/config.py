@@ -22,6 +22,45 @@ def sample_columns(names: list[str]) -> list[str]:
     return cols
 
 
+def sample_row(t: float, phase: str, sample: Any, state: Any, currents: np.ndarray) -> list[object]:
+    """One ``samples.csv`` row, field by field: the time, the phase, the tracker's ``sample``
+    (position, visibility, frame), each finger of the hand's ``state`` (None: NaNs) and its
+    motor A current (the general form :func:`sample_line` formats at once)."""
+    row: list[object] = [
+        f"{t:.6f}",
+        phase,
+        *(f"{v:.7f}" for v in sample.position_m),
+        int(sample.visible),
+        sample.frame,
+    ]
+    for i in range(len(currents)):
+        if state is None:
+            row += ["nan"] * len(FINGER_FIELDS)
+            continue
+        fs = state.fingers[i]
+        row += [f"{fs.theta2:.5f}", f"{fs.target:.5f}", f"{fs.duty_a:.3f}", f"{fs.duty_b:.3f}",
+                fs.mode.name, int(fs.faults), f"{currents[i, 0]:.4f}"]  # fmt: skip
+    return row
+
+
+_FINGER_FORMAT = ",%.5f,%.5f,%.3f,%.3f,%s,%d,%.4f"
+
+
+def sample_line(t: float, phase: str, sample: Any, state: Any, currents: np.ndarray) -> str:
+    """:func:`sample_row` as the CSV writer writes it, formatted at once (every sample is
+    written; a test compares the two)."""
+    p = sample.position_m
+    head = f"{t:.6f},{phase},{p[0]:.7f},{p[1]:.7f},{p[2]:.7f},{int(sample.visible)},{sample.frame}"
+    n = len(currents)
+    if state is None:
+        return head + ",nan" * (len(FINGER_FIELDS) * n) + "\n"
+    values: list[object] = []
+    for i, fs in enumerate(state.fingers[:n]):
+        values += [fs.theta2, fs.target, fs.duty_a, fs.duty_b, fs.mode.name, int(fs.faults),
+                   currents[i, 0]]  # fmt: skip
+    return head + (_FINGER_FORMAT * n) % tuple(values) + "\n"
+
+
 @dataclass(frozen=True)
 class GraspHoldConfig:
     pose: str = "grasp-bottle"

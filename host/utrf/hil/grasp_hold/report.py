@@ -133,7 +133,9 @@ def plot(result: dict[str, Any], rows: list[dict[str, Any]], names: list[str], p
     )
     for a in ax:
         a.grid(alpha=0.3)
-    fig.tight_layout()
+    # fixed margins that fit the labels: tight_layout drew the figure once more to find them
+    # (a third of the figure's cost)
+    fig.subplots_adjust(left=0.12, right=0.98, top=0.955, bottom=0.065, hspace=0.22)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

@@ -11,7 +11,12 @@ from typing import Any
 import numpy as np
 
 from utrf.datalog import CsvLog
-from utrf.hil.grasp_hold.config import FINGER_FIELDS, HIT_COLUMNS, GraspHoldConfig, sample_columns
+from utrf.hil.grasp_hold.config import (
+    HIT_COLUMNS,
+    GraspHoldConfig,
+    sample_columns,
+    sample_line,
+)
 from utrf.hil.rig import Rig
 from utrf.hil.runs import ProgressFn, RunError, RunStopped, write_json
 from utrf.models import kinematics
@@ -78,32 +83,35 @@ def run(
             while hits and hits[0][0] <= t:
                 _, f, imp = hits.pop(0)
                 rig.hit(f, imp, config.hit_duration_s)
-                hit_log.write([f"{rig.now() - t0:.6f}", f, imp[0], imp[1],
-                               config.hit_duration_s])  # fmt: skip
+                log_hit(rig.now() - t0, f, imp)
             return t, rig.tracker.read_later(), rig.currents()
+
+        def log_hit(t: float, f: int, imp: tuple[float, float]) -> None:
+            hit_log.write([f"{t:.6f}", f, imp[0], imp[1], config.hit_duration_s])
+            if stops is not None:
+                stops.applied += 1  # by take(): the harness's list moves on with it
+
+        def made(t: float, reading: Any, cur: np.ndarray, applied: int) -> Any:
+            """take()'s value from what the harness did and recorded at the sample's time."""
+            if t > config.duration_s:
+                return None
+            for _ in range(applied):
+                _, f, imp = hits.pop(0)
+                hit_log.write([f"{t:.6f}", f, imp[0], imp[1], config.hit_duration_s])
+            return t, reading, cur
+
+        # the fast path: the harness hits and takes the truth at each sample time itself, the
+        # board running through many samples a run (Rig.batch_stops; None: take() each time)
+        stops = rig.batch_stops(t0, config.duration_s, list(hits), config.hit_duration_s, made)
 
         # the board runs on to the next sample while this one is written; closed on the way
         # out (a stop too), so the board has stopped before anything else uses it
-        with contextlib.closing(rig.each_period(t0, period, take)) as periods:
+        with contextlib.closing(rig.each_period(t0, period, take, stops)) as periods:
             for t, reading, cur in periods:
                 s = reading()
                 st = hand.latest
-                row: list[object] = [
-                    f"{t:.6f}",
-                    "baseline" if t < config.baseline_s else "hold",
-                    *(f"{v:.7f}" for v in s.position_m),
-                    int(s.visible),
-                    s.frame,
-                ]
-                for i in range(len(names)):
-                    if st is None:
-                        row += ["nan"] * len(FINGER_FIELDS)
-                        continue
-                    fs = st.fingers[i]
-                    row += [f"{fs.theta2:.5f}", f"{fs.target:.5f}", f"{fs.duty_a:.3f}",
-                            f"{fs.duty_b:.3f}", fs.mode.name, int(fs.faults),
-                            f"{cur[i, 0]:.4f}"]  # fmt: skip
-                samples.write(row)
+                phase = "baseline" if t < config.baseline_s else "hold"
+                samples.write_line(sample_line(t, phase, s, st, cur[: len(names)]))
                 new = hand.faults_seen[seen:]
                 if new:
                     raise RunStopped(f"grasp hold at {t:.2f} s: {new[0]}")

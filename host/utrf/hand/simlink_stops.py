@@ -1,0 +1,218 @@
+""":meth:`SimLink.sleep_each <utrf.hand.simlink.SimLink.sleep_each>` with the stops in C, in
+batches (:meth:`SimLink.stops_each`): the fast path beside the general one, the same samples.
+
+``sleep_each`` stops the board at every end for ``take()`` (Python reads the plant, hits it)
+and starts it again: thousands of stops a hold, the board standing still at each. Here the
+caller says beforehand what ``take()`` does to the plant (:class:`Stops`: the hits, each with
+its time) and what it reads (the plant's truth: the tips, the motors' currents), and the
+harness does it at each end (``EmulatedBoard.run_ahead_stops``), so the board runs through
+several ends in one run ahead while the caller works on the last batch's. A batch ends
+where the general path could decide otherwise: before the next heartbeat could fall due (its
+time hangs on the ack of the one before), at the end that may be the caller's last, and
+at :data:`~utrf.emulator.harness_abi.STOPS` ends. Every end is one a run ahead to it would
+reach, to the cycle (a test compares the two paths' holds byte for byte); where the general
+path would not run ahead (a plain sleep) or a run ends short (a crash, its marks full), that
+end is taken the general way.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable, Generator, Iterable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, TypeVar
+
+import numpy as np
+
+from utrf.emulator.board_types import EmulatorError
+from utrf.emulator.harness_abi import F_CPU_HZ, HITS, STOPS
+
+if TYPE_CHECKING:
+    from utrf.hand.simlink import SimLink
+
+T = TypeVar("T")
+#: how far past an exchange's end the MCU may stop (cycles): it ends at the first instruction
+#: boundary there, a few cycles on (an interrupt's entry at most); a stop past it is an error
+OVERSHOOT_BOUND = 1_000
+
+
+@dataclass
+class Stops:
+    """What ``take()`` does at each end, for the harness to do: ``hits`` (time from ``t0``,
+    body, site, world impulse N s, duration s; rising time) each applied at the first end
+    whose ``now - t0`` reaches its time; ``made(now, truth, hits)`` gives what ``take()``
+    would have (None: the end is the last), from the time, the truth the end recorded and
+    how many hits were applied there; an end whose ``now - t0`` passes ``last_s`` must be
+    its last."""
+
+    t0: float
+    hits: list[tuple[float, int, int, Any, float]]
+    last_s: float
+    made: Callable[[float, np.ndarray, int], Any]
+    applied: int = 0  # hits applied so far
+
+
+@dataclass
+class _Batch:
+    """A run ahead under way through ``ends`` (their ``targets``)."""
+
+    ends: list[float]
+    targets: list[int]
+
+
+def stops_each(
+    link: SimLink, ends: Iterable[float], take: Callable[[], T | None], stops: Stops
+) -> Generator[T, None, None]:
+    """The batches; see the module. Each batch's samples are made and yielded while the next
+    batch runs (the engine takes a batch's frames first: the next one's heartbeat hangs on
+    them), as ``sleep_each`` works on a sample while the board runs to the next."""
+    upcoming: deque[float] = deque()
+    it = iter(ends)
+
+    def peek(k: int) -> float | None:
+        while len(upcoming) <= k:
+            nxt = next(it, None)
+            if nxt is None:
+                return None
+            upcoming.append(nxt)
+        return upcoming[k]
+
+    batch = _start(link, peek, upcoming, stops)
+    try:
+        while batch is not None or peek(0) is not None:
+            if batch is None:  # the general way, for this end
+                end = upcoming.popleft()
+                link._deliver_arrived()
+                link.sleep(end - link.now())
+                value = take()
+                if value is None:
+                    return
+                yield value
+                batch = _start(link, peek, upcoming, stops)
+                continue
+            cycles, truths, applied, done = _join(link, batch, stops)
+            for end in reversed(batch.ends[len(cycles) :]):  # not reached: taken again
+                upcoming.appendleft(end)
+            last = bool(cycles) and cycles[-1] / F_CPU_HZ - stops.t0 > stops.last_s
+            batch = _start(link, peek, upcoming, stops) if done and not last else None
+            for k, cycle in enumerate(cycles):
+                now = cycle / F_CPU_HZ
+                link._deliver_arrived(now)
+                value = stops.made(now, truths[k], applied[k])
+                if value is None:
+                    return
+                yield value
+            link._deliver_arrived()
+            if not done:  # short (a crash, the marks full): the next end the general way
+                end = upcoming.popleft()
+                link.sleep(end - link.now())
+                value = take()
+                if value is None:
+                    return
+                yield value
+                batch = _start(link, peek, upcoming, stops)
+    finally:  # what the board ran reaches the engine and the callbacks, a caller stopping too
+        if batch is not None:
+            _join(link, batch, stops)
+        link._deliver_arrived()
+
+
+def _start(
+    link: SimLink, peek: Callable[[int], float | None], upcoming: deque[float], stops: Stops
+) -> _Batch | None:
+    """The next batch started on the board (its ends taken off ``upcoming``), or None where
+    the general path would not run ahead to the next end."""
+    plan = _plan(link, peek, stops)
+    if plan is None:
+        return None
+    targets, send = plan
+    hits = stops.hits[stops.applied : stops.applied + HITS]
+    link.board.run_ahead_stops(targets, stops.t0, hits, send)
+    return _Batch([upcoming.popleft() for _ in targets], targets)
+
+
+def _join(
+    link: SimLink, batch: _Batch, stops: Stops
+) -> tuple[list[int], np.ndarray, list[int], bool]:
+    """Wait for a batch: its stops' cycles, truths and hits applied at each (counted in
+    ``stops``), whether it reached its end. Its frames are taken by the engine, cut at the
+    marks and stamped there, and its heartbeat counted."""
+    board = link.board
+    run = board.run_ahead_join()
+    cycles, truths, hit_stop = board.run_ahead_stops_done()
+    data = board.read()
+    for cycle, target in zip(cycles, batch.targets, strict=False):
+        if not 0 <= cycle - target <= OVERSHOOT_BOUND:  # the plan assumed it: say so
+            raise EmulatorError(
+                f"a stop ended {cycle - target} cycles past its exchange's end (planned "
+                f"within {OVERSHOOT_BOUND}): the batched samples may differ from sleep_each's"
+            )
+    if link._heartbeat is not None and run.sent_at is not None:
+        link._engine.sent(link._heartbeat, run.sent_at)
+        link._heartbeat = None
+    at = 0
+    for n, t in run.marks:
+        link._arrived.append((data[at:n], t))
+        at = n
+    link._arrived.append((data[at:], link.now()))
+    link._take_arrived()
+    applied = [sum(1 for s in hit_stop if s == k) for k in range(len(cycles))]
+    stops.applied += sum(applied)
+    return cycles, truths, applied, run.done
+
+
+def _exchanges(seconds: float, period: float, plain: float | None) -> int | None:
+    """The exchanges ``sleep_each`` runs ahead for ``seconds`` (None: it sleeps plainly)."""
+    if seconds < period / 2 or (plain is not None and seconds > plain):
+        return None
+    return max(round(seconds / period), 1)
+
+
+def _plan(
+    link: SimLink, peek: Callable[[int], float | None], stops: Stops
+) -> tuple[list[int], tuple[bytes, float] | None] | None:
+    """The next batch's stops (cycles) and its heartbeat, or None where the general path would
+    not run ahead to the next end."""
+    board, engine = link.board, link._engine
+    period = board.exchange_period
+    link._take_arrived()  # the heartbeat's due time counts every ack that came
+    due = engine.heartbeat_due()
+    hb = engine.heartbeat_period_s
+    plain = min(hb / 2, link.pump_interval_s) if hb is not None else None
+    bound = due + hb if due is not None and hb is not None else None
+    now = link.now()
+    lo = hi = now  # where the MCU stands at the stop before (known exactly at the first)
+    plant = board.plant_cycle
+    # the first hit the harness is not given: the batch ends before it could fall due
+    unheld = stops.hits[stops.applied + HITS][0] if len(stops.hits) > stops.applied + HITS else None
+    targets: list[int] = []
+    k = 0
+    while len(targets) < STOPS:
+        end = peek(k)
+        if end is None:
+            break
+        counts = {_exchanges(end - at, period, plain) for at in (lo, hi)}
+        n = counts.pop()
+        if counts or n is None:  # the MCU's few cycles past the stop could change it, or
+            break  # sleep_each would not run ahead here
+        target = board.exchanges_after(plant, n * period)
+        if bound is not None and not target / F_CPU_HZ < bound:
+            break  # the next heartbeat may fall due here: its time is not known yet
+        if unheld is not None and (target + OVERSHOOT_BOUND) / F_CPU_HZ - stops.t0 >= unheld:
+            break  # a hit beyond the harness's list may fall due here
+        targets.append(target)
+        k += 1
+        if (target + OVERSHOOT_BOUND) / F_CPU_HZ - stops.t0 > stops.last_s:
+            break  # this end may be the last: nothing runs past it
+        plant = target
+        lo, hi = target / F_CPU_HZ, (target + OVERSHOOT_BOUND) / F_CPU_HZ
+    if not targets:
+        return None
+    send = None
+    last = targets[-1] / F_CPU_HZ
+    if due is not None and due <= last:  # goes out within the batch, where sleep_each sends it
+        if link._heartbeat is None:
+            link._heartbeat = engine.heartbeat(max(due, now))
+        if link._heartbeat is not None:
+            send = (link._heartbeat.data, due)
+    return targets, send
