@@ -54,6 +54,7 @@ void fw_power_on(uint8_t reset_cause) {
 void fw_tick(uint32_t n) {
     for (uint32_t i = 0; i < n; ++i) {
         ++state().ms;
+        state().tick_ms = state().ms;
         if (state().tick_locked) ++state().lock_errors;  // the tick cannot run while locked
         app::tick();
         // As the AVR's timer can tell: at most two periods, well within 16 bits.

@@ -221,7 +221,8 @@ void drives_change(uint8_t f, uint8_t d) { drives_change_hw(g_hw[f], g_drives_la
 // receive interrupt, which nests in the control tick once for each byte that arrives while it
 // runs, touches no other memory on its usual path.
 // GPIOR0 bit 0, set (sbi: two cycles, no register) by the interrupts that give loop() work:
-// a frame's last byte (0x00) received, a tick, the transmit buffer emptied.
+// a frame's last byte (0x00) received, a tick that asks for a pass (app::tick_done()), the
+// transmit buffer emptied.
 // sleep_until_interrupt() sleeps again after any other (an ADC conversion, a byte going out)
 // without a loop() pass.
 static const uint8_t kWake = 0;
@@ -254,6 +255,7 @@ namespace {
 volatile uint32_t g_ms;
 uint8_t g_ms_fract;           // each overflow's 24 us past a millisecond, in 8 us (125: 1 ms)
 volatile uint8_t g_t0_overflows;  // wraps: the idle sleep's "a millisecond since"
+volatile uint32_t g_tick_ms;      // g_ms as the last tick began (tick_millis())
 }  // namespace
 
 // The Arduino core's main() calls init() before setup(): interrupts on, timer 0 as the core
@@ -278,7 +280,9 @@ ISR(TIMER0_OVF_vect, ISR_NOBLOCK) {
         ++m;
     }
     g_ms_fract = f;
+    cli();  // the tick, which nests here, reads g_ms whole (g_tick_ms)
     g_ms = m;
+    sei();
     g_t0_overflows = (uint8_t)(g_t0_overflows + 1);
     TIMSK0 = _BV(TOIE0);
 }
@@ -353,11 +357,13 @@ __attribute__((noinline)) void run_one_tick() {
     g_tick_deferred = 0;
     g_tick_running = 1;
     g_tick_start = read_stamp();
+    g_tick_ms = g_ms;  // interrupts off: whole (timer 0's handler stores it so too)
     sei();
     app::tick();
     const uint16_t cycles = cycles_from(g_tick_start);
     const bool overran = g_tick_deferred != 0 || lost != 0;
-    app::tick_done(cycles, overran);
+    // loop() after the tick only when it gave loop() work (sleep_until_interrupt()).
+    if (app::tick_done(cycles, overran)) GPIOR0 |= _BV(kWake);
     cli();
     g_tick_running = 0;
 }
@@ -370,7 +376,7 @@ inline __attribute__((always_inline)) void run_due_ticks() {
 
 // A compare: its tick, or, while one runs (or a lock the mask below missed), a deferred one.
 inline __attribute__((always_inline)) void take_compare() {
-    GPIOR0 |= _BV(kWake) | _BV(kTickSeen);  // loop() after the tick (sleep_until_interrupt)
+    GPIOR0 |= _BV(kTickSeen);  // the tick runs: timer 0 need not wake loop() (the idle sleep)
     if (g_tick_running || g_tick_locked) {
         if (g_tick_deferred) g_tick_lost = 1;
         g_tick_deferred = 1;
@@ -582,6 +588,7 @@ void tick_start() {
     g_tick_running = 0;
     g_tick_deferred = 0;
     g_tick_lost = 0;
+    g_tick_ms = millis();
     TCNT2 = 0;
     TIFR2 = _BV(OCF2A);
     TIMSK2 = _BV(OCIE2A);
@@ -626,6 +633,12 @@ bool tick_period_elapsed() { return g_tick_deferred != 0; }
 uint32_t millis() {
     uint32_t m;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { m = g_ms; }
+    return m;
+}
+
+uint32_t tick_millis() {
+    uint32_t m;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { m = g_tick_ms; }
     return m;
 }
 
