@@ -255,7 +255,7 @@ namespace {
 volatile uint32_t g_ms;
 uint8_t g_ms_fract;           // each overflow's 24 us past a millisecond, in 8 us (125: 1 ms)
 volatile uint8_t g_t0_overflows;  // wraps: the idle sleep's "a millisecond since"
-volatile uint32_t g_tick_ms;      // g_ms as the last tick began (tick_millis())
+volatile uint32_t g_tick_ms;      // g_ms as the last tick ended (tick_millis())
 }  // namespace
 
 // The Arduino core's main() calls init() before setup(): interrupts on, timer 0 as the core
@@ -357,7 +357,6 @@ __attribute__((noinline)) void run_one_tick() {
     g_tick_deferred = 0;
     g_tick_running = 1;
     g_tick_start = read_stamp();
-    g_tick_ms = g_ms;  // interrupts off: whole (timer 0's handler stores it so too)
     sei();
     app::tick();
     const uint16_t cycles = cycles_from(g_tick_start);
@@ -366,6 +365,9 @@ __attribute__((noinline)) void run_one_tick() {
     if (app::tick_done(cycles, overran)) GPIOR0 |= _BV(kWake);
     cli();
     g_tick_running = 0;
+    // As the tick ends (where a loop() pass after each tick read millis() before): interrupts
+    // off, so whole (timer 0's handler stores g_ms so too).
+    g_tick_ms = g_ms;
 }
 
 inline __attribute__((always_inline)) void run_due_ticks() {
