@@ -488,12 +488,13 @@ bool tick_done(uint16_t cycles, bool overran) {
     Board& b = g_board;
     b.hand.record_timing(cycles, overran);
     // The cheap reads first: most ticks give loop() nothing (a sample every tenth at 100 Hz).
-    if (--b.loop_countdown == 0) {
-        b.loop_countdown = kLoopEveryTicks;
-    } else if (b.hand.stream_pending() == 0 && !b.paths_running && !new_faults(b) &&
-               !b.hand.halted()) {
+    // A pass at least every kLoopEveryTicks ticks, counted from the last one asked for (a
+    // sample's pass serves the stall rules too).
+    if (--b.loop_countdown != 0 && b.hand.stream_pending() == 0 && !b.paths_running &&
+        !new_faults(b) && !b.hand.halted()) {
         return false;
     }
+    b.loop_countdown = kLoopEveryTicks;
     b.loop_due = 1;
     return true;
 }
