@@ -119,7 +119,7 @@ void receive_byte(Board& b, uint8_t byte) {
 // The received bytes, read in place from the UART's buffer (no copy, no call a byte), up to
 // kRxBurst of them; a reply waiting for room stops the reading (the rest stays in the buffer).
 // Out of line, called only when bytes wait: its locals and the decoder's registers are not
-// saved and set up by the passes that find none (most of them: a pass a tick).
+// saved and set up by the passes that find none (most of them).
 __attribute__((noinline)) void receive_bytes(Board& b) {
     uint8_t budget = kRxBurst;
     while (budget != 0 && b.reply_len == 0) {

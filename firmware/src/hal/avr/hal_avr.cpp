@@ -731,10 +731,10 @@ void sleep_until_interrupt(bool (*idle)(), void (*take_bytes)()) {
             const uint8_t now = g_t0_overflows;
             if (now == ms) continue;
             // Timer 0's overflow: a new millisecond for the tick-alive check. While the tick
-            // runs, its own wake-up brings loop() round every period and that check with it;
-            // once a whole overflow period passed with no tick, every overflow wakes loop(),
-            // so a stopped tick is seen at the same millisecond as by a loop() that never
-            // sleeps.
+            // runs, it wakes loop() at least every 5 ticks (app::tick_done()), and the check
+            // (against the last tick's end, tick_millis()) cannot fire; once a whole overflow
+            // period passed with no tick, every overflow wakes loop(), so a stopped tick is
+            // seen at the same millisecond as by a loop() that never sleeps.
             ms = now;
             if (!(GPIOR0 & _BV(kTickSeen))) break;
             GPIOR0 &= (uint8_t)~_BV(kTickSeen);
@@ -749,8 +749,9 @@ void eeprom_write(uint16_t addr, uint8_t value) { eeprom_write_byte((uint8_t*)ad
 
 // 30 ms (WDTO_30MS: 4K cycles of the 128 kHz watchdog oscillator, 32 ms nominal): the longest
 // a hang with interrupts off leaves the motors at their last duty (nothing of the firmware
-// runs then). loop() feeds it every pass (a pass takes a few ms at most), and the loop-alive
-// rule (hand.h, 20 ticks) turns the motors off before it fires when the tick still runs.
+// runs then). loop() feeds it every pass (at least every 5 ticks while the tick runs; a pass
+// takes a few ms at most), and the loop-alive rule (hand.h, 20 ticks) turns the motors off
+// before it fires when the tick still runs.
 void watchdog_start() { wdt_enable(WDTO_30MS); }
 void watchdog_feed() { wdt_reset(); }
 void watchdog_mark_hang() { g_hang_mark = kHangMagic; }
