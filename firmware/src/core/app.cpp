@@ -484,12 +484,17 @@ void tick() {
     hal::encoders_sample();
 }
 
+static_assert(kLoopEveryTicks <= finger::kStallEvery && kLoopEveryTicks < hand::kLoopHangTicks,
+              "a pass at least as often as the stall rules and the loop-alive rule need");
+
 bool tick_done(uint16_t cycles, bool overran) {
     Board& b = g_board;
     b.hand.record_timing(cycles, overran);
     // The cheap reads first: most ticks give loop() nothing (a sample every tenth at 100 Hz).
     // A pass at least every kLoopEveryTicks ticks, counted from the last one asked for (a
     // sample's pass serves the stall rules too).
+    // A mode the tick changes comes with a new fault (a stop fault, the safe action's
+    // HOST_TIMEOUT: a driving finger has none latched), or with the halt.
     if (--b.loop_countdown != 0 && b.hand.stream_pending() == 0 && !b.paths_running &&
         !new_faults(b) && !b.hand.halted()) {
         return false;

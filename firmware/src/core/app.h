@@ -29,7 +29,7 @@ static const uint8_t kRequestHoldTicks = 2;
 static const uint8_t kStreamBacklog = 4;
 // After a tick loop() is woken only when it has work (tick_done()): a sample to send, a fault
 // the tick latched, a move's next segment, or every kLoopEveryTicks ticks for the checks that
-// do not need a pass a tick (the stall rules, every kStallEvery ticks; the watchdog's feeding).
+// need no pass a tick (the stall rules, every kStallEvery ticks; the watchdog's feeding).
 static const uint8_t kLoopEveryTicks = 5;
 
 struct LinkStats {
