@@ -4,6 +4,8 @@ safety rules that live in loop() keeping their timings."""
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 import pytest
 from fwsim import Sim, m
 
@@ -46,7 +48,7 @@ def test_with_nothing_to_do_a_pass_comes_every_fifth_tick_and_keeps_the_hand_goi
     woke, passes = still.run_woken(200)
     ticks = asked(woke)
     assert len(ticks) == 200 // EVERY
-    assert {b - a for a, b in zip(ticks, ticks[1:], strict=False)} == {EVERY}
+    assert {b - a for a, b in pairwise(ticks)} == {EVERY}
     assert passes == len(ticks)  # one pass each: nothing kept it awake
     st = still.status()
     assert not st.halted  # the loop-alive rule (20 ticks) is satisfied
@@ -62,7 +64,7 @@ def test_each_stream_sample_asks_for_its_pass_and_the_fifth_tick_counts_from_it(
     still.take()
     woke, _ = still.run_woken(1000)
     ticks = asked(woke)
-    gaps = {b - a for a, b in zip(ticks, ticks[1:], strict=False)}
+    gaps = {b - a for a, b in pairwise(ticks)}
     assert gaps == {EVERY}  # each sample's pass restarts the count: 200 passes, not 300
     assert len(still.take(m.State)) == 100  # every sample sent
 
