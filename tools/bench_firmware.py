@@ -292,8 +292,9 @@ def short_name(name: str) -> str:
     base = label(name.split(" [clone")[0])
     if base.startswith("__vector_"):
         return base
-    base = base.split("(")[0] if not base.startswith("(") else base
-    return base.replace("utrf::", "").replace("(anonymous namespace)::", "")
+    # The namespaces out before the arguments: "(anonymous namespace)::" has a parenthesis.
+    base = base.replace("utrf::", "").replace("(anonymous namespace)::", "")
+    return base.split("(")[0] if not base.startswith("(") else base
 
 
 def twin_awake(seconds: float, reference: Path | None) -> list[str]:

@@ -147,7 +147,7 @@ MUTANTS = [
         "tick-alive-off",
         "tick alive",
         "firmware/src/core/app.cpp",
-        "if (ms - b.watch_ms > kTickDeadMs) {",
+        "if (ms - tick_ms > kTickDeadMs) {",
         "if (false) {",
     ),
     Mutant(

@@ -54,6 +54,7 @@ void fw_power_on(uint8_t reset_cause) {
 void fw_tick(uint32_t n) {
     for (uint32_t i = 0; i < n; ++i) {
         ++state().ms;
+        state().tick_ms = state().ms;
         if (state().tick_locked) ++state().lock_errors;  // the tick cannot run while locked
         app::tick();
         // As the AVR's timer can tell: at most two periods, well within 16 bits.
@@ -81,6 +82,28 @@ void fw_run(uint32_t ms) {
             drain_to_line();
         }
     }
+}
+
+// `ms` milliseconds as the MEGA runs them: a tick, then loop() only if the tick asked for a
+// pass (app::tick_done()), and more passes while app::idle() finds work (the AVR layer's idle
+// sleep, hal_avr.cpp). woke[i]: whether tick i asked. Returns the passes run.
+uint32_t fw_run_woken(uint32_t ms, uint8_t* woke) {
+    uint32_t passes = 0;
+    for (uint32_t i = 0; i < ms; ++i) {
+        ++state().ms;
+        state().tick_ms = state().ms;
+        app::tick();
+        const uint32_t c = state().tick_cycles;
+        woke[i] = app::tick_done((uint16_t)(c > 0xFFFFu ? 0xFFFFu : c), state().period_elapsed);
+        if (!woke[i]) continue;
+        for (uint8_t k = 0; k < 8; ++k) {
+            app::loop();
+            drain_to_line();
+            ++passes;
+            if (app::idle()) break;
+        }
+    }
+    return passes;
 }
 
 void fw_advance_ms(uint32_t ms) { state().ms += ms; }

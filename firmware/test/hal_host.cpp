@@ -93,7 +93,10 @@ void encoders_sample() {
     if (!g_state.adc_frozen) g_state.adc_seq = (uint8_t)(g_state.adc_seq + 1);
 }
 
-void tick_start() { g_state.tick_started = true; }
+void tick_start() {
+    g_state.tick_started = true;
+    g_state.tick_ms = g_state.ms;
+}
 
 void tick_lock() {
     if (g_state.tick_locked) ++g_state.lock_errors;
@@ -114,6 +117,7 @@ Stamp stamp() {
 
 bool tick_period_elapsed() { return g_state.period_elapsed; }
 uint32_t millis() { return g_state.ms; }
+uint32_t tick_millis() { return g_state.tick_ms; }
 
 uint8_t serial_rx_peek(const uint8_t** data) {
     const uint16_t tail = g_state.rx_tail;

@@ -35,6 +35,7 @@ struct State {
     uint32_t tick_cycles;   // each tick's length, as fw_tick() reports it to app::tick_done()
     bool period_elapsed;    // what tick_period_elapsed() reports
     uint32_t ms;
+    uint32_t tick_ms;       // ms as the last tick ran (tick_millis())
     // serial
     uint8_t rx[kRxBytes];
     uint16_t rx_head, rx_tail;

@@ -93,6 +93,7 @@ def load_library(path: Path = LIB_PATH) -> ctypes.CDLL:
         "fw_tick": (None, [c.c_uint32]),
         "fw_loop": (None, [c.c_uint32]),
         "fw_run": (None, [c.c_uint32]),
+        "fw_run_woken": (c.c_uint32, [c.c_uint32, c.POINTER(c.c_uint8)]),
         "fw_advance_ms": (None, [c.c_uint32]),
         "fw_set_adc": (None, [c.c_uint8, c.c_uint16]),
         "fw_freeze_adc": (None, [c.c_int]),
@@ -234,6 +235,14 @@ class Sim:
             self.lib.fw_run(n)
             self._drain()
             ms -= n
+
+    def run_woken(self, ms: int) -> tuple[list[bool], int]:
+        """`ms` milliseconds as the MEGA runs them: loop() only after the ticks that ask for a
+        pass (and on while it finds work). Each tick's asking, and the passes run."""
+        woke = (ctypes.c_uint8 * ms)()
+        passes = self.lib.fw_run_woken(ms, woke)
+        self._drain()
+        return [bool(w) for w in woke], passes
 
     def tick(self, n: int = 1) -> None:
         self.lib.fw_tick(n)

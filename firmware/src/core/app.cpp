@@ -119,7 +119,7 @@ void receive_byte(Board& b, uint8_t byte) {
 // The received bytes, read in place from the UART's buffer (no copy, no call a byte), up to
 // kRxBurst of them; a reply waiting for room stops the reading (the rest stays in the buffer).
 // Out of line, called only when bytes wait: its locals and the decoder's registers are not
-// saved and set up by the passes that find none (most of them: a pass a tick).
+// saved and set up by the passes that find none (most of them).
 __attribute__((noinline)) void receive_bytes(Board& b) {
     uint8_t budget = kRxBurst;
     while (budget != 0 && b.reply_len == 0) {
@@ -321,15 +321,13 @@ __attribute__((noinline)) void send_boot(Board& b) {
 
 void watchdog(Board& b) {
     b.hand.note_loop();
-    const uint32_t t = b.hand.ticks();
+    b.loop_due = 0;  // before the pass's work: a tick that asks for one during it is seen
+    // The last tick's millisecond first, then now's (a tick between the two reads only makes
+    // the first older, never later than now).
+    const uint32_t tick_ms = hal::tick_millis();
     const uint32_t ms = hal::millis();
-    b.pass_ticks = t;
     b.pass_ms = ms;
-    if (t != b.watch_ticks) {
-        b.watch_ticks = t;
-        b.watch_ms = ms;
-    }
-    if (ms - b.watch_ms > kTickDeadMs) {
+    if (ms - tick_ms > kTickDeadMs) {
         // The tick stopped: nothing supervises the motors. Off, and let the watchdog reset.
         if (!b.hand.halted()) {
             Lock lock;
@@ -431,8 +429,9 @@ void setup() {
         b.status_mode[f] = b.hand.finger(f).mode();
         b.status_faults[f] = b.hand.finger(f).faults();
     }
-    b.watch_ticks = 0;
-    b.watch_ms = hal::millis();
+    b.loop_due = 0;
+    b.loop_countdown = kLoopEveryTicks;
+    b.paths_running = false;
     hal::watchdog_clear_hang_mark();
     hal::watchdog_start();
     hal::tick_start();
@@ -449,7 +448,9 @@ void loop() {
     // (its reply is in the transmit buffer by now), and a check waits at most for one dispatch.
     b.hand.stall_rules();  // about every 5 ticks a finger (core/hand.h)
     board_frames(b);
-    b.hand.plan_paths();  // a segment is due every 5 ticks, planned one ahead (core/path.h)
+    // A segment is due every 5 ticks, planned one ahead (core/path.h): while a move runs, a
+    // pass every tick.
+    b.paths_running = b.hand.plan_paths();
     save_progress(b);
     flush_reply(b);
 }
@@ -462,7 +463,7 @@ bool idle() {
     const uint8_t pending = b.hand.stream_pending();
     if (pending >= kStreamBacklog) return false;  // behind: they go as the buffer has room
     if (hal::serial_rx_waiting()) return false;
-    if (b.hand.ticks() != b.pass_ticks || hal::millis() != b.pass_ms) return false;
+    if (b.loop_due || hal::millis() != b.pass_ms) return false;
     if (!tx_idle(b)) return true;    // a frame starts when the buffer empties: an interrupt
     return pending == 0 && !b.status_pending && !new_faults(b);
 }
@@ -483,7 +484,25 @@ void tick() {
     hal::encoders_sample();
 }
 
-void tick_done(uint16_t cycles, bool overran) { g_board.hand.record_timing(cycles, overran); }
+static_assert(kLoopEveryTicks <= finger::kStallEvery && kLoopEveryTicks < hand::kLoopHangTicks,
+              "a pass at least as often as the stall rules and the loop-alive rule need");
+
+bool tick_done(uint16_t cycles, bool overran) {
+    Board& b = g_board;
+    b.hand.record_timing(cycles, overran);
+    // The cheap reads first: most ticks give loop() nothing (a sample every tenth at 100 Hz).
+    // A pass at least every kLoopEveryTicks ticks, counted from the last one asked for (a
+    // sample's pass serves the stall rules too).
+    // A mode the tick changes comes with a new fault (a stop fault, the safe action's
+    // HOST_TIMEOUT: a driving finger has none latched), or with the halt.
+    if (--b.loop_countdown != 0 && b.hand.stream_pending() == 0 && !b.paths_running &&
+        !new_faults(b) && !b.hand.halted()) {
+        return false;
+    }
+    b.loop_countdown = kLoopEveryTicks;
+    b.loop_due = 1;
+    return true;
+}
 
 }  // namespace app
 }  // namespace utrf

@@ -27,6 +27,10 @@ static const uint8_t kRequestHoldTicks = 2;
 // Samples the state stream lets wait while a request comes in (the ring holds
 // hand::kStreamSlots = 8): beyond, they go out whatever comes in.
 static const uint8_t kStreamBacklog = 4;
+// After a tick loop() is woken only when it has work (tick_done()): a sample to send, a fault
+// the tick latched, a move's next segment, or every kLoopEveryTicks ticks for the checks that
+// need no pass a tick (the stall rules, every kStallEvery ticks; the watchdog's feeding).
+static const uint8_t kLoopEveryTicks = 5;
 
 struct LinkStats {
     uint32_t rx_frames;
@@ -87,12 +91,14 @@ struct Board {
     bool status_pending;  // changed, the status frame not yet sent
 
 
-    uint32_t watch_ticks;  // loop()'s view of the tick, for the watchdog
-    uint32_t watch_ms;
-    // The tick count and millis() when this loop() pass began (its watchdog check): idle()
-    // finds whether a tick or timer 0 came since.
-    uint32_t pass_ticks;
+    // millis() when this loop() pass began (its watchdog check): idle() finds whether timer 0
+    // came since.
     uint32_t pass_ms;
+    // Set by tick_done() when the tick gave loop() work, cleared as a pass begins: idle() finds
+    // whether one came since.
+    volatile uint8_t loop_due;
+    uint8_t loop_countdown;  // ticks to the next pass every kLoopEveryTicks
+    bool paths_running;      // a move under way (loop()'s view): a pass every tick
 
     // The last move (dispatch.cpp): a resend (same seq and body) gets its reply again and
     // restarts nothing. Zero at start-up (static storage): no move yet.
@@ -119,10 +125,11 @@ void setup();  // after hal init: load the configuration, arm the tick and the w
 void loop();   // one pass: link, dispatch, reports, telemetry, EEPROM, watchdog
 // After a pass, called by the hardware layer with interrupts disabled: true when a pass run
 // now would find nothing to do, so the CPU may sleep until the next interrupt (whatever gives
-// loop() work comes from an interrupt: a byte received or sent, a tick, timer 0's millisecond).
-// False when a byte waits to be read, a reply or a board frame can go, the EEPROM is being
-// written, or a tick or timer 0 came during the pass (its work, or the tick-alive check at
-// the new millisecond, is not left for the next interrupt).
+// loop() work comes from an interrupt: a byte received or sent, a tick that asks for a pass,
+// timer 0's millisecond). False when a byte waits to be read, a reply or a board frame can go,
+// the EEPROM is being written, or a tick that asked for a pass or timer 0 came during the
+// pass (its work, or the tick-alive check at the new millisecond, is not left for the next
+// interrupt).
 bool idle();
 // Between passes, while a frame comes in (the AVR layer's sleep, interrupts on): the bytes
 // received so far, up to any 0x00, into the decoder, which decodes them as they come; the
@@ -130,8 +137,10 @@ bool idle();
 void take_bytes();
 void tick();   // the control tick (timer interrupt context)
 // After each tick, from the hardware layer that timed it: its length in CPU cycles, and
-// whether the next period began before it ended (an overrun).
-void tick_done(uint16_t cycles, bool overran);
+// whether the next period began before it ended (an overrun). True when loop() has work from
+// it (a sample, a new fault, a move's segment, the halt, or the kLoopEveryTicks pass): the
+// AVR layer wakes loop() only then.
+bool tick_done(uint16_t cycles, bool overran);
 
 // A long request (a move's plans) calls this between its parts: the board's own frames that
 // fell due meanwhile go out (the state stream drops a frame after two periods without one).

@@ -155,7 +155,11 @@ class Finger {
     bool moving() const { return path_.active(); }
     const path::Path& path() const { return path_; }
     // loop() context, without the lock: the path's next segment, when it needs one.
-    void plan_path() { path_.plan_next(); }
+    // The next segment worked out if due; true while segments are left to work out.
+    bool plan_path() {
+        path_.plan_next();
+        return path_.planning();
+    }
     int16_t duty_a() const { return duty_a_; }  // Q15, signed, positive pulls
     int16_t duty_b() const { return duty_b_; }
     int16_t output() const { return pid_.output(); }  // the controller's u, Q15

@@ -30,7 +30,9 @@ Hand::Hand()
     timing_.overruns = 0;
     timing_.worst_cycles = 0;
     timing_.mean_cycles = 0;
-    // Staggered: one finger's check a tick while loop() keeps up.
+    // Staggered: one finger's check a tick where loop() runs every tick (the host tests); on
+    // the board, which wakes loop() every kLoopEveryTicks (core/app.h), they fall due together
+    // after the first pass.
     for (uint8_t f = 0; f < kFingers; ++f) stall_at_[f] = f;
 }
 
@@ -51,15 +53,17 @@ void Hand::stall_rules() {
 }
 
 void Hand::stall_checks(uint8_t now, uint8_t due) {
+    // Under one lock (usually all five are due together, loop() being woken every
+    // kLoopEveryTicks ticks): some 350 cycles at most that a tick may wait.
+    hal::tick_lock();
     uint8_t bit = 1;
     for (uint8_t f = 0; f < kFingers; ++f, bit = (uint8_t)(bit << 1)) {
         if (!(due & bit)) continue;
         const uint8_t elapsed = (uint8_t)(now - stall_at_[f]);
         stall_at_[f] = now;
-        hal::tick_lock();
         if (fingers_[f].stall_rule(elapsed)) hal::motor_off(f);  // stopped now, not next tick
-        hal::tick_unlock();
     }
+    hal::tick_unlock();
 }
 
 void Hand::safe_action_tick(const hal::EncoderReading* enc) {

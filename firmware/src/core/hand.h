@@ -58,9 +58,12 @@ class Hand {
     }
     void set_safety(uint16_t timeout_ms, uint8_t safe_action);
     finger::Finger& finger(uint8_t f) { return fingers_[f]; }
-    // loop() context, every pass, without the lock: the moves' next path segments.
-    void plan_paths() {
-        for (uint8_t f = 0; f < kFingers; ++f) fingers_[f].plan_path();
+    // loop() context, every pass, without the lock: the moves' next path segments; true while
+    // a finger's move has segments left to work out.
+    bool plan_paths() {
+        bool planning = false;
+        for (uint8_t f = 0; f < kFingers; ++f) planning = fingers_[f].plan_path() || planning;
+        return planning;
     }
     const finger::Finger& finger(uint8_t f) const { return fingers_[f]; }
     // loop() context, every pass, without the lock (it takes it for a check): each finger's

@@ -81,7 +81,14 @@ class Path {
     // `first`: the first segment's length, 1..kEvery (the hand staggers its fingers' segment
     // ends, so their segments are not all taken in the same tick).
     void start(const Plan& p, int16_t from_bu, uint8_t first);
-    void stop() { left_ = 0; }
+    // Ends the path and its planning (the tick's or loop()'s: plan_next_work() writes
+    // plan_left_ only while left_ != 0, under the lock, so no segment is planned after this).
+    void stop() {
+        left_ = 0;
+        plan_left_ = 0;
+    }
+    // loop() context: segments still to work out (loop() is woken every tick meanwhile).
+    bool planning() const { return plan_left_ != 0; }
     // loop() context, without the lock (it takes it to hand the segment over): work out the
     // next segment when the tick has taken the last one. Cheap when there is nothing to do:
     // that test inline (loop() runs it for every finger every pass; the work's frame is not).

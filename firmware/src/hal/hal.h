@@ -127,6 +127,9 @@ static const uint32_t kCpuHz = 16000000UL;
 bool tick_period_elapsed();
 // Milliseconds since start, for loop()'s own time-outs.
 uint32_t millis();
+// millis() as the last tick ended (as tick_start() ran, before the first): loop()'s tick-alive
+// rule, which loop() checks only at the passes the tick asks for (app::tick_done()).
+uint32_t tick_millis();
 
 // ---- serial (UART0) ----------------------------------------------------------------------------
 // Never blocks. Reads what has arrived; writes only when serial_tx_room() says it fits.

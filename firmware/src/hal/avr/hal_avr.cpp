@@ -221,7 +221,8 @@ void drives_change(uint8_t f, uint8_t d) { drives_change_hw(g_hw[f], g_drives_la
 // receive interrupt, which nests in the control tick once for each byte that arrives while it
 // runs, touches no other memory on its usual path.
 // GPIOR0 bit 0, set (sbi: two cycles, no register) by the interrupts that give loop() work:
-// a frame's last byte (0x00) received, a tick, the transmit buffer emptied.
+// a frame's last byte (0x00) received, a tick that asks for a pass (app::tick_done()), the
+// transmit buffer emptied.
 // sleep_until_interrupt() sleeps again after any other (an ADC conversion, a byte going out)
 // without a loop() pass.
 static const uint8_t kWake = 0;
@@ -254,6 +255,7 @@ namespace {
 volatile uint32_t g_ms;
 uint8_t g_ms_fract;           // each overflow's 24 us past a millisecond, in 8 us (125: 1 ms)
 volatile uint8_t g_t0_overflows;  // wraps: the idle sleep's "a millisecond since"
+volatile uint32_t g_tick_ms;      // g_ms as the last tick ended (tick_millis())
 }  // namespace
 
 // The Arduino core's main() calls init() before setup(): interrupts on, timer 0 as the core
@@ -278,7 +280,9 @@ ISR(TIMER0_OVF_vect, ISR_NOBLOCK) {
         ++m;
     }
     g_ms_fract = f;
+    cli();  // the tick, which nests here, reads g_ms whole (g_tick_ms)
     g_ms = m;
+    sei();
     g_t0_overflows = (uint8_t)(g_t0_overflows + 1);
     TIMSK0 = _BV(TOIE0);
 }
@@ -357,9 +361,13 @@ __attribute__((noinline)) void run_one_tick() {
     app::tick();
     const uint16_t cycles = cycles_from(g_tick_start);
     const bool overran = g_tick_deferred != 0 || lost != 0;
-    app::tick_done(cycles, overran);
+    // loop() after the tick only when it gave loop() work (sleep_until_interrupt()).
+    if (app::tick_done(cycles, overran)) GPIOR0 |= _BV(kWake);
     cli();
     g_tick_running = 0;
+    // As the tick ends (where a loop() pass after each tick read millis() before): interrupts
+    // off, so whole (timer 0's handler stores g_ms so too).
+    g_tick_ms = g_ms;
 }
 
 inline __attribute__((always_inline)) void run_due_ticks() {
@@ -370,7 +378,7 @@ inline __attribute__((always_inline)) void run_due_ticks() {
 
 // A compare: its tick, or, while one runs (or a lock the mask below missed), a deferred one.
 inline __attribute__((always_inline)) void take_compare() {
-    GPIOR0 |= _BV(kWake) | _BV(kTickSeen);  // loop() after the tick (sleep_until_interrupt)
+    GPIOR0 |= _BV(kTickSeen);  // the tick runs: timer 0 need not wake loop() (the idle sleep)
     if (g_tick_running || g_tick_locked) {
         if (g_tick_deferred) g_tick_lost = 1;
         g_tick_deferred = 1;
@@ -582,6 +590,7 @@ void tick_start() {
     g_tick_running = 0;
     g_tick_deferred = 0;
     g_tick_lost = 0;
+    g_tick_ms = millis();
     TCNT2 = 0;
     TIFR2 = _BV(OCF2A);
     TIMSK2 = _BV(OCIE2A);
@@ -626,6 +635,12 @@ bool tick_period_elapsed() { return g_tick_deferred != 0; }
 uint32_t millis() {
     uint32_t m;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { m = g_ms; }
+    return m;
+}
+
+uint32_t tick_millis() {
+    uint32_t m;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { m = g_tick_ms; }
     return m;
 }
 
@@ -716,10 +731,10 @@ void sleep_until_interrupt(bool (*idle)(), void (*take_bytes)()) {
             const uint8_t now = g_t0_overflows;
             if (now == ms) continue;
             // Timer 0's overflow: a new millisecond for the tick-alive check. While the tick
-            // runs, its own wake-up brings loop() round every period and that check with it;
-            // once a whole overflow period passed with no tick, every overflow wakes loop(),
-            // so a stopped tick is seen at the same millisecond as by a loop() that never
-            // sleeps.
+            // runs, it wakes loop() at least every 5 ticks (app::tick_done()), and the check
+            // (against the last tick's end, tick_millis()) cannot fire; once a whole overflow
+            // period passed with no tick, every overflow wakes loop(), so a stopped tick is
+            // seen at the same millisecond as by a loop() that never sleeps.
             ms = now;
             if (!(GPIOR0 & _BV(kTickSeen))) break;
             GPIOR0 &= (uint8_t)~_BV(kTickSeen);
@@ -734,8 +749,9 @@ void eeprom_write(uint16_t addr, uint8_t value) { eeprom_write_byte((uint8_t*)ad
 
 // 30 ms (WDTO_30MS: 4K cycles of the 128 kHz watchdog oscillator, 32 ms nominal): the longest
 // a hang with interrupts off leaves the motors at their last duty (nothing of the firmware
-// runs then). loop() feeds it every pass (a pass takes a few ms at most), and the loop-alive
-// rule (hand.h, 20 ticks) turns the motors off before it fires when the tick still runs.
+// runs then). loop() feeds it every pass (at least every 5 ticks while the tick runs; a pass
+// takes a few ms at most), and the loop-alive rule (hand.h, 20 ticks) turns the motors off
+// before it fires when the tick still runs.
 void watchdog_start() { wdt_enable(WDTO_30MS); }
 void watchdog_feed() { wdt_reset(); }
 void watchdog_mark_hang() { g_hang_mark = kHangMagic; }
