@@ -117,6 +117,7 @@ int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, in
         }
         at = s->plant_cycle = end;
         s->lock_mcu_cycle = s->avr->cycle;
+        beats_period_end(s);
         if (now != status) {
             status = now;
             break;
