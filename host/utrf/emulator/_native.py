@@ -299,6 +299,11 @@ class NativeBoard:
         """With two twin threads: the periods the MCU's thread stepped the plant itself."""
         return int(self._lib.utrf_sim_plant_inline_periods(self._h))
 
+    @property
+    def plant_wait_s(self) -> float:
+        """With two twin threads: how long the MCU's thread waited for the plant's (s)."""
+        return int(self._lib.utrf_sim_plant_wait_ns(self._h)) / 1e9
+
     def set_plant_spin(self, spin: bool) -> None:
         """With two twin threads: whether the plant's thread spins before it sleeps."""
         self._lib.utrf_sim_set_plant_spin(self._h, int(bool(spin)))

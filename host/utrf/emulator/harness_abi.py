@@ -362,6 +362,7 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_plant_threads": (ctypes.c_int, [p]),
         "utrf_sim_set_plant_spin": (ctypes.c_int, [p, ctypes.c_int]),
         "utrf_sim_plant_inline_periods": (ctypes.c_uint64, [p]),
+        "utrf_sim_plant_wait_ns": (ctypes.c_uint64, [p]),
         "utrf_sim_ahead_start": (
             ctypes.c_int,
             [p, ctypes.c_uint64, ctypes.c_uint64, ctypes.c_int],

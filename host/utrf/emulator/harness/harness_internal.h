@@ -208,6 +208,7 @@ struct utrf_sim {
     long lock_handover_ns16, lock_step_ns16;
     int lock_inline_left;
     uint64_t lock_inline_periods; /* periods two threads stepped on one, for a test to read */
+    uint64_t lock_wait_ns; /* the MCU's thread waiting for the plant's at the hand-overs */
     int lock_keep_plant; /* a run ahead's stops: the run goes on at once, the plant not parked */
     void *plant_ctx;
     void (*plant_step)(void *ctx, double dt, const double *pins);

@@ -274,6 +274,9 @@ int utrf_sim_set_plant_spin(utrf_sim_t *s, int spin);
 /* With two: the periods the MCU's thread stepped the plant itself, the hand-over costing it
  * more than the step (lockstep.c) */
 uint64_t utrf_sim_plant_inline_periods(const utrf_sim_t *s);
+/* With two: how long (ns, the monotonic clock) the MCU's thread waited for the plant's at the
+ * hand-overs, its period run (the stall the second thread costs it) */
+uint64_t utrf_sim_plant_wait_ns(const utrf_sim_t *s);
 
 /* ---- Running ahead of the caller (run_ahead.c) ---------------------------------------------
  * utrf_sim_run_plant_until(s, target, period, wake) on a thread of its own: the call returns
