@@ -18,6 +18,11 @@ if TYPE_CHECKING:
     from utrf.emulator._native import NativeBoard
 
 
+#: a run ahead's heartbeats (:meth:`BoardDriven.run_ahead_stops`): ``(seq, frame)`` each, the
+#: next due (s), the period (s), the seqs whose acks count, the message kinds (256 bytes)
+Beats = tuple[list[tuple[int, bytes]], float, float, set[int], bytes]
+
+
 @dataclass(frozen=True)
 class AheadRun:
     """What a run ahead (:meth:`BoardDriven.run_ahead`) did: ``marks``, each period's end in
@@ -150,7 +155,7 @@ class BoardDriven:
         t0: float,
         hits: list[tuple[float, int, int, Any, float]],
         send: tuple[bytes, float] | None = None,
-        beats: tuple[list[tuple[int, bytes]], float, float, set[int], bytes] | None = None,
+        beats: Beats | None = None,
     ) -> None:
         """:meth:`run_ahead` through stops at ``targets`` (cycles, rising; each where a run
         ahead to it would end, the last the run's end): at each the hits due are applied

@@ -29,10 +29,12 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
+from utrf.emulator.board_driven import Beats
 from utrf.emulator.board_types import EmulatorError
 from utrf.emulator.harness_abi import BEATS, F_CPU_HZ, HITS, STOPS
 from utrf.protocol import messages as m
-from utrf.protocol.engine import HEARTBEAT_SEQS_KEPT, STREAM_IDS
+from utrf.protocol.engine import HEARTBEAT_SEQS_KEPT, SEQ_MASK, STREAM_IDS, Engine
+from utrf.protocol.framing import encode_frame
 
 if TYPE_CHECKING:
     from utrf.hand.simlink import SimLink
@@ -182,7 +184,7 @@ def _exchanges(seconds: float, period: float, plain: float | None) -> int | None
 
 def _plan(
     link: SimLink, peek: Callable[[int], float | None], stops: Stops
-) -> tuple[list[int], tuple[bytes, float] | None] | None:
+) -> tuple[list[int], Beats | None] | None:
     """The next batch's stops (cycles) and its heartbeat, or None where the general path would
     not run ahead to the next end."""
     board, engine = link.board, link._engine
@@ -221,9 +223,18 @@ def _plan(
         return None
     if due is None or hb is None:
         return targets, None
-    awaited = engine.heartbeats_awaited  # the engine forgets seqs beyond its count
-    frames = engine.heartbeat_frames(max(min(BEATS, HEARTBEAT_SEQS_KEPT - len(awaited)), 0))
-    return targets, (frames, due, hb, set(awaited), KINDS)
+    awaited = set(engine._heartbeat_seqs)  # the engine forgets seqs beyond its count
+    frames = next_heartbeats(engine, max(min(BEATS, HEARTBEAT_SEQS_KEPT - len(awaited)), 0))
+    return targets, (frames, due, hb, awaited, KINDS)
+
+
+def next_heartbeats(engine: Engine, n: int) -> list[tuple[int, bytes]]:
+    """The next ``n`` heartbeats' (seq, frame) as ``engine.heartbeat()`` will make them if
+    nothing else is sent first (its seq read here: no other driver needs it)."""
+    return [
+        (seq, encode_frame(seq, m.Heartbeat.ID))
+        for seq in ((engine._seq + i) & SEQ_MASK for i in range(n))
+    ]
 
 
 def _heartbeats(

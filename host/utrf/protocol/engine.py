@@ -405,19 +405,6 @@ class Engine:
             self._heartbeat_seqs.pop()
         return Transmit(encode_frame(seq, m.Heartbeat.ID), Kind.HEARTBEAT)
 
-    def heartbeat_frames(self, n: int) -> list[tuple[int, bytes]]:
-        """The next ``n`` heartbeats' (seq, frame) as :meth:`heartbeat` will make them if
-        nothing else is sent first (a driver that has them sent at their times)."""
-        return [
-            (seq, encode_frame(seq, m.Heartbeat.ID))
-            for seq in ((self._seq + i) & SEQ_MASK for i in range(n))
-        ]
-
-    @property
-    def heartbeats_awaited(self) -> frozenset[int]:
-        """The seqs of the heartbeats whose acks are awaited (an ack of one counts as heard)."""
-        return frozenset(self._heartbeat_seqs)
-
     # --- what the board sends -------------------------------------------------------------------
 
     def fail(self, error: DisconnectedError) -> None:
