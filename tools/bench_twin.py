@@ -145,6 +145,7 @@ def engine_threads(seconds: float) -> dict:
             seen["threads"] = _thread_clocks()
             seen["wall"] = time.perf_counter() - wall0
             seen["inline"] = getattr(self._native, "plant_inline_periods", None)
+            seen["wait"] = getattr(self._native, "plant_wait_s", None)
             seen["periods"] = round(self.sim_time / self.exchange_period)
             seen["twin_threads"] = self.plant_threads
         return close(self, *args, **kwargs)
@@ -241,16 +242,36 @@ def hold(tree: Path, seconds: float, threads: int | None = None) -> dict:
             "complete": bool(results.get("complete")), "load": os.getloadavg()[0]}  # fmt: skip
 
 
-def engine(tree: Path, which: str, seconds: float) -> dict:
+def engine(tree: Path, which: str, seconds: float, threads: int | None = None) -> dict:
     """One engine alone in ``tree`` (this file run there with that tree's sources)."""
     cmd = [sys.executable, str(Path(__file__).resolve()), "--engine", which,
            "--seconds", f"{seconds:g}"]  # fmt: skip
-    _, _, done = _child(cmd, tree)
+    _, _, done = _child(cmd, tree, threads)
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def median(rows: list[dict], key: str) -> float:
     return statistics.median(r[key] for r in rows)
+
+
+def _by_thread(th: dict) -> str:
+    """A by-thread run's cell: each thread's CPU, and with two twin threads what the
+    hand-overs cost the MCU's thread (its wait for the plant's, the periods it stepped the
+    plant itself)."""
+    clocks = dict(th["threads"])
+    parts = [clocks.pop(k, 0.0) for k in ("client", "utrf-board", "utrf-plant")]
+    cell = " / ".join(f"{x:.1f} s" for x in (*parts, sum(clocks.values())))
+    if th.get("inline") is not None and th["twin_threads"] == 2:
+        share = 100 * th["inline"] / max(th["periods"], 1)
+        cell += f"; the MCU's thread stepped the plant itself in {share:.0f} % of the periods"
+        if th.get("wait") is not None:
+            cell += f" and waited {th['wait']:.1f} s for the plant's thread at the others"
+    if th.get("runs_ahead"):
+        cell += (
+            f"; the board ran ahead of the client {th['runs_ahead']} times through its "
+            f"{th['samples']} samples ({th['samples'] / th['runs_ahead']:.1f} a run)"
+        )
+    return cell
 
 
 def report(
@@ -281,18 +302,7 @@ def report(
         shares = " / ".join(f"{100 * x / h:.0f}" for x in (e["cpu"], j["cpu"], rest))
         return f"{e['cpu']:.1f} s / {j['cpu']:.1f} s / {rest:.1f} s ({shares} %)"
 
-    th = alone["threads"]
-    clocks = dict(th["threads"])
-    parts = [clocks.pop(k, 0.0) for k in ("client", "utrf-board", "utrf-plant")]
-    by_thread = " / ".join(f"{x:.1f} s" for x in (*parts, sum(clocks.values())))
-    if th.get("inline") is not None and th["twin_threads"] == 2:
-        share = 100 * th["inline"] / max(th["periods"], 1)
-        by_thread += f"; the MCU's thread stepped the plant itself in {share:.0f} % of the periods"
-    if th.get("runs_ahead"):
-        by_thread += (
-            f"; the board ran ahead of the client {th['runs_ahead']} times through its "
-            f"{th['samples']} samples ({th['samples'] / th['runs_ahead']:.1f} a run)"
-        )
+    rows = [alone[k] for k in ("threads", "threads_other") if k in alone]
 
     lines = [
         BEGIN,
@@ -329,11 +339,14 @@ def report(
         f"the rest of the hold (Python, start-up, the figure, the crossings; this checkout's: "
         f"of its one-thread hold) | {engines('new')} "
         f"| {engines('ref')} | |",
-        f"| this checkout's hold by thread, CPU (one more run, in-process: each thread's clock "
-        f"as the board closes, {th['wall']:.1f} s in; the twin on {th['twin_threads']} "
-        f"thread{'s' if th['twin_threads'] > 1 else ''}): the client (Python) / the board's "
-        f"(the MCU, and the plant where stepped there) / the plant's / the rest | "
-        f"{by_thread} | | |",
+        *(
+            f"| this checkout's hold by thread, CPU (one more run, in-process: each thread's "
+            f"clock as the board closes, {th['wall']:.1f} s in; the twin on {th['twin_threads']} "
+            f"thread{'s' if th['twin_threads'] > 1 else ''}): the client (Python) / the board's "
+            f"(the MCU, and the plant where stepped there) / the plant's / the rest | "
+            f"{_by_thread(th)} | | |"
+            for th in rows
+        ),
         "",
         f"The ELF alone: the firmware for {seconds:g} s simulated with no plant attached, the "
         "hold's host traffic (telemetry at 100 Hz, heartbeats), five fingers in POSITION at the "
@@ -380,7 +393,10 @@ def main(argv: list[str] | None = None) -> int:
         tag: {which: engine(trees[tag], which, args.seconds) for which in ("elf", "mjcf")}
         for tag in ("new", "ref")
     }
-    alone["threads"] = engine(trees["new"], "threads", args.seconds)
+    for n in (own, other):  # by thread, the checkout's own count first
+        alone["threads" if n == own else "threads_other"] = engine(
+            trees["new"], "threads", args.seconds, n
+        )
     print(json.dumps(alone), file=sys.stderr)
     section = report(args.reference, runs, alone, args.seconds, args.repeats, own)
     print(section)

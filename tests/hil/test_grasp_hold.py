@@ -121,16 +121,22 @@ def test_disturbance_detection_on_a_known_trace() -> None:
 
 
 def _hold(
-    tmp: Path, ahead: bool, batched: bool = False, **config_kw: float
+    tmp: Path, ahead: bool, batched: bool = False, line: bool = False, **config_kw: float
 ) -> tuple[dict[str, bytes], dict[str, int], dict[str, int]]:
     kw: dict = {"duration_s": 3.0, "hits": 1, "seed": 2, "sample_hz": 50.0, **config_kw}
     config = gh.GraspHoldConfig(**kw)
     rig = open_emulated(seed=2, tracked_finger=1, truth=EmulatedTruth(actuator=None))
     rig.ahead, rig.batched = ahead, batched
     board = rig.board
+    if line:  # damaged frames both ways: heartbeats the board never acks, frames it garbles
+        board.set_line_faults("to_board", corrupt=0.03)
+        board.set_line_faults("to_host", corrupt=0.0005, drop=0.0005)
     runs: list[int] = []
     batch = board.run_ahead_stops
-    board.run_ahead_stops = lambda targets, *a: (runs.append(len(targets)), batch(targets, *a))
+    board.run_ahead_stops = lambda targets, *a, **kw: (
+        runs.append(len(targets)),
+        batch(targets, *a, **kw),
+    )
     try:
         run.run(rig, config, tmp, progress=lambda _s: None)
         stats, rx = dict(board.stats), board.rx_timing()  # every byte's arrival, to the cycle
@@ -161,8 +167,8 @@ def test_the_board_running_ahead_takes_the_same_hold_to_the_bit(
         assert ahead["samples.csv"].count(b"\n") > 140 and ahead["hits.csv"].count(b"\n") == 2
         assert ahead == plain
         runs, stops = stats_a.pop("batched_runs"), stats_a.pop("batched_stops")
-        if batched:  # the board ran through about 5 samples a run (a heartbeat's 0.1 s)
-            assert stops >= 145 and runs < stops / 3
+        if batched:  # the harness sends the heartbeats: up to 64 samples a run
+            assert stops >= 145 and runs <= stops / 30, (runs, stops)
         else:
             assert runs == 0
         # the sleep counter adds a cycle at each SLEEP entry: a run ahead entered 9-14 fewer of
@@ -187,7 +193,24 @@ def test_more_hits_a_batch_than_the_harness_takes_come_out_the_same(
     batched, stats_b, _ = _hold(tmp_path / "batched", True, True, **light)
     assert batched["hits.csv"].count(b"\n") == 401 and batched == plain
     # batches before and after the hits, the general way among them
-    assert stats_b["batched_runs"] > 10 and 100 < stats_b["batched_stops"] < 140
+    assert stats_b["batched_runs"] >= 3 and 100 < stats_b["batched_stops"] < 140
     for st in (stats_p, stats_b):
         st.pop("batched_runs"), st.pop("batched_stops"), st.pop("sleep_cycles")
     assert stats_b == stats_p
+
+
+@pytest.mark.slow
+def test_a_noisy_line_comes_out_the_same(firmware_elf: Path, tmp_path: Path) -> None:
+    """The harness's heartbeats on a noisy line: heartbeats damaged on the way (no ack: the
+    next falls due a period after the last one sent) and the board's frames damaged (the
+    harness cannot place them: the batch ends at the next sample, and the engine goes on the
+    general way). The hold is sleep_each's to the bit, and the batches still ran."""
+    plain, stats_p, rx_p = _hold(tmp_path / "ahead", True, False, line=True)
+    batched, stats_b, rx_b = _hold(tmp_path / "batched", True, True, line=True)
+    assert stats_p["rx_corrupted"] > 5 and stats_p["tx_corrupted"] > 5, stats_p
+    assert batched["samples.csv"].count(b"\n") > 140 and batched == plain
+    runs, stops = stats_b.pop("batched_runs"), stats_b.pop("batched_stops")
+    assert stops > 75 and runs > 5  # frozen batches, ended early
+    for st in (stats_p, stats_b):
+        st.pop("batched_runs", None), st.pop("batched_stops", None), st.pop("sleep_cycles")
+    assert stats_b == stats_p and rx_b == rx_p

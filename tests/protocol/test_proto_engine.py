@@ -325,6 +325,27 @@ def test_heartbeats_fall_due_when_the_board_was_not_heard_for_a_period() -> None
     assert engine.heartbeat_due() is None
 
 
+def test_the_next_heartbeats_frames_are_the_ones_the_engine_makes() -> None:
+    """What the harness sending the heartbeats itself is given (simlink_stops): the next
+    frames as Engine.heartbeat() makes them, across the seq's wrap."""
+    from utrf.hand.simlink_stops import next_heartbeats
+
+    engine = Engine(heartbeat_period_s=0.1)
+    shake_hands(engine, 1.0)
+    start(engine, M.Ping(1), 1.0)  # a request moves the seq: the frames follow it
+    for _ in range(125):
+        engine._next_seq()  # near the wrap (host seqs 0..127)
+    ahead = next_heartbeats(engine, 4)
+    assert [seq for seq, _ in ahead] == [127, 0, 1, 2]
+    sent = []
+    for i, (seq, data) in enumerate(ahead):
+        tx = engine.heartbeat(1.1 + i)
+        assert tx is not None and tx.data == data and seq_of(tx) == seq
+        engine.sent(tx, 1.1 + i)
+        sent.append(seq)
+    assert engine._heartbeat_seqs == set(sent)  # what the harness is told is awaited
+
+
 def test_a_lost_line_fails_the_request_and_every_next_one() -> None:
     engine = Engine()
     start(engine, M.Ping(1), 0.0)

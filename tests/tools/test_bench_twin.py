@@ -28,6 +28,7 @@ def test_the_hold_by_thread_names_the_harness_threads(
     monkeypatch.setenv("UTRF_TWIN_THREADS", "2")
     r = bench_twin.engine_threads(4.0)
     assert r["twin_threads"] == 2 and 0 <= r["inline"] <= r["periods"]
+    assert r["wait"] >= 0 and (r["wait"] > 0) == (r["inline"] < r["periods"])
     assert {"client", "utrf-board", "utrf-plant"} <= set(r["threads"])
     assert r["threads"]["client"] > 0 and r["threads"]["utrf-board"] > 0
 
@@ -46,7 +47,10 @@ def test_the_section_gives_the_ratio_of_the_medians_and_each_engine(threads: int
     alone: dict = {tag: {"elf": {"cpu": 2.0}, "mjcf": {"cpu": 1.0}} for tag in ("new", "ref")}
     alone["threads"] = {"threads": {"client": 3.0, "utrf-board": 9.0, "utrf-plant": 4.0,
                                     "python": 0.5}, "wall": 12.0, "inline": 300,
-                        "periods": 1200, "twin_threads": threads}  # fmt: skip
+                        "periods": 1200, "twin_threads": threads, "wait": 1.5}  # fmt: skip
+    alone["threads_other"] = {"threads": {"client": 2.0, "utrf-board": 7.0, "utrf-plant": 5.0},
+                              "wall": 11.0, "inline": 600, "periods": 1200, "wait": 2.5,
+                              "twin_threads": 3 - threads}  # fmt: skip
     text = bench_twin.report(
         "f500c49",
         {"new": runs(5.0, 6.0, 50.0), "ref": runs(12.0, 11.0, 10.0), "other": runs(9.0, 8.0, 10.0)},
@@ -65,4 +69,7 @@ def test_the_section_gives_the_ratio_of_the_medians_and_each_engine(threads: int
     assert ("2.0 s / 1.0 s / 1.5 s" if threads == 2 else "2.0 s / 1.0 s / 0.0 s") in text
     # by thread: the client, the board's, the plant's, the rest; the inline share with two
     assert "3.0 s / 9.0 s / 4.0 s / 0.5 s" in text
-    assert ("plant itself in 25 % of the periods" in text) == (threads == 2)
+    assert ("plant itself in 25 % of the periods and waited 1.5 s" in text) == (threads == 2)
+    # and the other count's by-thread run beside it, its hand-overs' cost with two
+    assert text.count("hold by thread") == 2 and "2.0 s / 7.0 s / 5.0 s / 0.0 s" in text
+    assert ("plant itself in 50 % of the periods and waited 2.5 s" in text) == (threads == 1)

@@ -17,6 +17,8 @@ import numpy as np
 from utrf.emulator.harness_abi import (
     ABI,
     ADC_CHANNELS,
+    BEAT_BYTES,
+    BEATS,
     F_CPU_HZ,
     FINGERS,
     FRAME_LOG,
@@ -228,6 +230,42 @@ class NativeBoard:
         )
         return list(cycles[:n]), truth[:n], list(at[: getattr(self, "_stop_hits", 0)])
 
+    def ahead_beats(
+        self,
+        frames: list[tuple[int, bytes]],
+        due: float,
+        period: float,
+        acks: set[int],
+        kinds: bytes,
+    ) -> None:
+        """Heartbeats for the next run ahead with stops (``(seq, frame)`` each, the next due
+        at ``due``, a ``period`` after each sent or each ack of ``acks`` heard; ``kinds``: per
+        message id, 1 the stream, 2 an ack, 0 anything else)."""
+        if len(frames) > BEATS or any(len(f) > BEAT_BYTES for _, f in frames) or len(kinds) != 256:
+            raise HarnessError(f"at most {BEATS} heartbeats of {BEAT_BYTES} bytes a run")
+        n = len(frames)
+        buf = (ctypes.c_uint8 * (BEATS * BEAT_BYTES))()
+        lens = (ctypes.c_uint8 * BEATS)()
+        seqs = (ctypes.c_uint8 * BEATS)()
+        for i, (seq, frame) in enumerate(frames):
+            buf[i * BEAT_BYTES : i * BEAT_BYTES + len(frame)] = list(frame)
+            lens[i], seqs[i] = len(frame), seq
+        mask = (ctypes.c_uint8 * 16)()
+        for seq in acks:
+            mask[seq >> 3] |= 1 << (seq & 7)
+        ckinds = (ctypes.c_uint8 * 256).from_buffer_copy(kinds)
+        if self._lib.utrf_sim_ahead_beats(
+            self.handle, buf, lens, seqs, n, due, period, mask, ckinds
+        ):
+            raise HarnessError("heartbeats refused: too many, or a run ahead is under way")
+
+    def ahead_beats_done(self) -> tuple[list[int], list[float]]:
+        """After the join: the heartbeats sent, their cycles and the due times they went for."""
+        cycles = (ctypes.c_uint64 * BEATS)()
+        dues = (ctypes.c_double * BEATS)()
+        n = self._lib.utrf_sim_ahead_beats_done(self.handle, cycles, dues, BEATS)
+        return list(cycles[:n]), list(dues[:n])
+
     def ahead_send(self, data: bytes, at_s: float) -> None:
         """Write ``data`` to UART0 at the first period's end whose time reaches ``at_s``."""
         buf = (ctypes.c_uint8 * len(data)).from_buffer_copy(data)
@@ -260,6 +298,11 @@ class NativeBoard:
     def plant_inline_periods(self) -> int:
         """With two twin threads: the periods the MCU's thread stepped the plant itself."""
         return int(self._lib.utrf_sim_plant_inline_periods(self._h))
+
+    @property
+    def plant_wait_s(self) -> float:
+        """With two twin threads: how long the MCU's thread waited for the plant's (s)."""
+        return int(self._lib.utrf_sim_plant_wait_ns(self._h)) / 1e9
 
     def set_plant_spin(self, spin: bool) -> None:
         """With two twin threads: whether the plant's thread spins before it sleeps."""

@@ -18,6 +18,11 @@ if TYPE_CHECKING:
     from utrf.emulator._native import NativeBoard
 
 
+#: a run ahead's heartbeats (:meth:`BoardDriven.run_ahead_stops`): ``(seq, frame)`` each, the
+#: next due (s), the period (s), the seqs whose acks count, the message kinds (256 bytes)
+Beats = tuple[list[tuple[int, bytes]], float, float, set[int], bytes]
+
+
 @dataclass(frozen=True)
 class AheadRun:
     """What a run ahead (:meth:`BoardDriven.run_ahead`) did: ``marks``, each period's end in
@@ -150,11 +155,15 @@ class BoardDriven:
         t0: float,
         hits: list[tuple[float, int, int, Any, float]],
         send: tuple[bytes, float] | None = None,
+        beats: Beats | None = None,
     ) -> None:
         """:meth:`run_ahead` through stops at ``targets`` (cycles, rising; each where a run
         ahead to it would end, the last the run's end): at each the hits due are applied
         (``(at, body, site, world impulse, duration)``, due once ``cycle / F_CPU_HZ - t0``
-        reaches ``at``) and the plant's truth recorded (:meth:`run_ahead_stops_done`)."""
+        reaches ``at``) and the plant's truth recorded (:meth:`run_ahead_stops_done`).
+        ``beats``: the heartbeats the harness sends at the client's times (``(seq, frame)``
+        each, the next due, the period, the seqs whose acks count, the message kinds:
+        ``utrf_sim_ahead_beats``; :meth:`run_ahead_beats_done`)."""
         if self.realtime or not self._capture:
             raise EmulatorError("run_ahead needs realtime=False and capture=True")
         if not targets:
@@ -163,6 +172,8 @@ class BoardDriven:
         try:
             native = self._board()
             native.ahead_stops(targets, t0, hits)
+            if beats is not None:
+                native.ahead_beats(*beats)
             if send is not None:
                 native.ahead_send(send[0], send[1])
             native.ahead_start(targets[-1], self._period_cycles, 0)
@@ -177,6 +188,11 @@ class BoardDriven:
         sites' world positions (15), the motors' currents (10)) and each hit's stop (-1: not
         applied)."""
         return self._native.ahead_stops_done()
+
+    def run_ahead_beats_done(self) -> tuple[list[int], list[float]]:
+        """After the join: the heartbeats the harness sent (their cycles) and the due times
+        they went for."""
+        return self._native.ahead_beats_done()
 
     def run_ahead(self, seconds: float, send: tuple[bytes, float] | None = None) -> None:
         """Driven: start running ``seconds`` of simulated time in whole exchanges (the same

@@ -15,7 +15,7 @@ from typing import Any
 
 from utrf import artifacts
 
-ABI = 19
+ABI = 20
 F_CPU_HZ = 16_000_000
 FINGERS = 5
 PIN_FIELDS = 4  # duty, IN1, IN2, STBY
@@ -81,6 +81,8 @@ MARKS = 256  # UTRF_SIM_MARKS: the periods a run ahead marks at most
 STOPS = 64  # UTRF_SIM_STOPS: the stops one run ahead passes through at most
 HITS = 16  # UTRF_SIM_HITS: the hits one run ahead's stops apply at most
 TRUTH = 32  # UTRF_SIM_TRUTH: the doubles a stop records of the plant
+BEATS = 16  # UTRF_SIM_BEATS: the heartbeats one run ahead with stops sends at most
+BEAT_BYTES = 16  # UTRF_SIM_BEAT_BYTES: a heartbeat frame's room
 MOTOR_REG_FIELDS = ("com", "ocr", "icr", "wgm", "cs", "in1", "in2", "pwm_pin", "outputs")
 
 
@@ -360,6 +362,7 @@ def load_library() -> ctypes.CDLL:
         "utrf_sim_plant_threads": (ctypes.c_int, [p]),
         "utrf_sim_set_plant_spin": (ctypes.c_int, [p, ctypes.c_int]),
         "utrf_sim_plant_inline_periods": (ctypes.c_uint64, [p]),
+        "utrf_sim_plant_wait_ns": (ctypes.c_uint64, [p]),
         "utrf_sim_ahead_start": (
             ctypes.c_int,
             [p, ctypes.c_uint64, ctypes.c_uint64, ctypes.c_int],
@@ -377,6 +380,11 @@ def load_library() -> ctypes.CDLL:
             ctypes.c_size_t,
             [p, u64p, _dp, ctypes.POINTER(ctypes.c_int32), ctypes.c_size_t],
         ),
+        "utrf_sim_ahead_beats": (
+            ctypes.c_int,
+            [p, u8p, u8p, u8p, ctypes.c_size_t, ctypes.c_double, ctypes.c_double, u8p, u8p],
+        ),
+        "utrf_sim_ahead_beats_done": (ctypes.c_size_t, [p, u64p, _dp, ctypes.c_size_t]),
         "utrf_mjplant_truth_sites": (
             ctypes.c_int,
             [p, ctypes.POINTER(ctypes.c_int32), ctypes.c_int],

@@ -6,10 +6,14 @@ and starts it again: thousands of stops a hold, the board standing still at each
 caller says beforehand what ``take()`` does to the plant (:class:`Stops`: the hits, each with
 its time) and what it reads (the plant's truth: the tips, the motors' currents), and the
 harness does it at each end (``EmulatedBoard.run_ahead_stops``), so the board runs through
-several ends in one run ahead while the caller works on the last batch's. A batch ends
-where the general path could decide otherwise: before the next heartbeat could fall due (its
-time hangs on the ack of the one before), at the end that may be the caller's last, and
-at :data:`~utrf.emulator.harness_abi.STOPS` ends. Every end is one a run ahead to it would
+several ends in one run ahead while the caller works on the last batch's. The heartbeats
+go out at the engine's times within a batch: the harness keeps the engine's rule (the next
+a period after the later of the last one sent and the last ack heard) and frames the output
+to hear the acks (``utrf_sim_ahead_beats``); the engine is told of each after the join, and
+a test of its own keeps the two in step (the due time each went for is the engine's). A
+batch ends where the general path could decide otherwise: at a frame the harness cannot
+place (a boot, a damaged frame: the next stop), at the end that may be the caller's last,
+and at :data:`~utrf.emulator.harness_abi.STOPS` ends. Every end is one a run ahead to it would
 reach, to the cycle (a test compares the two paths' holds byte for byte); where the general
 path would not run ahead (a plain sleep) or a run ends short (a crash, its marks full), that
 end is taken the general way.
@@ -17,6 +21,7 @@ end is taken the general way.
 
 from __future__ import annotations
 
+from bisect import bisect_left
 from collections import deque
 from collections.abc import Callable, Generator, Iterable
 from dataclasses import dataclass
@@ -24,13 +29,22 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
+from utrf.emulator.board_driven import Beats
 from utrf.emulator.board_types import EmulatorError
-from utrf.emulator.harness_abi import F_CPU_HZ, HITS, STOPS
+from utrf.emulator.harness_abi import BEATS, F_CPU_HZ, HITS, STOPS
+from utrf.protocol import messages as m
+from utrf.protocol.engine import HEARTBEAT_SEQS_KEPT, SEQ_MASK, STREAM_IDS, Engine
+from utrf.protocol.framing import encode_frame
 
 if TYPE_CHECKING:
     from utrf.hand.simlink import SimLink
 
 T = TypeVar("T")
+#: per message id, what the harness's heartbeat rule makes of a frame: 1 the stream (with the
+#: board's seq flag; the boot is not: it stops the heartbeats), 2 an ack, 0 anything else
+KINDS = bytes(
+    1 if i in STREAM_IDS and i != m.Boot.ID else 2 if i == m.Ack.ID else 0 for i in range(256)
+)
 #: how far past an exchange's end the MCU may stop (cycles): it ends at the first instruction
 #: boundary there, a few cycles on (an interrupt's entry at most); a stop past it is an error
 OVERSHOOT_BOUND = 1_000
@@ -58,6 +72,7 @@ class _Batch:
 
     ends: list[float]
     targets: list[int]
+    beats: list[tuple[int, bytes]]  # the heartbeats the harness may send, in order
 
 
 def stops_each(
@@ -125,10 +140,10 @@ def _start(
     plan = _plan(link, peek, stops)
     if plan is None:
         return None
-    targets, send = plan
+    targets, beats = plan
     hits = stops.hits[stops.applied : stops.applied + HITS]
-    link.board.run_ahead_stops(targets, stops.t0, hits, send)
-    return _Batch([upcoming.popleft() for _ in targets], targets)
+    link.board.run_ahead_stops(targets, stops.t0, hits, beats=beats)
+    return _Batch([upcoming.popleft() for _ in targets], targets, beats[0] if beats else [])
 
 
 def _join(
@@ -140,6 +155,7 @@ def _join(
     board = link.board
     run = board.run_ahead_join()
     cycles, truths, hit_stop = board.run_ahead_stops_done()
+    sent, dues = board.run_ahead_beats_done()
     data = board.read()
     for cycle, target in zip(cycles, batch.targets, strict=False):
         if not 0 <= cycle - target <= OVERSHOOT_BOUND:  # the plan assumed it: say so
@@ -147,14 +163,12 @@ def _join(
                 f"a stop ended {cycle - target} cycles past its exchange's end (planned "
                 f"within {OVERSHOOT_BOUND}): the batched samples may differ from sleep_each's"
             )
-    if link._heartbeat is not None and run.sent_at is not None:
-        link._engine.sent(link._heartbeat, run.sent_at)
-        link._heartbeat = None
     at = 0
     for n, t in run.marks:
         link._arrived.append((data[at:n], t))
         at = n
     link._arrived.append((data[at:], link.now()))
+    _heartbeats(link, batch, cycles, sent, dues)
     link._take_arrived()
     applied = [sum(1 for s in hit_stop if s == k) for k in range(len(cycles))]
     stops.applied += sum(applied)
@@ -170,16 +184,17 @@ def _exchanges(seconds: float, period: float, plain: float | None) -> int | None
 
 def _plan(
     link: SimLink, peek: Callable[[int], float | None], stops: Stops
-) -> tuple[list[int], tuple[bytes, float] | None] | None:
+) -> tuple[list[int], Beats | None] | None:
     """The next batch's stops (cycles) and its heartbeat, or None where the general path would
     not run ahead to the next end."""
     board, engine = link.board, link._engine
     period = board.exchange_period
     link._take_arrived()  # the heartbeat's due time counts every ack that came
+    if link._heartbeat is not None:
+        return None  # one made and not sent (a run ended short): the general way sends it
     due = engine.heartbeat_due()
     hb = engine.heartbeat_period_s
     plain = min(hb / 2, link.pump_interval_s) if hb is not None else None
-    bound = due + hb if due is not None and hb is not None else None
     now = link.now()
     lo = hi = now  # where the MCU stands at the stop before (known exactly at the first)
     plant = board.plant_cycle
@@ -196,8 +211,6 @@ def _plan(
         if counts or n is None:  # the MCU's few cycles past the stop could change it, or
             break  # sleep_each would not run ahead here
         target = board.exchanges_after(plant, n * period)
-        if bound is not None and not target / F_CPU_HZ < bound:
-            break  # the next heartbeat may fall due here: its time is not known yet
         if unheld is not None and (target + OVERSHOOT_BOUND) / F_CPU_HZ - stops.t0 >= unheld:
             break  # a hit beyond the harness's list may fall due here
         targets.append(target)
@@ -208,11 +221,41 @@ def _plan(
         lo, hi = target / F_CPU_HZ, (target + OVERSHOOT_BOUND) / F_CPU_HZ
     if not targets:
         return None
-    send = None
-    last = targets[-1] / F_CPU_HZ
-    if due is not None and due <= last:  # goes out within the batch, where sleep_each sends it
-        if link._heartbeat is None:
-            link._heartbeat = engine.heartbeat(max(due, now))
-        if link._heartbeat is not None:
-            send = (link._heartbeat.data, due)
-    return targets, send
+    if due is None or hb is None:
+        return targets, None
+    awaited = set(engine._heartbeat_seqs)  # the engine forgets seqs beyond its count
+    frames = next_heartbeats(engine, max(min(BEATS, HEARTBEAT_SEQS_KEPT - len(awaited)), 0))
+    return targets, (frames, due, hb, awaited, KINDS)
+
+
+def next_heartbeats(engine: Engine, n: int) -> list[tuple[int, bytes]]:
+    """The next ``n`` heartbeats' (seq, frame) as ``engine.heartbeat()`` will make them if
+    nothing else is sent first (its seq read here: no other driver needs it)."""
+    return [
+        (seq, encode_frame(seq, m.Heartbeat.ID))
+        for seq in ((engine._seq + i) & SEQ_MASK for i in range(n))
+    ]
+
+
+def _heartbeats(
+    link: SimLink, batch: _Batch, cycles: list[int], sent: list[int], dues: list[float]
+) -> None:
+    """The engine told of the heartbeats the harness sent, each after the frames that came
+    before its stretch of the run (where ``sleep_each`` decided it) and checked against them:
+    the due time it went for is the engine's, its frame the one the engine makes."""
+    engine = link._engine
+    for beat, (cycle, due) in enumerate(zip(sent, dues, strict=True)):
+        k = bisect_left(cycles, cycle)  # its stretch: the first stop at or past it
+        start = cycles[k - 1] / F_CPU_HZ if k else -float("inf")
+        n = next((i for i, (_, t) in enumerate(link._arrived) if t > start), len(link._arrived))
+        for data, t in link._arrived[:n]:
+            link._items += engine.receive(data, t)
+        del link._arrived[:n]
+        tx = engine.heartbeat(due) if engine.heartbeat_due() == due else None
+        if tx is None or tx.data != batch.beats[beat][1]:
+            raise EmulatorError(
+                f"the harness sent a heartbeat at {cycle / F_CPU_HZ:.6f} s for {due:.6f} s, "
+                f"the engine's next was due at {engine.heartbeat_due()}: the batched "
+                "samples may differ from sleep_each's"
+            )
+        engine.sent(tx, cycle / F_CPU_HZ)

@@ -15,6 +15,7 @@
 #define RX_QUEUE_SIZE 65536u   /* host bytes waiting for the wire (power of two) */
 #define TX_QUEUE_SIZE 8192u    /* bytes on the wire toward the host (power of two) */
 #define CAPTURE_SIZE 1048576u  /* in-process output buffer (power of two) */
+#define BEAT_ACC 80u           /* beats.c: a frame's bytes kept (the protocol's longest is 69) */
 
 /* The monotonic clock in ns: the threads' spins and the hand-over's timing. */
 static inline long harness_now_ns(void)
@@ -207,6 +208,7 @@ struct utrf_sim {
     long lock_handover_ns16, lock_step_ns16;
     int lock_inline_left;
     uint64_t lock_inline_periods; /* periods two threads stepped on one, for a test to read */
+    uint64_t lock_wait_ns; /* the MCU's thread waiting for the plant's at the hand-overs */
     int lock_keep_plant; /* a run ahead's stops: the run goes on at once, the plant not parked */
     void *plant_ctx;
     void (*plant_step)(void *ctx, double dt, const double *pins);
@@ -235,6 +237,19 @@ struct utrf_sim {
     utrf_sim_hit_t stop_hit[UTRF_SIM_HITS];
     int32_t stop_hit_at[UTRF_SIM_HITS];
     uint32_t stop_hits_n, stop_hits_done;
+    /* beats.c: the output framed as the client frames it, and the next run ahead's heartbeats
+     * sent at the client's times (utrf_sim_ahead_beats) */
+    uint8_t acc[BEAT_ACC];
+    size_t acc_n;
+    int acc_sync, acc_over; /* a 0x00 seen since the capture began; the frame too long */
+    int beats_on, beat_heard, beat_frozen;
+    uint32_t beats_n, beats_sent;
+    uint8_t beat_frame[UTRF_SIM_BEATS][UTRF_SIM_BEAT_BYTES];
+    uint8_t beat_len[UTRF_SIM_BEATS], beat_seq[UTRF_SIM_BEATS];
+    uint8_t beat_acks[16];  /* the seqs whose ack the client awaits, a bit each */
+    uint8_t beat_kind[256]; /* per message id: 0 other, 1 the stream, 2 an ack */
+    double beat_due, beat_period, beat_at[UTRF_SIM_BEATS];
+    uint64_t beat_cycle[UTRF_SIM_BEATS];
 
     /* faults.c: a stalled interrupt vector (0: none) */
     int stall_vector;
@@ -280,6 +295,13 @@ long plant_thread_step_ns(utrf_sim_t *s); /* the plant thread's last step, ns (0
 int ahead_mark(utrf_sim_t *s);
 void ahead_send_due(utrf_sim_t *s);
 void ahead_close(utrf_sim_t *s);
+
+/* beats.c: each captured byte; each period's end; before a stretch of a run ahead to
+ * `target` (-1: the run ends here, the rule frozen or out of heartbeats) and after it */
+void beats_byte(utrf_sim_t *s, uint8_t b);
+void beats_period_end(utrf_sim_t *s);
+int beats_arm(utrf_sim_t *s, uint64_t target);
+void beats_stretch_end(utrf_sim_t *s);
 
 /* uart_bridge.c */
 void bridge_init(utrf_sim_t *s);

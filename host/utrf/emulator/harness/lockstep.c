@@ -63,6 +63,11 @@ int utrf_sim_plant_threads(const utrf_sim_t *s)
     return s->plant_threads;
 }
 
+uint64_t utrf_sim_plant_wait_ns(const utrf_sim_t *s)
+{
+    return s->lock_wait_ns;
+}
+
 uint64_t utrf_sim_plant_inline_periods(const utrf_sim_t *s)
 {
     return s->lock_inline_periods;
@@ -102,7 +107,9 @@ int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, in
         if (handover) {
             t0 = harness_now_ns();
             plant_thread_wait(s);
-            mean16(&s->lock_handover_ns16, posted + harness_now_ns() - t0);
+            long waited = harness_now_ns() - t0;
+            s->lock_wait_ns += (uint64_t)waited;
+            mean16(&s->lock_handover_ns16, posted + waited);
             mean16(&s->lock_step_ns16, plant_thread_step_ns(s));
             if (s->lock_handover_ns16 > s->lock_step_ns16) { /* cheaper here: a stretch */
                 s->lock_inline_left = INLINE_STRETCH;
@@ -117,6 +124,7 @@ int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, in
         }
         at = s->plant_cycle = end;
         s->lock_mcu_cycle = s->avr->cycle;
+        beats_period_end(s);
         if (now != status) {
             status = now;
             break;

@@ -98,9 +98,15 @@ static int ahead_run(utrf_sim_t *s, struct utrf_ahead *a)
     int status = utrf_sim_status(s);
     for (uint32_t k = 0; k < s->stops_n; k++) {
         /* between two stops the plant's thread may keep spinning: the next stretch follows */
+        if (beats_arm(s, s->stop_target[k])) { /* the client decides the next heartbeat */
+            if (s->plant_thread && s->plant_threads == 2)
+                plant_thread_park(s);
+            return status;
+        }
         s->lock_keep_plant = k + 1 < s->stops_n;
         int now = utrf_sim_run_plant_until(s, s->stop_target[k], a->period, a->wake);
         s->lock_keep_plant = 0;
+        beats_stretch_end(s);
         if (now != status || s->avr->cycle < s->stop_target[k]) {
             if (s->plant_thread && s->plant_threads == 2)
                 plant_thread_park(s); /* the run ends here, short */
@@ -179,6 +185,10 @@ int utrf_sim_ahead_start(utrf_sim_t *s, uint64_t target, uint64_t period, int wa
     s->stop_hits_done = 0;
     if (s->stops_n && s->stop_target[s->stops_n - 1] != target)
         s->stops_n = 0; /* stops for another run: none */
+    if (!s->stops_n)
+        s->beats_on = 0; /* heartbeats go with stops */
+    if (!s->beats_on)
+        s->beats_sent = 0;
     pthread_mutex_lock(&a->mu);
     a->target = target;
     a->period = period;
@@ -205,6 +215,7 @@ int utrf_sim_ahead_join(utrf_sim_t *s)
     a->running = 0;
     s->mark_on = 0;
     s->stops_n = 0; /* what they recorded stays for utrf_sim_ahead_stops_done */
+    s->beats_on = 0; /* and the heartbeats sent for utrf_sim_ahead_beats_done */
     return a->status;
 }
 

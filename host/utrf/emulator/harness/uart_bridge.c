@@ -328,6 +328,7 @@ void bridge_to_host(utrf_sim_t *s, const uint8_t *buf, size_t n)
             }
             s->capture[s->cap_head & CAP_MASK] = buf[i];
             s->cap_head++;
+            beats_byte(s, buf[i]);
             if (buf[i] == s->wake_byte)
                 s->woke = 1;
         }
@@ -476,6 +477,8 @@ void utrf_sim_set_capture(utrf_sim_t *s, int on)
         s->cap_head = s->cap_tail = 0;
         s->frames_head = s->frames_tail = 0;
         s->tx_frame_start = 0;
+        s->acc_n = 0;
+        s->acc_sync = 0; /* the client reads from the next capture's start */
     }
 }
 

@@ -15,7 +15,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define UTRF_SIM_ABI 19
+#define UTRF_SIM_ABI 20
 
 #define UTRF_SIM_ADC_CHANNELS 8 /* ADC0..7: simavr 1.6 takes external values on these */
 /* Pin block: per finger (5), per channel (0 = motor A, 1 = motor B), 4 doubles:
@@ -274,6 +274,9 @@ int utrf_sim_set_plant_spin(utrf_sim_t *s, int spin);
 /* With two: the periods the MCU's thread stepped the plant itself, the hand-over costing it
  * more than the step (lockstep.c) */
 uint64_t utrf_sim_plant_inline_periods(const utrf_sim_t *s);
+/* With two: how long (ns, the monotonic clock) the MCU's thread waited for the plant's at the
+ * hand-overs, its period run (the stall the second thread costs it) */
+uint64_t utrf_sim_plant_wait_ns(const utrf_sim_t *s);
 
 /* ---- Running ahead of the caller (run_ahead.c) ---------------------------------------------
  * utrf_sim_run_plant_until(s, target, period, wake) on a thread of its own: the call returns
@@ -321,6 +324,23 @@ int utrf_sim_ahead_stops(utrf_sim_t *s, const uint64_t *targets, size_t n, doubl
  * (-1: not yet). */
 size_t utrf_sim_ahead_stops_done(const utrf_sim_t *s, uint64_t *cycles, double *truth,
                                  int32_t *hit_stop, size_t n);
+
+/* Heartbeats within the next run ahead with stops (beats.c): the client's rule kept by the
+ * harness. The next falls due at `due` (s), and a `period` after each one sent or each
+ * awaited ack heard (at its period's end), whichever is later; before each stretch to a stop
+ * whose target ((double)target / 16e6) it reaches, the next of the `n` frames
+ * (UTRF_SIM_BEAT_BYTES apart, `lens` long, their `seqs`) waits for it, as
+ * utrf_sim_ahead_send. An ack is a frame of kind 2 (`kinds`, per message id: 1 the stream,
+ * with the board's seq flag, 2 an ack) whose seq is in `acks` (a bit a seq) or was sent
+ * since; any frame neither the stream nor such an ack (a boot, a damaged frame) ends the run
+ * at the next stop, as does a heartbeat due with none left. -1: too many, or a run on. */
+#define UTRF_SIM_BEATS 16
+#define UTRF_SIM_BEAT_BYTES 16
+int utrf_sim_ahead_beats(utrf_sim_t *s, const uint8_t *frames, const uint8_t *lens,
+                         const uint8_t *seqs, size_t n, double due, double period,
+                         const uint8_t *acks, const uint8_t *kinds);
+/* After the join: the heartbeats sent, their cycles and the due times they went for. */
+size_t utrf_sim_ahead_beats_done(const utrf_sim_t *s, uint64_t *cycles, double *dues, size_t n);
 
 /* ---- The MuJoCo plant (mjplant.c) ----------------------------------------------------------
  * The MuJoCo hand (utrf.models.mjcf, drive "force") stepped here; its mjModel and mjData
