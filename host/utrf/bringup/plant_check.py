@@ -7,7 +7,7 @@ import math
 
 from utrf.bringup.diagnose import STOP_DUTY
 from utrf.bringup.findings import Finding
-from utrf.bringup.identify import REVERSAL_DUTY, Plant
+from utrf.bringup.identify import LAG_DUTY, REVERSAL_DUTY, Plant
 from utrf.hand import Hand
 
 #: more friction (duty) than the model's makes a finding
@@ -54,6 +54,10 @@ def lag_ratios(p: Plant, ref: Plant) -> dict[str, float]:
 #: a friction duty this much over the model's is friction, not slack, whatever the lags say
 #: (slack fingers read at most 0.037 over it, heavy friction at least 0.093: docs/bringup.md)
 FRICTION_NOT_SLACK = 0.065
+#: a friction duty over this fraction of the lag steps' duty leaves too little of it to time
+#: the motor's force by: no weak-motor then (weak motors read u_f at most 0.111, heavy
+#: friction up to 0.26: docs/bringup.md)
+CRAWL = 0.5
 #: a reading within this factor of a lag rule's threshold (or this far, s, under the
 #: reversal's) is read again (``near``) and the rule decided on the median of all readings
 NEAR_FACTOR = 1.6
@@ -72,20 +76,25 @@ def frictional(p: Plant, ref: Plant) -> bool:
 def near(p: Plant, ref: Plant) -> tuple[int, int]:
     """(more steps from rest each way, more reversals) to read: where a rule's reading is
     within ``NEAR_FACTOR`` of its threshold, so that one noisy reading does not decide it."""
-    if not p.K >= SLOW * ref.K:
-        return 0, 0  # a slow motor's lag is unresolved: no lag rule is judged on it
+    if not p.K >= SLOW * ref.K or p.u_f > CRAWL * LAG_DUTY:
+        return 0, 0  # a slow motor's lag is unresolved, a crawl's not timed: no rule uses them
     r = lag_ratios(p, ref)
     flex, ext = r.get("flex", math.nan), r.get("extend", math.nan)
     slow_way, fast_way = max(flex, ext), min(flex, ext)
     late = math.sqrt(flex * ext)
-    weakish = late > WEAK_LAG / NEAR_FACTOR and (
-        late < WEAK_LAG * NEAR_FACTOR or fast_way < WEAK_BOTH * NEAR_FACTOR
+    weakish = not math.isfinite(late) or (
+        late > WEAK_LAG / NEAR_FACTOR
+        and (late < WEAK_LAG * NEAR_FACTOR or fast_way < WEAK_BOTH * NEAR_FACTOR)
     )
-    one_way = slow_way > ONE_WAY_LAG / NEAR_FACTOR or not math.isfinite(late)
+    one_way = slow_way > ONE_WAY_LAG / NEAR_FACTOR and (
+        fast_way < PROMPT_LAG * NEAR_FACTOR
+        or slow_way > min(ONE_WAY_SPREAD, ONE_WAY_EVEN) / NEAR_FACTOR * fast_way
+    )
     reversal = p.reversal_s.get(f"{REVERSAL_DUTY:g}", math.nan) - p.tau
+    slack = not frictional(p, ref)  # else neither slack rule is judged
     return (
-        MORE_LAGS if weakish or one_way else 0,
-        MORE_REVERSALS if reversal > REVERSAL_SLACK_S - NEAR_REVERSAL_S else 0,
+        MORE_LAGS if weakish or (slack and one_way) else 0,
+        MORE_REVERSALS if slack and reversal > REVERSAL_SLACK_S - NEAR_REVERSAL_S else 0,
     )
 
 
@@ -114,8 +123,12 @@ def plant_findings(
     # a weaker motor takes more duty for the same friction as it comes up to speed later (both
     # ∝ 1 / F_stall): a friction duty beyond what its lag explains is friction, not weakness
     explained = ref.u_f * late + FRICTION_DUTY
+    # the lag steps' duty less this much friction is too little to time a motor's force by
+    # (campaign seed 10's 10 N thumb: u_f 0.26, its lags at 0.3 duty at the fit's bound)
+    crawling = p.u_f > CRAWL * LAG_DUTY
     weak = (
         resolved
+        and not crawling
         and not loose
         and late > WEAK_LAG
         and fast_way > WEAK_BOTH
