@@ -150,7 +150,9 @@ def lag(
 def _reversal_s(tr: Trace, sign: int) -> float:
     """The time a step took to move the joint 0.01 rad its way (NaN: it never did)."""
     th = tr.theta2[:, tr.finger]
-    moved = np.nonzero(sign * (th - th[0]) > 0.01)[0] if len(th) > 40 else []
+    if len(th) <= 40:
+        return math.nan
+    moved = np.nonzero(sign * (th - th[0]) > 0.01)[0]
     return float(tr.t[moved[0]] - tr.t[0]) if len(moved) else math.nan
 
 
