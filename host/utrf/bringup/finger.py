@@ -312,6 +312,8 @@ def finish_finger(
     }
     res.config.limits = {"theta2_min": th_min, "theta2_max": th_max}
     if upto == "stops":
+        if closed.paused > 0:  # the plant's friction duty would tell it from friction
+            res.findings.append(pause_finding(name, closed.paused))
         return res
     begin("plant")
     mid = min(max(0.3, th_min + 0.6), th_max - 0.6)
