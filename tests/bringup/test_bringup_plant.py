@@ -71,13 +71,16 @@ def test_a_weak_motor_is_named_and_fixable() -> None:
 
 
 def test_slack_is_named_not_weakness_nor_friction() -> None:
-    # measured, slack 1.5 mm: the lag fits at their bound, the take-up 0.064 s
+    # the lag fits at their bound (measured, slack 1.5 mm), the take-up 0.11 s: 0.074 rad
     p = _plant(2.30, 0.001, 0.001, 0.014)
-    got = plant_findings("index", p, REF, slack_rad(p, REF, 0.064))
+    got = plant_findings("index", p, REF, slack_rad(p, REF, 0.11))
     assert [f.kind for f in got] == ["slack"] and not got[0].fixable
     # Joint 2 loose between its strands also makes the steps' friction look high
     p = _plant(2.30, 0.001, 0.001, 0.1)
-    assert [f.kind for f in plant_findings("i", p, REF, 0.04)] == ["slack"]
+    assert [f.kind for f in plant_findings("i", p, REF, 0.08)] == ["slack"]
+    # measured, seed 30's fault-free little finger: one take-up of 0.077 s read 0.038 rad
+    fine = _plant(2.253, 0.0122, 0.0150, 0.0216)
+    assert plant_findings("little", fine, REF, slack_rad(fine, REF, 0.077)) == []
 
 
 def test_slack_late_one_way_only_is_named() -> None:
