@@ -101,3 +101,13 @@ def test_a_stand_after_the_drive_stopped_is_not_a_dwell() -> None:
     driven = dwell_rad(_leg(th, t, 0.35), 1)
     assert driven > DWELL_RAD  # read as if driven throughout: a dwell
     assert dwell_rad(_leg(th, t, 0.35, off_s=2.3 - 1.6), 1) < DWELL_RAD
+
+
+def test_the_stand_at_the_stop_that_ended_a_leg_is_not_a_dwell() -> None:
+    """Driven onto the closed stop, the reading stands there until the stall rule ends the
+    leg, later than the 0.3 s cut when a count of noise restarts it (seed 60's ring: 0.4 s,
+    a count up after 0.3 s, named slack): that stand is not Joint 2 waiting mid-travel."""
+    t = np.arange(0.0, 2.45, 0.001)
+    th = np.minimum(0.8 * t, 0.8 * 2.05)
+    th[t > 2.13] += COUNT  # a count of noise just before the cut: "went on"
+    assert dwell_rad(_leg(th, t, 0.35), 1) < 0.02

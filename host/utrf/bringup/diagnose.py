@@ -375,6 +375,10 @@ def dwell_rad(trace: Trace, direction: int, counts_rad: float = 0.012) -> float:
     end_cut = 0.03 if trace.stop == "reached" else 0.3
     use = (t >= t[0] + start + 0.05) & (t <= t[-1] - end_cut) & _driven(trace)
     t, y = t[use], np.maximum.accumulate(y[use])
+    # the stand at the stop that ended the leg is not a dwell, however late the stall rule
+    # ended it (seed 60's ring stood 0.4 s there, a count of noise "going on" after 0.3 s)
+    last = int(np.searchsorted(y, y[-1] - counts_rad)) if len(y) else 0
+    t, y = t[: last + 1], y[: last + 1]
     if len(t) < 50 or y[-1] - y[0] < 0.1:
         return 0.0
     speed = (y[-1] - y[0]) / (t[-1] - t[0])
