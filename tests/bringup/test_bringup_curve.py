@@ -9,17 +9,23 @@ import math
 import numpy as np
 
 from utrf.bringup.diagnose import dwell_rad, reading_curve
+from utrf.bringup.finger import DWELL_RAD
 from utrf.bringup.pulses import Trace
 
 COUNT = 2 * math.pi / 1024
 F = 1
 
 
-def _leg(theta: np.ndarray, t: np.ndarray, duty: float, stop: str = "stall") -> Trace:
+def _leg(
+    theta: np.ndarray, t: np.ndarray, duty: float, stop: str = "stall", off_s: float = 0.0
+) -> Trace:
+    """``off_s``: the leg's last seconds with the board no longer driving it (DUTY 0)."""
     th = np.zeros((len(t), 5))
     th[:, F] = np.round(theta / COUNT) * COUNT  # the encoder's counts
-    z = np.zeros((len(t), 5))
-    return Trace(F, duty, t, th, z, z, stop)
+    da, db = np.full((len(t), 5), 0.1), np.full((len(t), 5), 0.1)  # the pretension
+    on = t <= t[-1] - off_s
+    (da if duty > 0 else db)[on, F] += abs(duty)
+    return Trace(F, duty, t, th, da, db, stop)
 
 
 def _drive(speed_at: object, start: float, end: float, direction: int = 1) -> Trace:
@@ -82,3 +88,26 @@ def test_a_leg_is_read_from_its_frame_on() -> None:
     leg = _leg(theta, t, 0.35)
     assert abs(leg.delta()[F] - 0.24) > 1.0  # the old frame's first sample
     assert abs(leg.after(0.01).delta()[F] - 0.24) < 0.01
+
+
+def test_a_stand_after_the_drive_stopped_is_not_a_dwell() -> None:
+    """The board ramps a leg's duty down at a limit before the host's stall rule ends it (seed
+    19's little finger: 0.07 s standing 0.41 s before the end, named slack): only the samples
+    driven at the leg's duty count."""
+    t = np.arange(0.0, 2.3, 0.001)
+    th = np.minimum(0.8 * t, 0.8 * 1.8)  # at 0.8 rad/s until the limit, then standing
+    th[(t > 1.60) & (t < 1.70)] = 0.8 * 1.60  # a stand while the duty ramps down
+    th[t >= 1.70] = 0.8 * 1.60 + 0.8 * (np.minimum(t[t >= 1.70], 1.8) - 1.70)
+    driven = dwell_rad(_leg(th, t, 0.35), 1)
+    assert driven > DWELL_RAD  # read as if driven throughout: a dwell
+    assert dwell_rad(_leg(th, t, 0.35, off_s=2.3 - 1.6), 1) < DWELL_RAD
+
+
+def test_the_stand_at_the_stop_that_ended_a_leg_is_not_a_dwell() -> None:
+    """Driven onto the closed stop, the reading stands there until the stall rule ends the
+    leg, later than the 0.3 s cut when a count of noise restarts it (seed 60's ring: 0.4 s,
+    a count up after 0.3 s, named slack): that stand is not Joint 2 waiting mid-travel."""
+    t = np.arange(0.0, 2.45, 0.001)
+    th = np.minimum(0.8 * t, 0.8 * 2.05)
+    th[t > 2.13] += COUNT  # a count of noise just before the cut: "went on"
+    assert dwell_rad(_leg(th, t, 0.35), 1) < 0.02

@@ -10,7 +10,14 @@ import numpy as np
 import pytest
 
 from utrf.bringup.identify import LAG_DUTY, Plant, _fit_from_rest
-from utrf.bringup.plant_check import SLACK_RAD, plant_findings, slack_rad
+from utrf.bringup.plant_check import (
+    MORE_LAGS,
+    MORE_REVERSALS,
+    SLACK_RAD,
+    near,
+    plant_findings,
+    slack_rad,
+)
 from utrf.bringup.pulses import Trace
 
 REF = Plant(K=2.63, tau=0.010, u_f=0.03, backlash_rad=0.0, steps=0)
@@ -64,13 +71,16 @@ def test_a_weak_motor_is_named_and_fixable() -> None:
 
 
 def test_slack_is_named_not_weakness_nor_friction() -> None:
-    # measured, slack 1.5 mm: the lag fits at their bound, the take-up 0.064 s
+    # the lag fits at their bound (measured, slack 1.5 mm), the take-up 0.11 s: 0.074 rad
     p = _plant(2.30, 0.001, 0.001, 0.014)
-    got = plant_findings("index", p, REF, slack_rad(p, REF, 0.064))
+    got = plant_findings("index", p, REF, slack_rad(p, REF, 0.11))
     assert [f.kind for f in got] == ["slack"] and not got[0].fixable
     # Joint 2 loose between its strands also makes the steps' friction look high
     p = _plant(2.30, 0.001, 0.001, 0.1)
-    assert [f.kind for f in plant_findings("i", p, REF, 0.04)] == ["slack"]
+    assert [f.kind for f in plant_findings("i", p, REF, 0.08)] == ["slack"]
+    # measured, seed 30's fault-free little finger: one take-up of 0.077 s read 0.038 rad
+    fine = _plant(2.253, 0.0122, 0.0150, 0.0216)
+    assert plant_findings("little", fine, REF, slack_rad(fine, REF, 0.077)) == []
 
 
 def test_slack_late_one_way_only_is_named() -> None:
@@ -163,3 +173,39 @@ def test_a_late_finger_slow_to_reverse_is_slack() -> None:
     weak = _plant(1.92, 0.0294, 0.0265, 0.068)
     weak.reversal_s = {"0.3": 0.078}
     assert [f.kind for f in plant_findings("thumb", weak, REF)] == ["weak-motor"]
+
+
+def test_heavy_friction_late_one_way_or_slow_to_reverse_is_not_slack() -> None:
+    """Breakaway friction delays a start, one way more under gravity, and a reversal; it
+    takes the duty to move that slack does not (heavy friction at least 0.093 over the
+    model's, slack fingers at most 0.037: docs/bringup.md)."""
+    late_one_way = _plant(REF.K, 9.0 * REF.tau, 0.3 * REF.tau, 0.2)
+    assert [f.kind for f in plant_findings("thumb", late_one_way, REF)] == ["friction"]
+    slow_reversal = _plant(REF.K, REF.tau, REF.tau, 0.2)
+    slow_reversal.reversal_s = {"0.3": 0.1}
+    assert [f.kind for f in plant_findings("thumb", slow_reversal, REF)] == ["friction"]
+    slow_reversal.u_f = 0.05  # the same readings at a free finger's duty: slack
+    assert [f.kind for f in plant_findings("thumb", slow_reversal, REF)] == ["slack"]
+    # measured, seed 10's thumb (10 N): its lag steps at 0.3 crawl (two at the fit's bound)
+    crawl = _plant(2.206, 0.3, 0.0445, 0.262)
+    assert [f.kind for f in plant_findings("thumb", crawl, REF)] == ["friction"]
+
+
+def test_a_reading_near_its_threshold_is_read_again_and_the_median_decides() -> None:
+    """Measured (seed 15's fault-free ring, K 1.815): three steps each way, medians 0.033 and
+    0.023 s (4.8 and 3.3 times the model's lag at that K: weak-motor); four more each way,
+    the medians of all seven 0.016 and 0.013 s (2.3 and 1.9 times): nothing."""
+    first = Plant(1.815, math.nan, 0.035, 0.0, 8)
+    first.add_fits({"flex": [0.033, 0.034, 0.011], "extend": [0.025, 0.015, 0.023]}, {})
+    ref = REF
+    assert [f.kind for f in plant_findings("ring", first, ref)] == ["weak-motor"]
+    assert near(first, ref) == (MORE_LAGS, 0)
+    first.add_fits({"flex": [0.012, 0.016, 0.016], "extend": [0.013, 0.013, 0.013, 0.011]}, {})
+    assert first.lag_s == {"flex": 0.016, "extend": 0.013} and first.tau == 0.013
+    assert plant_findings("ring", first, ref) == []
+    # far from every threshold: nothing more is read
+    assert near(_plant(REF.K, 1.3 * REF.tau, 0.6 * REF.tau), REF) == (0, 0)
+    # a reversal within 0.02 s under its threshold is timed again
+    close = _plant(REF.K, REF.tau, REF.tau)
+    close.reversal_s = {"0.3": REF.tau + 0.045}
+    assert near(close, REF) == (0, MORE_REVERSALS)

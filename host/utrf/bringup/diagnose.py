@@ -323,6 +323,15 @@ def take_up_s(trace: Trace, direction: int, moved: float = 0.01) -> float:
     return float(trace.t[idx[0]] - trace.t[0]) if len(idx) else math.nan
 
 
+def _driven(trace: Trace) -> np.ndarray:
+    """The samples of a leg while the board drove it at the leg's duty: not the ramp down after
+    a limit or the stop (campaign seed 19's little finger stood 0.07 s there, 0.41 s before the
+    stall rule ended the leg, and was taken for slack)."""
+    f = trace.finger
+    drive = np.abs(trace.duty_a[:, f] - trace.duty_b[:, f])  # either way the motors turn
+    return np.asarray(drive >= 0.9 * abs(trace.duty))
+
+
 def _speed_by_angle(trace: Trace, direction: int, edges: np.ndarray) -> np.ndarray:
     """The reading's mean speed (rad/s, positive its driven way) across each bin of ``edges``:
     the bin's width over the time the reading took to cross it (NaN where not crossed), from
@@ -336,7 +345,7 @@ def _speed_by_angle(trace: Trace, direction: int, edges: np.ndarray) -> np.ndarr
     t, y = trace.t, direction * trace.theta2[:, trace.finger]
     # a leg that ended at its target was still running: only a stall's slowing is cut
     end_cut = 0.03 if trace.stop == "reached" else 0.3
-    use = (t >= t[0] + start + 0.1) & (t <= t[-1] - end_cut)
+    use = (t >= t[0] + start + 0.1) & (t <= t[-1] - end_cut) & _driven(trace)
     t, y = t[use], y[use]
     if len(t) < 50:
         return out
@@ -364,8 +373,12 @@ def dwell_rad(trace: Trace, direction: int, counts_rad: float = 0.012) -> float:
         return 0.0
     t, y = trace.t, direction * trace.theta2[:, trace.finger]
     end_cut = 0.03 if trace.stop == "reached" else 0.3
-    use = (t >= t[0] + start + 0.05) & (t <= t[-1] - end_cut)
+    use = (t >= t[0] + start + 0.05) & (t <= t[-1] - end_cut) & _driven(trace)
     t, y = t[use], np.maximum.accumulate(y[use])
+    # the stand at the stop that ended the leg is not a dwell, however late the stall rule
+    # ended it (seed 60's ring stood 0.4 s there, a count of noise "going on" after 0.3 s)
+    last = int(np.searchsorted(y, y[-1] - counts_rad)) if len(y) else 0
+    t, y = t[: last + 1], y[: last + 1]
     if len(t) < 50 or y[-1] - y[0] < 0.1:
         return 0.0
     speed = (y[-1] - y[0]) / (t[-1] - t[0])

@@ -22,10 +22,12 @@ from utrf.bringup.diagnose import (
     wiring,
 )
 from utrf.bringup.findings import Finding, FingerConfig
-from utrf.bringup.identify import Check, check, identify, tune
+from utrf.bringup.identify import Check, check, identify, refine, tune
 from utrf.bringup.plant_check import (
     dwell_finding,
+    frictional,
     model_plant,
+    near,
     pause_finding,
     plant_findings,
     slack_rad,
@@ -236,10 +238,9 @@ def finish_finger(
     }
     back = max(backward_rad(closed.first, 1), backward_rad(closed.trace, 1))
     if closed.paused > 0:
-        # driven on at the same duty it went on: Joint 2 waited on its strand mid-travel
+        # driven on at the same duty it went on: Joint 2 waited on its strand mid-travel, or
+        # heavy friction stuck and slipped on (seed 10's thumb): the plant's duty to move tells
         res.stops["paused_rad"] = closed.paused
-        res.findings.append(pause_finding(name, closed.paused))
-        return res
     if span < JAM_SPAN * (hi - lo) and back > BACKWARD_RAD:
         # it went back before it stopped: Joint 2 swinging loose paused it, not a jam
         res.findings.append(swing_finding(name, back))
@@ -311,6 +312,8 @@ def finish_finger(
     }
     res.config.limits = {"theta2_min": th_min, "theta2_max": th_max}
     if upto == "stops":
+        if closed.paused > 0:  # the plant's friction duty would tell it from friction
+            res.findings.append(pause_finding(name, closed.paused))
         return res
     begin("plant")
     mid = min(max(0.3, th_min + 0.6), th_max - 0.6)
@@ -384,11 +387,19 @@ def finish_finger(
     uneven = curve["spread"] > SPEED_SPREAD
     settle(hand, 0.1)
     plant, _ = identify(hand, rec, f, bounds, mid)
+    ref = model_plant(hand, f)
+    lags, reversals = near(plant, ref)
+    if lags or reversals:  # a rule's reading near its threshold: decided on more of them
+        refine(hand, rec, f, bounds, plant, mid, lags, reversals)
     res.plant = plant.to_dict()
-    res.plant["slack_rad"] = slack_rad(plant, model_plant(hand, f), res.stops["take_up_s"], duty)
-    res.findings += plant_findings(
-        name, plant, model_plant(hand, f), res.plant["slack_rad"], uneven
-    )
+    res.plant["slack_rad"] = slack_rad(plant, ref, res.stops["take_up_s"], duty)
+    res.findings += plant_findings(name, plant, ref, res.plant["slack_rad"], uneven)
+    if closed.paused > 0 and not frictional(plant, ref):
+        res.findings = [
+            fd for fd in res.findings if fd.kind in ("encoder-inverted", "leads-swapped")
+        ]
+        res.findings.append(pause_finding(name, closed.paused))
+        return res
     if uneven and not any(fd.kind == "slack" for fd in res.findings):
         # not Joint 2 hanging loose between its strands (slack, which runs the legs unevenly
         # too): the reading is not the joint's angle, and the zero and range from it are void

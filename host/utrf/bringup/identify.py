@@ -36,6 +36,8 @@ from utrf.hand.errors import FingerFaultError, NotControlledError, NotSettledErr
 
 STEP_DUTIES = (0.15, 0.3, 0.4)  # the third only when one of the first does not move it
 STEP_S = 0.3
+#: the step duty whose reversals are timed for slack (``plant_check``)
+REVERSAL_DUTY = 0.3
 #: a check waits this long (s) for the finger to settle after each move (a slow finger on the
 #: saved gains does not: 2 s was most of its check's 11.9 s)
 SETTLE_WAIT_S = 1.0
@@ -55,6 +57,19 @@ class Plant:
     reversal_s: dict[str, float] = field(default_factory=dict)
     #: the time constant of a step from rest each way ("flex", "extend")
     lag_s: dict[str, float] = field(default_factory=dict)
+    #: every fit behind ``lag_s`` and ``reversal_s`` (more are added near a rule's threshold)
+    lag_fits: dict[str, list[float]] = field(default_factory=dict)
+    reversal_fits: dict[str, list[float]] = field(default_factory=dict)
+
+    def add_fits(self, lags: dict[str, list[float]], reversals: dict[str, list[float]]) -> None:
+        """More lag and reversal readings: the medians (and τ, the faster way's lag) anew."""
+        for mine, more in ((self.lag_fits, lags), (self.reversal_fits, reversals)):
+            for k, v in more.items():
+                mine.setdefault(k, []).extend(v)
+        self.lag_s = {k: float(np.median(v)) if v else math.nan for k, v in self.lag_fits.items()}
+        self.reversal_s = {k: float(np.median(v)) for k, v in self.reversal_fits.items() if v}
+        fin = [v for v in self.lag_s.values() if math.isfinite(v)]
+        self.tau = min(fin) if fin else math.nan  # the motor's; slack lengthens one way only
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -112,13 +127,14 @@ def _fit_from_rest(tr: Trace, sign: int) -> tuple[float, float] | None:
     return float(r.x[0]), float(r.x[1])
 
 
-def lag(hand: Hand, rec: Recorder, f: int, bounds: Bounds) -> tuple[dict[str, float], list[Trace]]:
-    """The finger's time constant from steps from rest (held by the pretension), ``LAG_REPEATS``
-    each way, in turn: {"flex": τ, "extend": τ}, each the median of the steps that fitted (NaN
-    where none did)."""
+def lag(
+    hand: Hand, rec: Recorder, f: int, bounds: Bounds, repeats: int = LAG_REPEATS
+) -> tuple[dict[str, list[float]], list[Trace]]:
+    """The finger's time constant from steps from rest (held by the pretension), ``repeats``
+    each way, in turn: {"flex": [τ, ...], "extend": [...]}, the steps that fitted."""
     fits: dict[str, list[float]] = {"flex": [], "extend": []}
     traces: list[Trace] = []
-    for sign in (1, -1) * LAG_REPEATS:
+    for sign in (1, -1) * repeats:
         rest = pulse(hand, rec, f, 0.0, bounds, seconds=0.3)
         tr = pulse(hand, rec, f, sign * LAG_DUTY, bounds, seconds=LAG_S, travel=0.5)
         traces += [rest, tr]
@@ -128,8 +144,62 @@ def lag(hand: Hand, rec: Recorder, f: int, bounds: Bounds) -> tuple[dict[str, fl
         # prompt start (at the upper one it did not come up to speed: late, kept)
         if got is not None and got[0] > MOVING_RAD_S and got[1] > 1.01e-3:
             fits["flex" if sign > 0 else "extend"].append(got[1])
-    taus = {k: float(np.median(v)) if v else math.nan for k, v in fits.items()}
-    return taus, traces
+    return fits, traces
+
+
+def _reversal_s(tr: Trace, sign: int) -> float:
+    """The time a step took to move the joint 0.01 rad its way (NaN: it never did)."""
+    th = tr.theta2[:, tr.finger]
+    if len(th) <= 40:
+        return math.nan
+    moved = np.nonzero(sign * (th - th[0]) > 0.01)[0]
+    return float(tr.t[moved[0]] - tr.t[0]) if len(moved) else math.nan
+
+
+def _to_mid(hand: Hand, rec: Recorder, f: int, bounds: Bounds, mid: float, within: float) -> bool:
+    """Back toward ``mid`` at 0.35 duty if the finger is further than ``within``; True if moved."""
+    here = hand.state().fingers[f].theta2
+    if abs(here - mid) <= within:
+        return False
+    pulse(hand, rec, f, math.copysign(0.35, mid - here), bounds, seconds=1.0, until=mid)
+    return True
+
+
+def refine(
+    hand: Hand,
+    rec: Recorder,
+    f: int,
+    bounds: Bounds,
+    plant: Plant,
+    mid: float,
+    lags: int = 0,
+    reversals: int = 0,
+) -> list[Trace]:
+    """More readings for a rule near its threshold (``plant_check.near``): ``reversals`` more
+    reversals at ``REVERSAL_DUTY`` (a square wave about ``mid``) and ``lags`` more steps from
+    rest each way; ``plant``'s medians taken anew over all of them."""
+    traces: list[Trace] = []
+    got: list[float] = []
+    sign, from_rest = 1, True
+    _to_mid(hand, rec, f, bounds, mid, 0.2)
+    for _ in range(2 * reversals + 2 if reversals else 0):
+        if len(got) >= reversals:
+            break
+        tr = pulse(hand, rec, f, sign * REVERSAL_DUTY, bounds, seconds=STEP_S, travel=0.5)
+        traces.append(tr)
+        hand.clear_faults([f])
+        settle(hand, 0.0)
+        if not from_rest:  # the step before ran the other way: a reversal
+            got.append(_reversal_s(tr, sign))
+        from_rest = tr.stop != "time"
+        sign = -sign
+        if _to_mid(hand, rec, f, bounds, mid, 0.35):
+            from_rest = True
+    brake(hand, [f])
+    _to_mid(hand, rec, f, bounds, mid, 0.2)
+    fits, more = lag(hand, rec, f, bounds, lags) if lags else ({}, [])
+    plant.add_fits(fits, {f"{REVERSAL_DUTY:g}": [g for g in got if math.isfinite(g)]})
+    return traces + more
 
 
 def _mean_speed(speeds: dict[tuple[float, int], list[float]], u: float) -> float:
@@ -205,17 +275,13 @@ def identify(
     flex, ext = dead[1][1:], dead[-1]  # the first flexion step starts from rest
     extra = (np.median(flex) - np.median(ext)) if flex and ext else 0.0
     backlash = max(0.0, float(extra)) * v2
-    reversal = {f"{u:g}": float(np.median(v)) for u, v in rev.items() if v}
     here = hand.state().fingers[f].theta2
     if abs(here - mid) > 0.2:
         pulse(hand, rec, f, math.copysign(0.35, mid - here), bounds, seconds=1.0, until=mid)
     lags, more = lag(hand, rec, f, bounds)
     traces += more
-    fin = [v for v in lags.values() if math.isfinite(v)]
-    tau = min(fin) if fin else math.nan  # the motor's; slack lengthens one way only
-    plant = Plant(
-        float(K), tau, float(u_f), backlash, sum(map(len, speeds.values())), reversal, lags
-    )
+    plant = Plant(float(K), math.nan, float(u_f), backlash, sum(map(len, speeds.values())))
+    plant.add_fits(lags, {f"{u:g}": v for u, v in rev.items()})
     return plant, traces
 
 
