@@ -38,8 +38,8 @@ CHART_STYLE = "height: 150px; width: 560px"
 #: nothing else; the 3D hand (``draw``) or a chart's new points (``setOption``, as JSON text:
 #: parsed faster than the same as code) in the frame after, never the numbers' frame (the
 #: 3D hand's read-back and ECharts' redraw took milliseconds there); the promise resolves
-#: once that work is done (its frame is then drawn at once), which paces the page's updates,
-#: so the next update's numbers find the page idle
+#: in a task after that frame (its paint and commit done), which paces the page's updates,
+#: so the next update's message and numbers find the page idle
 LIVE_JS = """<style>
 .utrf-live { contain: strict; overflow: hidden; white-space: pre; }
 .utrf-live { font-variant-numeric: tabular-nums; }
@@ -51,11 +51,12 @@ window.utrfLive = (texts, draw, chart, points) => {
     if (node) node.nodeValue = text;
   }
   return new Promise((resolve) => requestAnimationFrame(() => {
-    if (!draw && chart === undefined) return resolve(0);
+    const drawn = () => setTimeout(resolve, 0, 0);  // a task: after the frame is painted
+    if (!draw && chart === undefined) return drawn();
     requestAnimationFrame(() => {
       if (draw) draw();
       if (chart !== undefined) getElement(chart)?.chart?.setOption(JSON.parse(points));
-      resolve(0);
+      drawn();
     });
   }));
 };
