@@ -73,13 +73,14 @@ def test_page_loads_live_against_the_emulated_board(first: WebDriver, dashboard:
             """const el = document.querySelector(arguments[0]), node = el.firstChild;
             const was = node.nodeValue;
             node.nodeValue = arguments[1];
-            const fits = el.scrollWidth <= el.clientWidth && el.scrollHeight <= el.clientHeight;
+            const box = [el.scrollWidth, el.clientWidth, el.scrollHeight, el.clientHeight];
             node.nodeValue = was;
-            return [fits, getComputedStyle(el).contain];""",
+            return [...box, getComputedStyle(el).contain];""",
             selector,
             text,
         )
-        assert fits == [True, "strict"], (selector, fits)
+        width, box_width, height, box_height, contain = fits
+        assert width <= box_width and height <= box_height and contain == "strict", (selector, fits)
 
 
 def test_a_pose_button_moves_the_hand(first: WebDriver, dashboard: Dashboard) -> None:

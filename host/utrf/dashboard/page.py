@@ -64,7 +64,7 @@ window.utrfLive = (texts, draw, chart, points) => {
 DRAWN_TIMEOUT_S = 1.0
 #: the live labels' boxes, fixed (with ``utrf-live``'s containment): a new text is laid out
 #: and painted inside its label alone, not in the rows and columns around it
-LIVE_VALUE_STYLE = "width: 12rem; height: 1.25rem"
+LIVE_VALUE_STYLE = "width: 14rem; height: 1.25rem"
 LIVE_BOARD_TIME_STYLE = "width: 11rem; height: 1.5rem; text-align: right"
 
 
@@ -194,7 +194,7 @@ class DashboardPage:
         for i, name in enumerate(self.hub.fingers):
             lim = self.hub.limits[i]
             with ui.row().classes(f"utrf-finger-{name} items-center no-wrap w-full"):
-                with ui.column().classes("w-48"):
+                with ui.column().classes("w-56"):
                     with ui.row().classes("items-center"):
                         ui.label(name).classes("text-bold")
                         self.modes.append(ui.label("").classes(f"utrf-mode-{name} text-caption"))
