@@ -12,8 +12,8 @@ from utrf.hand.clock import Clock
 from utrf.hand.links import LinkLike
 from utrf.protocol import messages as m
 from utrf.protocol.codec import Message, Request
-from utrf.protocol.link import Link
 from utrf.protocol.errors import BoardResetError, DisconnectedError, ProtocolError
+from utrf.protocol.link import Link
 
 log = logging.getLogger("utrf.hand.client")  # one logger for every part, named as it always was
 
