@@ -62,6 +62,26 @@ def test_page_loads_live_against_the_emulated_board(first: WebDriver, dashboard:
     board = math.degrees(dashboard.status()["fingers"]["index"]["theta2_rad"])
     assert abs((index_deg(first) or math.inf) - board) < 2.0
 
+    # the live labels' boxes are fixed (contained, so a new text is laid out in them alone):
+    # the widest texts the page writes fit them, nothing clipped
+    widest = {
+        ".utrf-value-index": "-180.0° → -180.0°, duty +100/+100 %",
+        ".utrf-board-time": "board time 99999.999 s",
+    }
+    for selector, text in widest.items():
+        fits = first.execute_script(
+            """const el = document.querySelector(arguments[0]), node = el.firstChild;
+            const was = node.nodeValue;
+            node.nodeValue = arguments[1];
+            const box = [el.scrollWidth, el.clientWidth, el.scrollHeight, el.clientHeight];
+            node.nodeValue = was;
+            return [...box, getComputedStyle(el).contain];""",
+            selector,
+            text,
+        )
+        width, box_width, height, box_height, contain = fits
+        assert width <= box_width and height <= box_height and contain == "strict", (selector, fits)
+
 
 def test_a_pose_button_moves_the_hand(first: WebDriver, dashboard: Dashboard) -> None:
     scene = first.find_element(By.CSS_SELECTOR, ".nicegui-scene")

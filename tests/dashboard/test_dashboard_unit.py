@@ -18,6 +18,8 @@ from utrf.dashboard import settings
 from utrf.dashboard.access import COOKIE, TokenGuard, needs_token
 from utrf.dashboard.hub import READ_LINGER_S, DashboardHub, NotInControl, SampleRing
 from utrf.dashboard.page import hand_turn
+from utrf.hand.clock import WallClock
+from utrf.hand.session import HandSession
 from utrf.hand.state import FingerState, HandState
 from utrf.hand.state_block import StateBlock
 from utrf.protocol import messages as m
@@ -141,6 +143,22 @@ def test_the_hands_reader_takes_the_stream_in_batches_for_the_dashboard() -> Non
         hub.close()
     finally:
         link.close()
+
+
+def test_a_reopened_line_keeps_the_dashboards_linger() -> None:
+    # Hand.reconnect after the line went away opens a new Link: it must read as the old one
+    # did, or the dashboard's reader goes back to a read per frame
+    first = Link(SerialTransport("loop://"), heartbeat_period_s=None)
+    second = Link(SerialTransport("loop://"), heartbeat_period_s=None)
+    try:
+        session = HandSession(first, WallClock(), url="loop://")
+        first.read_linger_s = READ_LINGER_S
+        session.replace_link(second)
+        assert session.link is second
+        assert second.read_linger_s == READ_LINGER_S
+    finally:
+        first.close()
+        second.close()
 
 
 def test_the_ring_decimates_for_the_eye_and_keeps_the_newest() -> None:

@@ -38,25 +38,34 @@ CHART_STYLE = "height: 150px; width: 560px"
 #: nothing else; the 3D hand (``draw``) or a chart's new points (``setOption``, as JSON text:
 #: parsed faster than the same as code) in the frame after, never the numbers' frame (the
 #: 3D hand's read-back and ECharts' redraw took milliseconds there); the promise resolves
-#: once that work is done (its frame is then drawn at once), which paces the page's updates,
-#: so the next update's numbers find the page idle
-LIVE_JS = """<script>
+#: in a task after that frame (its paint and commit done), which paces the page's updates,
+#: so the next update's message and numbers find the page idle
+LIVE_JS = """<style>
+.utrf-live { contain: strict; overflow: hidden; white-space: pre; }
+.utrf-live { font-variant-numeric: tabular-nums; }
+</style>
+<script>
 window.utrfLive = (texts, draw, chart, points) => {
   for (const [id, text] of texts) {
     const node = document.getElementById("c" + id)?.firstChild;
     if (node) node.nodeValue = text;
   }
   return new Promise((resolve) => requestAnimationFrame(() => {
-    if (!draw && chart === undefined) return resolve(0);
+    const drawn = () => setTimeout(resolve, 0, 0);  // a task: after the frame is painted
+    if (!draw && chart === undefined) return drawn();
     requestAnimationFrame(() => {
       if (draw) draw();
       if (chart !== undefined) getElement(chart)?.chart?.setOption(JSON.parse(points));
-      resolve(0);
+      drawn();
     });
   }));
 };
 </script>"""
 DRAWN_TIMEOUT_S = 1.0
+#: the live labels' boxes, fixed (with ``utrf-live``'s containment): a new text is laid out
+#: and painted inside its label alone, not in the rows and columns around it
+LIVE_VALUE_STYLE = "width: 14rem; height: 1.25rem"
+LIVE_BOARD_TIME_STYLE = "width: 11rem; height: 1.5rem; text-align: right"
 
 
 def _chart(lo_deg: float, hi_deg: float) -> dict[str, Any]:
@@ -132,7 +141,8 @@ class DashboardPage:
             self.control_label = ui.label().classes("utrf-control text-bold")
             self.take_button = ui.button("Take control", on_click=self._take).classes("utrf-take")
             ui.space()
-            self.board_time = ui.label("board time –").classes("utrf-board-time")
+            self.board_time = ui.label("board time –").classes("utrf-board-time utrf-live")
+            self.board_time.style(LIVE_BOARD_TIME_STYLE)
             # the newest sample's board time on the host's wall clock, and when the server
             # sent it (ms): the latency probe's
             self.sample_wall = ui.label("–").classes("utrf-sample-wall hidden")
@@ -184,12 +194,13 @@ class DashboardPage:
         for i, name in enumerate(self.hub.fingers):
             lim = self.hub.limits[i]
             with ui.row().classes(f"utrf-finger-{name} items-center no-wrap w-full"):
-                with ui.column().classes("w-48"):
+                with ui.column().classes("w-56"):
                     with ui.row().classes("items-center"):
                         ui.label(name).classes("text-bold")
                         self.modes.append(ui.label("").classes(f"utrf-mode-{name} text-caption"))
                     # written by the live update (LIVE_JS), not by NiceGUI
-                    self.values.append(ui.label("–").classes(f"utrf-value-{name} text-caption"))
+                    value = ui.label("–").classes(f"utrf-value-{name} text-caption utrf-live")
+                    self.values.append(value.style(LIVE_VALUE_STYLE))
                     with ui.row().classes("items-center"):
                         self.faults.append(ui.label("").classes(f"utrf-faults-{name}"))
                         b = ui.button(

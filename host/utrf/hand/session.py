@@ -13,6 +13,7 @@ from utrf.hand.links import LinkLike
 from utrf.protocol import messages as m
 from utrf.protocol.codec import Message, Request
 from utrf.protocol.errors import BoardResetError, DisconnectedError, ProtocolError
+from utrf.protocol.link import Link
 
 log = logging.getLogger("utrf.hand.client")  # one logger for every part, named as it always was
 
@@ -95,7 +96,11 @@ class HandSession:
             self._handshaken = True
 
     def replace_link(self, link: LinkLike) -> None:
-        """A new link on the same line (reopened): no handshake on it yet."""
+        """A new link on the same line (reopened): no handshake on it yet. It reads as the old
+        one did (its linger, which a consumer such as the dashboard chose, is kept)."""
+        old = self.link
+        if isinstance(old, Link) and isinstance(link, Link):
+            link.read_linger_s = old.read_linger_s
         self.link = link
         with self._lock:
             self._reset = None
