@@ -92,14 +92,18 @@ def stops_each(
             upcoming.append(nxt)
         return upcoming[k]
 
+    def general() -> T | None:
+        """The next end the general way: the board sleeps to it, then the sample is taken."""
+        end = upcoming.popleft()
+        link.sleep(end - link.now())
+        return take()
+
     batch = _start(link, peek, upcoming, stops)
     try:
         while batch is not None or peek(0) is not None:
             if batch is None:  # the general way, for this end
-                end = upcoming.popleft()
                 link._deliver_arrived()
-                link.sleep(end - link.now())
-                value = take()
+                value = general()
                 if value is None:
                     return
                 yield value
@@ -119,9 +123,7 @@ def stops_each(
                 yield value
             link._deliver_arrived()
             if not done:  # short (a crash, the marks full): the next end the general way
-                end = upcoming.popleft()
-                link.sleep(end - link.now())
-                value = take()
+                value = general()
                 if value is None:
                     return
                 yield value
