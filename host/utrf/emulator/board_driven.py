@@ -154,7 +154,6 @@ class BoardDriven:
         targets: list[int],
         t0: float,
         hits: list[tuple[float, int, int, Any, float]],
-        send: tuple[bytes, float] | None = None,
         beats: Beats | None = None,
     ) -> None:
         """:meth:`run_ahead` through stops at ``targets`` (cycles, rising; each where a run
@@ -174,8 +173,6 @@ class BoardDriven:
             native.ahead_stops(targets, t0, hits)
             if beats is not None:
                 native.ahead_beats(*beats)
-            if send is not None:
-                native.ahead_send(send[0], send[1])
             native.ahead_start(targets[-1], self._period_cycles, 0)
         except BaseException:
             self._lock.__exit__(None, None, None)

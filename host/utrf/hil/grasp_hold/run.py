@@ -86,8 +86,11 @@ def run(
                 log_hit(rig.now() - t0, f, imp)
             return t, rig.tracker.read_later(), rig.currents()
 
-        def log_hit(t: float, f: int, imp: tuple[float, float]) -> None:
+        def write_hit(t: float, f: int, imp: tuple[float, float]) -> None:
             hit_log.write([f"{t:.6f}", f, imp[0], imp[1], config.hit_duration_s])
+
+        def log_hit(t: float, f: int, imp: tuple[float, float]) -> None:
+            write_hit(t, f, imp)
             if stops is not None:
                 stops.applied += 1  # by take(): the harness's list moves on with it
 
@@ -97,7 +100,7 @@ def run(
                 return None
             for _ in range(applied):
                 _, f, imp = hits.pop(0)
-                hit_log.write([f"{t:.6f}", f, imp[0], imp[1], config.hit_duration_s])
+                write_hit(t, f, imp)
             return t, reading, cur
 
         # the fast path: the harness hits and takes the truth at each sample time itself, the
