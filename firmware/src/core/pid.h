@@ -165,18 +165,22 @@ UTRF_HOT int16_t Pid::step(int16_t limit, int16_t target, int16_t measured, int1
     // The fast path: the last step's inputs again (the same measurement, error and limit, no
     // feedforward) on the state that step left as it found it: the step is a function of the
     // two, so it would give the same output and leave the state so again. Nothing to do.
-    if (still_ && measured == m_prev_ && e == e_last_ && limit == still_limit_ && ff == 0) {
-        return u_;
+    // The mark is cleared here, not by every step: the general step writes it only when it
+    // finds itself still (below).
+    if (UTRF_UNLIKELY(still_)) {
+        if (ff == 0 && e == e_last_ && measured == m_prev_ && limit == still_limit_) return u_;
+        still_ = false;
     }
     const int16_t dm = fx::clamp16((int16_t)(measured - m_prev_), (int16_t)-kMaxDm, kMaxDm);
-    const bool e_same = e == e_last_;
     m_prev_ = measured;
-    e_last_ = e;
     // v += alpha (256 dm - v): |256 dm - v| < 2^15, one 16 x 16 multiply, rounded. 256 dm is a
     // multiply, not a shift: dm may be negative.
     const int16_t dv = (int16_t)(dm * 256 - v8_);
     const int16_t dv8 = fx::prod_hi16(fx::prod_su(dv, c.alpha), true);
     v8_ = (int16_t)(v8_ + dv8);
+    // The measurement and the velocity stood still (the rest is told at the end, from the
+    // fields this step has not written yet: few values kept across the step).
+    const bool calm = dv8 == 0 && dm == 0 && ff == 0;
 
     // P - D in Q14, the integrator's high word and the feedforward in Q15: fits sum_t.
     sum_t v = p_minus_d(c, e, v8_) * 2 + (int16_t)(i31_ >> 16) + ff;
@@ -193,25 +197,24 @@ UTRF_HOT int16_t Pid::step(int16_t limit, int16_t target, int16_t measured, int1
         u = (int16_t)v;
         free = true;
     }
-    const int16_t u_was = u_;
-    const int16_t s = slew_limit(u, u_was, c.slew);
+    const int16_t s = slew_limit(u, u_, c.slew);
     if (s != u) free = false;
     u = s;
-    u_ = u;
 
     // Conditional integration: hold the integrator while the output is held back in the
     // direction the error pushes it; integrate when it is free or when the error unwinds it.
-    const bool sat_was = saturated_;
-    saturated_ = !free && ((v > u && e > 0) || (v < u && e < 0));
-    const bool integrate = !saturated_ && e != 0;
-    // Still: no field changed (the integrator's step is taken as a change). Worked out only
-    // when the measurement and the velocity stood still: moving, one test.
-    bool still = false;
-    if (dm == 0 && dv8 == 0 && ff == 0) {
-        still = c.still_path && e_same && u == u_was && saturated_ == sat_was && !integrate;
+    const bool sat = !free && ((v > u && e > 0) || (v < u && e < 0));
+    const bool integrate = !sat && e != 0;
+    // Still: no field changed (an integrator's step is taken as a change), against the last
+    // step's error, output and flag, not written yet. Moving, one test.
+    if (UTRF_UNLIKELY(calm) && c.still_path && !integrate && e == e_last_ && u == u_ &&
+        sat == saturated_) {
+        still_ = true;
+        still_limit_ = limit;
     }
-    still_ = still;
-    still_limit_ = limit;
+    e_last_ = e;
+    u_ = u;
+    saturated_ = sat;
     if (integrate) {
         // min(i31 + step, limit) for a step up, max(i31 + step, -limit) for a step down, the
         // sum exact: i31 + step may overflow int32 near the limit (the add's overflow flag),
