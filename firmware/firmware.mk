@@ -8,6 +8,7 @@
 #   make bench-firmware        tick load and memory, appended to docs/benchmarks.md
 #                              (FW_REF_ELF=other.elf: its awake cycles beside this build's)
 #   make profile-firmware      where the awake cycles go under the twin's traffic, per function
+#                              (FW_REF_ELF=other.elf: the CPU time of each ELF alone, side by side)
 #   UTRF_BAUD=...              serial baud rate (default 1000000, exact at 16 MHz with U2X)
 
 # FW_DIR: where this file lives (an installed utrf builds from its packaged copy into a cache).
@@ -200,6 +201,7 @@ bench-firmware: firmware firmware-host firmware-check emulator
 profile-firmware: firmware emulator
 	$(PY) -m tools.fw_profile --elf $(FW_ELF) --seconds 5 --rate 100 --top 30
 	$(PY) -m tools.fw_profile --elf $(FW_ELF) --seconds 5 --rate 1000 --top 30
+	$(if $(FW_REF_ELF),$(PY) -m tools.fw_profile --elf $(FW_ELF) --versus $(FW_REF_ELF))
 
 # ---- the PlatformIO build, reproduced with Debian's toolchain (make firmware-pio) -------------
 # `pio run` cannot fetch its platform here, so this builds what it would: PlatformIO's atmelavr

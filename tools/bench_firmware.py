@@ -297,6 +297,10 @@ def short_name(name: str) -> str:
     return base.split("(")[0] if not base.startswith("(") else base
 
 
+CPU_SECONDS = 120.0  # the grasp hold's length (make bench-twin)
+CPU_REPEATS = 3
+
+
 def twin_awake(seconds: float, reference: Path | None) -> list[str]:
     """The awake share under the twin's traffic, and its largest parts (tools.fw_profile)."""
     from tools import fw_profile
@@ -331,6 +335,20 @@ def twin_awake(seconds: float, reference: Path | None) -> list[str]:
             )
         lines.append(f"{row} {parts} |")
     lines.append("")
+    if reference:
+        import os
+
+        v = fw_profile.versus(ELF, reference, CPU_SECONDS, CPU_REPEATS)
+        runs = {k: ", ".join(f"{x:.2f}" for x in v[k]) for k in ("this", "ref")}
+        load = os.getloadavg()[0]
+        lines += [
+            f"What simavr costs the host for each ELF alone (`tools.fw_profile --versus`: the "
+            f"process CPU time of {CPU_SECONDS:g} s simulated under the 100 Hz traffic above, "
+            f"the two ELFs alternating, {CPU_REPEATS} runs each; `make profile-firmware "
+            f"FW_REF_ELF=...`): this build {runs['this']} s, `{reference}` {runs['ref']} s: "
+            f"**{v['ratio']:.2f}** (medians; load average {load:.1f}).",
+            "",
+        ]
     return lines
 
 

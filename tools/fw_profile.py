@@ -1,6 +1,7 @@
 """Where the firmware's awake cycles go under the twin's traffic: a PC histogram per function.
 
     python -m tools.fw_profile [--elf ELF] [--seconds S] [--rate HZ] [--top N] [--function F]
+    python -m tools.fw_profile [--elf ELF] --versus REF_ELF [--cpu-seconds S] [--repeats N]
 
 Runs the ELF on the emulated board with no plant (as ``tools.bench_twin --engine elf``: the
 grasp hold's host traffic, telemetry at ``--rate`` Hz (100: the hold's; 1000: the stream),
@@ -8,7 +9,11 @@ heartbeats, five fingers in POSITION at the angles their still encoders read), c
 simulated cycle at the address of the instruction that spent it (the harness's PC histogram,
 sleep included) and maps the addresses to the ELF's functions (``avr-nm``). Prints the share
 of the cycles the CPU was awake, and the functions by awake cycles per simulated second; with
-``--function``, that function's hottest instructions too (``avr-objdump`` lines).
+``--function``, that function's hottest instructions too (``avr-objdump`` lines). With
+``--versus``: what simavr costs the host for each ELF alone instead, side by side (the process
+CPU time of ``--cpu-seconds`` simulated under the same traffic, the two ELFs alternating,
+``--repeats`` each; the ratio of the medians): the twin's floor, as ``tools.bench_twin``'s
+"ELF alone" row measures it for a tree's own build.
 """
 
 from __future__ import annotations
@@ -16,7 +21,9 @@ from __future__ import annotations
 import argparse
 import bisect
 import re
+import statistics
 import subprocess
+import time
 from pathlib import Path
 
 import numpy as np
@@ -109,6 +116,27 @@ def awake(elf: Path, seconds: float, rate_hz: int) -> dict:
     }
 
 
+def cpu_alone(elf: Path, seconds: float) -> float:
+    """The process CPU time (s) simavr takes for ``seconds`` simulated of the ELF alone."""
+    from tools.bench_twin import elf_alone
+
+    with elf_alone(elf) as (_board, link):
+        cpu0 = time.process_time()
+        link.sleep(seconds)
+        return time.process_time() - cpu0
+
+
+def versus(elf: Path, ref: Path, seconds: float, repeats: int) -> dict:
+    """Each ELF alone ``repeats`` times, alternating: ``this`` and ``ref`` (CPU s per run)
+    and ``ratio``, this build's median over the reference's."""
+    runs: dict[str, list[float]] = {"this": [], "ref": []}
+    for i in range(repeats):
+        order = [("this", elf), ("ref", ref)]
+        for tag, path in order if i % 2 == 0 else order[::-1]:
+            runs[tag].append(cpu_alone(path, seconds))
+    return {**runs, "ratio": statistics.median(runs["this"]) / statistics.median(runs["ref"])}
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--elf", type=Path, default=Path("build/firmware/utrf.elf"))
@@ -120,9 +148,24 @@ def main(argv: list[str] | None = None) -> int:
         "--lines", action="store_true",
         help="with --function: its cycles by source file and line instead",
     )  # fmt: skip
+    p.add_argument("--versus", type=Path, help="CPU time of this ELF alone against another's")
+    p.add_argument("--cpu-seconds", type=float, default=120.0, help="with --versus: simulated s")
+    p.add_argument("--repeats", type=int, default=3, help="with --versus: runs of each ELF")
     args = p.parse_args(argv)
     if not args.elf.exists():
         p.error(f"no ELF at {args.elf} (make firmware)")
+    if args.versus is not None:
+        if not args.versus.exists():
+            p.error(f"no ELF at {args.versus}")
+        if not args.cpu_seconds > 0 or args.repeats < 1:
+            p.error("--cpu-seconds must be > 0 and --repeats >= 1")
+        v = versus(args.elf, args.versus, args.cpu_seconds, args.repeats)
+        this, ref = statistics.median(v["this"]), statistics.median(v["ref"])
+        print(f"ELF alone, {args.cpu_seconds:g} s simulated, CPU s (median of {args.repeats}): "
+              f"{args.elf} {this:.2f} ({', '.join(f'{x:.2f}' for x in v['this'])}), "
+              f"{args.versus} {ref:.2f} ({', '.join(f'{x:.2f}' for x in v['ref'])}): "
+              f"ratio {v['ratio']:.2f}")  # fmt: skip
+        return 0
     if not args.seconds > 0 or args.rate not in (100, 1000):
         p.error("--seconds must be > 0 and --rate 100 or 1000")
     a = awake(args.elf, args.seconds, args.rate)
