@@ -1,6 +1,7 @@
 """Where the firmware's awake cycles go under the twin's traffic: a PC histogram per function.
 
     python -m tools.fw_profile [--elf ELF] [--seconds S] [--rate HZ] [--top N] [--function F]
+    python -m tools.fw_profile [--elf ELF] --plant [--seconds S] [--top N]
     python -m tools.fw_profile [--elf ELF] --versus REF_ELF [--cpu-seconds S] [--repeats N]
 
 Runs the ELF on the emulated board with no plant (as ``tools.bench_twin --engine elf``: the
@@ -10,6 +11,8 @@ simulated cycle at the address of the instruction that spent it (the harness's P
 sleep included) and maps the addresses to the ELF's functions (``avr-nm``). Prints the share
 of the cycles the CPU was awake, and the functions by awake cycles per simulated second; with
 ``--function``, that function's hottest instructions too (``avr-objdump`` lines). With
+``--plant``: the grasp hold with the MuJoCo hand instead (the encoders moving, with the
+emulated sensor's noise: what the twin's hold pays; the run's closing included). With
 ``--versus``: what simavr costs the host for each ELF alone instead, side by side (the process
 CPU time of ``--cpu-seconds`` simulated under the same traffic, the two ELFs alternating,
 ``--repeats`` each; the ratio of the medians): the twin's floor, as ``tools.bench_twin``'s
@@ -88,11 +91,40 @@ def run(elf: Path, seconds: float, rate_hz: int) -> tuple[np.ndarray, int, int]:
     return hist, cycles, slept
 
 
-def awake(elf: Path, seconds: float, rate_hz: int) -> dict:
+def run_hold(elf: Path, seconds: float) -> tuple[np.ndarray, int, int]:
+    """As run(), over the grasp hold with the MuJoCo hand (``utrf hil grasp-hold --emulated``'s
+    run, seed 0, one hit, ``seconds`` of hold after the closing): the encoders move and carry
+    the emulated sensor's noise, as in the twin's hold."""
+    import tempfile
+
+    from utrf.hil.grasp_hold import config as gh
+    from utrf.hil.grasp_hold import run as hold
+    from utrf.hil.rig import EmulatedTruth, open_emulated
+
+    rig = open_emulated(seed=0, tracked_finger=1, truth=EmulatedTruth(actuator=None), elf=str(elf))
+    native = rig.board._native
+    config = gh.GraspHoldConfig(pose="grasp-bottle", duration_s=seconds, hits=1,
+                                hit_impulse_n_s=0.3, tracked_finger=1, sample_hz=10.0,
+                                emulated=True, seed=0)  # fmt: skip
+    try:
+        native.pc_histogram(-1)
+        slept0, cycle0 = native.stats()["sleep_cycles"], native.cycle
+        with tempfile.TemporaryDirectory() as out:
+            hold.run(rig, config, Path(out) / "run", progress=lambda _s: None)
+        hist = native.pc_histogram_get().copy()
+        slept, cycles = native.stats()["sleep_cycles"] - slept0, native.cycle - cycle0
+        native.pc_histogram(None)
+    finally:
+        rig.close()
+    return hist, cycles, slept
+
+
+def awake(elf: Path, seconds: float, rate_hz: int, plant: bool = False) -> dict:
     """The awake cycles of ``seconds`` simulated under the twin's traffic: ``share`` (of every
     cycle), ``per_s`` (awake cycles per simulated second), ``functions`` (name: cycles per
-    simulated second, largest first), ``hist`` (awake cycles per program word)."""
-    hist, cycles, slept = run(elf, seconds, rate_hz)
+    simulated second, largest first), ``hist`` (awake cycles per program word). ``plant``:
+    the grasp hold with the MuJoCo hand instead (run_hold(); ``rate_hz`` its 100)."""
+    hist, cycles, slept = run_hold(elf, seconds) if plant else run(elf, seconds, rate_hz)
     for a in sorted(sleeps(elf)):  # the slept cycles, off the sleep and the next
         take = min(int(hist[a // 2]), slept)
         hist[a // 2] -= take
@@ -148,6 +180,10 @@ def main(argv: list[str] | None = None) -> int:
         "--lines", action="store_true",
         help="with --function: its cycles by source file and line instead",
     )  # fmt: skip
+    p.add_argument(
+        "--plant", action="store_true",
+        help="the grasp hold with the MuJoCo hand (moving, noisy encoders), not the ELF alone",
+    )  # fmt: skip
     p.add_argument("--versus", type=Path, help="CPU time of this ELF alone against another's")
     p.add_argument("--cpu-seconds", type=float, default=120.0, help="with --versus: simulated s")
     p.add_argument("--repeats", type=int, default=3, help="with --versus: runs of each ELF")
@@ -168,8 +204,9 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if not args.seconds > 0 or args.rate not in (100, 1000):
         p.error("--seconds must be > 0 and --rate 100 or 1000")
-    a = awake(args.elf, args.seconds, args.rate)
-    print(f"{args.elf}: {a['sim_s']:.2f} s simulated, telemetry {args.rate} Hz, awake "
+    a = awake(args.elf, args.seconds, args.rate, plant=args.plant)
+    what = "the grasp hold with the MuJoCo hand, " if args.plant else ""
+    print(f"{args.elf}: {a['sim_s']:.2f} s simulated, {what}telemetry {args.rate} Hz, awake "
           f"{100 * a['share']:.2f} % of the cycles ({a['per_s']:,.0f} cycles/s)")  # fmt: skip
     print(f"{'cycles/s':>10} {'% awake':>8}  function")
     for name, c in list(a["functions"].items())[: args.top]:
