@@ -52,9 +52,10 @@ def test_one_functions_source_lines_are_listed(profile, capsys) -> None:
 
 @pytest.mark.slow
 def test_the_hold_with_the_plant_is_profiled_like_the_elf_alone(profile) -> None:
-    # (the profile fixture builds the ELF and the harness) the grasp hold's run (the closing, then 4 s of hold): every slept cycle found at a
-    # sleep instruction (awake() raises otherwise), the rest in the ELF's functions; the
-    # moving, noisy encoders keep the tick the largest part
+    # (the profile fixture builds the ELF and the harness) the grasp hold's run (the closing,
+    # then 4 s of hold): every slept cycle found at a sleep instruction (awake() raises
+    # otherwise), the rest in the ELF's functions; the moving, noisy encoders keep the tick
+    # the largest part
     a = fw_profile.awake(ELF, 4.0, 100, plant=True)
     assert a["sim_s"] > 5.0  # the closing is counted
     assert "?" not in a["functions"]
