@@ -278,21 +278,11 @@ int fw_pid_regain(const uint8_t* set_gains_body, uint8_t len, int16_t limit) {
 // The PID's fast paths as compile() chose them for the gains (bit 0 ki_plain, bit 1 pd_plain);
 // fw_pid_general_path() turns them off in the running Pid, state kept, so a test can run the
 // general twins on the same inputs.
-// Bit 2: the step's fast path for a repeated step (still_path).
-int fw_pid_fast_paths(void) {
-    return (g_pc.ki_plain ? 1 : 0) | (g_pc.pd_plain ? 2 : 0) | (g_pc.still_path ? 4 : 0);
-}
+int fw_pid_fast_paths(void) { return (g_pc.ki_plain ? 1 : 0) | (g_pc.pd_plain ? 2 : 0); }
 void fw_pid_general_path(void) {
     g_pc.ki_plain = false;
     g_pc.pd_plain = false;
-    g_pc.still_path = false;
     g_pid.load(g_pc);
-}
-// The limit of the steps that follow; whether the next step with the last inputs repeats it.
-void fw_pid_limit(int16_t limit) { g_plimit = limit; }
-int fw_pid_still(void) { return g_pid.still() ? 1 : 0; }
-int16_t fw_pid_step_ff(int16_t target, int16_t measured, int16_t ff) {
-    return g_pid.step(g_plimit, target, measured, ff);
 }
 
 void fw_pid_reset(int16_t u, int16_t measured) { g_pid.reset(g_plimit, u, measured); }

@@ -317,12 +317,12 @@ def test_gain_fast_paths_equal_their_general_twins(
 
 
 def test_gain_fast_paths_cover_the_default_gains(fwlib: ctypes.CDLL) -> None:
-    """The spec's default gains take both gain fast paths (what make bench-firmware measures),
-    and a gain outside a path's condition does not; the repeated step's takes any gains."""
+    """The spec's default gains take both PID fast paths (what make bench-firmware measures),
+    and a gain outside a path's condition does not."""
     pid_config(fwlib, LIMIT)
-    assert fwlib.fw_pid_fast_paths() == 7
+    assert fwlib.fw_pid_fast_paths() == 3
     pid_config(fwlib, LIMIT, kp=500.0, ki=5000.0)  # kp of shift 0, ki that may saturate
-    assert fwlib.fw_pid_fast_paths() == 4
+    assert fwlib.fw_pid_fast_paths() == 0
     assert fwlib.fw_gain_paths(1e6, I_STEP_MAX31) & 1 == 0
 
 
@@ -362,74 +362,3 @@ def test_pid_fast_paths_step_like_the_general_ones(
             trace.append((fwlib.fw_pid_step(target, measured), pid_state(fwlib)))
         runs.append(trace)
     assert runs[0] == runs[1]
-
-
-# ---- the repeated step's fast path (Pid::step(): the last step's inputs on the state it left
-# unchanged) beside the general step ----
-
-
-@settings(max_examples=80, deadline=None)
-@given(
-    kp=st.floats(0.0, 100.0),
-    ki=st.floats(0.0, 50.0),
-    kd=st.floats(0.0, 2.0),
-    deadband=st.sampled_from([0.0, 0.04, 0.2]),
-    u0=st.integers(-LIMIT, LIMIT),
-    holds=st.lists(
-        st.tuples(
-            st.integers(-400, 400),  # target
-            st.integers(-400, 400),  # measured
-            st.sampled_from([LIMIT, LIMIT // 3, 0]),  # limit
-            st.sampled_from([0, 0, 0, 900]),  # feedforward
-            st.integers(1, 40),  # ticks held
-        ),
-        min_size=1,
-        max_size=12,
-    ),
-)
-def test_pid_repeated_steps_fast_path_steps_like_the_general_one(
-    fwlib: ctypes.CDLL,
-    kp: float,
-    ki: float,
-    kd: float,
-    deadband: float,
-    u0: int,
-    holds: list[tuple[int, int, int, int, int]],
-) -> None:
-    """Inputs held for stretches of ticks (a finger holding still, then a new target, limit,
-    feedforward or reading): the same outputs and state every step with the repeated step's
-    fast path as with the general step alone."""
-    runs = []
-    for general in (False, True):
-        pid_config(fwlib, LIMIT, kp=kp, ki=ki, kd=kd, deadband_duty=deadband, slew_per_s=50.0)
-        if general:
-            fwlib.fw_pid_general_path()
-        fwlib.fw_pid_reset(u0, holds[0][1])
-        trace = []
-        for target, measured, limit, ff, n in holds:
-            fwlib.fw_pid_limit(limit)
-            for _ in range(n):
-                trace.append((fwlib.fw_pid_step_ff(target, measured, ff), pid_state(fwlib)))
-        runs.append(trace)
-        if general:
-            assert fwlib.fw_pid_still() == 0  # the general step never marks itself still
-    assert runs[0] == runs[1]
-
-
-def test_pid_holding_still_takes_the_fast_path(fwlib: ctypes.CDLL) -> None:
-    """At rest on its target the step settles into the fast path; a feedforward, a new
-    reading, target or limit, and new gains each leave it."""
-    pid_config(fwlib, LIMIT)
-    fwlib.fw_pid_reset(0, 100)
-    for _ in range(3):
-        fwlib.fw_pid_step(100, 100)
-    assert fwlib.fw_pid_still() == 1
-    fwlib.fw_pid_step_ff(100, 100, 50)
-    assert fwlib.fw_pid_still() == 0
-    for _ in range(400):  # the feedforward's kick settles
-        fwlib.fw_pid_step(100, 100)
-    assert fwlib.fw_pid_still() == 1
-    fwlib.fw_pid_step(100, 140)  # a new reading: the velocity moves
-    assert fwlib.fw_pid_still() == 0
-    pid_config(fwlib, LIMIT)
-    assert fwlib.fw_pid_still() == 0

@@ -19,7 +19,6 @@ Coeffs compile(const config::Gains& g, float dt_s) {
     // v is Q8 BU per tick: rad/s = v / 256 * kRadPerBu / dt.
     c.kd = fx::make_gain(g.kd * kRadPerBu / (256.0f * dt_s) * 16384.0f, kTermMax14);
     c.pd_plain = fx::mid16(c.kp) && fx::hi16_plain(c.kd, kMaxV8);
-    c.still_path = true;
     // Matched pole of a first-order low-pass: alpha = 1 - exp(-2 pi fc dt).
     const float a = 1.0f - expf(-2.0f * 3.14159265f * g.d_cutoff_hz * dt_s);
     c.alpha = (uint16_t)fx::clamp32(fx::round_sat(a * 65536.0f), 1, 65535);
@@ -46,16 +45,7 @@ int16_t remove_deadband(int16_t u, int16_t db, uint16_t db_inverse) {
 
 int32_t ki_step_general(const Coeffs& c, int16_t e) { return fx::apply(c.ki, e, kIStepMax31); }
 
-Pid::Pid()
-    : i31_(0),
-      v8_(0),
-      m_prev_(0),
-      e_last_(0),
-      u_(0),
-      saturated_(false),
-      still_(false),
-      still_limit_(0),
-      c_() {}
+Pid::Pid() : i31_(0), v8_(0), m_prev_(0), e_last_(0), u_(0), saturated_(false), c_() {}
 
 void Pid::reset(int16_t limit, int16_t u, int16_t measured) {
     u_ = fx::clamp16(u, (int16_t)-limit, limit);
@@ -66,7 +56,6 @@ void Pid::reset(int16_t limit, int16_t u, int16_t measured) {
     m_prev_ = measured;
     e_last_ = 0;
     saturated_ = false;
-    still_ = false;
 }
 
 void Pid::set_coeffs(const Coeffs& c, int16_t new_limit) {
@@ -77,7 +66,6 @@ void Pid::set_coeffs(const Coeffs& c, int16_t new_limit) {
         fx::clamp32(before - (int32_t)p_minus_d(c, e_last_, v8_) * 2, -new_limit, new_limit);
     i31_ = (int32_t)((uint32_t)i15 << 16);
     u_ = fx::clamp16(u_, (int16_t)-new_limit, new_limit);
-    still_ = false;
 }
 
 }  // namespace pid

@@ -48,9 +48,6 @@ struct Coeffs {
     // P - D's fast path: kp of shift -8 (fx::apply16_mid()) and kd of shift -16 that never
     // saturates for |v| <= kMaxV8 (fx::apply16_hi()).
     bool pd_plain;
-    // The step's fast path for a step that would repeat the last one (Pid::step(): a finger
-    // holding still). compile() sets it; a test clears it to run the general step alone.
-    bool still_path;
 };
 
 // Saturation levels of the terms, chosen so no sum can overflow.
@@ -68,10 +65,7 @@ class Pid {
    public:
     Pid();
     // Coefficients for a Pid about to be reset() (no rebase).
-    void load(const Coeffs& c) {
-        c_ = c;
-        still_ = false;
-    }
+    void load(const Coeffs& c) { c_ = c; }
     // New gains or limit while running: keep the output where it is (the integrator absorbs the
     // change of the proportional and derivative terms).
     void set_coeffs(const Coeffs& c, int16_t new_limit);
@@ -91,9 +85,6 @@ class Pid {
     int16_t velocity8() const { return v8_; }
     // The last step wanted more than the limit or slew limiter gave, toward its error.
     bool saturated() const { return saturated_; }
-    // The last step left the state as it found it, at this limit: the same inputs again give
-    // the same output and change nothing (step()'s fast path).
-    bool still() const { return still_; }
 
    private:
     // The state, then the coefficients: one object, every field within a displacement of its
@@ -104,8 +95,6 @@ class Pid {
     int16_t e_last_;  // last error, BU
     int16_t u_;       // last output, Q15 duty
     bool saturated_;
-    bool still_;            // the last step changed no field above (and had no feedforward)
-    int16_t still_limit_;   // ... at this limit
     Coeffs c_;
 };
 
@@ -162,25 +151,13 @@ UTRF_HOT int16_t Pid::step(int16_t limit, int16_t target, int16_t measured, int1
     const Coeffs& c = c_;
     // Angles are within +-pi (BU), so these differences fit int16.
     const int16_t e = (int16_t)(target - measured);
-    // The fast path: the last step's inputs again (the same measurement, error and limit, no
-    // feedforward) on the state that step left as it found it: the step is a function of the
-    // two, so it would give the same output and leave the state so again. Nothing to do.
-    // The mark is cleared here, not by every step: the general step writes it only when it
-    // finds itself still (below).
-    if (UTRF_UNLIKELY(still_)) {
-        if (ff == 0 && e == e_last_ && measured == m_prev_ && limit == still_limit_) return u_;
-        still_ = false;
-    }
     const int16_t dm = fx::clamp16((int16_t)(measured - m_prev_), (int16_t)-kMaxDm, kMaxDm);
     m_prev_ = measured;
+    e_last_ = e;
     // v += alpha (256 dm - v): |256 dm - v| < 2^15, one 16 x 16 multiply, rounded. 256 dm is a
     // multiply, not a shift: dm may be negative.
     const int16_t dv = (int16_t)(dm * 256 - v8_);
-    const int16_t dv8 = fx::prod_hi16(fx::prod_su(dv, c.alpha), true);
-    v8_ = (int16_t)(v8_ + dv8);
-    // The measurement and the velocity stood still (the rest is told at the end, from the
-    // fields this step has not written yet: few values kept across the step).
-    const bool calm = dv8 == 0 && dm == 0 && ff == 0;
+    v8_ = (int16_t)(v8_ + fx::prod_hi16(fx::prod_su(dv, c.alpha), true));
 
     // P - D in Q14, the integrator's high word and the feedforward in Q15: fits sum_t.
     sum_t v = p_minus_d(c, e, v8_) * 2 + (int16_t)(i31_ >> 16) + ff;
@@ -200,22 +177,12 @@ UTRF_HOT int16_t Pid::step(int16_t limit, int16_t target, int16_t measured, int1
     const int16_t s = slew_limit(u, u_, c.slew);
     if (s != u) free = false;
     u = s;
+    u_ = u;
 
     // Conditional integration: hold the integrator while the output is held back in the
     // direction the error pushes it; integrate when it is free or when the error unwinds it.
-    const bool sat = !free && ((v > u && e > 0) || (v < u && e < 0));
-    const bool integrate = !sat && e != 0;
-    // Still: no field changed (an integrator's step is taken as a change), against the last
-    // step's error, output and flag, not written yet. Moving, one test.
-    if (UTRF_UNLIKELY(calm) && c.still_path && !integrate && e == e_last_ && u == u_ &&
-        sat == saturated_) {
-        still_ = true;
-        still_limit_ = limit;
-    }
-    e_last_ = e;
-    u_ = u;
-    saturated_ = sat;
-    if (integrate) {
+    saturated_ = !free && ((v > u && e > 0) || (v < u && e < 0));
+    if (!saturated_ && e != 0) {
         // min(i31 + step, limit) for a step up, max(i31 + step, -limit) for a step down, the
         // sum exact: i31 + step may overflow int32 near the limit (the add's overflow flag),
         // and the limit is a whole Q15 duty (low word 0), so the compare is of the high word.
@@ -239,7 +206,6 @@ UTRF_HOT int16_t Pid::step_open(int16_t limit, int16_t duty, int16_t measured) {
     saturated_ = u != duty;
     u_ = u;
     m_prev_ = measured;  // a switch to closed loop calls reset() with this output
-    still_ = false;
     return u;
 }
 
