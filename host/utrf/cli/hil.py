@@ -409,7 +409,7 @@ def _grasp_hold(args: argparse.Namespace) -> int:
         try:
             _warn_rate(rig.tracker, config.sample_hz, "--sample-hz")
             geometry = rig.hand.geometry
-            run.run(
+            lines = run.run(
                 rig,
                 config,
                 args.out,
@@ -418,7 +418,7 @@ def _grasp_hold(args: argparse.Namespace) -> int:
             )
         finally:
             rig.close()
-        result = report.write(args.out, geometry)
+        result = report.write(args.out, geometry, lines)
         print(report.describe(result))
         print(f"results: {args.out / 'results.json'}, figure: {args.out / report.FIGURE}")
         # everything is written: the interpreter's exit need not collect what the hold made
