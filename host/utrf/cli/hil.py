@@ -406,6 +406,9 @@ def _grasp_hold(args: argparse.Namespace) -> int:
         # The grasp hold uses the hand's own motors (no rig actuator).
         rig = _open(args, tracked, EmulatedTruth(actuator=None))
         report.preload_plotting()  # the figure's imports, beside the hold
+        # what start-up made lives to the end: the collector's full passes need not walk it
+        # again during the hold (they ran while the board stood still, in the closing)
+        gc.freeze()
         try:
             _warn_rate(rig.tracker, config.sample_hz, "--sample-hz")
             geometry = rig.hand.geometry
