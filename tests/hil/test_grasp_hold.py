@@ -138,10 +138,14 @@ def _hold(
         runs.append(len(targets)),
         batch(targets, *a, **kw),
     )
+    carried: list[object] = []  # the harness's heartbeat rule carried to the next batch
+    rule = board.run_ahead_beats_next
+    board.run_ahead_beats_next = lambda: (r := rule(), r is not None and carried.append(r))[0]
     try:
         run.run(rig, config, tmp, progress=lambda _s: None)
         stats, rx = dict(board.stats), board.rx_timing()  # every byte's arrival, to the cycle
         stats["batched_runs"], stats["batched_stops"] = len(runs), sum(runs)
+        stats["carried_runs"] = len(carried)
         stats["cycle"] = round(board.sim_time * 16e6)
     finally:
         rig.close()
@@ -162,14 +166,19 @@ def test_the_board_running_ahead_takes_the_same_hold_to_the_bit(
     (SimLink.stops_each)."""
     plain, stats_p, rx_p = _hold(tmp_path / "plain", False)
     assert stats_p.pop("batched_runs") == 0 and stats_p.pop("batched_stops") == 0
+    assert stats_p.pop("carried_runs") == 0
     for threads, batched in (("1", False), ("2", False), ("1", True), ("2", True)):
         monkeypatch.setenv("UTRF_TWIN_THREADS", threads)
         ahead, stats_a, rx_a = _hold(tmp_path / f"ahead{threads}{batched}", True, batched)
         assert ahead["samples.csv"].count(b"\n") > 140 and ahead["hits.csv"].count(b"\n") == 2
         assert ahead == plain
         runs, stops = stats_a.pop("batched_runs"), stats_a.pop("batched_stops")
+        carried = stats_a.pop("carried_runs")
         if batched:  # the harness sends the heartbeats: up to 64 samples a run
             assert stops >= 145 and runs <= stops / 30, (runs, stops)
+            # each batch after the first started from the harness's rule, before the engine
+            # took the last one's frames (and stood where the rule said: checked as it ran)
+            assert carried >= runs - 1 and carried >= 2, (carried, runs)
         else:
             assert runs == 0
         # the sleep counter adds a cycle at each SLEEP entry: a run ahead entered 9-14 fewer of
@@ -197,6 +206,7 @@ def test_more_hits_a_batch_than_the_harness_takes_come_out_the_same(
     assert stats_b["batched_runs"] >= 3 and 100 < stats_b["batched_stops"] < 140
     for st in (stats_p, stats_b):
         st.pop("batched_runs"), st.pop("batched_stops"), st.pop("sleep_cycles")
+        st.pop("carried_runs")
     assert stats_b == stats_p
 
 
@@ -212,8 +222,11 @@ def test_a_noisy_line_comes_out_the_same(firmware_elf: Path, tmp_path: Path) -> 
     assert batched["samples.csv"].count(b"\n") > 140 and batched == plain
     runs, stops = stats_b.pop("batched_runs"), stats_b.pop("batched_stops")
     assert stops > 75 and runs > 5  # frozen batches, ended early
+    # a frozen rule is not carried on: the engine takes those frames before the next batch
+    assert 0 < stats_b.pop("carried_runs") < runs
     for st in (stats_p, stats_b):
         st.pop("batched_runs", None), st.pop("batched_stops", None), st.pop("sleep_cycles")
+        st.pop("carried_runs", None)
     assert stats_b == stats_p and rx_b == rx_p
 
 
