@@ -62,7 +62,8 @@ def test_hits_are_found_and_the_grasp_recovers(
 
     drawn: dict[str, object] = {}
     monkeypatch.setattr(plt.Figure, "savefig", lambda fig, *_a, **_k: drawn.update(fig=fig))
-    report.plot(result, rows, list(result["fingers"]), tmp_path / "again.png")
+    samples = analysis.read_samples(out, list(result["fingers"]))
+    report.plot(result, samples, list(result["fingers"]), tmp_path / "again.png")
     drift_ax, dist_ax, tip_ax = drawn["fig"].axes  # type: ignore[attr-defined]
     labels = [line.get_label() for line in drift_ax.get_lines()]
     for name, p in result["fingers"].items():
@@ -137,10 +138,14 @@ def _hold(
         runs.append(len(targets)),
         batch(targets, *a, **kw),
     )
+    carried: list[object] = []  # the harness's heartbeat rule carried to the next batch
+    rule = board.run_ahead_beats_next
+    board.run_ahead_beats_next = lambda: (r := rule(), r is not None and carried.append(r))[0]
     try:
         run.run(rig, config, tmp, progress=lambda _s: None)
         stats, rx = dict(board.stats), board.rx_timing()  # every byte's arrival, to the cycle
         stats["batched_runs"], stats["batched_stops"] = len(runs), sum(runs)
+        stats["carried_runs"] = len(carried)
         stats["cycle"] = round(board.sim_time * 16e6)
     finally:
         rig.close()
@@ -161,14 +166,19 @@ def test_the_board_running_ahead_takes_the_same_hold_to_the_bit(
     (SimLink.stops_each)."""
     plain, stats_p, rx_p = _hold(tmp_path / "plain", False)
     assert stats_p.pop("batched_runs") == 0 and stats_p.pop("batched_stops") == 0
+    assert stats_p.pop("carried_runs") == 0
     for threads, batched in (("1", False), ("2", False), ("1", True), ("2", True)):
         monkeypatch.setenv("UTRF_TWIN_THREADS", threads)
         ahead, stats_a, rx_a = _hold(tmp_path / f"ahead{threads}{batched}", True, batched)
         assert ahead["samples.csv"].count(b"\n") > 140 and ahead["hits.csv"].count(b"\n") == 2
         assert ahead == plain
         runs, stops = stats_a.pop("batched_runs"), stats_a.pop("batched_stops")
+        carried = stats_a.pop("carried_runs")
         if batched:  # the harness sends the heartbeats: up to 64 samples a run
             assert stops >= 145 and runs <= stops / 30, (runs, stops)
+            # each batch after the first started from the harness's rule, before the engine
+            # took the last one's frames (and stood where the rule said: checked as it ran)
+            assert carried >= runs - 1 and carried >= 2, (carried, runs)
         else:
             assert runs == 0
         # the sleep counter adds a cycle at each SLEEP entry: a run ahead entered 9-14 fewer of
@@ -196,6 +206,7 @@ def test_more_hits_a_batch_than_the_harness_takes_come_out_the_same(
     assert stats_b["batched_runs"] >= 3 and 100 < stats_b["batched_stops"] < 140
     for st in (stats_p, stats_b):
         st.pop("batched_runs"), st.pop("batched_stops"), st.pop("sleep_cycles")
+        st.pop("carried_runs")
     assert stats_b == stats_p
 
 
@@ -211,6 +222,54 @@ def test_a_noisy_line_comes_out_the_same(firmware_elf: Path, tmp_path: Path) -> 
     assert batched["samples.csv"].count(b"\n") > 140 and batched == plain
     runs, stops = stats_b.pop("batched_runs"), stats_b.pop("batched_stops")
     assert stops > 75 and runs > 5  # frozen batches, ended early
+    # a frozen rule is not carried on: the engine takes those frames before the next batch
+    assert 0 < stats_b.pop("carried_runs") < runs
     for st in (stats_p, stats_b):
         st.pop("batched_runs", None), st.pop("batched_stops", None), st.pop("sleep_cycles")
+        st.pop("carried_runs", None)
     assert stats_b == stats_p and rx_b == rx_p
+
+
+def test_the_decimated_line_keeps_every_extreme_and_gap() -> None:
+    rng = np.random.default_rng(3)
+    x = np.sort(rng.uniform(0.0, 120.0, 6001))
+    y = np.cumsum(rng.normal(size=x.size))
+    y[1000:1400] = np.nan  # a gap wider than a column: the line breaks there
+    y[3000] = np.nan  # one missing sample within a column
+    columns = 200
+    xs, ys = report.decimate(x, y, columns)
+    assert len(xs) <= 2 * columns and np.all(np.diff(xs) > 0)
+    col = np.minimum(((x - x[0]) * (columns / (x[-1] - x[0]))).astype(int), columns - 1)
+    kept = np.minimum(((xs - x[0]) * (columns / (x[-1] - x[0]))).astype(int), columns - 1)
+    for c in np.unique(col):  # each column's lowest and highest sample are drawn
+        whole, drawn = y[col == c], ys[kept == c]
+        if np.isfinite(whole).any():
+            assert np.nanmin(drawn) == np.nanmin(whole) and np.nanmax(drawn) == np.nanmax(whole)
+        else:
+            assert np.isnan(drawn).all() and len(drawn) >= 1
+    assert np.nanmax(ys) == np.nanmax(y) and np.nanmin(ys) == np.nanmin(y)
+    gap = (xs > x[1001]) & (xs < x[1399])
+    assert gap.any() and np.isnan(ys[gap]).all()
+    short = report.decimate(x[:300], y[:300], columns)  # fewer points than it keeps: whole
+    assert np.array_equal(short[0], x[:300])
+    assert np.array_equal(short[1], y[:300], equal_nan=True)
+
+
+def test_samples_kept_in_memory_are_the_files(tmp_path: Path) -> None:
+    names = ["thumb", "index", "middle", "ring", "little"]
+    columns = gh.sample_columns(names)
+    finger = ",0.10000,0.20000,0.300,0.000,GRASP,0,0.1000"
+    lines = [f"{k * 0.02:.6f},baseline,0.1,0.2,0.3,1,{k}{finger * 5}\n" for k in range(4)]
+    (tmp_path / "samples.csv").write_text(",".join(columns) + "\n" + "".join(lines) + "0.08,ho")
+    kept = analysis.parse_samples(lines, names)
+    read = analysis.read_samples(tmp_path, names)  # the row cut by a kill is left out
+    assert analysis.count(read) == analysis.count(kept) == 4
+    for c in columns:
+        assert np.array_equal(read[c], kept[c]), c
+    with (tmp_path / "samples.csv").open() as f:  # the CSV module reads the same values
+        rows = list(csv.DictReader(f))[:4]
+    assert [float(r["index_theta2_rad"]) for r in rows] == kept["index_theta2_rad"].tolist()
+    assert kept["thumb_mode"].tolist() == ["GRASP"] * 4 and kept["phase"][0] == "baseline"
+    bad = [lines[0], lines[1].replace(",0.300,", ",oops,", 1)]
+    with pytest.raises(ValueError, match=r"column 'thumb_duty_a', row 2: 'oops' is not a number"):
+        analysis.parse_samples(bad, names)

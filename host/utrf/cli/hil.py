@@ -406,10 +406,13 @@ def _grasp_hold(args: argparse.Namespace) -> int:
         # The grasp hold uses the hand's own motors (no rig actuator).
         rig = _open(args, tracked, EmulatedTruth(actuator=None))
         report.preload_plotting()  # the figure's imports, beside the hold
+        # what start-up made lives to the end: the collector's full passes need not walk it
+        # again during the hold (they ran while the board stood still, in the closing)
+        gc.freeze()
         try:
             _warn_rate(rig.tracker, config.sample_hz, "--sample-hz")
             geometry = rig.hand.geometry
-            run.run(
+            lines = run.run(
                 rig,
                 config,
                 args.out,
@@ -418,7 +421,7 @@ def _grasp_hold(args: argparse.Namespace) -> int:
             )
         finally:
             rig.close()
-        result = report.write(args.out, geometry)
+        result = report.write(args.out, geometry, lines)
         print(report.describe(result))
         print(f"results: {args.out / 'results.json'}, figure: {args.out / report.FIGURE}")
         # everything is written: the interpreter's exit need not collect what the hold made

@@ -266,6 +266,15 @@ class NativeBoard:
         n = self._lib.utrf_sim_ahead_beats_done(self.handle, cycles, dues, BEATS)
         return list(cycles[:n]), list(dues[:n])
 
+    def ahead_beats_next(self) -> tuple[float, set[int]] | None:
+        """After the join: the next heartbeat's due time and the seqs whose acks still count,
+        as the harness's rule stands (None: heartbeats off, or the rule frozen)."""
+        due = ctypes.c_double(0.0)
+        mask = (ctypes.c_uint8 * 16)()
+        if self._lib.utrf_sim_ahead_beats_next(self.handle, ctypes.byref(due), mask):
+            return None
+        return due.value, {k for k in range(128) if mask[k >> 3] >> (k & 7) & 1}
+
     def ahead_send(self, data: bytes, at_s: float) -> None:
         """Write ``data`` to UART0 at the first period's end whose time reaches ``at_s``."""
         buf = (ctypes.c_uint8 * len(data)).from_buffer_copy(data)

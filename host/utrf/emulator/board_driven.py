@@ -191,6 +191,12 @@ class BoardDriven:
         they went for."""
         return self._native.ahead_beats_done()
 
+    def run_ahead_beats_next(self) -> tuple[float, set[int]] | None:
+        """After the join: where the harness's heartbeat rule stands (the next due time, the
+        seqs whose acks still count; None: off or frozen), before the client has taken the
+        run's frames."""
+        return self._native.ahead_beats_next()
+
     def run_ahead(self, seconds: float, send: tuple[bytes, float] | None = None) -> None:
         """Driven: start running ``seconds`` of simulated time in whole exchanges (the same
         end as :meth:`run_until_output`'s) on the harness's own thread, and return at once:

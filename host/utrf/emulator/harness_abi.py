@@ -385,6 +385,7 @@ def load_library() -> ctypes.CDLL:
             [p, u8p, u8p, u8p, ctypes.c_size_t, ctypes.c_double, ctypes.c_double, u8p, u8p],
         ),
         "utrf_sim_ahead_beats_done": (ctypes.c_size_t, [p, u64p, _dp, ctypes.c_size_t]),
+        "utrf_sim_ahead_beats_next": (ctypes.c_int, [p, _dp, u8p]),
         "utrf_mjplant_truth_sites": (
             ctypes.c_int,
             [p, ctypes.POINTER(ctypes.c_int32), ctypes.c_int],

@@ -109,11 +109,23 @@ def stops_each(
                 yield value
                 batch = _start(link, peek, upcoming, stops)
                 continue
-            cycles, truths, applied, done = _join(link, batch, stops)
+            joined = _join(link, batch, stops)
+            cycles, truths, applied = joined.cycles, joined.truths, joined.applied
+            done = joined.done
             for end in reversed(batch.ends[len(cycles) :]):  # not reached: taken again
                 upcoming.appendleft(end)
             last = bool(cycles) and cycles[-1] / F_CPU_HZ - stops.t0 > stops.last_s
-            batch = _start(link, peek, upcoming, stops) if done and not last else None
+            go_on = done and not last
+            carried = joined.carried if go_on else None
+            # the next batch starts before the engine takes this one's frames where the
+            # harness's heartbeat rule carries on (its state is the engine's after them)
+            nxt = _start(link, peek, upcoming, stops, carried) if carried is not None else None
+            _take(link, batch, joined)
+            if carried is not None:
+                _check_carried(link, carried)
+            if carried is None:
+                nxt = _start(link, peek, upcoming, stops) if go_on else None
+            batch = nxt
             for k, cycle in enumerate(cycles):
                 now = cycle / F_CPU_HZ
                 link._deliver_arrived(now)
@@ -130,16 +142,45 @@ def stops_each(
                 batch = _start(link, peek, upcoming, stops)
     finally:  # what the board ran reaches the engine and the callbacks, a caller stopping too
         if batch is not None:
-            _join(link, batch, stops)
+            _take(link, batch, _join(link, batch, stops))
         link._deliver_arrived()
 
 
+@dataclass
+class _Carried:
+    """The harness's heartbeat rule after a batch, before the engine has taken its frames:
+    the next due time, the seqs whose acks count, the engine's next seq once it is told of
+    the batch's heartbeats."""
+
+    due: float
+    awaited: set[int]
+    seq: int
+
+
+@dataclass
+class _Joined:
+    """A batch joined, its frames not yet taken by the engine (``_take``)."""
+
+    cycles: list[int]
+    truths: np.ndarray
+    applied: list[int]
+    done: bool
+    sent: list[int]
+    dues: list[float]
+    carried: _Carried | None
+
+
 def _start(
-    link: SimLink, peek: Callable[[int], float | None], upcoming: deque[float], stops: Stops
+    link: SimLink,
+    peek: Callable[[int], float | None],
+    upcoming: deque[float],
+    stops: Stops,
+    carried: _Carried | None = None,
 ) -> _Batch | None:
     """The next batch started on the board (its ends taken off ``upcoming``), or None where
-    the general path would not run ahead to the next end."""
-    plan = _plan(link, peek, stops)
+    the general path would not run ahead to the next end. ``carried``: the heartbeats from
+    the harness's rule, the last batch's frames not yet taken (else from the engine's)."""
+    plan = _plan(link, peek, stops, carried)
     if plan is None:
         return None
     targets, beats = plan
@@ -148,16 +189,15 @@ def _start(
     return _Batch([upcoming.popleft() for _ in targets], targets, beats[0] if beats else [])
 
 
-def _join(
-    link: SimLink, batch: _Batch, stops: Stops
-) -> tuple[list[int], np.ndarray, list[int], bool]:
+def _join(link: SimLink, batch: _Batch, stops: Stops) -> _Joined:
     """Wait for a batch: its stops' cycles, truths and hits applied at each (counted in
-    ``stops``), whether it reached its end. Its frames are taken by the engine, cut at the
-    marks and stamped there, and its heartbeat counted."""
+    ``stops``), whether it reached its end, the heartbeats it sent and where the harness's
+    rule stands. Its frames wait, cut at the marks and stamped there, for ``_take``."""
     board = link.board
     run = board.run_ahead_join()
     cycles, truths, hit_stop = board.run_ahead_stops_done()
     sent, dues = board.run_ahead_beats_done()
+    rule = board.run_ahead_beats_next() if batch.beats else None
     data = board.read()
     for cycle, target in zip(cycles, batch.targets, strict=False):
         if not 0 <= cycle - target <= OVERSHOOT_BOUND:  # the plan assumed it: say so
@@ -170,11 +210,34 @@ def _join(
         link._arrived.append((data[at:n], t))
         at = n
     link._arrived.append((data[at:], link.now()))
-    _heartbeats(link, batch, cycles, sent, dues)
-    link._take_arrived()
     applied = [sum(1 for s in hit_stop if s == k) for k in range(len(cycles))]
     stops.applied += sum(applied)
-    return cycles, truths, applied, run.done
+    carried = None
+    if rule is not None and link._heartbeat is None:
+        carried = _Carried(rule[0], rule[1], (link._engine._seq + len(sent)) & SEQ_MASK)
+    return _Joined(cycles, truths, applied, run.done, sent, dues, carried)
+
+
+def _take(link: SimLink, batch: _Batch, joined: _Joined) -> None:
+    """The engine takes a joined batch's frames, told of its heartbeats among them."""
+    _heartbeats(link, batch, joined.cycles, joined.sent, joined.dues)
+    link._take_arrived()
+
+
+def _check_carried(link: SimLink, carried: _Carried) -> None:
+    """The engine, having taken the frames, stands where the harness's rule said it would
+    (the next batch was planned from the rule): say so if not."""
+    engine = link._engine
+    if (
+        engine.heartbeat_due() != carried.due
+        or set(engine._heartbeat_seqs) != carried.awaited
+        or engine._seq != carried.seq
+    ):
+        raise EmulatorError(
+            f"the harness's heartbeat rule stood at {carried.due!r} awaiting "
+            f"{sorted(carried.awaited)}, the engine's at {engine.heartbeat_due()!r} awaiting "
+            f"{sorted(engine._heartbeat_seqs)}: the batched samples may differ from sleep_each's"
+        )
 
 
 def _exchanges(seconds: float, period: float, plain: float | None) -> int | None:
@@ -185,16 +248,20 @@ def _exchanges(seconds: float, period: float, plain: float | None) -> int | None
 
 
 def _plan(
-    link: SimLink, peek: Callable[[int], float | None], stops: Stops
+    link: SimLink,
+    peek: Callable[[int], float | None],
+    stops: Stops,
+    carried: _Carried | None = None,
 ) -> tuple[list[int], Beats | None] | None:
     """The next batch's stops (cycles) and its heartbeat, or None where the general path would
-    not run ahead to the next end."""
+    not run ahead to the next end; the heartbeats from ``carried`` where given."""
     board, engine = link.board, link._engine
     period = board.exchange_period
-    link._take_arrived()  # the heartbeat's due time counts every ack that came
+    if carried is None:
+        link._take_arrived()  # the heartbeat's due time counts every ack that came
     if link._heartbeat is not None:
         return None  # one made and not sent (a run ended short): the general way sends it
-    due = engine.heartbeat_due()
+    due = engine.heartbeat_due() if carried is None else carried.due
     hb = engine.heartbeat_period_s
     plain = min(hb / 2, link.pump_interval_s) if hb is not None else None
     now = link.now()
@@ -225,17 +292,19 @@ def _plan(
         return None
     if due is None or hb is None:
         return targets, None
-    awaited = set(engine._heartbeat_seqs)  # the engine forgets seqs beyond its count
-    frames = next_heartbeats(engine, max(min(BEATS, HEARTBEAT_SEQS_KEPT - len(awaited)), 0))
+    # the engine forgets seqs beyond its count
+    awaited = set(engine._heartbeat_seqs) if carried is None else carried.awaited
+    n = max(min(BEATS, HEARTBEAT_SEQS_KEPT - len(awaited)), 0)
+    frames = next_heartbeats(engine, n, None if carried is None else carried.seq)
     return targets, (frames, due, hb, awaited, KINDS)
 
 
-def next_heartbeats(engine: Engine, n: int) -> list[tuple[int, bytes]]:
+def next_heartbeats(engine: Engine, n: int, seq: int | None = None) -> list[tuple[int, bytes]]:
     """The next ``n`` heartbeats' (seq, frame) as ``engine.heartbeat()`` will make them if
-    nothing else is sent first (its seq read here: no other driver needs it)."""
+    nothing else is sent first (its seq read here, or ``seq``: no other driver needs it)."""
+    first = engine._seq if seq is None else seq
     return [
-        (seq, encode_frame(seq, m.Heartbeat.ID))
-        for seq in ((engine._seq + i) & SEQ_MASK for i in range(n))
+        (s, encode_frame(s, m.Heartbeat.ID)) for s in ((first + i) & SEQ_MASK for i in range(n))
     ]
 
 

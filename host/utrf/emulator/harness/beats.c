@@ -160,3 +160,12 @@ size_t utrf_sim_ahead_beats_done(const utrf_sim_t *s, uint64_t *cycles, double *
     }
     return k;
 }
+
+int utrf_sim_ahead_beats_next(const utrf_sim_t *s, double *due, uint8_t *acks)
+{
+    if (!s->beats_ran || s->beat_frozen || utrf_sim_ahead_running(s))
+        return -1;
+    *due = s->beat_due;
+    memcpy(acks, s->beat_acks, sizeof s->beat_acks);
+    return 0;
+}

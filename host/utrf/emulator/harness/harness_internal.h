@@ -243,6 +243,7 @@ struct utrf_sim {
     size_t acc_n;
     int acc_sync, acc_over; /* a 0x00 seen since the capture began; the frame too long */
     int beats_on, beat_heard, beat_frozen;
+    int beats_ran; /* the last run ahead joined had them (utrf_sim_ahead_beats_next) */
     uint32_t beats_n, beats_sent;
     uint8_t beat_frame[UTRF_SIM_BEATS][UTRF_SIM_BEAT_BYTES];
     uint8_t beat_len[UTRF_SIM_BEATS], beat_seq[UTRF_SIM_BEATS];

@@ -45,6 +45,7 @@ struct utrf_mjplant {
     const mjModel *m;
     mjData *d;
     void (*step)(const mjModel *, mjData *);
+    mjfTime *timer; /* MuJoCo's profiling clock (the mujoco package sets one): off while stepping */
 #endif
     double voltage[F][2], connected[F][2];
     double decay, decay_dt;
@@ -93,6 +94,7 @@ utrf_mjplant_t *utrf_mjplant_new(const char *libmujoco, void *model, void *data,
         free(mp);
         return NULL;
     }
+    mp->timer = (mjfTime *)dlsym(mp->lib, "mjcb_time");
     mp->m = model;
     mp->d = data;
     mp->p = *params;
@@ -255,6 +257,11 @@ void utrf_mjplant_step(utrf_mjplant_t *mp, double dt, const double *pins)
         mp->decay = exp(-h / mp->p.electrical_time_constant);
     }
     const double K = mp->p.force_constant, R = mp->p.resistance, limit = mp->p.stall_force;
+    /* MuJoCo reads its profiling clock (mjData.timer) twice for each part of a step when
+     * mjcb_time is set, as the mujoco package sets it: off for the twin's steps, back after */
+    mjfTime timer = mp->timer ? *mp->timer : NULL;
+    if (timer)
+        *mp->timer = NULL;
     for (int k = 0; k < n; k++) {
         for (int f = 0; f < F; f++) {
             for (int c = 0; c < 2; c++) {
@@ -275,6 +282,8 @@ void utrf_mjplant_step(utrf_mjplant_t *mp, double dt, const double *pins)
         mp->step(m, mp->d);
         mp->st.time += h;
     }
+    if (timer)
+        *mp->timer = timer;
     m->opt.timestep = ts;
 #else
     (void)mp;

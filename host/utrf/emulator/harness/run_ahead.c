@@ -181,6 +181,7 @@ int utrf_sim_ahead_start(utrf_sim_t *s, uint64_t target, uint64_t period, int wa
     struct utrf_ahead *a = s->ahead;
     s->marks = 0;
     s->mark_on = 1;
+    s->beats_ran = 0;
     s->stops_done = 0;
     s->stop_hits_done = 0;
     if (s->stops_n && s->stop_target[s->stops_n - 1] != target)
@@ -215,6 +216,7 @@ int utrf_sim_ahead_join(utrf_sim_t *s)
     a->running = 0;
     s->mark_on = 0;
     s->stops_n = 0; /* what they recorded stays for utrf_sim_ahead_stops_done */
+    s->beats_ran = s->beats_on;
     s->beats_on = 0; /* and the heartbeats sent for utrf_sim_ahead_beats_done */
     return a->status;
 }

@@ -341,6 +341,10 @@ int utrf_sim_ahead_beats(utrf_sim_t *s, const uint8_t *frames, const uint8_t *le
                          const uint8_t *acks, const uint8_t *kinds);
 /* After the join: the heartbeats sent, their cycles and the due times they went for. */
 size_t utrf_sim_ahead_beats_done(const utrf_sim_t *s, uint64_t *cycles, double *dues, size_t n);
+/* After the join: where the rule stands (the next heartbeat's due time, the seqs whose acks
+ * still count, a bit each), for the next batch to start before the client takes this one's
+ * frames; -1 when it cannot be carried on (heartbeats off, or the rule frozen). */
+int utrf_sim_ahead_beats_next(const utrf_sim_t *s, double *due, uint8_t *acks);
 
 /* ---- The MuJoCo plant (mjplant.c) ----------------------------------------------------------
  * The MuJoCo hand (utrf.models.mjcf, drive "force") stepped here; its mjModel and mjData

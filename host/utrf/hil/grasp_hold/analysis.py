@@ -5,30 +5,83 @@ the tracked tip's slip. What the run and ``utrf hil analyse`` share."""
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from utrf.datalog import read_rows
+from utrf.datalog import LogFormatError, read_rows
 from utrf.hand.state import fault_names
 from utrf.hil.grasp_hold.config import HIT_COLUMNS, GraspHoldConfig, sample_columns
 from utrf.hil.runs import write_json
 from utrf.models import kinematics
 from utrf.models.geometry import HandGeometry
 
+#: a run's samples by column (``samples.csv``'s): numbers as float, the phase and the modes as
+#: text, one entry a row
+Samples = dict[str, np.ndarray]
 
-def read_samples(out: Path, names: list[str]) -> list[dict[str, Any]]:
-    """The rows of a run's ``samples.csv``."""
-    return read_rows(out / "samples.csv", sample_columns(names))
+
+def _is_text(column: str) -> bool:
+    return column == "phase" or column.endswith("_mode")
 
 
-def tracker_samples(rows: list[dict[str, Any]]) -> tuple[np.ndarray, np.ndarray]:
+def parse_samples(lines: Sequence[str], names: list[str], source: str = "samples") -> Samples:
+    """The columns of ``samples.csv``'s rows as written (``sample_line``: one line each,
+    newline-ended); a line cut short (a kill) or of another width is left out, as
+    :func:`~utrf.datalog.read_log` leaves it. A number column holding text is an error that
+    names it."""
+    columns = sample_columns(names)
+    cells = [line.split(",") for line in lines if line.endswith("\n")]
+    cells = [c for c in cells if len(c) == len(columns)]
+    by_column = list(zip(*cells, strict=True)) or [()] * len(columns)
+    out: Samples = {}
+    for c, values in zip(columns, by_column, strict=True):
+        if _is_text(c):
+            out[c] = np.array([v.strip() for v in values], dtype=str)
+            continue
+        try:
+            out[c] = np.array(values, dtype=float)
+        except ValueError:
+            bad = next(i for i, v in enumerate(values) if not _number(v))
+            raise LogFormatError(
+                f"{source}: column {c!r}, row {bad + 1}: {values[bad].strip()!r} is not a number"
+            ) from None
+    return out
+
+
+def _number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def read_samples(out: Path, names: list[str]) -> Samples:
+    """A run's ``samples.csv`` by column (none when it is missing or its header was cut short:
+    a kill before the first row; a header of other columns is an error)."""
+    path = out / "samples.csv"
+    text = path.read_text(encoding="utf-8") if path.exists() else ""
+    header, newline, rest = text.partition("\n")
+    if newline and tuple(header.split(",")) != tuple(sample_columns(names)):
+        raise LogFormatError(
+            f"{path}: columns are {header.split(',')}, expected {sample_columns(names)}"
+        )
+    return parse_samples(rest.splitlines(keepends=True), names, str(path))
+
+
+def count(samples: Samples) -> int:
+    return len(samples["time_s"])
+
+
+def tracker_samples(samples: Samples) -> tuple[np.ndarray, np.ndarray]:
     """Which rows hold a new tracker sample in view, and which repeat the previous row's
     frame: a row sampled faster than the tracker measures is not a new sample."""
-    visible = np.array([int(r["visible"]) for r in rows]) == 1
-    frames = np.array([int(r.get("tracker_frame", -1) or -1) for r in rows])
-    repeated = np.zeros(len(rows), dtype=bool)
+    visible = samples["visible"] == 1
+    frames = np.nan_to_num(samples["tracker_frame"], nan=-1.0)
+    repeated = np.zeros(len(frames), dtype=bool)
     repeated[1:] = (frames[1:] >= 0) & (frames[1:] == frames[:-1])
     return visible & ~repeated, repeated
 
@@ -79,16 +132,17 @@ def _events(
 
 
 def analyse(
-    out: Path, hand_geometry: HandGeometry | None = None, rows: list[dict[str, Any]] | None = None
+    out: Path, hand_geometry: HandGeometry | None = None, samples: Samples | None = None
 ) -> dict[str, Any]:
-    """A run's results from its files (``rows``: its samples when the caller has read them)."""
+    """A run's results from its files (``samples``: its samples when the caller has them, as
+    :func:`read_samples` would read them: the run's own lines, :func:`parse_samples`)."""
     meta = json.loads((out / "meta.json").read_text())
     config = GraspHoldConfig(**meta["config"])
     geometry = hand_geometry or HandGeometry.default()
     names = [f.name for f in geometry.fingers]
-    if rows is None:
-        rows = read_samples(out, names)
-    if not rows:
+    if samples is None:
+        samples = read_samples(out, names)
+    if not count(samples):
         empty: dict[str, Any] = {
             "experiment": "grasp hold (paper Sec. IV-C)",
             "pose": config.pose,
@@ -98,7 +152,7 @@ def analyse(
         }
         write_json(out / "results.json", empty)
         return empty
-    t = np.array([float(r["time_s"]) for r in rows])
+    t = samples["time_s"]
     base = t < config.baseline_s
     end = t >= t[-1] - config.baseline_s
     hits = read_rows(out / "hits.csv", HIT_COLUMNS)
@@ -106,11 +160,11 @@ def analyse(
     worst_dev, worst_rec = 0.0, 0.0
     unrecovered = 0
     for i, n in enumerate(names):
-        th = np.array([float(r[f"{n}_theta2_rad"]) for r in rows])
-        da = np.array([float(r[f"{n}_duty_a"]) for r in rows])
-        db = np.array([float(r[f"{n}_duty_b"]) for r in rows])
-        cur = np.array([float(r[f"{n}_current_a_a"]) for r in rows])
-        faults = sorted({int(r[f"{n}_faults"]) for r in rows} - {0})
+        th = samples[f"{n}_theta2_rad"]
+        da, db = samples[f"{n}_duty_a"], samples[f"{n}_duty_b"]
+        cur = samples[f"{n}_current_a_a"]
+        codes = samples[f"{n}_faults"]
+        faults = sorted({int(f) for f in np.unique(codes[np.isfinite(codes)])} - {0})
         th0 = float(th[base].mean()) if base.any() else float(th[0])
         th1 = float(th[end].mean())
         g = geometry.fingers[i].geometry
@@ -132,7 +186,7 @@ def analyse(
             "largest_deviation_rad": float(dev[np.argmax(np.abs(dev))]),
             "disturbances": events,
             "faults": [fault_names(f) for f in faults],
-            "modes": sorted({str(r[f"{n}_mode"]) for r in rows}),
+            "modes": sorted(str(v) for v in np.unique(samples[f"{n}_mode"])),
             "duty_a": {"mean": float(np.nanmean(da)), "max": float(np.nanmax(da))},
             "duty_b": {"mean": float(np.nanmean(db)), "max": float(np.nanmax(db))},
             "current_a_a": (
@@ -141,8 +195,8 @@ def analyse(
                 else None
             ),
         }
-    vis, repeated = tracker_samples(rows)
-    raw = np.array([[float(r[c]) for c in ("raw_x_m", "raw_y_m", "raw_z_m")] for r in rows])
+    vis, repeated = tracker_samples(samples)
+    raw = np.column_stack([samples[c] for c in ("raw_x_m", "raw_y_m", "raw_z_m")])
     slip = None
     if (vis & base).any() and (vis & end).any():
         slip = float(np.linalg.norm(raw[vis & end].mean(axis=0) - raw[vis & base].mean(axis=0)))
@@ -152,7 +206,7 @@ def analyse(
         "duration_s": float(t[-1]),
         "planned_duration_s": config.duration_s,
         "complete": bool(t[-1] >= config.duration_s - 2.0 / config.sample_hz),
-        "samples": len(rows),
+        "samples": count(samples),
         "tracker_repeated_frames": int(repeated.sum()),
         "emulated": config.emulated,
         "hits_applied": [

@@ -7,24 +7,40 @@ from __future__ import annotations
 import math
 import sys
 import threading
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from utrf.hil.grasp_hold.analysis import analyse, read_samples, tracker_samples
+from utrf.hil.grasp_hold.analysis import (
+    Samples,
+    analyse,
+    parse_samples,
+    read_samples,
+    tracker_samples,
+)
 from utrf.models.geometry import HandGeometry
 
 FIGURE = "grasp_hold.png"
+SIZE_IN, DPI = (7.5, 7.5), 110  # the figure's size (in) and resolution (dots per inch)
 
 
-def write(out: Path, hand_geometry: HandGeometry | None = None) -> dict[str, Any]:
-    """The run's results (``results.json``) and its figure, from its files alone."""
+def write(
+    out: Path, hand_geometry: HandGeometry | None = None, lines: Sequence[str] | None = None
+) -> dict[str, Any]:
+    """The run's results (``results.json``) and its figure, from its files alone; ``lines``:
+    the rows of ``samples.csv`` the run wrote, kept (``run.run``'s): the same samples, not
+    read back."""
     names = [f.name for f in (hand_geometry or HandGeometry.default()).fingers]
-    rows = read_samples(out, names) if (out / "meta.json").exists() else None  # read once
-    result = analyse(out, hand_geometry, rows)
-    if result["samples"]:
-        plot(result, rows or [], list(result["fingers"]), out / FIGURE)
+    samples = None
+    if lines is not None:
+        samples = parse_samples(lines, names)
+    elif (out / "meta.json").exists():
+        samples = read_samples(out, names)  # read once, for the analysis and the figure
+    result = analyse(out, hand_geometry, samples)
+    if result["samples"] and samples is not None:
+        plot(result, samples, list(result["fingers"]), out / FIGURE)
     return result
 
 
@@ -64,7 +80,22 @@ def _running_mean(t: np.ndarray, y: np.ndarray, window_s: float) -> np.ndarray:
         return np.where(count > 0, (c[hi] - c[lo]) / np.maximum(count, 1), np.nan)
 
 
-def plot(result: dict[str, Any], rows: list[dict[str, Any]], names: list[str], path: Path) -> Path:
+def decimate(x: np.ndarray, y: np.ndarray, columns: int) -> tuple[np.ndarray, np.ndarray]:
+    """The points of a line (``x`` rising) a plot ``columns`` pixels wide shows: in each
+    column of ``x`` its lowest and highest ``y`` (in their order), so every extreme stays; a
+    column with no finite ``y`` keeps one NaN (the line's gap). Short lines stay whole."""
+    if len(x) <= 2 * columns or not x[-1] > x[0]:
+        return x, y
+    col = np.minimum(((x - x[0]) * (columns / (x[-1] - x[0]))).astype(np.int64), columns - 1)
+    finite = np.isfinite(y)
+    lowest = np.lexsort((np.where(finite, y, np.inf), col))  # by column, then y rising
+    highest = np.lexsort((np.where(finite, -y, np.inf), col))  # by column, then y falling
+    first = np.flatnonzero(np.r_[True, col[lowest][1:] != col[lowest][:-1]])
+    keep = np.union1d(lowest[first], highest[first])  # sorted: the line's order
+    return x[keep], y[keep]
+
+
+def plot(result: dict[str, Any], samples: Samples, names: list[str], path: Path) -> Path:
     """What the run concludes: each finger's drift (Joint 2 averaged over 1 s outside its
     disturbances, so the drift shows under the readings' noise; the drift from the baseline to
     the end window in the legend), each disturbance's deviation and recovery time, and the
@@ -74,19 +105,21 @@ def plot(result: dict[str, Any], rows: list[dict[str, Any]], names: list[str], p
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    t = np.array([float(r["time_s"]) for r in rows])
-    fig, ax = plt.subplots(3, 1, figsize=(7.5, 7.5), sharex=True)
+    t = samples["time_s"]
+    fig, ax = plt.subplots(3, 1, figsize=SIZE_IN, sharex=True)
+    # each line at most two points a pixel column: the same picture as every sample's point
+    columns = round(SIZE_IN[0] * DPI)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for k, n in enumerate(names):
         p = result["fingers"][n]
         c = colours[k % len(colours)]
-        th = np.array([float(r[f"{n}_theta2_rad"]) for r in rows])
-        held = th.copy()  # the disturbances are the middle panel's: left out of the drift
+        # the disturbances are the middle panel's: left out of the drift
+        held = samples[f"{n}_theta2_rad"].copy()
         for e in p["disturbances"]:
             stop = e["start_s"] + (e["recovery_s"] if e["recovery_s"] is not None else np.inf)
             held[(t >= e["start_s"]) & (t <= stop)] = np.nan
         dev = np.degrees(_running_mean(t, held, 1.0) - p["baseline_theta2_rad"])
-        ax[0].plot(t, dev, lw=0.9, color=c,
+        ax[0].plot(*decimate(t, dev, columns), lw=0.9, color=c,
                    label=f"{n}: drift {math.degrees(p['drift_rad']):+.2f} deg")  # fmt: skip
         for e in p["disturbances"]:
             peak = math.degrees(e["largest_deviation_rad"])
@@ -107,15 +140,15 @@ def plot(result: dict[str, Any], rows: list[dict[str, Any]], names: list[str], p
     ax[1].set_ylabel("disturbance: largest\ndeviation (deg)")
     ax[1].set_title("bars: from the disturbance to its recovery (time written); grey: hits",
                     fontsize=7)  # fmt: skip
-    vis, _ = tracker_samples(rows)
-    raw = np.array([[float(r[c]) for c in ("raw_x_m", "raw_y_m", "raw_z_m")] for r in rows])
+    vis, _ = tracker_samples(samples)
+    raw = np.column_stack([samples[c] for c in ("raw_x_m", "raw_y_m", "raw_z_m")])
     base = vis & (t < t[0] + 1.0)
     if base.any():
         # The 1 s mean position's distance from the baseline's: the norm of each noisy
         # sample would sit at the noise's size, not at the tip's movement.
         mean_xyz = np.column_stack([_running_mean(t[vis], raw[vis, k], 1.0) for k in range(3)])
         moved = np.linalg.norm(mean_xyz - raw[base].mean(axis=0), axis=1) * 1e3
-        ax[2].plot(t[vis], moved, lw=1.0, color="C3", label="1 s mean")
+        ax[2].plot(*decimate(t[vis], moved, columns), lw=1.0, color="C3", label="1 s mean")
         ax[2].legend(fontsize=6)
     slip = result.get("tracked_tip_slip_m")
     ax[2].set_ylabel(f"tracked tip ({result['tracked_finger']})\nfrom baseline (mm)")
@@ -136,7 +169,7 @@ def plot(result: dict[str, Any], rows: list[dict[str, Any]], names: list[str], p
     # fixed margins that fit the labels: tight_layout drew the figure once more to find them
     # (a third of the figure's cost)
     fig.subplots_adjust(left=0.12, right=0.98, top=0.955, bottom=0.065, hspace=0.22)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=DPI)
     plt.close(fig)
     return path
 

@@ -29,9 +29,10 @@ def run(
     *,
     progress: ProgressFn = print,
     meta: dict[str, Any] | None = None,
-) -> None:
+) -> list[str]:
     """Close on the object, hold, record every sample as it is taken (the results:
-    ``report.write``, from the files); RunStopped on a fault (the data stay)."""
+    ``report.write``, from the files); RunStopped on a fault (the data stay). Returns the
+    rows written to ``samples.csv`` (kept: the analysis need not read them back)."""
     hand = rig.hand
     names = list(hand.fingers)
     if (out / "samples.csv").exists():
@@ -70,6 +71,7 @@ def run(
     period = 1.0 / config.sample_hz
     t0 = rig.now()
     next_report = 0.0
+    lines: list[str] = []
     with (
         CsvLog(out / "samples.csv", sample_columns(names)) as samples,
         CsvLog(out / "hits.csv", HIT_COLUMNS) as hit_log,
@@ -114,7 +116,9 @@ def run(
                 s = reading()
                 st = hand.latest
                 phase = "baseline" if t < config.baseline_s else "hold"
-                samples.write_line(sample_line(t, phase, s, st, cur[: len(names)]))
+                line = sample_line(t, phase, s, st, cur[: len(names)])
+                samples.write_line(line)
+                lines.append(line)
                 new = hand.faults_seen[seen:]
                 if new:
                     raise RunStopped(f"grasp hold at {t:.2f} s: {new[0]}")
@@ -129,3 +133,4 @@ def run(
                         else f"hold {t:.1f} s"
                     )
                     next_report += max(config.duration_s / 20, 1.0)
+    return lines
