@@ -26,6 +26,7 @@ from utrf.bringup.identify import Check, check, identify, refine, tune
 from utrf.bringup.plant_check import (
     dwell_finding,
     frictional,
+    lags_read,
     model_plant,
     near,
     pause_finding,
@@ -386,8 +387,8 @@ def finish_finger(
         return res
     uneven = curve["spread"] > SPEED_SPREAD
     settle(hand, 0.1)
-    plant, _ = identify(hand, rec, f, bounds, mid)
     ref = model_plant(hand, f)
+    plant, _ = identify(hand, rec, f, bounds, mid, lambda p: lags_read(p, ref))
     lags, reversals = near(plant, ref)
     if lags or reversals:  # a rule's reading near its threshold: decided on more of them
         refine(hand, rec, f, bounds, plant, mid, lags, reversals)
@@ -400,6 +401,16 @@ def finish_finger(
         ]
         res.findings.append(pause_finding(name, closed.paused))
         return res
+    if closed.paused > 0 and any(fd.kind == "narrow-range" for fd in res.findings):
+        # heavy friction stuck and slipped on in the closing search, and stuck again short of
+        # the stop (seed 10's 10 N thumb: paused at 1.35 rad, stuck at 1.83 of 3.31): that is
+        # friction's stick, not this build's stop (no narrow range paused: 0 of 135
+        # readings); the limits back to the model's closed stop (the stall rule guards it)
+        res.findings = [fd for fd in res.findings if fd.kind != "narrow-range"]
+        th_max = hi - STOP_MARGIN_RAD
+        hand.set_limits(f, theta2_max=th_max)
+        res.config.limits["theta2_max"] = th_max
+        res.stops["stuck_rad"] = closed_at
     if uneven and not any(fd.kind == "slack" for fd in res.findings):
         # not Joint 2 hanging loose between its strands (slack, which runs the legs unevenly
         # too): the reading is not the joint's angle, and the zero and range from it are void
