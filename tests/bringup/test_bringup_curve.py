@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from utrf.bringup.diagnose import dwell_rad, reading_curve
-from utrf.bringup.finger import DWELL_RAD
+from utrf.bringup.finger import DWELL_RAD, stood
 from utrf.bringup.pulses import Trace
 
 COUNT = 2 * math.pi / 1024
@@ -111,3 +111,17 @@ def test_the_stand_at_the_stop_that_ended_a_leg_is_not_a_dwell() -> None:
     th = np.minimum(0.8 * t, 0.8 * 2.05)
     th[t > 2.13] += COUNT  # a count of noise just before the cut: "went on"
     assert dwell_rad(_leg(th, t, 0.35), 1) < 0.02
+
+
+def test_a_short_stand_on_an_uneven_reading_is_slack() -> None:
+    """Measured (docs/bringup.md): seed 46's slack middle finger stood 0.035 rad and ran 1.17
+    uneven, seed 38's slack thumb 0.035 and 1.27; fingers with neither slack nor an
+    off-centre magnet ran at most 1.07 uneven (seed 19's little finger stood 0.045 in the
+    ramp down, at 1.03), off-centre magnets stood at most 0.019 (seed 43's index: 0.016 at
+    1.72)."""
+    assert stood({"dwell_rad": 0.035, "spread": 1.17})
+    assert stood({"dwell_rad": 0.035, "spread": 1.27})
+    assert not stood({"dwell_rad": 0.035, "spread": 1.07})
+    assert not stood({"dwell_rad": 0.016, "spread": 1.72})
+    assert not stood({"dwell_rad": 0.035, "spread": math.nan})  # no curve: the dwell alone
+    assert stood({"dwell_rad": 0.045, "spread": math.nan})

@@ -14,6 +14,7 @@ from utrf.bringup.plant_check import (
     MORE_LAGS,
     MORE_REVERSALS,
     SLACK_RAD,
+    lags_read,
     near,
     plant_findings,
     slack_rad,
@@ -127,6 +128,25 @@ def test_friction_and_a_slow_motor_are_named() -> None:
         "friction"
     ]
     assert [f.kind for f in plant_findings("i", _plant(1.1, 0.004, 0.004), REF)] == ["slow-motor"]
+
+
+def test_a_low_speed_gain_from_steps_friction_barely_lets_move_is_not_a_slow_motor() -> None:
+    """Measured, campaign seed 5's little finger (10 N of friction): the 0.15 step did not
+    move it, and the line through 0.3 and 0.4 read K 1.03 (0.39 of the model's) and u_f
+    0.086 once (K 0.75-0.78, u_f 0.24 in six other runs). A slow motor with the model's force
+    moves at 0.15, only slowly (every slow-motor reading of this issue's runs)."""
+    stiff = _plant(1.032, 0.0055, 0.0055, 0.086)
+    stiff.first_duty = 0.3
+    assert [f.kind for f in plant_findings("little", stiff, REF)] == ["friction"]
+    moved = _plant(1.032, 0.0055, 0.0055, 0.086)
+    moved.first_duty = 0.15
+    assert [f.kind for f in plant_findings("little", moved, REF)] == ["slow-motor", "friction"]
+
+
+def test_the_steps_from_rest_are_taken_only_where_a_rule_reads_them() -> None:
+    assert lags_read(_plant(2.3, 0.02, 0.02), REF)
+    assert not lags_read(_plant(1.06, 0.048, 0.001), REF)  # a slow motor: its lag unresolved
+    assert not lags_read(_plant(2.2, 0.05, 0.05, 0.26), REF)  # a crawl: not timed
 
 
 def test_a_slow_motors_unresolved_lag_is_not_weakness() -> None:

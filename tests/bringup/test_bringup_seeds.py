@@ -54,3 +54,13 @@ def test_a_slack_thumb_late_like_a_weak_motor_is_slack(
     times the model's lag), named weak-motor and saved as brought up; its reversals wait
     for the strand beyond its lag (0.108 s, alone)."""
     assert named(47, 0, "plant") == ["slack"]
+
+
+@pytest.mark.slow
+def test_friction_stuck_short_of_the_stop_is_not_a_narrow_range(
+    named: Callable[[int, int, str], list[str]],
+) -> None:
+    """Seed 10's thumb (10 N of friction): its closing search paused at 1.35 rad, went on
+    and stuck again at 1.83 of the joint's 3.31, which was named a narrow range as well;
+    a frictional finger's stick after a pause is not the build's stop."""
+    assert named(10, 0, "plant") == ["friction"]

@@ -24,6 +24,7 @@ above the pretension and friction.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -40,7 +41,7 @@ STEP_S = 0.3
 REVERSAL_DUTY = 0.3
 #: a check waits this long (s) for the finger to settle after each move (a slow finger on the
 #: saved gains does not: 2 s was most of its check's 11.9 s)
-SETTLE_WAIT_S = 1.0
+SETTLE_WAIT_S = 0.5
 MOVING_RAD_S = 0.05
 MAX_CROSSOVER = 30.0  # rad/s
 PHASE_BUDGET = math.pi / 6  # of the 90° margin a PD with a cancelled pole gives
@@ -60,6 +61,8 @@ class Plant:
     #: every fit behind ``lag_s`` and ``reversal_s`` (more are added near a rule's threshold)
     lag_fits: dict[str, list[float]] = field(default_factory=dict)
     reversal_fits: dict[str, list[float]] = field(default_factory=dict)
+    #: the smallest step duty that moved it both ways (K and u_f are fitted from it up)
+    first_duty: float = math.nan
 
     def add_fits(self, lags: dict[str, list[float]], reversals: dict[str, list[float]]) -> None:
         """More lag and reversal readings: the medians (and τ, the faster way's lag) anew."""
@@ -210,9 +213,16 @@ def _mean_speed(speeds: dict[tuple[float, int], list[float]], u: float) -> float
 
 
 def identify(
-    hand: Hand, rec: Recorder, f: int, bounds: Bounds, mid: float
+    hand: Hand,
+    rec: Recorder,
+    f: int,
+    bounds: Bounds,
+    mid: float,
+    with_lags: Callable[[Plant], bool] = lambda p: True,
 ) -> tuple[Plant, list[Trace]]:
-    """Square-wave duty steps about ``mid`` (rad), two sizes, each way."""
+    """Square-wave duty steps about ``mid`` (rad), two sizes, each way; then, when
+    ``with_lags`` says a rule will read them (from the speed gain and friction found), the
+    steps from rest (``lag``)."""
     traces: list[Trace] = []
     speeds: dict[tuple[float, int], list[float]] = {
         (u, d): [] for u in STEP_DUTIES for d in (1, -1)
@@ -275,12 +285,13 @@ def identify(
     flex, ext = dead[1][1:], dead[-1]  # the first flexion step starts from rest
     extra = (np.median(flex) - np.median(ext)) if flex and ext else 0.0
     backlash = max(0.0, float(extra)) * v2
-    here = hand.state().fingers[f].theta2
-    if abs(here - mid) > 0.2:
-        pulse(hand, rec, f, math.copysign(0.35, mid - here), bounds, seconds=1.0, until=mid)
-    lags, more = lag(hand, rec, f, bounds)
-    traces += more
     plant = Plant(float(K), math.nan, float(u_f), backlash, sum(map(len, speeds.values())))
+    plant.first_duty = good[0] if good else math.nan
+    lags: dict[str, list[float]] = {}
+    if with_lags(plant):
+        _to_mid(hand, rec, f, bounds, mid, 0.2)
+        lags, more = lag(hand, rec, f, bounds)
+        traces += more
     plant.add_fits(lags, {f"{u:g}": v for u, v in rev.items()})
     return plant, traces
 
