@@ -104,8 +104,8 @@ MUTANTS = [
         "encoder-jump-off",
         "encoder jump (Finger::take_angle, both tick paths)",
         "firmware/src/core/finger.h",
-        "params_.jump)) found = ENCODER_JUMP;",
-        "params_.jump)) found = 0;",
+        "        found = ENCODER_JUMP;",
+        "        ;",
     ),
     Mutant(
         "joint-limit-off",

@@ -365,38 +365,6 @@ void fw_kin_tip_raw(uint8_t g, int32_t theta_au, int16_t* x, int16_t* y) {
 int16_t fw_encoder_angle(uint16_t turn, uint16_t zero, int invert) {
     return encoder::angle_bu(turn, zero, invert != 0);
 }
-// The sampler's way (encoder::judge_into(): a sample its slot holds judged stands) against
-// judge() of every sample: sample k judged with setup which[k] (setups: two of zero_turn,
-// invert, low, high; a change of setup flags both slots kReadingRejudge, as
-// hal::encoder_setup() does), into two slots in turn (the ADC interrupt's two rounds). The
-// first k whose reading differs, or -1.
-int fw_judge_into_check(const uint16_t* samples, const uint8_t* which, int n,
-                        const int16_t* setups) {
-    hal::EncoderSetup su[2];
-    for (uint8_t k = 0; k < 2; ++k) {
-        su[k].zero_turn = (uint16_t)setups[4 * k];
-        su[k].invert = setups[4 * k + 1] != 0;
-        su[k].low = setups[4 * k + 2];
-        su[k].high = setups[4 * k + 3];
-    }
-    hal::EncoderReading slot[2] = {};
-    slot[0].flags = slot[1].flags = hal::kReadingRejudge;  // none judged yet (avr_init())
-    uint8_t cur = which[0] & 1;
-    for (int k = 0; k < n; ++k) {
-        if ((which[k] & 1) != cur) {
-            cur = which[k] & 1;
-            slot[0].flags |= hal::kReadingRejudge;
-            slot[1].flags |= hal::kReadingRejudge;
-        }
-        hal::EncoderReading& r = slot[k & 1];
-        encoder::judge_into(r, samples[k], su[cur]);
-        const hal::EncoderReading g = encoder::judge(samples[k], su[cur]);
-        if (r.turn != g.turn || r.status != g.status || r.angle != g.angle || r.flags != g.flags) {
-            return k;
-        }
-    }
-    return -1;
-}
 int16_t fw_au_from_bu(int16_t b) { return fx::au_from_bu(b); }
 int16_t fw_bu(double rad) { return fx::bu((float)rad); }
 uint16_t fw_encoder_turn_from_rad(double rad) { return encoder::turn_from_rad((float)rad); }

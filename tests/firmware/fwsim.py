@@ -151,10 +151,6 @@ def load_library(path: Path = LIB_PATH) -> ctypes.CDLL:
             [c.c_uint8, c.c_int32, c.POINTER(c.c_int16), c.POINTER(c.c_int16)],
         ),
         "fw_encoder_angle": (c.c_int16, [c.c_uint16, c.c_uint16, c.c_int]),
-        "fw_judge_into_check": (
-            c.c_int,
-            [c.POINTER(c.c_uint16), c.POINTER(c.c_uint8), c.c_int, c.POINTER(c.c_int16)],
-        ),
         "fw_au_from_bu": (c.c_int16, [c.c_int16]),
         "fw_bu": (c.c_int16, [c.c_double]),
         "fw_encoder_turn_from_rad": (c.c_uint16, [c.c_double]),

@@ -4,13 +4,10 @@ unbiased (``firmware/src/core/encoder.h``)."""
 
 from __future__ import annotations
 
-import ctypes
 import math
 
 import numpy as np
 from fwsim import BU, Sim, adc_for_angle, m
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 COUNT_RAD = 2 * math.pi / (0.8 * 1024)  # one ADC count of Joint-2 angle: 7.67 mrad
 
@@ -88,46 +85,3 @@ def test_the_encoders_fast_and_general_paths_judge_alike(sim: Sim) -> None:
     # the run met every encoder rule (so the comparison covers them)
     for bit in (m.FaultBits.ENCODER_RANGE, m.FaultBits.ENCODER_JUMP, m.FaultBits.JOINT_LIMIT):
         assert any(f & bit for f in faults), bit
-
-
-@settings(max_examples=200, deadline=None)
-@given(
-    steps=st.lists(
-        st.tuples(
-            st.integers(0, 1023) | st.sampled_from([91, 92, 500, 932, 933]),  # band edges
-            st.integers(1, 6),  # samples alike in a row (an encoder standing still)
-            st.booleans(),  # which setup
-        ),
-        min_size=1,
-        max_size=40,
-    ),
-    setups=st.lists(
-        st.tuples(
-            st.integers(0, 65535),
-            st.booleans(),
-            st.integers(-16384, 0),
-            st.integers(0, 16383),
-        ),
-        min_size=2,
-        max_size=2,
-    ),
-)
-def test_the_samplers_fast_path_judges_as_judge_does(
-    fwlib: ctypes.CDLL,
-    steps: list[tuple[int, int, bool]],
-    setups: list[tuple[int, bool, int, int]],
-) -> None:
-    """The ADC interrupt's way (encoder::judge_into(): a sample its slot already holds judged
-    is not judged again) against judge() of every sample, over samples repeated, in and out of
-    the band, and setups changed meanwhile: the same reading every time."""
-    samples = [s for s, n, _ in steps for _ in range(n)]
-    which = [int(w) for _, n, w in steps for _ in range(n)]
-    flat = [v for z, inv, lo, hi in setups for v in (z - 65536 if z > 32767 else z, inv, lo, hi)]
-    n = len(samples)
-    got = fwlib.fw_judge_into_check(
-        (ctypes.c_uint16 * n)(*samples),
-        (ctypes.c_uint8 * n)(*which),
-        n,
-        (ctypes.c_int16 * 8)(*flat),
-    )
-    assert got == -1, f"sample {got} judged otherwise"

@@ -72,19 +72,6 @@ __attribute__((always_inline)) inline hal::EncoderReading judge(uint16_t sample,
     return judge(as5600_reading(sample), s);
 }
 
-// A sample judged into its slot, which holds an earlier judgment of the same channel (or one
-// flagged kReadingRejudge: none yet, or made with an earlier setup). The fast path: the slot
-// holds this very sample (its turn; sample to turn is one to one over the ADC's 0..1023)
-// judged with the setup in use, so judge() would write what it holds: it stands. Otherwise
-// judge(), the general path. The sampler's way (the AVR's ADC interrupt): a still encoder's
-// samples are judged once.
-__attribute__((always_inline)) inline void judge_into(hal::EncoderReading& slot, uint16_t sample,
-                                                      const hal::EncoderSetup& s) {
-    const uint16_t turn = (uint16_t)((uint16_t)(sample * 80u) - 8192u);  // as5600_reading()'s
-    if (slot.turn == turn && !(slot.flags & hal::kReadingRejudge)) return;
-    slot = judge(sample, s);
-}
-
 // A reading with no data (the sampler stopped).
 inline hal::EncoderReading no_data() {
     hal::EncoderReading r;

@@ -237,12 +237,12 @@ UTRF_HOT uint16_t pwm_counts(uint16_t mag) {
 
 UTRF_HOT uint8_t Finger::take_angle(int16_t th) {
     uint8_t found = 0;
-    if (UTRF_LIKELY(have_theta_)) {
-        if (UTRF_UNLIKELY(fx::abs16((int16_t)(th - theta_)) > params_.jump)) found = ENCODER_JUMP;
-    } else {
-        have_theta_ = true;  // written only when it changes: the tick's every cycle counts
+    if (UTRF_LIKELY(have_theta_) &&
+        UTRF_UNLIKELY(fx::abs16((int16_t)(th - theta_)) > params_.jump)) {
+        found = ENCODER_JUMP;
     }
     theta_ = th;
+    have_theta_ = true;
     return found;
 }
 

@@ -23,7 +23,6 @@ static const float kDt = 1.0f / kTickHz;
 // resets the board. Below the watchdog's 30 ms (hal/avr), so the firmware stops the motors and
 // marks the hang itself first whenever its tick still runs.
 static const uint16_t kLoopHangTicks = 20;
-static_assert(kLoopHangTicks < 255, "Hand::loop_idle_ticks_ counts to it in a byte");
 
 struct TickTiming {
     uint32_t ticks;
@@ -144,7 +143,7 @@ class Hand {
     volatile uint8_t frame_seen_;
     volatile uint8_t loop_count_;
     uint8_t loop_seen_;
-    uint8_t loop_idle_ticks_;  // <= kLoopHangTicks: one byte
+    uint16_t loop_idle_ticks_;
     volatile uint8_t halted_;
     bool overrun_pending_;
     uint8_t stall_seen_;              // ticks_' low byte at stall_rules()' last look

@@ -398,14 +398,12 @@ ISR(TIMER2_COMPA_vect) { take_compare(); }
 ISR(ADC_vect, ISR_NOBLOCK) {
     const uint8_t i = g_adc_at;
     // Judged here, between ticks (the round runs after each tick), not in the tick: the band,
-    // the angle and the joint limits (core/encoder.h, judge()); a sample the slot already
-    // holds judged (the round before last's, the encoder still) is not judged again
-    // (judge_into()). Through the two running pointers (no index arithmetic), each field
-    // stored as it is worked out: few registers, so few to save and restore around this
-    // handler, five times a tick.
+    // the angle and the joint limits (core/encoder.h, judge()). Through the two running
+    // pointers (no index arithmetic), each field stored as it is worked out: few registers,
+    // so few to save and restore around this handler, five times a tick.
     EncoderReading* const r = g_adc_slot;
     const EncoderSetup* const s = g_adc_setup;
-    encoder::judge_into(*r, ADC, *s);
+    *r = encoder::judge(ADC, *s);
     const uint8_t next = (uint8_t)(i + 1);
     cli();
     if (next < UTRF_FINGER_COUNT) {
@@ -477,7 +475,6 @@ void avr_init() {
         g_hw[f].stby_last = 0;
         avr_motors::g_drives_last[f] = 0xFF;
         g_admux[f] = (uint8_t)(_BV(REFS0) | (p.adc_channel & 0x07));
-        g_reading[0][f].flags = g_reading[1][f].flags = kReadingRejudge;  // none judged yet
         if (p.adc_channel < 8) DIDR0 |= (uint8_t)(1u << p.adc_channel);  // analog only
     }
 
