@@ -75,10 +75,21 @@ def frictional(p: Plant, ref: Plant) -> bool:
     return p.u_f > ref.u_f + FRICTION_NOT_SLACK
 
 
+def resolved(p: Plant, ref: Plant) -> bool:
+    """Not a slow motor: its lag is resolved (a slow motor's is far under one count, v τ)."""
+    return p.K >= SLOW * ref.K
+
+
+def crawling(p: Plant) -> bool:
+    """The lag steps' duty less this much friction is too little to time a motor's force by
+    (campaign seed 10's 10 N thumb: u_f 0.26, its lags at 0.3 duty at the fit's bound)."""
+    return p.u_f > CRAWL * LAG_DUTY
+
+
 def lags_read(p: Plant, ref: Plant) -> bool:
     """Whether a rule reads the steps from rest (``lag``): not on a slow motor (its lag is
     unresolved) nor a crawl (not timed); those fingers skip the steps (board time)."""
-    return p.K >= SLOW * ref.K and not p.u_f > CRAWL * LAG_DUTY
+    return resolved(p, ref) and not crawling(p)
 
 
 def stiff(p: Plant) -> bool:
@@ -123,7 +134,7 @@ def plant_findings(
     r = lag_ratios(p, ref)
     flex, ext = r.get("flex", math.nan), r.get("extend", math.nan)
     # a slow motor's lag is far under one count (v τ): neither is judged from it
-    resolved = p.K >= SLOW * ref.K
+    lag_resolved = resolved(p, ref)
     slow_way, fast_way = max(flex, ext), min(flex, ext)
     # breakaway friction delays a start too (late one way under gravity): not slack then
     one_way = (
@@ -134,17 +145,13 @@ def plant_findings(
             or slow_way > (ONE_WAY_SPREAD if uneven else ONE_WAY_EVEN) * fast_way
         )
     )
-    loose = resolved and (slack > SLACK_RAD or one_way)
+    loose = lag_resolved and (slack > SLACK_RAD or one_way)
     late = math.sqrt(flex * ext)
     # a weaker motor takes more duty for the same friction as it comes up to speed later (both
     # ∝ 1 / F_stall): a friction duty beyond what its lag explains is friction, not weakness
     explained = ref.u_f * late + FRICTION_DUTY
-    # the lag steps' duty less this much friction is too little to time a motor's force by
-    # (campaign seed 10's 10 N thumb: u_f 0.26, its lags at 0.3 duty at the fit's bound)
-    crawling = p.u_f > CRAWL * LAG_DUTY
     weak = (
-        resolved
-        and not crawling
+        lags_read(p, ref)
         and not loose
         and late > WEAK_LAG
         and fast_way > WEAK_BOTH
@@ -152,7 +159,7 @@ def plant_findings(
     )
     # late on a reversal beyond its own lag: Joint 2 waits for its strand
     reversal = p.reversal_s.get(f"{REVERSAL_DUTY:g}", math.nan) - p.tau
-    if resolved and reversal > REVERSAL_SLACK_S and not frictional(p, ref):
+    if lag_resolved and reversal > REVERSAL_SLACK_S and not frictional(p, ref):
         weak, loose = False, True
     if loose:
         out.append(
@@ -194,7 +201,7 @@ def plant_findings(
     # a low K fitted from duties that friction barely lets move is friction's: its speed at the
     # lower one stick-slips (campaign seed 5's 10 N little finger read K 0.39 of the model's
     # from 0.3 and 0.4 once, 0.75-0.78 in six other runs)
-    if p.K < SLOW * ref.K and not stiff(p):
+    if p.K < SLOW * ref.K and not stiff(p):  # not when K is NaN (no fit)
         out.append(
             Finding(
                 name,

@@ -117,13 +117,14 @@ def stops_each(
             last = bool(cycles) and cycles[-1] / F_CPU_HZ - stops.t0 > stops.last_s
             go_on = done and not last
             carried = joined.carried if go_on else None
-            # the next batch starts before the engine takes this one's frames where the
-            # harness's heartbeat rule carries on (its state is the engine's after them)
-            nxt = _start(link, peek, upcoming, stops, carried) if carried is not None else None
-            _take(link, batch, joined)
             if carried is not None:
+                # the next batch starts before the engine takes this one's frames: the
+                # harness's heartbeat rule carries on (its state is the engine's after them)
+                nxt = _start(link, peek, upcoming, stops, carried)
+                _take(link, batch, joined)
                 _check_carried(link, carried)
-            if carried is None:
+            else:
+                _take(link, batch, joined)
                 nxt = _start(link, peek, upcoming, stops) if go_on else None
             batch = nxt
             for k, cycle in enumerate(cycles):
