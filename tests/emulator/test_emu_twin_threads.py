@@ -123,8 +123,8 @@ def test_the_choice_argument_environment_cores(monkeypatch: pytest.MonkeyPatch) 
     assert twin_threads.plant_threads() == 2
     assert twin_threads.plant_threads(paced=True) == 1  # paced to the wall clock: time to spare
     assert twin_threads.plant_threads(1) == 1
-    monkeypatch.setattr(twin_threads, "usable_cores", lambda: 2)  # the client needs the other
-    assert twin_threads.plant_threads() == 1
+    monkeypatch.setattr(twin_threads, "usable_cores", lambda: 2)  # the MCU's and the plant's
+    assert twin_threads.plant_threads() == 2
     monkeypatch.setattr(twin_threads, "usable_cores", lambda: 1)
     assert twin_threads.plant_threads() == 1
     assert twin_threads.plant_threads(2) == 2  # asked for: given
@@ -146,3 +146,29 @@ def test_the_plant_thread_spins_only_with_a_core_for_each(monkeypatch: pytest.Mo
     assert twin_threads.plant_spins()
     monkeypatch.setattr(twin_threads, "usable_cores", lambda: 2)  # MCU, plant, client on two
     assert not twin_threads.plant_spins()
+
+
+def test_a_client_beside_the_board_has_the_plant_stepped_on_the_mcus_thread(
+    firmware_elf: Path,
+) -> None:
+    """Where the plant's thread sleeps at once while a client works beside the board (fewer
+    than three cores), the MCU's thread steps every period of a run ahead itself until the
+    client joins; a run on the caller's own thread hands its periods over."""
+    with EmulatedBoard(firmware_elf, realtime=False, plant_threads=2) as b:
+        native = b._native
+        native.set_plant_spin(False)
+        b.run_for(0.02)  # the caller's own run: no client beside, the plant's thread steps
+        handed = 20 - native.plant_inline_periods
+        assert handed > 0
+        before = native.plant_inline_periods
+        b.run_ahead(0.02)  # 20 periods: a few ms of wall time, not joined for 2 s
+        time.sleep(2.0)
+        run = b.run_ahead_join()
+        assert run.done
+        assert native.plant_inline_periods - before == 20
+        native.set_plant_spin(True)  # a core for each: the plant's thread steps them
+        before = native.plant_inline_periods
+        b.run_ahead(0.02)
+        time.sleep(2.0)
+        b.run_ahead_join()
+        assert native.plant_inline_periods - before < 20

@@ -290,6 +290,7 @@ void plant_thread_stop(utrf_sim_t *s);
 void plant_thread_step(utrf_sim_t *s, double dt);
 void plant_thread_wait(utrf_sim_t *s);
 void plant_thread_park(utrf_sim_t *s); /* the caller leaves the lockstep: the plant sleeps */
+int plant_thread_sleeps_now(utrf_sim_t *s); /* the plant's thread sleeps at once: a client beside */
 long plant_thread_step_ns(utrf_sim_t *s); /* the plant thread's last step, ns (0: none yet) */
 
 /* run_ahead.c: the lockstep's marks and its waiting write; mark returns 0 when full */

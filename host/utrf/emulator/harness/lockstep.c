@@ -10,8 +10,9 @@
  *
  * With two threads the MCU's thread keeps the hand-over honest: where posting the period and
  * waiting for the plant costs it more than stepping the plant itself would (no core free for
- * the plant's thread: other work on the machine, a client beside), it steps the plant itself
- * for a stretch of periods, then tries the thread again.
+ * the plant's thread: other work on the machine), it steps the plant itself for a stretch of
+ * periods, then tries the thread again; and it steps the plant itself while the plant's
+ * thread sleeps for a client working beside the board (plant_thread_sleeps_now).
  */
 #include <string.h>
 
@@ -21,10 +22,12 @@
 /* periods stepped on the MCU's thread before the plant's is tried again */
 #define INLINE_STRETCH 32
 
-/* A running mean (x16) moved 1/8 of the way to x. */
+/* A running mean (x16) moved 1/32 of the way to x: one hand-over that waited out a
+ * preemption (milliseconds) must not send a stretch inline, a machine that keeps the plant's
+ * thread off its core does within a few dozen periods. */
 static void mean16(long *m16, long x)
 {
-    *m16 += (x * 16 - *m16) / 8;
+    *m16 += (x * 16 - *m16) / 32;
 }
 
 /* The plant's clock. When the MCU ran without it since the last exchange (utrf_sim_run_to),
@@ -96,7 +99,9 @@ int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, in
         memcpy(s->hold, s->pins, sizeof s->hold);
         if (s->plant_volts)
             s->plant_volts(s->plant_ctx, s->adc_volts);
-        int handover = threaded && s->lock_inline_left == 0;
+        /* while the plant's thread would sleep at once (a client working beside the board
+         * with no core for each: plant_thread.c), waking it costs more than its step */
+        int handover = threaded && s->lock_inline_left == 0 && !plant_thread_sleeps_now(s);
         long t0 = 0, posted = 0;
         if (handover) {
             t0 = harness_now_ns();
@@ -114,11 +119,13 @@ int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, in
             if (s->lock_handover_ns16 > s->lock_step_ns16) { /* cheaper here: a stretch */
                 s->lock_inline_left = INLINE_STRETCH;
                 s->lock_handover_ns16 = s->lock_step_ns16 / 2; /* the next try starts fair */
+                plant_thread_park(s); /* the plant's thread sleeps through it, not spins */
             }
         } else if (s->plant_step) {
             s->plant_step(s->plant_ctx, dt, s->hold);
             if (threaded) {
-                s->lock_inline_left--;
+                if (s->lock_inline_left > 0)
+                    s->lock_inline_left--;
                 s->lock_inline_periods++;
             }
         }

@@ -7,8 +7,9 @@
  * sequence numbers: each side spins on the other's for a while (a period is tens of µs of
  * work; a futex wake-up costs about as much), then sleeps on a futex. Where cores are scarce
  * (utrf_sim_set_plant_spin(s, 0)) the plant's side sleeps at once while a client works beside
- * the board (a run ahead, not being joined): the plant waits most of each period for the MCU,
- * and spinning there takes the core the client needs; it spins while the client waits.
+ * the board (a run ahead, not being joined), and the MCU's thread steps the plant itself
+ * meanwhile (lockstep.c): spinning there would take the core the client needs, and waking the
+ * plant each period costs more than its step; it spins while the client waits.
  * Linux only, as the rest of the harness (ptys).
  */
 #define _GNU_SOURCE
@@ -27,10 +28,13 @@
 /* How long a side spins before it sleeps, adapted to what the waits take: a wait that ended
  * while spinning lets the next spin longer (up to SPIN_MAX_NS, beyond a period's work on this
  * project's machines), one that had to sleep halves it (on a loaded machine the other side is
- * often off its core: spinning then burns what it needs). */
-#define SPIN_START_NS 100000L
+ * often off its core: spinning then burns what it needs), but not below SPIN_MIN_NS, about
+ * the MCU's longer periods: below that every hand-over wakes a sleeper, which sends the MCU's
+ * thread inline (lockstep.c), whose stretch times the spin out again, down to nothing (the
+ * spiral measured in docs/benchmarks.md). A loaded machine is lockstep.c's to detect. */
+#define SPIN_START_NS 150000L
 #define SPIN_MAX_NS 400000L
-#define SPIN_MIN_NS 2000L
+#define SPIN_MIN_NS 150000L
 
 struct utrf_plant_thread {
     pthread_t thread;
@@ -105,16 +109,25 @@ static void post(_Atomic uint32_t *word, uint32_t value, _Atomic int *asleep)
         futex_wake(word);
 }
 
+static int sleeps_now(utrf_plant_thread_t *t)
+{
+    return atomic_load_explicit(&t->plant_sleeps, memory_order_relaxed) &&
+           atomic_load_explicit(&t->s->client_busy, memory_order_relaxed);
+}
+
+int plant_thread_sleeps_now(utrf_sim_t *s)
+{
+    return s->plant_thread && sleeps_now(s->plant_thread);
+}
+
 static void *plant_main(void *arg)
 {
     utrf_plant_thread_t *t = arg;
     uint32_t seen = 0;
     for (;;) {
         /* sleeping at once: a stop that reads as set, so the wait skips its spin */
-        int sleep_now = atomic_load_explicit(&t->plant_sleeps, memory_order_relaxed) &&
-                        atomic_load_explicit(&t->s->client_busy, memory_order_relaxed);
         seen = wait_change(&t->go, seen, &t->plant_asleep, &t->plant_spin,
-                           sleep_now ? &t->no_spin : &t->parked);
+                           sleeps_now(t) ? &t->no_spin : &t->parked);
         if (t->quit)
             return NULL;
         utrf_sim_t *s = t->s;
