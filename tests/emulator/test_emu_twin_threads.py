@@ -69,6 +69,24 @@ def test_one_and_two_threads_give_the_same_run_to_the_bit(firmware_elf: Path) ->
     assert np.ptp(s1[:10]) > 0.1  # the fingers moved: the comparison compared something
 
 
+def test_on_one_core_the_hand_over_backs_off(firmware_elf: Path) -> None:
+    """Two threads on one core: each try of the plant's thread wakes it and waits for the one
+    core, so the stretches the MCU's thread steps itself double while the tries keep failing
+    (lockstep.c): 4 s simulated, nearly every period inline (32-period stretches alone would
+    leave 60-90 % of them inline)."""
+    cores = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, {min(cores)})
+    try:
+        with EmulatedBoard(firmware_elf, realtime=False, seed=5, plant_threads=2) as b:
+            b.run_for(4.0)
+            periods = round(b.sim_time / b.exchange_period)
+            inline = b._native.plant_inline_periods
+    finally:
+        os.sched_setaffinity(0, cores)
+    assert inline > 0.95 * periods
+    assert inline < periods  # the thread was tried
+
+
 def test_the_plant_steps_exact_periods_on_its_own_clock(firmware_elf: Path) -> None:
     with EmulatedBoard(firmware_elf, realtime=False, plant_threads=2) as b:
         native = b._native

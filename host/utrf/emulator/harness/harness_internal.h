@@ -204,9 +204,10 @@ struct utrf_sim {
     _Atomic int client_busy; /* run_ahead.c: a run ahead is under way, its caller not joining */
     /* lockstep.c, two threads: what a period's hand-over costs the MCU's thread (posting and
      * waiting) against what stepping the plant itself would (ns, running means x16), and how
-     * many periods are left to step it here before the thread is tried again */
+     * many periods are left to step it here before the thread is tried again; the stretch's
+     * length (doubled when the thread failed again soon after one) and the hand-overs since */
     long lock_handover_ns16, lock_step_ns16;
-    int lock_inline_left;
+    int lock_inline_left, lock_stretch, lock_handed;
     uint64_t lock_inline_periods; /* periods two threads stepped on one, for a test to read */
     uint64_t lock_wait_ns; /* the MCU's thread waiting for the plant's at the hand-overs */
     int lock_keep_plant; /* a run ahead's stops: the run goes on at once, the plant not parked */

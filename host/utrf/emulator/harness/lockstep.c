@@ -19,8 +19,12 @@
 #include "harness_internal.h"
 
 #define CPU_HZ 16e6
-/* periods stepped on the MCU's thread before the plant's is tried again */
+/* periods stepped on the MCU's thread before the plant's is tried again: a stretch doubles,
+ * up to INLINE_STRETCH_MAX (about 4 s simulated), while the thread fails again within the
+ * first stretch's count of hand-overs (a machine that stays loaded: each try wakes a parked
+ * thread that waits for a core), and is back to INLINE_STRETCH after a longer run of them */
 #define INLINE_STRETCH 32
+#define INLINE_STRETCH_MAX 4096
 
 /* A running mean (x16) moved 1/32 of the way to x: one hand-over that waited out a
  * preemption (milliseconds) must not send a stretch inline, a machine that keeps the plant's
@@ -116,8 +120,14 @@ int utrf_sim_run_plant_until(utrf_sim_t *s, uint64_t target, uint64_t period, in
             s->lock_wait_ns += (uint64_t)waited;
             mean16(&s->lock_handover_ns16, posted + waited);
             mean16(&s->lock_step_ns16, plant_thread_step_ns(s));
+            s->lock_handed++;
             if (s->lock_handover_ns16 > s->lock_step_ns16) { /* cheaper here: a stretch */
-                s->lock_inline_left = INLINE_STRETCH;
+                int again = s->lock_stretch && s->lock_handed < INLINE_STRETCH;
+                s->lock_stretch = !again                             ? INLINE_STRETCH
+                                  : s->lock_stretch < INLINE_STRETCH_MAX ? 2 * s->lock_stretch
+                                                                       : INLINE_STRETCH_MAX;
+                s->lock_handed = 0;
+                s->lock_inline_left = s->lock_stretch;
                 s->lock_handover_ns16 = s->lock_step_ns16 / 2; /* the next try starts fair */
                 plant_thread_park(s); /* the plant's thread sleeps through it, not spins */
             }
