@@ -190,6 +190,8 @@ int utrf_sim_ahead_start(utrf_sim_t *s, uint64_t target, uint64_t period, int wa
         s->beats_on = 0; /* heartbeats go with stops */
     if (!s->beats_on)
         s->beats_sent = 0;
+    /* busy before the run can start: its first period already sees the client beside it */
+    atomic_store_explicit(&s->client_busy, 1, memory_order_relaxed);
     pthread_mutex_lock(&a->mu);
     a->target = target;
     a->period = period;
@@ -198,7 +200,6 @@ int utrf_sim_ahead_start(utrf_sim_t *s, uint64_t target, uint64_t period, int wa
     pthread_cond_broadcast(&a->cv);
     pthread_mutex_unlock(&a->mu);
     a->running = 1;
-    atomic_store_explicit(&s->client_busy, 1, memory_order_relaxed);
     return 0;
 }
 
