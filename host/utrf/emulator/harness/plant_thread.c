@@ -32,9 +32,9 @@
  * the MCU's longer periods: below that every hand-over wakes a sleeper, which sends the MCU's
  * thread inline (lockstep.c), whose stretch times the spin out again, down to nothing (the
  * spiral measured in docs/benchmarks.md). A loaded machine is lockstep.c's to detect. */
-#define SPIN_START_NS 150000L
-#define SPIN_MAX_NS 400000L
 #define SPIN_MIN_NS 150000L
+#define SPIN_START_NS SPIN_MIN_NS
+#define SPIN_MAX_NS 400000L
 
 struct utrf_plant_thread {
     pthread_t thread;
